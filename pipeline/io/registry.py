@@ -1,0 +1,158 @@
+"""Reader registry: one reader per format, chosen from the file's bytes, never its extension.
+
+Every reader module in :data:`READER_MODULES` defines a :class:`~pipeline.io.base.LogReader`
+subclass decorated with :func:`register`. :func:`detect` offers the first 64 KiB of a file
+(or ``b""`` for a directory) to each reader's ``sniff`` in priority order; the first that
+claims it wins, and its one-line reason is recorded (``uavpipe info`` prints it).
+
+:func:`read_log` is the one entry point for ingest: detection, reading, ``meta`` bookkeeping
+(sha256, size, reader, flight id) and the guarantee that failures surface as
+:class:`~pipeline.io.base.IngestError` naming the file and the reason, never as a library
+traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import re
+import traceback
+from pathlib import Path
+
+from .base import FlightLog, IngestError, LogReader, Progress, sha256_of, source_size
+
+#: Reader modules, imported on first use (each registers its reader class).
+READER_MODULES: tuple[str, ...] = ("dataflash", "tlog")
+
+_READERS: dict[str, type[LogReader]] = {}
+_loaded = False
+
+HEAD_BYTES = 64 * 1024
+
+
+def register(cls: type[LogReader]) -> type[LogReader]:
+    """Class decorator: add a reader to the registry under ``cls.name``."""
+    if not cls.name:
+        raise ValueError(f"{cls.__name__} has no name")
+    _READERS[cls.name] = cls
+    return cls
+
+
+def readers() -> list[type[LogReader]]:
+    """Registered readers in sniffing order."""
+    global _loaded
+    if not _loaded:
+        for mod in READER_MODULES:
+            importlib.import_module(f"{__package__}.{mod}")
+        _loaded = True
+    return sorted(_READERS.values(), key=lambda r: (r.priority, r.name))
+
+
+def get_reader(name: str) -> type[LogReader]:
+    readers()
+    try:
+        return _READERS[name]
+    except KeyError:
+        raise IngestError(None, f"unknown format {name!r}; known: {', '.join(sorted(_READERS))}") from None
+
+
+def detect(path: str | os.PathLike) -> tuple[type[LogReader], str]:
+    """Choose the reader for ``path`` from its content.
+
+    Returns
+    -------
+    (reader class, reason)
+
+    Raises
+    ------
+    IngestError
+        Missing, unreadable or empty file, or no reader recognises the content.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise IngestError(p, "no such file or directory")
+    head = b""
+    if p.is_file():
+        try:
+            with open(p, "rb") as fh:
+                head = fh.read(HEAD_BYTES)
+        except OSError as exc:
+            raise IngestError(p, f"cannot read: {exc.strerror or exc}") from None
+        if not head:
+            raise IngestError(p, "empty file (0 bytes)")
+    for r in readers():
+        try:
+            reason = r.sniff(p, head)
+        except Exception:  # a sniffer bug must not hide the other readers
+            reason = None
+        if reason:
+            return r, reason
+    kind = "directory" if p.is_dir() else f"file starting {head[:8].hex(' ')}"
+    raise IngestError(p, f"unrecognised log format ({kind}); known formats: "
+                      f"{', '.join(r.name for r in readers())}")
+
+
+_ID_BAD = re.compile(r"[^A-Za-z0-9-]+")
+
+
+def flight_id_for(path: str | os.PathLike) -> str:
+    """Default flight id: the file (or bag directory) stem with characters outside
+    ``[A-Za-z0-9-]`` replaced by ``-`` (the workflow's wildcard alphabet)."""
+    p = Path(path)
+    stem = p.name if p.is_dir() else p.stem
+    return _ID_BAD.sub("-", stem).strip("-") or "flight"
+
+
+def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str | None = None,
+             config: dict | None = None, progress: Progress | None = None) -> FlightLog:
+    """Ingest one log into a :class:`FlightLog`.
+
+    Parameters
+    ----------
+    path : path-like
+        Log file or bag directory.
+    fmt : str, optional
+        Force a reader by name instead of detecting from the bytes.
+    flight_id : str, optional
+        Defaults to :func:`flight_id_for`.
+    config : dict, optional
+        The ``ingest`` section of the dataset config (topic maps, column maps, ...).
+    progress : callable, optional
+        ``progress(done, total)`` for long decodes.
+
+    Raises
+    ------
+    IngestError
+        One line naming the file and the reason; library exceptions are wrapped.
+    """
+    p = Path(path)
+    if fmt:
+        reader_cls, reason = get_reader(fmt), f"format {fmt!r} forced by the caller"
+        if not p.exists():
+            raise IngestError(p, "no such file or directory")
+    else:
+        reader_cls, reason = detect(p)
+    try:
+        log = reader_cls().read(p, config=config, progress=progress)
+    except IngestError:
+        raise
+    except MemoryError:
+        raise IngestError(p, f"out of memory while decoding as {reader_cls.name}") from None
+    except Exception as exc:  # last line of defence: never leak a deep library traceback
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        raise IngestError(
+            p, f"{reader_cls.name} reader failed: {type(exc).__name__}: {exc} "
+               f"(at {Path(where.filename).name}:{where.lineno})") from exc
+    m = log.meta
+    m["flight_id"] = flight_id or m.get("flight_id") or flight_id_for(p)
+    m["source_path"] = str(p)
+    m["source_format"] = m.get("source_format") or reader_cls.source_format
+    m["reader"] = reader_cls.name
+    m["reader_version"] = reader_cls.version
+    m["detected_by"] = reason
+    m["source_sha256"] = sha256_of(p)
+    m["source_size_bytes"] = source_size(p)
+    if m.get("status") == "ok" and (m["diagnostics"].get("bytes_skipped")
+                                    or m["diagnostics"].get("records_dropped")):
+        m["status"] = "partial"
+    return log

@@ -1,0 +1,28 @@
+"""Fixtures shared by all tests; helper functions live in ``tests/helpers.py``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers import REALDATA, REQUIRE_SHARED, TEST_SEED, need_shared
+
+
+def pytest_report_header(config):
+    return [f"PIPELINE_TEST_SEED={TEST_SEED}  realdata={REALDATA} "
+            f"({'present' if REALDATA.is_dir() else 'absent'})  UAVPIPE_REQUIRE_SHARED={int(REQUIRE_SHARED)}"]
+
+
+@pytest.fixture
+def realdata() -> Path:
+    """The ../shared/realdata folder (skip, or fail under UAVPIPE_REQUIRE_SHARED=1, when absent)."""
+    need_shared()
+    return REALDATA
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    """A Generator seeded from PIPELINE_TEST_SEED (printed in the header)."""
+    return np.random.default_rng(TEST_SEED)

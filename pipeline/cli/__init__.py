@@ -13,7 +13,7 @@ import sys
 from .. import __version__
 
 #: subcommand modules under ``pipeline.cli``, in help order
-COMMANDS: tuple[str, ...] = ("info", "ingest")
+COMMANDS: tuple[str, ...] = ("info", "ingest", "simulate", "preprocess", "train", "classify")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -42,7 +42,9 @@ def _print_text(d: dict) -> None:
     print(f"  status      {d['status']}   duration {d['duration_s']:.1f} s   flight_id {d['flight_id']}")
     if d["ned_origin"]:
         o = d["ned_origin"]
-        print(f"  NED origin  {o['lat_deg']:.7f}, {o['lon_deg']:.7f}, {o['alt_wgs84_m']:.2f} m")
+        h, datum = (o.get("alt_wgs84_m"), "WGS-84") if o.get("alt_wgs84_m") is not None else (o.get("alt_msl_m"), "MSL")
+        hs = "unknown height" if h is None else f"{h:.2f} m {datum}"
+        print(f"  NED origin  {o['lat_deg']:.7f}, {o['lon_deg']:.7f}, {hs}")
     print("  streams:")
     for name, s in d["streams"].items():
         rate = "" if s["rate_hz"] != s["rate_hz"] else f"{s['rate_hz']:8.2f} Hz"

@@ -22,7 +22,8 @@ from pathlib import Path
 from .base import FlightLog, IngestError, LogReader, Progress, sha256_of, source_size
 
 #: Reader modules, imported on first use (each registers its reader class).
-READER_MODULES: tuple[str, ...] = ("dataflash", "tlog")
+READER_MODULES: tuple[str, ...] = ("dataflash", "tlog", "rosbag", "mcap_reader", "ulog", "flightcoach",
+                                  "tabular")
 
 _READERS: dict[str, type[LogReader]] = {}
 _loaded = False
@@ -104,7 +105,8 @@ def flight_id_for(path: str | os.PathLike) -> str:
 
 
 def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str | None = None,
-             config: dict | None = None, progress: Progress | None = None) -> FlightLog:
+             config: dict | None = None, progress: Progress | None = None,
+             labels: str | os.PathLike | None = None) -> FlightLog:
     """Ingest one log into a :class:`FlightLog`.
 
     Parameters
@@ -119,6 +121,9 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
         The ``ingest`` section of the dataset config (topic maps, column maps, ...).
     progress : callable, optional
         ``progress(done, total)`` for long decodes.
+    labels : path-like, optional
+        A truth/labels side-car to attach (:mod:`pipeline.io.sidecar`); without it,
+        ``<log>.truth.parquet`` beside the log is attached when present.
 
     Raises
     ------
@@ -143,6 +148,11 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
         raise IngestError(
             p, f"{reader_cls.name} reader failed: {type(exc).__name__}: {exc} "
                f"(at {Path(where.filename).name}:{where.lineno})") from exc
+    from .sidecar import attach_sidecar, find_sidecar
+
+    side = Path(labels) if labels else find_sidecar(p)
+    if side is not None:
+        attach_sidecar(log, side)  # raises IngestError naming the side-car
     m = log.meta
     m["flight_id"] = flight_id or m.get("flight_id") or flight_id_for(p)
     m["source_path"] = str(p)

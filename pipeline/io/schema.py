@@ -167,6 +167,11 @@ STATE: tuple[Column, ...] = (
     _f("ele", "1"),
     _f("rud", "1"),
     _f("thr", "1"),
+    # physical controls (seed 004 §6.8), NaN unless the vehicle config gives bench fits
+    _f("delta_a_rad", "rad", "", "aileron deflection"),
+    _f("delta_e_rad", "rad", "", "elevator deflection"),
+    _f("delta_r_rad", "rad", "", "rudder deflection"),
+    _f("thrust_N", "N", "", "propeller thrust"),
     _f("alt_cal_m", "m", "up"),
     Column("gap", "bool"),
 )

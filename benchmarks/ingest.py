@@ -1,0 +1,166 @@
+"""Benchmark: vectorised DataFlash decoder vs pymavlink's message loop, memory, and scaling.
+
+Baseline: ``mavutil.mavlink_connection(path)`` + a ``recv_msg()`` loop over the whole file
+(pymavlink's DFReader: index pass plus one Python object per record). Ours:
+:func:`pipeline.io.dataflash.decode_all` (every message type into in-memory column tables, no
+Parquet write). Both are timed in the same run over the four real ``.bin`` logs (best of
+``--repeat`` per file) with the process CPU clock by default (``--clock wall`` for
+wall time; both decoders are single-threaded, and CPU time is not inflated by other jobs on a
+shared machine); the speed-up is the ratio of the summed times.
+
+Memory: tracemalloc peak of one ``decode_all`` per file, reported as
+``(peak - output tables) / file size`` (the acceptance bound is 3).
+
+Scaling: one real log concatenated 40 times (in memory) against the single log:
+``(t40 / 40) / t1`` (acceptance bound 1.2).
+
+Usage: ``python benchmarks/ingest.py [--realdata DIR] [--repeat N]``. Ends with
+``RESULT <name> <value>`` lines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pipeline.io.dataflash import decode_all  # noqa: E402
+
+FILES = (
+    "ap_copter313_austin_4flights/2014-10-18_20-04-24.bin",
+    "ap_copter313_austin_4flights/2014-10-18_20-44-05.bin",
+    "ap_copter_forum_crash_pool/log_0036_mechanical_failure.bin",
+    "ap_plane_flightcoach_box/pilot_0004.BIN",
+)
+SCALING_FILE = FILES[0]
+
+
+def pymavlink_loop(path: Path) -> int:
+    from pymavlink import mavutil
+
+    devnull = open(os.devnull, "w")
+    old, sys.stderr = sys.stderr, devnull  # pymavlink prints resync notes on stderr
+    try:
+        m = mavutil.mavlink_connection(str(path))
+        n = 0
+        while m.recv_msg() is not None:
+            n += 1
+        m.close()
+    finally:
+        sys.stderr = old
+        devnull.close()
+    return n
+
+
+def ours(src) -> int:
+    tables, diag = decode_all(src)
+    return sum(diag["record_counts"].values())
+
+
+CLOCK = time.process_time
+
+
+def best_time(fn, arg, repeat: int) -> tuple[float, int]:
+    best, n = float("inf"), 0
+    for _ in range(repeat):
+        t = CLOCK()
+        n = fn(arg)
+        best = min(best, CLOCK() - t)
+    return best, n
+
+
+def table_bytes(tables) -> int:
+    """Bytes held by the output tables: each underlying buffer once (numeric columns are views
+    into one record matrix per type), plus the str objects of char columns."""
+    seen: dict[int, int] = {}
+    total = 0
+    for cols in tables.values():
+        for v in cols.values():
+            base = v
+            while isinstance(base.base, np.ndarray):
+                base = base.base
+            seen[id(base)] = base.nbytes
+            if v.dtype == object:
+                total += sum(sys.getsizeof(x) for x in {id(x): x for x in v.tolist()}.values())
+    return total + sum(seen.values())
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--realdata", type=Path, default=ROOT.parent / "shared" / "realdata")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
+                    help="cpu: process CPU time (default; robust on a shared machine), "
+                         "wall: perf_counter")
+    args = ap.parse_args(argv)
+    global CLOCK
+    CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
+    print(f"clock: {args.clock} time, best of {args.repeat} (pymavlink: {max(1, args.repeat - 1)})")
+    paths = [args.realdata / f for f in FILES]
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        print(f"benchmarks/ingest.py: missing real logs: {', '.join(missing)}", file=sys.stderr)
+        return 2
+
+    print(f"{'file':58s} {'MB':>6s} {'records':>8s} {'pymavlink s':>12s} {'ours s':>8s} "
+          f"{'pym MB/s':>9s} {'ours MB/s':>9s} {'x':>6s}")
+    t_pym = t_ours = mb_total = 0.0
+    for p in paths:
+        mb = p.stat().st_size / 1e6
+        tp, n_p = best_time(pymavlink_loop, p, max(1, args.repeat - 1))
+        to, n_o = best_time(ours, p, args.repeat)
+        if n_p != n_o:
+            print(f"  WARNING: record counts differ on {p.name}: pymavlink {n_p}, ours {n_o}")
+        t_pym += tp
+        t_ours += to
+        mb_total += mb
+        print(f"{p.relative_to(args.realdata).as_posix():58s} {mb:6.2f} {n_o:8d} {tp:12.3f} {to:8.4f} "
+              f"{mb / tp:9.2f} {mb / to:9.1f} {tp / to:6.1f}")
+    speedup = t_pym / t_ours
+    print(f"{'total':58s} {mb_total:6.2f} {'':8s} {t_pym:12.3f} {t_ours:8.4f} "
+          f"{mb_total / t_pym:9.2f} {mb_total / t_ours:9.1f} {speedup:6.1f}")
+
+    # memory: tracemalloc peak of one decode per file, net of the output tables
+    mem_ratio = 0.0
+    for p in paths:
+        size = p.stat().st_size
+        tracemalloc.start()
+        tables, _ = decode_all(p)
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        out = table_bytes(tables)
+        r = (peak - out) / size
+        mem_ratio = max(mem_ratio, r)
+        print(f"memory {p.name:40s} file {size / 1e6:5.2f} MB  peak {peak / 1e6:6.2f} MB  "
+              f"tables {out / 1e6:6.2f} MB  (peak - tables)/file = {r:.2f}")
+        del tables
+
+    # scaling: one log concatenated 40 times, from memory in both cases
+    one = (args.realdata / SCALING_FILE).read_bytes()
+    forty = one * 40
+    t1, n1 = best_time(ours, one, args.repeat + 2)
+    t40, n40 = best_time(ours, forty, max(2, args.repeat - 1))
+    assert n40 == 40 * n1, (n1, n40)
+    scaling = (t40 / 40) / t1
+    print(f"scaling {Path(SCALING_FILE).name}: t1 = {t1 * 1e3:.1f} ms, t40 = {t40 * 1e3:.0f} ms "
+          f"({len(forty) / 1e6:.1f} MB, {len(forty) / 1e6 / t40:.0f} MB/s)")
+
+    print(f"RESULT ingest_speedup_vs_pymavlink {speedup:.1f}")
+    print(f"RESULT ingest_pymavlink_MBps {mb_total / t_pym:.2f}")
+    print(f"RESULT ingest_ours_MBps {mb_total / t_ours:.1f}")
+    print(f"RESULT ingest_peak_mem_over_filesize {mem_ratio:.2f}")
+    print(f"RESULT ingest_scaling_40x {scaling:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    np.seterr(all="ignore")
+    sys.exit(main())

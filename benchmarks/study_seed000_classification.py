@@ -1,0 +1,263 @@
+"""Seed-000 classification study on simulated truth: Tables 3.1–3.4, 3.10–3.12, GMR errors.
+
+Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
+
+1. Simulate ``--runs`` runs of each maneuver M1–M5 (thesis: 2300) with
+   :func:`pipeline.simulate.datasets.simulate_set` (random N/E start and heading, Gauss–Markov
+   disturbance, truth at 5 Hz) and split them 70/30 exactly as ``uavpipe simulate`` does — or
+   read an existing ``uavpipe simulate`` output with ``--sets DIR``.
+2. Train one HMM per known maneuver M1–M4 (``models:`` config; thesis state counts 5/6/6/6).
+3. Tables 3.1–3.4: one-class and confidence classifiers, cumulative mode (thesis-faithful),
+   train and test sets; M5 is the unknown maneuver. Confusion matrices of final labels.
+4. Tables 3.10–3.12: change scenarios A–D at 3/8/13 s (``--switch-runs`` per cell, thesis 243),
+   truth input, confidence classifier, in ``cumulative`` and ``reset``/``windowed`` modes; final
+   MAoT counted from the end of the 2 s blend; detection delay = time from the switch to the
+   first sample from which the final maneuver is labelled for ≥ 1 s. The reset-mode change
+   point is also measured with the switch moved by ±1 s.
+5. GMR (§3.6.4, §7): on test runs, per maneuver and NED axis, mean error and error variance
+   over time of the HMM acceleration and jerk estimates, and scalar RMSE against the
+   finite-difference acceleration from the last three 5 Hz truth positions.
+
+Outputs (Parquet, ``--out`` [results/studies/seed000]): ``tables_3_1_3_4.parquet``,
+``confusion.parquet``, ``switch_tables.parquet``, ``switch_shift.parquet``,
+``gmr_error.parquet``, ``gmr_rmse.parquet``, ``models/`` (params.npz + meta.json).
+
+Usage: ``python benchmarks/study_seed000_classification.py --runs 300 --switch-runs 20``
+(smoke size) or ``--runs 2300 --switch-runs 243`` (thesis size, ~hours on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.config import load_config, section
+from pipeline.io.parquet import write_table
+from pipeline.models import ManeuverModelSet, ModelsConfig
+from pipeline.models.metrics import (SCENARIOS, SWITCH_TABLE, THESIS_SWITCH, UNKNOWN, confusion,
+                                     is_correct, per_maneuver_table, thesis_side_by_side)
+
+KNOWN = ("M1", "M2", "M3", "M4")
+ALL = (*KNOWN, "M5")
+
+
+def simulate(kind, name, n, seed, set_name, t_switch=None):
+    from pipeline.simulate.datasets import DatasetSettings, simulate_set
+    from pipeline.simulate.scenarios import SimSettings
+    from pipeline.simulate.sensors import SensorSettings
+
+    sim = section(load_config(), "simulate")
+    return simulate_set(kind, name, n, SimSettings.from_config(sim), DatasetSettings.from_config(sim),
+                        SensorSettings.from_config(sim), seed, set_name, t_switch=t_switch)
+
+
+def split(df, seed, man, frac=0.7):
+    from pipeline.simulate.datasets import set_rng
+
+    ids = np.sort(df["run_id"].unique())
+    perm = set_rng(seed, f"split/{man}").permutation(len(ids))
+    train = np.isin(df["run_id"], ids[np.sort(perm[:int(round(frac * len(ids)))])])
+    return df[train], df[~train]
+
+
+def tag(df, man):
+    return df.assign(run_id=man + "-" + df["run_id"].astype(str))
+
+
+def load_sets(args):
+    train, test = {}, {}
+    for man in ALL:
+        if args.sets:
+            train[man] = pd.read_parquet(Path(args.sets) / "sets" / f"{man}_train.parquet")
+            test[man] = pd.read_parquet(Path(args.sets) / "sets" / f"{man}_test.parquet")
+        else:
+            df = simulate("maneuver", man, args.runs, args.seed, f"maneuver/{man}")
+            train[man], test[man] = split(df, args.seed, man)
+    return train, test
+
+
+def detection_delay(pred, t_s, t_switch, final, hold=5):
+    """Seconds from the switch to the first sample from which ``final`` holds ``hold`` samples."""
+    ok = (pred == final) & (t_s >= t_switch)
+    run = np.convolve(ok.astype(int), np.ones(hold, dtype=int), "full")[hold - 1:len(ok) + hold - 1]
+    idx = np.nonzero(run[: len(ok) - hold + 1] == hold)[0] if len(ok) >= hold else []
+    return float(t_s[idx[0]] - t_switch) if len(idx) else np.nan
+
+
+def switch_cell(ms, key, ts, args, mode):
+    first, final = SCENARIOS[key]
+    df = simulate("switch", key, args.switch_runs, args.seed, f"switch_{key}_{ts:g}s", t_switch=ts)
+    res = ms.classify(df, mode=mode, decision="confidence", gmr=False)
+    fa_i, fa_f, ma_i, ma_f, delay, cps = [], [], [], [], [], []
+    for _, g in res.groupby("run_id", sort=False):
+        t_s = g["t_ns"].to_numpy() * 1e-9
+        pred = g["pred"].to_numpy(dtype=object)
+        before = t_s < ts
+        after = t_s >= ts + 2.0                                    # end of the 2 s blend
+        i_sw = np.nonzero(before)[0][-1]
+        fa_i.append(pred[i_sw] == first)
+        fa_f.append(pred[-1] == final)
+        ma_i.append(np.mean(is_correct(pred[before], np.full(before.sum(), first, dtype=object), KNOWN)))
+        ma_f.append(np.mean(is_correct(pred[after], np.full(after.sum(), final, dtype=object), KNOWN)))
+        delay.append(detection_delay(pred, t_s, ts, final))
+        ch = g["change_t_ns"].to_numpy()[g["change"].to_numpy()]
+        cps.append(ch[0] * 1e-9 if len(ch) else np.nan)
+    thesis = THESIS_SWITCH.get((int(ts), key), (np.nan,) * 4) if float(ts).is_integer() else (np.nan,) * 4
+    return {"table": SWITCH_TABLE.get(int(ts), ""), "switch_s": ts, "scenario": key, "first": first, "final": final,
+            "mode": mode, "n_runs": len(fa_i), "FA_initial_pct": 100 * np.mean(fa_i),
+            "FA_final_pct": 100 * np.mean(fa_f), "MAoT_initial_pct": 100 * np.mean(ma_i),
+            "MAoT_final_pct": 100 * np.mean(ma_f), "detection_delay_s": float(np.nanmedian(delay))
+            if np.isfinite(delay).any() else np.nan, "detected_pct": 100 * np.mean(np.isfinite(delay)),
+            "change_point_s": float(np.nanmedian(cps)) if np.isfinite(cps).any() else np.nan,
+            "thesis_FA_initial_pct": thesis[0], "thesis_FA_final_pct": thesis[1],
+            "thesis_MAoT_initial_pct": thesis[2], "thesis_MAoT_final_pct": thesis[3]}
+
+
+def gmr_errors(ms, test):
+    rows, rmse = [], []
+    dt = 1.0 / ms.config.rate_hz
+    for man in KNOWN:
+        truth = test[man].assign(run_id=test[man]["run_id"].astype(str))
+        truth = truth.sort_values(["run_id", "t_ns"], kind="stable")
+        res = ms.classify(truth, mode="cumulative", decision="confidence")
+        res["run_id"] = res["run_id"].astype(str)
+        truth = truth.drop(columns=["label"])
+        merged = res.merge(truth, on=["run_id", "t_ns"], how="left")
+        errs = {}
+        for ax in "ned":
+            pos = truth.pivot(index="run_id", columns="t_ns", values=f"pos_{ax}_m")
+            # finite-difference acceleration from the last three 5 Hz truth positions
+            fd = (pos - 2 * pos.shift(1, axis=1) + pos.shift(2, axis=1)) / dt ** 2
+            fd_long = fd.stack().rename("fd").reset_index()
+            m = merged.merge(fd_long, on=["run_id", "t_ns"], how="left")
+            e_acc = m[f"acc_hmm_{ax}_mps2"] - m[f"acc_{ax}_mps2"]
+            e_jerk = m[f"jerk_hmm_{ax}_mps3"] - m[f"jerk_{ax}_mps3"]
+            e_fd = m["fd"] - m[f"acc_{ax}_mps2"]
+            t_s = m["t_ns"] * 1e-9
+            for q, e in (("acc", e_acc), ("jerk", e_jerk), ("acc_fd", e_fd)):
+                g = pd.DataFrame({"t_s": t_s, "e": e}).dropna().groupby("t_s")["e"]
+                rows.append(pd.DataFrame({"maneuver": man, "quantity": q, "axis": ax,
+                                          "t_s": g.mean().index, "mean_err": g.mean().to_numpy(),
+                                          "err_var": g.var().to_numpy()}))
+                errs.setdefault(q, []).append(e.dropna().to_numpy())
+        for q, es in errs.items():
+            e = np.concatenate(es)
+            rmse.append({"maneuver": man, "quantity": q, "rmse": float(np.sqrt(np.mean(e ** 2))),
+                         "n": len(e)})
+    return pd.concat(rows, ignore_index=True), pd.DataFrame(rmse)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=2300, help="runs per maneuver (thesis 2300)")
+    ap.add_argument("--switch-runs", type=int, default=243, help="runs per switch cell (thesis 243)")
+    ap.add_argument("--sets", default=None, help="read sets/<M>_{train,test}.parquet of a simulate run")
+    ap.add_argument("--seed", type=int, default=20261123)
+    ap.add_argument("--out", type=Path, default=Path("results/studies/seed000"))
+    ap.add_argument("--alt-mode", default="windowed", choices=("reset", "windowed"),
+                    help="mode whose switch results are the headline (both are tabulated)")
+    ap.add_argument("--skip-switch", action="store_true")
+    ap.add_argument("--skip-gmr", action="store_true")
+    args = ap.parse_args()
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+
+    train, test = load_sets(args)
+    cfg = ModelsConfig.from_section(section(load_config(), "models"))
+    mdir = out / "models"
+    ms = ManeuverModelSet(config=cfg).fit(pd.concat([tag(train[m], m) for m in KNOWN], ignore_index=True))
+    ms.save(mdir)
+    t_train = time.perf_counter() - t0
+    print(f"trained {ms.labels_} on {sum(train[m]['run_id'].nunique() for m in KNOWN)} runs in {t_train:.0f} s")
+    for lab, tr in ms.training_.items():
+        print(f"  {lab}: {tr['n_states']} states, {tr['n_sequences']} sequences, "
+              f"{tr['n_iter']} iterations, converged={tr['converged']}")
+
+    # Tables 3.1-3.4 (cumulative, truth input)
+    tabs, confs = [], []
+    for table, split_name, decision in (("3.1", "train", "oneclass"), ("3.2", "train", "confidence"),
+                                        ("3.3", "test", "oneclass"), ("3.4", "test", "confidence")):
+        sets = train if split_name == "train" else test
+        mans = KNOWN if split_name == "train" else ALL
+        df = pd.concat([tag(sets[m], m) for m in mans], ignore_index=True)
+        res = ms.classify(df, mode="cumulative", decision=decision, gmr=False)
+        t = thesis_side_by_side(per_maneuver_table(res, KNOWN, truth_col="truth"), table)
+        t.insert(1, "classifier", decision)
+        t.insert(2, "split", split_name)
+        tabs.append(t)
+        fin = res.groupby("run_id", sort=False).tail(1)
+        c = confusion(fin["truth"].tolist(), fin["pred"].tolist(), list(KNOWN)).reset_index()
+        confs.append(c.assign(table=table))
+    tables = pd.concat(tabs, ignore_index=True)
+    write_table(tables, out / "tables_3_1_3_4.parquet", name="seed000_tables_3_1_3_4",
+                extra={"runs_per_maneuver": args.runs, "seed": args.seed})
+    conf = pd.concat(confs, ignore_index=True)
+    write_table(conf, out / "confusion.parquet", name="seed000_confusion")
+    with pd.option_context("display.width", 200, "display.max_columns", 20):
+        print(tables.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+        print(conf.to_string(index=False))
+
+    # Tables 3.10-3.12 (switch scenarios, truth input)
+    if not args.skip_switch:
+        cells, shifts = [], []
+        for ts in (3.0, 8.0, 13.0):
+            for key in "ABCD":
+                for mode in ("cumulative", "windowed", "reset"):
+                    cells.append(switch_cell(ms, key, ts, args, mode))
+        sw = pd.DataFrame(cells)
+        write_table(sw, out / "switch_tables.parquet", name="seed000_tables_3_10_3_12",
+                    extra={"switch_runs": args.switch_runs, "seed": args.seed})
+        with pd.option_context("display.width", 250, "display.max_columns", 30):
+            print(sw.drop(columns=["first", "final", "table"]).to_string(index=False, float_format=lambda x: f"{x:.1f}"))
+        for key in "ABCD":
+            for ts in (7.0, 8.0, 9.0):
+                c = switch_cell(ms, key, ts, args, "reset")
+                shifts.append({"scenario": key, "switch_s": ts, "change_point_s": c["change_point_s"],
+                               "detection_delay_s": c["detection_delay_s"]})
+        sh = pd.DataFrame(shifts)
+        write_table(sh, out / "switch_shift.parquet", name="seed000_switch_shift")
+        print(sh.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+
+    if not args.skip_gmr:
+        gerr, grmse = gmr_errors(ms, test)
+        write_table(gerr, out / "gmr_error.parquet", name="seed000_gmr_error")
+        write_table(grmse, out / "gmr_rmse.parquet", name="seed000_gmr_rmse")
+        print(grmse.pivot(index="maneuver", columns="quantity", values="rmse").to_string(float_format=lambda x: f"{x:.3f}"))
+
+    # headline figures
+    cf = tables[(tables.table == "3.4") & tables.maneuver.isin(KNOWN)]
+    oc = tables[(tables.table == "3.3")]
+    print(f"RESULT seed000_runs_per_maneuver {args.runs}")
+    print(f"RESULT seed000_cf_test_min_FA_pct {cf['FA_pct'].min():.2f}")
+    print(f"RESULT seed000_cf_test_min_MAoT_minus_thesis_pct {(cf['MAoT_pct'] - cf['thesis_MAoT_pct']).min():.2f}")
+    ock = oc[oc.maneuver.isin(KNOWN)]
+    print(f"RESULT seed000_1c_test_min_FA_pct {ock['FA_pct'].min():.2f}")
+    print(f"RESULT seed000_1c_test_min_MAoT_minus_thesis_pct {(ock['MAoT_pct'] - ock['thesis_MAoT_pct']).min():.2f}")
+    m5 = oc[oc.maneuver == "M5"]
+    if len(m5):
+        print(f"RESULT seed000_1c_M5_unknown_FA_pct {m5['FA_pct'].iloc[0]:.2f}")
+        print(f"RESULT seed000_1c_M5_unknown_MAoT_pct {m5['MAoT_pct'].iloc[0]:.2f}")
+    if not args.skip_switch:
+        low = sw[(sw["mode"] == args.alt_mode) & (sw["thesis_MAoT_final_pct"] < 50)]
+        print(f"RESULT seed000_switch_{args.alt_mode}_min_final_MAoT_pct_where_thesis_below_50 "
+              f"{low['MAoT_final_pct'].min():.2f}")
+        cum = sw[sw["mode"] == "cumulative"]
+        print(f"RESULT seed000_switch_cumulative_mean_final_MAoT_pct {cum['MAoT_final_pct'].mean():.2f}")
+        sh_p = sh.pivot(index="scenario", columns="switch_s", values="change_point_s")
+        d = np.concatenate([(sh_p[9.0] - sh_p[8.0]).to_numpy(), (sh_p[8.0] - sh_p[7.0]).to_numpy()])
+        print(f"RESULT seed000_change_point_shift_per_1s_switch_shift_s {np.nanmedian(d):.2f}")
+    if not args.skip_gmr:
+        r = grmse.pivot(index="maneuver", columns="quantity", values="rmse")
+        print(f"RESULT seed000_gmr_acc_rmse_mps2 {r['acc'].mean():.3f}")
+        print(f"RESULT seed000_fd_acc_rmse_mps2 {r['acc_fd'].mean():.3f}")
+        print(f"RESULT seed000_gmr_jerk_rmse_mps3 {r['jerk'].mean():.3f}")
+    print(f"RESULT seed000_study_wall_s {time.perf_counter() - t0:.0f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,54 @@
+"""``uavpipe preprocess INGEST_DIR... -o DIR``: ``state``/``segments``/``calibration`` per flight.
+
+Each ``INGEST_DIR`` is one flight written by ``uavpipe ingest`` (``<stream>.parquet`` +
+``meta.json``); outputs go to ``DIR/<flight_id>/{state,segments,calibration}.parquet`` plus
+``preprocess.json`` (diagnostics).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from ..config import ConfigError, load_config
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("preprocess", help="resample, filter, calibrate and differentiate ingested flights")
+    p.add_argument("ingest_dirs", nargs="+", type=Path, metavar="INGEST_DIR")
+    p.add_argument("-o", "--out", type=Path, required=True, metavar="DIR",
+                   help="output root; each flight goes to DIR/<flight_id>/")
+    p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    p.add_argument("--vehicle", default=None, help="vehicle key in preprocess.vehicles")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..preprocess.state import preprocess_dir, summary_line
+
+    try:
+        cfg = load_config(args.config)
+    except ConfigError as exc:
+        print(f"uavpipe preprocess: {exc}", file=sys.stderr)
+        return 2
+    failed = []
+    for d in args.ingest_dirs:
+        meta = d / "meta.json"
+        try:
+            fid = json.loads(meta.read_text()).get("flight_id") or d.name
+        except (OSError, ValueError) as exc:
+            print(f"uavpipe preprocess: {d}: not an ingest folder ({meta}: {exc})", file=sys.stderr)
+            failed.append(d)
+            continue
+        try:
+            diag = preprocess_dir(d, args.out / fid, cfg, vehicle=args.vehicle)
+        except (ConfigError, ValueError, OSError) as exc:
+            print(f"uavpipe preprocess: {d}: {exc}", file=sys.stderr)
+            failed.append(d)
+            continue
+        print(f"{d} -> {args.out / fid}: {summary_line(diag)}")
+    if failed:
+        print(f"uavpipe preprocess: {len(failed)} of {len(args.ingest_dirs)} flight(s) failed", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,1 @@
+"""Shipped column maps for the CSV/Parquet importer (:mod:`pipeline.io.tabular`), one YAML each."""

@@ -1,0 +1,408 @@
+"""ROS 1 ``.bag`` files and ROS 2 bag directories (sqlite3 or MCAP storage), through rosbags.
+
+Detection (one rule, from the bytes/structure, never the extension):
+
+* a **file** starting with ``#ROSBAG V2.0\\n`` → :class:`Ros1BagReader`;
+* a **directory** holding ``metadata.yaml`` (or that ``metadata.yaml`` file itself) →
+  :class:`Ros2BagReader`, whatever its storage (sqlite3 ``.db3`` or ``.mcap``);
+* a bare ``.mcap`` **file** (magic ``\\x89MCAP0\\r\\n``) → the MCAP reader
+  (:mod:`pipeline.io.mcap_reader`), also when it lies inside a ROS 2 bag directory;
+* a ROS 2 sqlite3 storage **file** (``.db3``) passed alone → :class:`Ros2Sqlite3FileReader`,
+  which refuses it with an :class:`IngestError` naming the bag directory to pass instead: a
+  ``.db3`` holds no ``metadata.yaml`` and may be one split of several.
+
+Decoding: the readers list the connections, let :func:`ros_common.plan_topics` pick the
+topics, deserialise only those with a rosbags ``Typestore`` built from the definitions stored
+in the bag (ROS 1 connection ``message_definition``; ROS 2 MCAP schemas and rosbag2 ≥ v9
+``message_definitions``) over a stock store for bags that carry none — so custom message types
+decode — and hand the messages to :func:`ros_common.build_flightlog` for the mapping to the
+canonical schema (frames, stamps, NED origin: see :mod:`pipeline.io.ros_common`).
+
+Damage: a ROS 1 bag rosbags cannot open (truncated, or never closed: its index at the end
+is missing or damaged) is scanned record by record without the index (:func:`_scan_ros1`),
+keeping the messages before the damage and counting the rest in ``bytes_skipped``; likewise a
+single-file MCAP-storage ROS 2 bag rosbags cannot open (no summary/footer) is read
+sequentially by the MCAP reader. Anything else unreadable (bad bag header, broken
+``metadata.yaml``, missing storage file, nothing decodable) raises :class:`IngestError` with
+the reason; a message
+that fails to deserialise is dropped and counted (``records_dropped['deserialize:<topic>']``);
+when the storage fails mid-way the messages read so far are kept and the rest counted
+(``records_dropped['unread_after_error']``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable
+
+import yaml
+
+from . import ros_common as rc
+from .base import FlightLog, IngestError, LogReader, Progress
+from .registry import register
+
+ROS1_MAGIC = b"#ROSBAG V2.0\n"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+ROS2_META_KEY = "rosbag2_bagfile_information"
+
+
+def _decode(path: Path, reader: Any, routes: dict[str, rc.Route], deser: Callable[[bytes, str], Any],
+            known_types: set[str], diag: dict, progress: Progress | None) -> dict[str, rc.Bucket]:
+    """Deserialise the routed topics of an open rosbags reader into buckets."""
+    drops = diag["records_dropped"]
+    for topic, route in list(routes.items()):
+        if route.msgtype not in known_types:
+            n = sum(c.msgcount for c in reader.connections if c.topic == topic)
+            drops[f"unknown_type:{topic}"] = n
+            diag["warnings"].append(f"{topic}: no definition for {route.msgtype} in the bag or the "
+                                    f"default type store; {n} message(s) not decoded")
+            del routes[topic]
+    buckets = {t: rc.Bucket(route=r) for t, r in routes.items()}
+    conns = [c for c in reader.connections if c.topic in routes]
+    total = sum(c.msgcount for c in conns)
+    done = bad = 0
+    if not conns:
+        return buckets
+    try:
+        for conn, ts, raw in reader.messages(connections=conns):
+            b = buckets[conn.topic]
+            try:
+                msg = deser(raw, conn.msgtype)
+            except Exception:  # noqa: BLE001 - one bad message is a counted drop, not a failure
+                key = f"deserialize:{conn.topic}"
+                drops[key] = drops.get(key, 0) + 1
+                bad += 1
+                continue
+            b.msgs.append(msg)
+            b.rec_ns.append(ts)
+            done += 1
+            if progress is not None and done % 4096 == 0:
+                progress(done, total)
+    except Exception as exc:  # noqa: BLE001 - storage failure mid-way: keep what was read
+        reason = f"{type(exc).__name__}: {exc}"
+        if done == 0:
+            raise IngestError(path, f"cannot read messages: {reason}") from None
+        left = max(total - done - bad, 0)
+        drops["unread_after_error"] = drops.get("unread_after_error", 0) + left
+        diag["warnings"].append(f"reading stopped after {done} message(s): {reason}; "
+                                f"{left} message(s) not read")
+    if progress is not None:
+        progress(total, total)
+    return buckets
+
+
+def _connections(reader: Any) -> list[tuple[str, str, int]]:
+    return [(c.topic, c.msgtype, c.msgcount) for c in reader.connections]
+
+
+@register
+class Ros1BagReader(LogReader):
+    """ROS 1 bag (format 2.0) through ``rosbags.rosbag1``."""
+
+    name = "rosbag1"
+    source_format = "ros1bag"
+    version = "1"
+    priority = 10
+
+    @classmethod
+    def sniff(cls, path: Path, head: bytes) -> str | None:
+        if head.startswith(ROS1_MAGIC):
+            return "ROS 1 bag magic '#ROSBAG V2.0'"
+        return None
+
+    def read(self, path: Path, *, config: dict | None = None,
+             progress: Progress | None = None) -> FlightLog:
+        from rosbags.rosbag1 import Reader
+
+        cfg = rc.RosConfig.from_config(config, path)
+        diag: dict = {"records_dropped": {}, "warnings": []}
+        try:
+            reader = Reader(path)
+            reader.open()
+        except Exception as exc:  # noqa: BLE001 - rosbags raises ReaderError and OS errors
+            msg = str(exc) or type(exc).__name__
+            if exc.__cause__ is not None and str(exc.__cause__):
+                msg = f"{msg} ({exc.__cause__})"
+            # no usable index (truncated, or never closed): scan the records sequentially
+            return _scan_ros1(path, f"rosbags cannot open it: {msg}", cfg, progress, self.source_format)
+        try:
+            conns = _connections(reader)
+            if not conns or reader.message_count == 0:
+                raise IngestError(path, "ROS 1 bag holds no messages")
+            routes, unmapped = rc.plan_topics(conns, cfg, path)
+            defs = [(c.msgtype, "msg", c.msgdef.data) for c in reader.connections]
+            store, errs = rc.make_typestore(defs, "ROS1_NOETIC", {r.msgtype for r in routes.values()})
+            for t, e in errs.items():
+                diag["warnings"].append(f"message definition of {t} unparsable: {e}")
+            buckets = _decode(path, reader, routes, store.deserialize_ros1, set(store.fielddefs),
+                              diag, progress)
+        finally:
+            reader.close()
+        return rc.build_flightlog(buckets, unmapped, cfg, path=path, source_format=self.source_format,
+                                  diag=diag)
+
+
+def _bag_dir(path: Path) -> Path:
+    return path.parent if path.is_file() and path.name == "metadata.yaml" else path
+
+
+@register
+class Ros2BagReader(LogReader):
+    """ROS 2 bag directory (``metadata.yaml`` + sqlite3 or MCAP storage) through ``rosbags.rosbag2``."""
+
+    name = "rosbag2"
+    source_format = "ros2bag"
+    version = "1"
+    priority = 12
+
+    @classmethod
+    def sniff(cls, path: Path, head: bytes) -> str | None:
+        if path.is_dir() and (path / "metadata.yaml").is_file():
+            return "directory with metadata.yaml (ROS 2 bag)"
+        if path.name == "metadata.yaml" and ROS2_META_KEY.encode() in head:
+            return "rosbag2 metadata.yaml (reads its bag directory)"
+        return None
+
+    def read(self, path: Path, *, config: dict | None = None,
+             progress: Progress | None = None) -> FlightLog:
+        from rosbags.rosbag2 import Reader
+
+        cfg = rc.RosConfig.from_config(config, path)
+        bag = _bag_dir(path)
+        meta_path = bag / "metadata.yaml"
+        try:
+            info = yaml.safe_load(meta_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            raise IngestError(path, f"ROS 2 bag metadata.yaml unreadable: {type(exc).__name__}: "
+                                    f"{str(exc).splitlines()[0] if str(exc) else ''}") from None
+        if not isinstance(info, dict) or not isinstance(info.get(ROS2_META_KEY), dict):
+            raise IngestError(path, f"metadata.yaml has no '{ROS2_META_KEY}' mapping: not a ROS 2 bag")
+        bi = info[ROS2_META_KEY]
+        storage = bi.get("storage_identifier", "?")
+        files = bi.get("relative_file_paths") or []
+        missing = [f for f in files if not (bag / str(f)).is_file()]
+        if missing:
+            raise IngestError(path, f"storage file(s) listed in metadata.yaml missing: {', '.join(map(str, missing))}")
+        diag: dict = {"records_dropped": {}, "warnings": [], "storage": storage}
+        try:
+            reader = Reader(bag)
+            reader.open()
+        except Exception as exc:  # noqa: BLE001 - rosbags ReaderError, sqlite3/mcap errors
+            reason = f"unreadable ROS 2 bag ({storage} storage): {type(exc).__name__}: {exc}"
+            if storage == "mcap" and len(files) == 1:
+                return self._mcap_fallback(path, bag / str(files[0]), reason, config, progress)
+            raise IngestError(path, reason) from None
+        try:
+            conns = _connections(reader)
+            if not conns or reader.message_count == 0:
+                raise IngestError(path, "ROS 2 bag holds no messages")
+            routes, unmapped = rc.plan_topics(conns, cfg, path)
+            defs = []
+            for c in reader.connections:
+                fmt = getattr(c.msgdef.format, "name", "NONE")
+                if fmt in ("MSG", "IDL"):
+                    defs.append((c.msgtype, fmt.lower(), c.msgdef.data))
+            store, errs = rc.make_typestore(defs, "LATEST", {r.msgtype for r in routes.values()})
+            for t, e in errs.items():
+                diag["warnings"].append(f"message definition of {t} unparsable: {e}")
+            fmts = {c.topic: getattr(c.ext, "serialization_format", "cdr") for c in reader.connections}
+            for topic in list(routes):
+                if fmts.get(topic, "cdr") != "cdr":
+                    n = sum(c.msgcount for c in reader.connections if c.topic == topic)
+                    diag["records_dropped"][f"unsupported_serialization:{topic}"] = n
+                    del routes[topic]
+            buckets = _decode(path, reader, routes, store.deserialize_cdr, set(store.fielddefs),
+                              diag, progress)
+        finally:
+            reader.close()
+        return rc.build_flightlog(buckets, unmapped, cfg, path=path, source_format=self.source_format,
+                                  diag=diag)
+
+
+    def _mcap_fallback(self, path: Path, file: Path, reason: str, config: dict | None,
+                       progress: Progress | None) -> FlightLog:
+        """rosbags needs an intact MCAP summary; a damaged single-file MCAP bag is read
+        sequentially instead, keeping the messages before the damage (counted in diagnostics)."""
+        from .mcap_reader import McapReader
+
+        try:
+            log = McapReader().read(file, config=config, progress=progress)
+        except IngestError as exc:
+            raise IngestError(path, f"{reason}; sequential read failed too: {exc.reason}") from None
+        d = log.meta["diagnostics"]
+        d["storage"] = "mcap"
+        d["warnings"].insert(0, f"{reason}; read {file.name} sequentially instead")
+        log.meta["source_format"] = self.source_format
+        return log
+
+
+@register
+class Ros2Sqlite3FileReader(LogReader):
+    """A ROS 2 sqlite3 storage file (``.db3``) passed alone: refused with a pointer to its bag."""
+
+    name = "rosbag2_db3"
+    source_format = "ros2bag"
+    version = "1"
+    priority = 14
+
+    @classmethod
+    def sniff(cls, path: Path, head: bytes) -> str | None:
+        if head.startswith(SQLITE_MAGIC) and b"CREATE TABLE topics" in head and b"messages" in head:
+            return "sqlite3 file with rosbag2 'topics'/'messages' tables"
+        return None
+
+    def read(self, path: Path, *, config: dict | None = None,
+             progress: Progress | None = None) -> FlightLog:
+        meta = path.parent / "metadata.yaml"
+        if meta.is_file():
+            raise IngestError(path, "a ROS 2 sqlite3 storage file is one part of a bag; ingest its "
+                                    f"bag directory {path.parent} (with metadata.yaml) instead")
+        raise IngestError(path, "a ROS 2 sqlite3 storage file cannot be read without its bag's "
+                                "metadata.yaml (none beside it); `ros2 bag reindex` can recreate it")
+
+
+def _length(fh: Any, size: int, skip: bool = False) -> int:
+    """Next uint32 length field, checked against the bytes left (garbage must not make us
+    allocate gigabytes); with ``skip`` the field is consumed, else the position is kept."""
+    import struct
+
+    pos = fh.tell()
+    raw = fh.read(4)
+    if len(raw) < 4:
+        raise EOFError(f"length field cut at byte {pos}")
+    n = struct.unpack("<L", raw)[0]
+    if n > size - pos - 4:
+        raise ValueError(f"record length {n} at byte {pos} exceeds the {size - pos - 4} bytes left")
+    if not skip:
+        fh.seek(pos)
+    return n
+
+
+def _scan_ros1(path: Path, why: str, cfg: rc.RosConfig, progress: Progress | None,
+               source_format: str) -> FlightLog:
+    """Read a ROS 1 bag without its index, record by record (bag format 2.0).
+
+    Records are ``<header_len><header: name=value fields><data_len><data>``; chunks (op 5)
+    hold connection (op 7) and message (op 2) records, bz2/lz4-compressed or not. Reading stops
+    at the first record that cannot be parsed (truncation, garbage): the messages before it are
+    kept, the remaining bytes are counted in ``bytes_skipped``; a chunk that fails to decompress
+    is counted in ``records_dropped['bad_chunk']`` and skipped. Messages of a topic are taken in
+    record-time order.
+    """
+    import io
+    import struct
+
+    from rosbags.rosbag1.reader import Header, RecordType, decompressors, normalize, read_bytes, read_uint32
+    from rosbags.typesys.msg import normalize_msgtype
+
+    size = path.stat().st_size
+    drops: dict[str, int] = {}
+    warnings: list[str] = []
+    conns: dict[int, tuple[str, str, str]] = {}  # conn id -> (topic, msgtype, msgdef)
+    raw: dict[int, list[tuple[int, int, bytes]]] = {}
+    counts: dict[int, int] = {}
+    bytes_skipped = 0
+    n_msgs = 0
+    good = 0
+
+    def connection(hdr: Header, data: bytes) -> None:
+        cid = hdr.get_uint32("conn")
+        if cid in conns:
+            return
+        fields = Header.read(io.BytesIO(struct.pack("<L", len(data)) + data))
+        topic = normalize(hdr.get_string("topic"))
+        typ = normalize_msgtype(fields.get_string("type"))
+        conns[cid] = (topic, typ, fields.get_string("message_definition"))
+        if ros1_candidate(topic, rc.normalize_type(typ)):
+            raw[cid] = []
+
+    def ros1_candidate(topic: str, msgtype: str) -> bool:
+        if topic in cfg.topics:
+            return cfg.topics[topic] is not None
+        return topic in cfg.custom or msgtype in rc.BUILTIN_TYPES or msgtype in cfg.custom_types
+
+    def message(hdr: Header, data: bytes, seq: int) -> None:
+        nonlocal n_msgs
+        cid = hdr.get_uint32("conn")
+        n_msgs += 1
+        counts[cid] = counts.get(cid, 0) + 1
+        if cid in raw:
+            raw[cid].append((hdr.get_time("time"), seq, data))
+        elif cid not in conns:
+            drops["unknown_connection"] = drops.get("unknown_connection", 0) + 1
+
+    with open(path, "rb") as fh:
+        if fh.read(len(ROS1_MAGIC)) != ROS1_MAGIC:
+            raise IngestError(path, "not a ROS 1 bag (bad magic)")
+        good = fh.tell()
+        seq = 0
+        try:
+            while good < size:
+                hdr = Header.read(io.BytesIO(read_bytes(fh, 4 + _length(fh, size))))
+                op = hdr.get_uint8("op")
+                data = read_bytes(fh, _length(fh, size, skip=True))
+                if op == RecordType.CHUNK:
+                    try:
+                        inner = io.BytesIO(decompressors[hdr.get_string("compression")](data))
+                    except Exception as exc:  # noqa: BLE001 - bad compression: drop the chunk
+                        drops["bad_chunk"] = drops.get("bad_chunk", 0) + 1
+                        bytes_skipped += len(data)
+                        warnings.append(f"chunk at byte {good} dropped: {type(exc).__name__}: {exc}")
+                        inner = io.BytesIO()
+                    end = len(inner.getbuffer())
+                    while inner.tell() < end:
+                        h = Header.read(inner)
+                        d = read_bytes(inner, read_uint32(inner))
+                        iop = h.get_uint8("op")
+                        if iop == RecordType.CONNECTION:
+                            connection(h, d)
+                        elif iop == RecordType.MSGDATA:
+                            message(h, d, seq)
+                            seq += 1
+                elif op == RecordType.CONNECTION:
+                    connection(hdr, data)
+                elif op == RecordType.MSGDATA:
+                    message(hdr, data, seq)
+                    seq += 1
+                good = fh.tell()
+                if progress is not None:
+                    progress(good, size)
+        except Exception as exc:  # noqa: BLE001 - truncation/garbage ends the scan
+            reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            if exc.__cause__ is not None and str(exc.__cause__):
+                reason = f"{reason} ({exc.__cause__})"
+            if n_msgs == 0:
+                raise IngestError(path, f"unreadable ROS 1 bag ({why}); sequential scan found no "
+                                        f"messages before byte {good} ({reason})") from None
+            bytes_skipped += size - good
+            warnings.append(f"bag unreadable from byte {good} of {size} ({reason}); "
+                            f"{size - good} byte(s) skipped")
+    if n_msgs == 0:
+        raise IngestError(path, f"unreadable ROS 1 bag ({why}); no messages in it")
+    warnings.insert(0, f"{why}; read sequentially without the index")
+    routes, unmapped = rc.plan_topics([(t, typ, counts.get(c, 0)) for c, (t, typ, _d) in conns.items()],
+                                      cfg, path)
+    defs = [(typ, "msg", d) for c, (t, typ, d) in conns.items() if t in routes]
+    store, errs = rc.make_typestore(defs, "ROS1_NOETIC", {r.msgtype for r in routes.values()})
+    for t, e in errs.items():
+        warnings.append(f"message definition of {t} unparsable: {e}")
+    buckets: dict[str, rc.Bucket] = {}
+    for cid in sorted((c for c in conns if conns[c][0] in routes), key=lambda c: conns[c][0]):
+        topic, typ, _d = conns[cid]
+        route = routes[topic]
+        b = buckets.setdefault(topic, rc.Bucket(route=route))
+        items = sorted(raw.get(cid, []))
+        if route.msgtype not in store.fielddefs:
+            drops[f"unknown_type:{topic}"] = drops.get(f"unknown_type:{topic}", 0) + len(items)
+            continue
+        for t_rec, _s, data in items:
+            try:
+                msg = store.deserialize_ros1(data, typ)
+            except Exception:  # noqa: BLE001 - one bad message is a counted drop
+                key = f"deserialize:{topic}"
+                drops[key] = drops.get(key, 0) + 1
+                continue
+            b.msgs.append(msg)
+            b.rec_ns.append(t_rec)
+    diag = {"records_dropped": drops, "warnings": warnings, "bytes_skipped": bytes_skipped}
+    return rc.build_flightlog(buckets, unmapped, cfg, path=path, source_format=source_format, diag=diag)

@@ -1,0 +1,103 @@
+"""Truth/labels side-cars: ``<log>.truth.parquet`` next to a (simulated) flight log.
+
+A side-car is one Parquet file holding the canonical ``truth`` stream (``schema.STREAMS['truth']``:
+position, velocity, acceleration, jerk, attitude, body rates and the maneuver label per sample)
+written with :func:`pipeline.io.parquet.write_table`; the ``labels`` table (maneuver segments)
+and the flight's UTC start ``t0_utc_ns`` travel in its ``uavpipe`` metadata. Its ``t_ns`` is
+relative to the flight start; when the log's own ``meta['t0_utc_ns']`` is known and differs,
+:func:`attach_sidecar` shifts the truth onto the log's time base (and says so in the
+diagnostics).
+
+Naming: for ``flight.bin`` the side-car is ``flight.bin.truth.parquet`` (the full file or bag
+directory name plus ``.truth.parquet``); :func:`find_sidecar` also accepts
+``flight.truth.parquet``. The workflow passes the side-car to ingest explicitly (the
+manifest's ``labels`` column); the CLI finds it by name.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import schema
+from .base import FlightLog, IngestError
+from .parquet import read_table, read_table_meta, write_table
+
+SUFFIX = ".truth.parquet"
+
+
+def sidecar_path(log_path: str | os.PathLike) -> Path:
+    """The side-car name written for ``log_path``: ``<name>.truth.parquet`` beside it."""
+    p = Path(log_path)
+    return p.with_name(p.name + SUFFIX)
+
+
+def find_sidecar(log_path: str | os.PathLike) -> Path | None:
+    """The side-car of ``log_path`` if one exists (``<name>.truth.parquet``, else
+    ``<stem>.truth.parquet``), otherwise ``None``."""
+    p = Path(log_path)
+    for cand in (sidecar_path(p), p.with_name(p.stem + SUFFIX)):
+        if cand.is_file() and cand != p:
+            return cand
+    return None
+
+
+def write_sidecar(path: str | os.PathLike, truth: pd.DataFrame, labels: pd.DataFrame | None = None,
+                  *, t0_utc_ns: int | None = None, extra: dict | None = None) -> Path:
+    """Write a side-car: ``truth`` rows (canonical truth stream) + ``labels`` in the metadata."""
+    path = Path(path)
+    t = schema.conform("truth", truth)
+    lab = schema.conform("labels", labels)
+    rows = [{"t_start_ns": int(r.t_start_ns), "t_end_ns": int(r.t_end_ns), "label": str(r.label),
+             "source": None if pd.isna(r.source) else str(r.source)} for r in lab.itertuples()]
+    write_table(t, path, schema.columns("truth"), name="truth",
+                extra={"labels": rows, "t0_utc_ns": t0_utc_ns, **(extra or {})})
+    return path
+
+
+def read_sidecar(path: str | os.PathLike) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
+    """``(truth, labels, metadata)`` of a side-car; :class:`IngestError` naming it when unreadable."""
+    p = Path(path)
+    if not p.is_file():
+        raise IngestError(p, "labels side-car not found")
+    try:
+        meta = read_table_meta(p)
+    except Exception as exc:  # pyarrow raises several types for a corrupt or foreign file
+        raise IngestError(p, f"not a readable truth side-car: {type(exc).__name__}: {exc}") from None
+    if meta.get("table") != "truth":
+        raise IngestError(p, f"not a truth side-car (table {meta.get('table')!r})")
+    try:
+        truth = read_table(p, schema.columns("truth"))
+    except Exception as exc:
+        raise IngestError(p, f"truth side-car unreadable: {type(exc).__name__}: {exc}") from None
+    rows = meta.get("labels") or []
+    labels = pd.DataFrame({
+        "t_start_ns": np.array([r["t_start_ns"] for r in rows], np.int64),
+        "t_end_ns": np.array([r["t_end_ns"] for r in rows], np.int64),
+        "label": pd.array([r["label"] for r in rows], dtype="string"),
+        "source": pd.array([r.get("source") for r in rows], dtype="string"),
+    })
+    return truth, schema.conform("labels", labels), meta
+
+
+def attach_sidecar(log: FlightLog, path: str | os.PathLike) -> FlightLog:
+    """Put a side-car's ``truth`` and ``labels`` into ``log`` (in place; also returned).
+
+    The truth is shifted by ``sidecar t0_utc_ns − log t0_utc_ns`` when both are known, so it
+    shares the log's ``t_ns`` base. ``meta['labels_path']`` records the side-car.
+    """
+    truth, labels, meta = read_sidecar(path)
+    t0_sc, t0_log = meta.get("t0_utc_ns"), log.meta.get("t0_utc_ns")
+    if t0_sc is not None and t0_log is not None and int(t0_sc) != int(t0_log):
+        shift = int(t0_sc) - int(t0_log)
+        truth = truth.assign(t_ns=truth["t_ns"] + shift)
+        labels = labels.assign(t_start_ns=labels["t_start_ns"] + shift, t_end_ns=labels["t_end_ns"] + shift)
+        log.meta.setdefault("diagnostics", schema.new_diagnostics())["warnings"].append(
+            f"truth side-car shifted by {shift * 1e-9:+.6f} s onto the log's UTC start")
+    log.streams["truth"] = schema.conform("truth", truth)
+    log.streams["labels"] = labels
+    log.meta["labels_path"] = str(path)
+    return log

@@ -1,0 +1,553 @@
+"""PX4 ULog reader (through pyulog): ``*.ulg`` -> canonical :class:`~pipeline.io.base.FlightLog`.
+
+pyulog parses the file (:class:`pyulog.ULog`); this module only selects topics, converts units
+and frames, and keeps the books (diagnostics). Topic -> stream map:
+
+=========================================  =================  ===================================
+ULog topic                                 stream             conversion
+=========================================  =================  ===================================
+``sensor_combined`` (or ``vehicle_imu``)   ``imu``            gyro rad/s, accel m/s^2 (FRD, as
+                                                              logged); ``vehicle_imu``:
+                                                              ``delta_angle/delta_angle_dt``,
+                                                              ``delta_velocity/delta_velocity_dt``
+``vehicle_gps_position`` (or              ``gps``            lat/lon: float deg, or int 1e-7 deg
+``sensor_gps``)                                               (older logs); alt: float m or int mm
+``vehicle_magnetometer`` (or              ``mag``            Gauss x 1e-4 -> T
+``sensor_mag``)
+``vehicle_air_data`` (or ``sensor_baro``)  ``baro``           Pa (``baro_pressure_pa``; mbar x 100
+                                                              for ``*_mbar`` fields);
+                                                              ``alt_rel_m`` = ``baro_alt_meter``,
+                                                              the ISA altitude (1013.25 hPa datum)
+``vehicle_attitude``                       ``attitude``       ``q`` is FRD->NED, scalar first: as is
+``vehicle_local_position``                 ``local_position`` ``x,y,z,vx,vy,vz`` NED; ``ref_lat``,
+                                                              ``ref_lon``, ``ref_alt`` (AMSL) ->
+                                                              ``meta['ned_origin']``
+``distance_sensor``                        ``rangefinder``    m; ``valid`` = within
+                                                              [min_distance, max_distance] and
+                                                              ``signal_quality != 0``
+``airspeed`` / ``differential_pressure``   ``airspeed``       indicated airspeed m/s, degC / Pa
+``input_rc``                               ``control``        ``values[i]`` -> ``rc_{i+1}_us``
+                                                              (channels >= ``channel_count`` NaN)
+``actuator_outputs``                       ``control``        ``output[i]`` -> ``servo_{i+1}_us``
+                                                              (>= ``noutputs`` NaN), raw as logged
+``vehicle_status``                         ``mode``           ``nav_state`` name, ``armed`` =
+                                                              ``arming_state == 2``; rows on change
+=========================================  =================  ===================================
+
+Time. ``t_boot_ns = timestamp * 1000`` (``timestamp``: µs since boot, the publication time of
+every uORB message) and ``t_ns = t_boot_ns - t0_boot_ns`` with ``t0_boot_ns`` the ULog header
+timestamp (logger start). Topics published once before the logger started (a stale sample is
+written at subscription) keep their true stamp and so get ``t_ns < 0``; their number is in
+``meta['diagnostics']['warnings']``. ``t0_utc_ns`` comes from the GPS topic's ``time_utc_usec``:
+
+.. math:: t_{0,\\mathrm{UTC}} = \\operatorname{median}_k\\,[u_k - (b_k + r_k)] + t_{0,\\mathrm{boot}}
+
+with ``u`` = ``time_utc_usec``, ``b`` = ``timestamp``, ``r`` = ``timestamp_time_relative``
+(samples with ``u > 0`` and a fix), ``utc_source = "gps"``.
+
+Multi-instance topics (pyulog ``multi_id``) become the ``instance`` column; ``src`` is the topic
+name. ``actuator_outputs`` are written raw: PWM µs for PWM output groups, but UAVCAN/DShot groups
+log ESC command units (e.g. 0..8191); groups whose values exceed 2500 are named in a warning.
+Logged text messages (``L`` and tagged ``C``) go to ``diagnostics['messages']``
+(``{t_ns, level, text}``), dropouts to ``diagnostics['dropouts']`` (``count``, ``total_ms``) and
+make the log ``partial``; a file cut mid-message is counted in ``bytes_skipped``.
+
+Config (``ingest: ulog:``): ``imu``, ``gps``, ``mag``, ``baro``: ``auto`` (the first listed topic
+present, default) or a topic name / list of topic names to take; ``rangefinder_valid_m: [lo, hi]``
+narrows ``valid`` to a trusted window inside the sensor's declared range (``motor_failure.ulg``
+declares 0.05-25 m, all 361 samples inside; 98 fall in 0.17-6 m).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import mmap
+import struct
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import schema
+from .base import FlightLog, IngestError, LogReader, Progress
+from .registry import register
+
+MAGIC = b"ULog\x01\x12\x35"
+
+#: PX4 ``vehicle_status.nav_state`` names (msg/VehicleStatus.msg; 6-9, 11 and 16 were renamed
+#: or freed across releases, so their older meaning is given too).
+NAV_STATES = {
+    0: "MANUAL", 1: "ALTCTL", 2: "POSCTL", 3: "AUTO_MISSION", 4: "AUTO_LOITER", 5: "AUTO_RTL",
+    6: "POSITION_SLOW/AUTO_RCRECOVER", 7: "AUTO_RTGS", 8: "AUTO_LANDENGFAIL",
+    9: "AUTO_LANDGPSFAIL", 10: "ACRO", 11: "UNUSED", 12: "DESCEND", 13: "TERMINATION",
+    14: "OFFBOARD", 15: "STAB", 16: "RATTITUDE", 17: "AUTO_TAKEOFF", 18: "AUTO_LAND",
+    19: "AUTO_FOLLOW_TARGET", 20: "AUTO_PRECLAND", 21: "ORBIT", 22: "AUTO_VTOL_TAKEOFF",
+    **{23 + i: f"EXTERNAL{i + 1}" for i in range(8)},
+}
+#: ``arming_state`` value meaning armed, in old (INIT/STANDBY/ARMED...) and new
+#: (DISARMED=1/ARMED=2) enumerations alike.
+ARMING_STATE_ARMED = 2
+
+#: candidate topics per stream in preference order ("auto" takes the first one present)
+DEFAULT_TOPICS = {
+    "imu": ("sensor_combined", "vehicle_imu"),
+    "gps": ("vehicle_gps_position", "sensor_gps"),
+    "mag": ("vehicle_magnetometer", "sensor_mag"),
+    "baro": ("vehicle_air_data", "sensor_baro"),
+}
+
+#: ``accelerometer_timestamp_relative`` value meaning "no accelerometer sample in this message"
+RELATIVE_TIMESTAMP_INVALID = 0x7FFFFFFF
+_VALID_MSG_TYPES = frozenset(b"BFIMPQARDLCSO")
+_GAUSS_TO_T = 1e-4
+
+
+@register
+class ULogReader(LogReader):
+    """PX4 ULog through pyulog (see the module docstring for the topic map)."""
+
+    name = "ulog"
+    source_format = "px4_ulog"
+    version = "1"
+    priority = 10
+
+    @classmethod
+    def sniff(cls, path: Path, head: bytes) -> str | None:
+        if head[:7] == MAGIC:
+            ver = head[7] if len(head) > 7 else -1
+            return f"ULog magic 'ULog\\x01\\x12\\x35' (file version {ver})"
+        return None
+
+    def read(self, path: Path, *, config: dict | None = None,
+             progress: Progress | None = None) -> FlightLog:
+        cfg = dict((config or {}).get("ulog") or {})
+        ulog, pyulog_out = _parse(path)
+        if progress:
+            progress(1, 2)
+        diag = schema.new_diagnostics()
+        if pyulog_out.strip():
+            diag["warnings"].append(f"pyulog: {' '.join(pyulog_out.split())[:500]}")
+        topics: dict[str, list] = {}
+        for d in ulog.data_list:
+            topics.setdefault(d.name, []).append(d)
+            diag["record_counts"][f"{d.name}[{d.multi_id}]"] = int(len(d.data["timestamp"]))
+        if not topics:
+            raise IngestError(path, "ULog has no data messages (empty or cut before the data section)")
+
+        t0_us = int(ulog.start_timestamp)
+        conv = _Conv(t0_us)
+        streams: dict[str, list[pd.DataFrame]] = {}
+
+        def add(stream: str, df: pd.DataFrame | None) -> None:
+            if df is not None and len(df):
+                streams.setdefault(stream, []).append(df)
+
+        for stream, builder in (("imu", _imu), ("gps", _gps), ("mag", _mag), ("baro", _baro)):
+            for d in _select(topics, stream, cfg.get(stream, "auto"), path):
+                add(stream, builder(d, conv))
+        for d in topics.get("vehicle_attitude", []):
+            add("attitude", _attitude(d, conv))
+        for d in topics.get("vehicle_local_position", []):
+            add("local_position", _local_position(d, conv))
+        for d in topics.get("distance_sensor", []):
+            add("rangefinder", _rangefinder(d, conv, cfg.get("rangefinder_valid_m")))
+        for d in topics.get("airspeed", []):
+            add("airspeed", _airspeed(d, conv))
+        for d in topics.get("differential_pressure", []):
+            add("airspeed", _diff_press(d, conv))
+        for d in topics.get("input_rc", []):
+            add("control", _input_rc(d, conv))
+        non_pwm = []
+        for d in topics.get("actuator_outputs", []):
+            df = _actuator_outputs(d, conv)
+            add("control", df)
+            vals = df.filter(like="servo_").to_numpy()
+            if np.isfinite(vals).any() and np.nanmax(vals) > 2500:
+                non_pwm.append(d.multi_id)
+        if non_pwm:
+            diag["warnings"].append(
+                f"actuator_outputs instance(s) {non_pwm} exceed 2500: not PWM µs (ESC/UAVCAN "
+                "command units), written raw into servo_*_us")
+        for d in topics.get("vehicle_status", []):
+            add("mode", _mode(d, conv))
+
+        out = {k: pd.concat(v, ignore_index=True) if len(v) > 1 else v[0] for k, v in streams.items()}
+        if conv.n_before_start:
+            diag["warnings"].append(
+                f"{conv.n_before_start} sample(s) stamped before the logger start (stale topics "
+                "written at subscription) have t_ns < 0")
+        meta = schema.new_meta(t0_boot_ns=t0_us * 1000)
+        meta["ned_origin"] = _ned_origin(topics, out.get("gps"), diag)
+        _utc(meta, topics, out, cfg, t0_us)
+        _messages(ulog, diag, t0_us)
+        if ulog.dropouts:
+            total = int(sum(int(o.duration) for o in ulog.dropouts))
+            diag["dropouts"] = {"count": len(ulog.dropouts), "total_ms": total}
+            diag["warnings"].append(f"{len(ulog.dropouts)} logger dropout(s), {total} ms in total")
+            meta["status"] = "partial"
+        else:
+            diag["dropouts"] = {"count": 0, "total_ms": 0}
+        tail = _walk_tail(path)
+        if tail:
+            diag["bytes_skipped"] += tail
+            diag["records_dropped"]["truncated"] = diag["records_dropped"].get("truncated", 0) + 1
+            diag["warnings"].append(f"file cut mid-message: last {tail} byte(s) not decoded")
+        if ulog.file_corruption:
+            diag["records_dropped"]["corrupt"] = diag["records_dropped"].get("corrupt", 0) + 1
+            diag["warnings"].append("pyulog detected corrupt data and resynchronised; "
+                                    "some records were skipped (count unknown)")
+        meta["diagnostics"] = diag
+        meta["params"] = {str(k): _py(v) for k, v in ulog.initial_parameters.items()}
+        meta["params_changed"] = [[int(t) * 1000 - t0_us * 1000, str(k), _py(v)]
+                                  for t, k, v in ulog.changed_parameters]
+        meta["source_info"] = {str(k): _py(v) for k, v in ulog.msg_info_dict.items()
+                               if isinstance(v, (str, int, float, np.integer, np.floating))}
+        meta["frames"] = {"world": "NED", "body": "FRD",
+                          "baro_alt_rel_m": "ISA pressure altitude (1013.25 hPa datum)",
+                          "control_servo": "actuator_outputs raw (PWM us for PWM groups)"}
+        if progress:
+            progress(2, 2)
+        return FlightLog.from_streams(meta, out)
+
+
+# --- parsing and bookkeeping ------------------------------------------------------------------
+
+def _parse(path: Path):
+    """Run pyulog, wrapping its exceptions and capturing what it prints."""
+    from pyulog import ULog
+    from pyulog.exceptions import ULogException
+
+    buf = io.StringIO()
+    try:
+        # our own handle: pyulog leaves its file open when it raises
+        with open(path, "rb") as fh, contextlib.redirect_stdout(buf):
+            ulog = ULog(fh)
+    except ULogException as exc:
+        raise IngestError(path, f"not a readable ULog: {exc}") from None
+    except (struct.error, ValueError, IndexError, KeyError, OverflowError, UnicodeDecodeError,
+            TypeError) as exc:
+        raise IngestError(path, f"corrupt ULog definitions section: {type(exc).__name__}: {exc}") from None
+    except OSError as exc:
+        raise IngestError(path, f"cannot read: {exc.strerror or exc}") from None
+    return ulog, buf.getvalue()
+
+
+def _walk_tail(path: Path) -> int:
+    """Bytes left over after the last complete message (a cut file), 0 when the file ends on a
+    message boundary. Walks the 3-byte message headers (uint16 size, uint8 type); stops at the
+    first byte that cannot be a message type (corruption: pyulog resyncs, we report separately)."""
+    n = path.stat().st_size
+    if n <= 16:
+        return 0
+    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        pos = 16
+        while pos + 3 <= n:
+            size = data[pos] | (data[pos + 1] << 8)
+            if data[pos + 2] not in _VALID_MSG_TYPES:
+                return 0
+            if pos + 3 + size > n:
+                return n - pos
+            pos += 3 + size
+        return n - pos if pos < n else 0
+
+
+class _Conv:
+    """Shared time conversion: µs since boot -> (t_ns, t_boot_ns), counting pre-start stamps."""
+
+    def __init__(self, t0_us: int):
+        self.t0_us = t0_us
+        self.n_before_start = 0
+
+    def frame(self, d, cols: dict[str, np.ndarray] | None = None) -> pd.DataFrame:
+        ts = np.asarray(d.data["timestamp"]).astype(np.int64)
+        self.n_before_start += int(np.sum(ts < self.t0_us))
+        base = {"t_ns": (ts - self.t0_us) * 1000, "t_boot_ns": ts * 1000,
+                "instance": np.full(len(ts), d.multi_id, dtype=np.uint8),
+                "src": np.full(len(ts), d.name, dtype=object)}
+        return pd.DataFrame({**base, **(cols or {})})
+
+
+def _select(topics: dict, stream: str, choice, path: Path) -> list:
+    """The datasets feeding ``stream``: ``auto`` = all instances of the first candidate present."""
+    if choice in (None, "auto"):
+        for name in DEFAULT_TOPICS[stream]:
+            if name in topics:
+                return topics[name]
+        return []
+    names = [choice] if isinstance(choice, str) else list(choice)
+    return [d for n in names for d in topics.get(n, [])]
+
+
+def _f(d, *names: str) -> np.ndarray | None:
+    """First field present among ``names``, as float64."""
+    for n in names:
+        if n in d.data:
+            return np.asarray(d.data[n], dtype=np.float64)
+    return None
+
+
+def _nan(d) -> np.ndarray:
+    return np.full(len(d.data["timestamp"]), np.nan)
+
+
+def _vec(d, fmt: str, n: int = 3) -> list[np.ndarray] | None:
+    if fmt.format(0) not in d.data:
+        return None
+    return [np.asarray(d.data[fmt.format(i)], dtype=np.float64) for i in range(n)]
+
+
+def _py(v):
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v) if np.isfinite(v) else None  # meta.json is strict JSON
+    if isinstance(v, bytes):
+        return v.decode("utf-8", "replace")
+    return v
+
+
+# --- topic -> stream builders -------------------------------------------------------------------
+
+def _imu(d, conv: _Conv) -> pd.DataFrame | None:
+    cols = {}
+    if d.name == "vehicle_imu":
+        # integrated deltas over their own dt (µs): the mean rate/specific force of the interval
+        da, dv = _vec(d, "delta_angle[{}]"), _vec(d, "delta_velocity[{}]")
+        dta, dtv = _f(d, "delta_angle_dt"), _f(d, "delta_velocity_dt")
+        if da is None or dv is None or dta is None or dtv is None:
+            return None
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for a, x, y in zip("xyz", da, dv):
+                cols[f"gyr_{a}_radps"] = np.where(dta > 0, x / (dta * 1e-6), np.nan)
+                cols[f"acc_{a}_mps2"] = np.where(dtv > 0, y / (dtv * 1e-6), np.nan)
+    else:
+        g = _vec(d, "gyro_rad[{}]")
+        acc = _vec(d, "accelerometer_m_s2[{}]")
+        if g is None and acc is None:
+            return None
+        rel = _f(d, "accelerometer_timestamp_relative")
+        ok = np.ones(len(d.data["timestamp"]), bool) if rel is None else rel != RELATIVE_TIMESTAMP_INVALID
+        for i, a in enumerate("xyz"):
+            cols[f"gyr_{a}_radps"] = g[i] if g is not None else _nan(d)
+            cols[f"acc_{a}_mps2"] = np.where(ok, acc[i], np.nan) if acc is not None else _nan(d)
+    return conv.frame(d, cols)
+
+
+def _scaled_deg(d, float_name: str, int_name: str) -> np.ndarray | None:
+    if float_name in d.data:
+        return np.asarray(d.data[float_name], dtype=np.float64)
+    if int_name in d.data:
+        raw = np.asarray(d.data[int_name])
+        # older logs: int32 in 1e-7 deg; a float field of the old name is already in deg
+        return raw.astype(np.float64) * (1e-7 if raw.dtype.kind in "iu" else 1.0)
+    return None
+
+
+def _scaled_alt(d, float_name: str, int_name: str) -> np.ndarray | None:
+    if float_name in d.data:
+        return np.asarray(d.data[float_name], dtype=np.float64)
+    if int_name in d.data:
+        raw = np.asarray(d.data[int_name])
+        return raw.astype(np.float64) * (1e-3 if raw.dtype.kind in "iu" else 1.0)  # int mm
+    return None
+
+
+def _gps(d, conv: _Conv) -> pd.DataFrame | None:
+    lat = _scaled_deg(d, "latitude_deg", "lat")
+    lon = _scaled_deg(d, "longitude_deg", "lon")
+    if lat is None or lon is None:
+        return None
+    alt = _scaled_alt(d, "altitude_msl_m", "alt")
+    alt_e = _scaled_alt(d, "altitude_ellipsoid_m", "alt_ellipsoid")
+    cols = {"lat_deg": lat, "lon_deg": lon,
+            "alt_msl_m": alt if alt is not None else _nan(d),
+            "alt_wgs84_m": alt_e if alt_e is not None else _nan(d)}
+    for a in "ned":
+        v = _f(d, f"vel_{a}_m_s")
+        cols[f"vel_{a}_mps"] = v if v is not None else _nan(d)
+    for col, names in (("fix_type", ("fix_type",)), ("n_sats", ("satellites_used",)),
+                       ("hacc_m", ("eph",)), ("vacc_m", ("epv",))):
+        v = _f(d, *names)
+        cols[col] = v if v is not None else _nan(d)
+    return conv.frame(d, cols)
+
+
+def _mag(d, conv: _Conv) -> pd.DataFrame | None:
+    m = _vec(d, "magnetometer_ga[{}]") if d.name == "vehicle_magnetometer" else None
+    if m is None and all(k in d.data for k in "xyz"):
+        m = [np.asarray(d.data[k], dtype=np.float64) for k in "xyz"]
+    if m is None:
+        return None
+    return conv.frame(d, {f"mag_{a}_T": v * _GAUSS_TO_T for a, v in zip("xyz", m)})
+
+
+def _baro(d, conv: _Conv) -> pd.DataFrame | None:
+    p = _f(d, "baro_pressure_pa")
+    if p is None:
+        mbar = _f(d, "baro_pressure_mbar", "baro_pres_mbar")
+        if mbar is not None:
+            p = mbar * 100.0
+    if p is None and d.name == "sensor_baro":
+        p = _f(d, "pressure")
+        # sensor_baro.pressure was mbar before PX4 1.12 and Pa since; 2000 separates them
+        if p is not None and len(p) and np.nanmedian(p) < 2000:
+            p = p * 100.0
+    alt = _f(d, "baro_alt_meter", "altitude")
+    temp = _f(d, "baro_temp_celcius", "baro_temp_celsius", "temperature")
+    if p is None and alt is None:
+        return None
+    return conv.frame(d, {"press_Pa": p if p is not None else _nan(d),
+                          "alt_rel_m": alt if alt is not None else _nan(d),
+                          "temp_degC": temp if temp is not None else _nan(d)})
+
+
+def _attitude(d, conv: _Conv) -> pd.DataFrame | None:
+    q = _vec(d, "q[{}]", 4)
+    if q is None:
+        return None
+    return conv.frame(d, {f"q_{c}": v for c, v in zip("wxyz", q)})
+
+
+def _local_position(d, conv: _Conv) -> pd.DataFrame | None:
+    cols = {}
+    for src, dst in (("x", "pos_n_m"), ("y", "pos_e_m"), ("z", "pos_d_m"),
+                     ("vx", "vel_n_mps"), ("vy", "vel_e_mps"), ("vz", "vel_d_mps")):
+        v = _f(d, src)
+        cols[dst] = v if v is not None else _nan(d)
+    return conv.frame(d, cols)
+
+
+def _rangefinder(d, conv: _Conv, window=None) -> pd.DataFrame | None:
+    dist = _f(d, "current_distance")
+    if dist is None:
+        return None
+    lo, hi = _f(d, "min_distance"), _f(d, "max_distance")
+    valid = np.isfinite(dist)
+    if lo is not None and hi is not None:
+        valid &= (dist >= lo) & (dist <= hi)
+    if window is not None:  # config: a tighter trusted range than the sensor declares
+        valid &= (dist >= float(window[0])) & (dist <= float(window[1]))
+    sq = _f(d, "signal_quality")
+    if sq is not None:
+        valid &= sq != 0  # 0 = invalid signal, -1 = unknown
+    ori = _f(d, "orientation")
+    return conv.frame(d, {"dist_m": dist, "valid": valid,
+                          "orientation": ori if ori is not None else _nan(d)})
+
+
+def _airspeed(d, conv: _Conv) -> pd.DataFrame | None:
+    ias = _f(d, "indicated_airspeed_m_s")
+    if ias is None:
+        return None
+    temp = _f(d, "air_temperature_celsius")
+    return conv.frame(d, {"airspeed_mps": ias, "temp_degC": temp if temp is not None else _nan(d)})
+
+
+def _diff_press(d, conv: _Conv) -> pd.DataFrame | None:
+    dp = _f(d, "differential_pressure_pa", "differential_pressure_filtered_pa",
+            "differential_pressure_raw_pa")
+    if dp is None:
+        return None
+    temp = _f(d, "temperature")
+    return conv.frame(d, {"diff_press_Pa": dp, "temp_degC": temp if temp is not None else _nan(d)})
+
+
+def _input_rc(d, conv: _Conv) -> pd.DataFrame | None:
+    n_ch = _f(d, "channel_count")
+    cols = {}
+    for i in range(schema.N_RC):
+        v = _f(d, f"values[{i}]")
+        if v is None:
+            break
+        cols[f"rc_{i + 1}_us"] = np.where(n_ch > i, v, np.nan) if n_ch is not None else v
+    return conv.frame(d, cols) if cols else None
+
+
+def _actuator_outputs(d, conv: _Conv) -> pd.DataFrame | None:
+    n_out = _f(d, "noutputs")
+    cols = {}
+    for i in range(schema.N_SERVO):
+        v = _f(d, f"output[{i}]")
+        if v is None:
+            break
+        cols[f"servo_{i + 1}_us"] = np.where(n_out > i, v, np.nan) if n_out is not None else v
+    return conv.frame(d, cols) if cols else None
+
+
+def _mode(d, conv: _Conv) -> pd.DataFrame | None:
+    nav = _f(d, "nav_state")
+    arm = _f(d, "arming_state")
+    if nav is None:
+        return None
+    arm = arm if arm is not None else _nan(d)
+    key = np.stack([nav, np.nan_to_num(arm, nan=-1)], axis=1)
+    change = np.ones(len(nav), bool)
+    change[1:] = np.any(key[1:] != key[:-1], axis=1)
+    df = conv.frame(d, {"mode": [NAV_STATES.get(int(v), str(int(v))) for v in nav],
+                        "armed": pd.array(np.where(np.isnan(arm), None, arm == ARMING_STATE_ARMED),
+                                          dtype="boolean")})
+    return df[change].reset_index(drop=True)
+
+
+def _ned_origin(topics: dict, gps: pd.DataFrame | None, diag: dict) -> dict | None:
+    """``ref_lat/ref_lon/ref_alt`` of the first globally referenced local-position sample.
+    ``ref_alt`` is AMSL; the ellipsoidal height adds the GPS geoid separation
+    (median ``alt_wgs84_m - alt_msl_m`` over 3D fixes) when the log has it."""
+    for d in topics.get("vehicle_local_position", []):
+        lat, lon, alt = _f(d, "ref_lat"), _f(d, "ref_lon"), _f(d, "ref_alt")
+        if lat is None or lon is None:
+            continue
+        glob = _f(d, "xy_global")
+        ok = np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+        if glob is not None:
+            ok &= glob != 0
+        if not ok.any():
+            continue
+        k = int(np.argmax(ok))
+        changes = np.unique(np.stack([lat[ok], lon[ok]], 1), axis=0)
+        if len(changes) > 1:
+            diag["warnings"].append(f"vehicle_local_position reference changed {len(changes) - 1} "
+                                    "time(s); meta.ned_origin is the first one")
+        origin = {"lat_deg": float(lat[k]), "lon_deg": float(lon[k]), "alt_wgs84_m": None,
+                  "alt_msl_m": float(alt[k]) if alt is not None else None,
+                  "source": "vehicle_local_position.ref_lat/ref_lon/ref_alt"}
+        if gps is not None and origin["alt_msl_m"] is not None:
+            good = (gps["fix_type"] >= 3) & gps["alt_wgs84_m"].notna() & gps["alt_msl_m"].notna()
+            if good.any():
+                n = float(np.median((gps["alt_wgs84_m"] - gps["alt_msl_m"])[good]))
+                origin["alt_wgs84_m"] = origin["alt_msl_m"] + n
+                origin["geoid_separation_m"] = n
+        return origin
+    return None
+
+
+def _utc(meta: dict, topics: dict, out: dict, cfg: dict, t0_us: int) -> None:
+    for d in _select(topics, "gps", cfg.get("gps", "auto"), Path()):
+        if "time_utc_usec" not in d.data:
+            continue
+        utc = np.asarray(d.data["time_utc_usec"]).astype(np.int64)
+        ts = np.asarray(d.data["timestamp"]).astype(np.int64)
+        rel = d.data.get("timestamp_time_relative")
+        rel = np.zeros_like(ts) if rel is None else np.asarray(rel).astype(np.int64)
+        fix = _f(d, "fix_type")
+        ok = utc > 0
+        if fix is not None:
+            ok &= fix >= 2
+        if not ok.any():
+            continue
+        off = np.median(utc[ok] - (ts[ok] + rel[ok]))
+        meta["t0_utc_ns"] = int(round(off)) * 1000 + t0_us * 1000
+        meta["utc_source"] = "gps"
+        return
+
+
+def _messages(ulog, diag: dict, t0_us: int) -> None:
+    msgs = [(int(m.timestamp), m.log_level_str(), str(m.message).strip()) for m in ulog.logged_messages]
+    for lst in ulog.logged_messages_tagged.values():
+        msgs += [(int(m.timestamp), m.log_level_str(), str(m.message).strip()) for m in lst]
+    msgs.sort(key=lambda m: m[0])
+    diag["messages"] = [{"t_ns": (t - t0_us) * 1000, "level": lvl, "text": txt}
+                        for t, lvl, txt in msgs[:1000]]
+    if len(msgs) > 1000:
+        diag["warnings"].append(f"{len(msgs)} logged messages, first 1000 kept")

@@ -1,0 +1,164 @@
+"""Configuration and errors of the maneuver models (``models:`` section of the dataset config).
+
+Defaults follow seed 000 (Strong 2021) where it gives a value and §13 of the digest where it
+does not (every such choice is logged in the model's ``meta.json``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from ..config import ConfigError
+
+
+class ModelError(ValueError):
+    """Training or classification cannot proceed (bad input data, bad model file)."""
+
+
+_MODES = ("cumulative", "windowed", "reset")
+_DECISIONS = ("confidence", "oneclass", "both")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelsConfig:
+    """Hyperparameters of :mod:`pipeline.models`.
+
+    Parameters
+    ----------
+    feature_set : str
+        ``state9`` (thesis), ``box`` or ``aero`` (see :mod:`pipeline.models.features`).
+    rate_hz : float
+        Model sample rate (thesis: 5 Hz, dt = 0.2 s).
+    n_states : int, "auto" or dict
+        States per maneuver HMM; a dict maps labels to counts with a ``default`` entry.
+        Thesis: λ1 = 5, λ2–λ4 = 6. ``auto``: BIC over ``n_states_range``.
+    n_states_range : tuple of int
+        Inclusive range searched by ``auto`` (thesis GMM search: 3..10).
+    n_mix : int
+        Gaussians per state (1 = the thesis's single full-covariance Gaussian).
+    n_iter, tol : int, float
+        Baum-Welch iteration cap and log-likelihood tolerance (not given in the thesis).
+    min_covar : float
+        Added to covariance diagonals (normalised units) to keep them positive definite.
+    self_prob : float
+        Initial ``a_ii``; off-diagonals share ``1 - self_prob`` so no transition starts at zero
+        (Baum-Welch keeps zeros; §13.1).
+    gmm_restarts : int
+        EM restarts of the Calinon GMM pre-training.
+    init_min_samples : int
+        Minimum samples for the GMM pre-training; the one random run is extended with further
+        random runs until it has this many (short real segments).
+    hmm_restarts : int
+        Whole-model restarts from different random runs; the best training LL is kept.
+    seed : int
+        Seed of every random choice in training (run pick, GMM, hmmlearn).
+    threshold_percentile : float
+        One-class threshold: this percentile of the training log-likelihoods at the same
+        elapsed time (default 0.5th).
+    threshold_slack : float or "auto"
+        Per-sample allowance (nats) subtracted from the one-class threshold; ``auto``
+        estimates it leave-one-recording-out where a label has several recordings (real
+        flights: phases of one recording are near-duplicates, so their percentile is
+        optimistic). Default 0 (thesis-style percentile only).
+    mode : str
+        ``cumulative`` (thesis, from t = 1), ``windowed`` (sliding window of predictive
+        log-likelihood increments with a restart transition) or ``reset`` (windowed change
+        detection that restarts the cumulative forward pass).
+    window_s : float
+        Window length of ``windowed``/``reset``, s.
+    restart_prob : float
+        Per-step probability of jumping back to π in ``windowed``/``reset`` (lets a model
+        re-enter its first state after a maneuver switch).
+    confirm_s : float
+        ``reset``: how long the windowed label must disagree before a change is declared.
+    confidence_threshold : float
+        Label ``c`` only when ``V_c`` is below this (thesis: −1).
+    decision : str
+        ``confidence`` (thesis's chosen classifier), ``oneclass`` or ``both``.
+    gate_mps2 : float
+        GMR outlier gate, per axis and step (seed 000 §8: 15 m/s²).
+    phases : bool
+        Train on every phase-offset decimation of a faster source (more sequences; required
+        for the single-sequence leave-one-phase-out threshold).
+    """
+
+    feature_set: str = "state9"
+    rate_hz: float = 5.0
+    n_states: Any = field(default_factory=lambda: {"default": 6, "M1": 5})
+    n_states_range: tuple[int, int] = (3, 10)
+    n_mix: int = 1
+    n_iter: int = 100
+    tol: float = 1e-2
+    min_covar: float = 1e-4
+    self_prob: float = 0.9
+    gmm_restarts: int = 3
+    init_min_samples: int = 60
+    hmm_restarts: int = 1
+    seed: int = 0
+    threshold_percentile: float = 0.5
+    threshold_slack: Any = 0.0
+    mode: str = "cumulative"
+    window_s: float = 3.0
+    restart_prob: float = 0.05
+    confirm_s: float = 1.0
+    confidence_threshold: float = -1.0
+    decision: str = "confidence"
+    gate_mps2: float = 15.0
+    phases: bool = True
+
+    @classmethod
+    def from_section(cls, sec: dict | None, **overrides) -> "ModelsConfig":
+        """Build from the ``models:`` config section; unknown keys are an error."""
+        d = dict(sec or {})
+        d.update(overrides)
+        known = {f.name for f in fields(cls)}
+        bad = sorted(set(d) - known)
+        if bad:
+            raise ConfigError(f"models: unknown key(s) {bad}; known: {sorted(known)}")
+        if "n_states_range" in d:
+            d["n_states_range"] = tuple(int(x) for x in d["n_states_range"])
+        cfg = cls(**d)
+        cfg.validate()
+        return cfg
+
+    def validate(self) -> None:
+        if self.mode not in _MODES:
+            raise ConfigError(f"models.mode must be one of {_MODES}, got {self.mode!r}")
+        if self.decision not in _DECISIONS:
+            raise ConfigError(f"models.decision must be one of {_DECISIONS}, got {self.decision!r}")
+        if not 0.0 < self.self_prob < 1.0:
+            raise ConfigError("models.self_prob must lie in (0, 1)")
+        if not 0.0 <= self.restart_prob < 1.0:
+            raise ConfigError("models.restart_prob must lie in [0, 1)")
+        if not 0.0 <= self.threshold_percentile <= 100.0:
+            raise ConfigError("models.threshold_percentile must lie in [0, 100]")
+        if self.rate_hz <= 0 or self.window_s <= 0:
+            raise ConfigError("models.rate_hz and models.window_s must be positive")
+        if not (self.threshold_slack == "auto" or isinstance(self.threshold_slack, (int, float))):
+            raise ConfigError("models.threshold_slack must be a number or 'auto'")
+        lo, hi = self.n_states_range
+        if not 2 <= lo <= hi:
+            raise ConfigError("models.n_states_range must be [lo, hi] with 2 <= lo <= hi")
+        ns = self.n_states
+        vals = ns.values() if isinstance(ns, dict) else [ns]
+        for v in vals:
+            if not (v == "auto" or (isinstance(v, int) and v >= 1)):
+                raise ConfigError(f"models.n_states: {v!r} is neither a positive int nor 'auto'")
+
+    def states_for(self, label: str) -> int | str:
+        """State count (or ``"auto"``) for one maneuver label."""
+        ns = self.n_states
+        if isinstance(ns, dict):
+            return ns.get(label, ns.get("default", 6))
+        return ns
+
+    @property
+    def window(self) -> int:
+        """Window length in samples."""
+        return max(1, int(round(self.window_s * self.rate_hz)))
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["n_states_range"] = list(self.n_states_range)
+        return d

@@ -1,0 +1,380 @@
+"""The set of per-maneuver HMMs: training from ``state`` tables, one-class thresholds,
+classification of flights, and npz/JSON persistence (seed 000 §3.3–§3.6).
+
+Data model: a bulk table has the ``schema.STATE`` columns plus ``run_id`` and ``label`` (one
+maneuver per training run). Runs faster than ``rate_hz`` are decimated; with ``phases`` every
+phase offset becomes its own training sequence (the five 5 Hz phases of a 25 Hz recording).
+
+**Normalisation.** One min-max normaliser is fitted on the observations of *all* maneuvers
+and shared by every model, so the log-likelihoods ``LL_m`` of different models are densities
+of the same variable and can be compared (per-model scaling would add a different Jacobian
+to each). It is frozen with the models (§13.6).
+
+**One-class threshold** (Yeung; value not given by the thesis, §13.7): for model ``m`` the
+``p``-th percentile (default 0.5) of the scores of its training sequences at the same elapsed
+sample. When a maneuver has a single training recording, its phase decimations are scored
+leave-one-phase-out: a model trained on the other phases scores the held-out one. An optional
+per-sample slack (``threshold_slack``; ``auto`` estimates it leave-one-recording-out on the
+labels that have several recordings) lowers the curve by ``slack · n`` after ``n`` samples.
+
+**Persistence**: ``DIR/params.npz`` (arrays, no pickles; ``np.load(allow_pickle=False)``) and
+``DIR/meta.json`` (labels, config, normaliser, training metadata, code version).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from .. import __version__
+from ..io.parquet import write_json
+from .base import ModelError, ModelsConfig
+from .features import (MinMaxNormaliser, decimation_factor, get_feature_set, observations,
+                       raw_features, run_sequences)
+from .gmr import gate, gmr_state9
+from .hmm import HMMParams, ManeuverHMM
+from .metrics import UNKNOWN
+from .online import OnlineClassifier, classify_batch
+
+F64 = NDArray[np.float64]
+FORMAT_VERSION = 1
+
+
+def _pad(seqs: list[F64]) -> F64:
+    T = max(len(s) for s in seqs)
+    out = np.full((len(seqs), T, seqs[0].shape[1]), np.nan)
+    for i, s in enumerate(seqs):
+        out[i, :len(s)] = s
+    return out
+
+
+class ManeuverModelSet:
+    """One HMM per maneuver plus the shared normaliser and the one-class thresholds.
+
+    Parameters
+    ----------
+    config : ModelsConfig
+
+    Attributes
+    ----------
+    labels_ : list of str
+    models_ : list of ManeuverHMM
+    normaliser_ : MinMaxNormaliser
+    thresholds_ : dict
+        ``{"cumulative": (M, T), "windowed": (M, W')}`` score thresholds by elapsed sample.
+    training_ : dict
+        Per-label training metadata (runs, sequences, samples, iterations, convergence, BIC).
+    """
+
+    def __init__(self, *, config: ModelsConfig | None = None):
+        self.config = config or ModelsConfig()
+
+    # -- features ------------------------------------------------------------------------
+    @property
+    def feature_set(self):
+        return get_feature_set(self.config.feature_set)
+
+    def phase_sequences(self, run: pd.DataFrame, *, box_heading_rad: float = 0.0,
+                        all_phases: bool | None = None) -> list[F64]:
+        """Raw observations (differenced if the set says so, not normalised) of one run at
+        ``rate_hz``: one sequence per decimation phase (or phase 0 only)."""
+        k = decimation_factor(run["t_ns"].to_numpy(), self.config.rate_hz)
+        phases = range(k) if (self.config.phases if all_phases is None else all_phases) else [0]
+        raw = raw_features(run, self.config.feature_set, box_heading_rad=box_heading_rad)
+        out = []
+        for ph in phases:
+            o = observations(raw[ph::k], self.feature_set.differenced)
+            if len(o) >= 2:
+                out.append(o)
+        return out
+
+    # -- training --------------------------------------------------------------------------
+    def fit(self, data: pd.DataFrame, *, label_col: str = "label", run_col: str = "run_id",
+            box_heading_rad: float = 0.0) -> "ManeuverModelSet":
+        """Train from a bulk state table (one maneuver label per run)."""
+        if label_col not in data.columns:
+            raise ModelError(f"training table has no {label_col!r} column")
+        recs: dict[str, list[list[F64]]] = {}
+        for rid, run in run_sequences(data, run_col=run_col):
+            labs = run[label_col].dropna().unique()
+            if len(labs) != 1:
+                raise ModelError(f"training run {rid!r} has {len(labs)} labels; need exactly one")
+            seqs = self.phase_sequences(run, box_heading_rad=box_heading_rad)
+            if seqs:
+                recs.setdefault(str(labs[0]), []).append(seqs)
+        return self.fit_recordings(recs)
+
+    def fit_recordings(self, recordings: dict[str, list[list[F64]]]) -> "ManeuverModelSet":
+        """Train from raw observations: ``{label: [recording: [phase sequence (n, d)]]}``."""
+        cfg = self.config
+        if not recordings:
+            raise ModelError("no training data")
+        self.labels_ = sorted(recordings)
+        allobs = np.concatenate([s for lab in self.labels_ for rec in recordings[lab] for s in rec])
+        self.normaliser_ = MinMaxNormaliser.fit(allobs)
+        self.models_, self.training_ = [], {}
+        curves: dict[str, list[F64]] = {"cumulative": [], "windowed": []}
+        for li, lab in enumerate(self.labels_):
+            recs = [[self.normaliser_.transform(s) for s in rec] for rec in recordings[lab]]
+            seqs = [s for rec in recs for s in rec]
+            model = self._new_hmm(lab, li).fit(np.concatenate(seqs), [len(s) for s in seqs])
+            self.models_.append(model)
+            meta = model.training_meta()
+            if len(recs) == 1 and len(recs[0]) > 1:
+                held = []
+                for k in range(len(recs[0])):
+                    rest = [s for j, s in enumerate(recs[0]) if j != k]
+                    m_k = self._new_hmm(lab, li, n_states=model.n_states_).fit(
+                        np.concatenate(rest), [len(s) for s in rest])
+                    held.append((m_k.params_, [recs[0][k]]))
+                meta["threshold"] = "leave-one-phase-out"
+            else:
+                held = [(model.params_, seqs)]
+                meta["threshold"] = "training sequences"
+            for mode in curves:
+                curves[mode].append(self._threshold_curve(held, mode))
+            meta.update({"n_recordings": len(recs), "n_sequences": len(seqs),
+                         "n_samples": int(sum(len(s) for s in seqs))})
+            self.training_[lab] = meta
+        self.threshold_slack_ = self._slack(recordings) if cfg.threshold_slack == "auto" \
+            else float(cfg.threshold_slack)
+        self.thresholds_ = {}
+        for mode, cs in curves.items():
+            T = max(len(c) for c in cs)
+            arr = np.empty((len(cs), T))
+            for i, c in enumerate(cs):
+                arr[i, :len(c)] = c
+                arr[i, len(c):] = c[-1] if mode == "windowed" else np.nan
+            if mode == "cumulative":
+                # extend short curves linearly so every model has a value at every t
+                for i, c in enumerate(cs):
+                    if len(c) < T:
+                        from .online import _extend_threshold
+                        arr[i, len(c):] = _extend_threshold(c, np.arange(len(c) + 1, T + 1), False)
+            n = np.arange(1, T + 1)
+            if mode == "windowed":
+                n = np.minimum(n, cfg.window)
+            self.thresholds_[mode] = arr - self.threshold_slack_ * n
+        return self
+
+    def with_slack(self, slack: float) -> "ManeuverModelSet":
+        """A shallow copy whose one-class thresholds use another per-sample ``slack``."""
+        import copy
+
+        out = copy.copy(self)
+        out.thresholds_ = {}
+        for mode, arr in self.thresholds_.items():
+            n = np.arange(1, arr.shape[1] + 1)
+            if mode == "windowed":
+                n = np.minimum(n, self.config.window)
+            out.thresholds_[mode] = arr + (self.threshold_slack_ - slack) * n
+        out.threshold_slack_ = float(slack)
+        return out
+
+    def _slack(self, recordings: dict[str, list[list[F64]]]) -> float:
+        """Per-sample allowance for flight-to-flight variation, from the training data alone.
+
+        Phases of one recording (and in-sample sequences) are nearly the same data, so their
+        log-likelihood percentile is an optimistic threshold for a *new* flight. For every
+        label with ≥ 2 recordings, a model trained on the others scores the left-out
+        recording; the slack is the median over these of
+        ``(threshold(T) − LL_held(T)) / T`` (nats per sample, ≥ 0), 0 when no label has two
+        recordings.
+        """
+        gaps = []
+        for li, lab in enumerate(self.labels_):
+            recs = [[self.normaliser_.transform(x) for x in rec] for rec in recordings[lab]]
+            if len(recs) < 2:
+                continue
+            for a in range(len(recs)):
+                rest = [x for j, rec in enumerate(recs) if j != a for x in rec]
+                m = self._new_hmm(lab, li, n_states=self.models_[li].n_states_).fit(
+                    np.concatenate(rest), [len(x) for x in rest])
+                curve = self._threshold_curve([(m.params_, rest)], "cumulative")
+                clf = OnlineClassifier([m.params_], mode="cumulative", viterbi=False)
+                sc = classify_batch(clf, _pad(recs[a]))["scores"][:, :, 0]
+                for r, x in enumerate(recs[a]):
+                    T = min(len(x), len(curve))
+                    gaps.append((curve[T - 1] - sc[r, T - 1]) / T)
+        return max(0.0, float(np.median(gaps))) if gaps else 0.0
+
+    def _new_hmm(self, label: str, index: int, n_states=None) -> ManeuverHMM:
+        cfg = self.config
+        return ManeuverHMM(n_states=n_states or cfg.states_for(label), n_states_range=cfg.n_states_range,
+                           n_mix=cfg.n_mix, n_iter=cfg.n_iter, tol=cfg.tol, min_covar=cfg.min_covar,
+                           self_prob=cfg.self_prob, gmm_restarts=cfg.gmm_restarts,
+                           init_min_samples=cfg.init_min_samples,
+                           hmm_restarts=cfg.hmm_restarts, seed=cfg.seed + 7919 * index)
+
+    def _threshold_curve(self, held: list[tuple[HMMParams, list[F64]]], mode: str) -> F64:
+        """Percentile of the scores at each elapsed sample (windowed: pooled after W)."""
+        cfg = self.config
+        rows = []
+        for params, seqs in held:
+            clf = OnlineClassifier([params], mode=mode, window=cfg.window,
+                                   restart_prob=cfg.restart_prob, viterbi=False)
+            res = classify_batch(clf, _pad(seqs))
+            rows.extend(res["scores"][:, :, 0])
+        T = max(len(r) for r in rows)
+        S = np.full((len(rows), T), np.nan)
+        for i, r in enumerate(rows):
+            S[i, :len(r)] = r
+        p = cfg.threshold_percentile
+        curve = np.array([np.percentile(S[np.isfinite(S[:, t]), t], p) for t in range(T)])
+        if mode == "windowed" and T > cfg.window:
+            tail = S[:, cfg.window - 1:]
+            curve[cfg.window - 1:] = np.percentile(tail[np.isfinite(tail)], p)
+        return curve
+
+    # -- classification ----------------------------------------------------------------------
+    def classifier(self, *, mode: str | None = None, decision: str | None = None) -> OnlineClassifier:
+        cfg = self.config
+        mode = mode or cfg.mode
+        thr = self.thresholds_["windowed" if mode == "windowed" else "cumulative"]
+        return OnlineClassifier([m.params_ for m in self.models_], mode=mode, window=cfg.window,
+                                restart_prob=cfg.restart_prob,
+                                confirm=max(1, int(round(cfg.confirm_s * cfg.rate_hz))),
+                                confidence_threshold=cfg.confidence_threshold,
+                                decision=decision or cfg.decision, thresholds=thr,
+                                thresholds_stationary=(mode == "windowed"))
+
+    def classify(self, state: pd.DataFrame, *, mode: str | None = None, decision: str | None = None,
+                 run_col: str = "run_id", reset_t_ns=None, box_heading_rad: float = 0.0,
+                 gmr: bool = True) -> pd.DataFrame:
+        """Classify every run of a state table online, sample by sample.
+
+        Parameters
+        ----------
+        state : DataFrame
+            ``schema.STATE`` columns (+ ``run_id``, ``label`` optional).
+        mode, decision : str, optional
+            Override the config.
+        reset_t_ns : sequence of int, optional
+            Restart the forward passes at the first sample at or after each of these times
+            (e.g. labelled segment starts); the classifier is otherwise never told of switches.
+        gmr : bool
+            Add HMM acceleration/jerk estimates (``state9`` only).
+
+        Returns
+        -------
+        DataFrame, one row per model-rate sample that has an observation: ``run_id``, ``t_ns``,
+        ``truth`` (if ``label`` given), ``pred`` (label or ``unknown``), ``best``, ``V_best``,
+        ``oneclass_ok``, ``ll_<label>`` per model, ``state`` (online Viterbi state of ``best``),
+        ``change``, ``change_t_ns`` and, with GMR, ``acc_hmm_{n,e,d}_mps2``,
+        ``jerk_hmm_{n,e,d}_mps3``, ``acc_hmm_gated_{n,e,d}``.
+        """
+        runs = run_sequences(state, run_col=run_col)
+        fs = self.feature_set
+        seqs, tks, truths, rids = [], [], [], []
+        for rid, run in runs:
+            k = decimation_factor(run["t_ns"].to_numpy(), self.config.rate_hz)
+            dec = run.iloc[::k].reset_index(drop=True)
+            raw = raw_features(dec, self.config.feature_set, box_heading_rad=box_heading_rad)
+            obs = self.normaliser_.transform(observations(raw, fs.differenced))
+            off = 1 if fs.differenced else 0
+            seqs.append(obs)
+            tks.append(dec["t_ns"].to_numpy()[off:])
+            truths.append(dec["label"].to_numpy(dtype=object)[off:] if "label" in dec else None)
+            rids.append(rid)
+        if not seqs or max(len(s) for s in seqs) == 0:
+            raise ModelError("no observations to classify (runs shorter than two samples?)")
+        seqs = [s if len(s) else np.full((1, len(self.normaliser_.x_min)), np.nan) for s in seqs]
+        X = _pad(seqs)
+        resets = None
+        if reset_t_ns is not None and len(reset_t_ns):
+            resets = np.zeros(X.shape[:2], dtype=bool)
+            for r, t in enumerate(tks):
+                for tr in reset_t_ns:
+                    i = np.searchsorted(t, tr)
+                    if 0 < i < len(t):
+                        resets[r, i] = True
+        clf = self.classifier(mode=mode, decision=decision)
+        res = classify_batch(clf, X, resets)
+        labels = np.array([*self.labels_, UNKNOWN], dtype=object)
+        frames = []
+        dt = 1.0 / self.config.rate_hz
+        for r, rid in enumerate(rids):
+            n = len(tks[r])
+            lab = res["label"][r, :n]
+            best = res["best"][r, :n]
+            d = {run_col: np.full(n, rid, dtype=object), "t_ns": tks[r]}
+            if truths[r] is not None:
+                d["truth"] = np.asarray(truths[r]).astype(str)
+            d["pred"] = labels[lab].astype(str)
+            d["best"] = labels[best].astype(str)
+            d["V_best"] = np.take_along_axis(res["V"][r, :n], best[:, None], axis=1)[:, 0]
+            d["oneclass_ok"] = res["oneclass_ok"][r, :n]
+            for m, name in enumerate(self.labels_):
+                d[f"ll_{name}"] = res["scores"][r, :n, m]
+            d["state"] = res["state"][r, :n]
+            d["change"] = res["change"][r, :n]
+            ca = res["change_at"][r, :n]
+            d["change_t_ns"] = np.where(ca >= 0, tks[r][np.clip(ca, 0, n - 1)], -1)
+            if gmr and self.config.feature_set == "state9":
+                acc = np.full((n, 3), np.nan)
+                jerk = np.full((n, 3), np.nan)
+                for m, model in enumerate(self.models_):
+                    rows = best == m
+                    if rows.any():
+                        p = model.params_
+                        a, j = gmr_state9(p.means[:, 0], p.covars[:, 0], X[r, :n][rows],
+                                          d["state"][rows], self.normaliser_, dt)
+                        acc[rows], jerk[rows] = a, j
+                gated, dropped = gate(acc, self.config.gate_mps2)
+                for i, ax in enumerate("ned"):
+                    d[f"acc_hmm_{ax}_mps2"] = acc[:, i]
+                    d[f"jerk_hmm_{ax}_mps3"] = jerk[:, i]
+                    d[f"acc_hmm_gated_{ax}"] = dropped[:, i]
+            frames.append(pd.DataFrame(d))
+        return pd.concat(frames, ignore_index=True)
+
+    # -- persistence ----------------------------------------------------------------------------
+    def save(self, out_dir: str | os.PathLike) -> list[Path]:
+        """Write ``params.npz`` + ``meta.json`` (atomic; no pickles)."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        arrays = {}
+        for i, m in enumerate(self.models_):
+            arrays.update(m.to_arrays(prefix=f"m{i}_"))
+        arrays["norm_min"], arrays["norm_max"] = self.normaliser_.x_min, self.normaliser_.x_max
+        for mode, thr in self.thresholds_.items():
+            arrays[f"threshold_{mode}"] = thr
+        tmp = out / ".params.tmp.npz"
+        np.savez(tmp, **arrays)
+        os.replace(tmp, out / "params.npz")
+        meta = {"format_version": FORMAT_VERSION, "code_version": __version__,
+                "labels": self.labels_, "threshold_slack": self.threshold_slack_, "config": self.config.to_dict(),
+                "feature_names": list(self.feature_set.names),
+                "normaliser": self.normaliser_.to_dict(), "training": self.training_}
+        write_json(meta, out / "meta.json")
+        return [out / "params.npz", out / "meta.json"]
+
+    @classmethod
+    def load(cls, in_dir: str | os.PathLike) -> "ManeuverModelSet":
+        d = Path(in_dir)
+        try:
+            meta = json.loads((d / "meta.json").read_text())
+            z = np.load(d / "params.npz", allow_pickle=False)
+        except FileNotFoundError as exc:
+            raise ModelError(f"{d}: not a model directory ({exc.filename} missing)") from None
+        except (ValueError, OSError) as exc:
+            raise ModelError(f"{d}: unreadable model files: {exc}") from None
+        if meta.get("format_version") != FORMAT_VERSION:
+            raise ModelError(f"{d}: model format {meta.get('format_version')} != {FORMAT_VERSION}")
+        cfg = dict(meta["config"])
+        self = cls(config=ModelsConfig.from_section(cfg))
+        self.labels_ = list(meta["labels"])
+        self.training_ = meta.get("training", {})
+        self.threshold_slack_ = float(meta.get("threshold_slack", 0.0))
+        self.normaliser_ = MinMaxNormaliser(z["norm_min"], z["norm_max"])
+        self.models_ = []
+        for i, lab in enumerate(self.labels_):
+            p = HMMParams(*(z[f"m{i}_{k}"] for k in ("startprob", "transmat", "weights", "means", "covars")))
+            self.models_.append(ManeuverHMM.from_params(p))
+        self.thresholds_ = {k[len("threshold_"):]: z[k] for k in z.files if k.startswith("threshold_")}
+        return self

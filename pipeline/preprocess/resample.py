@@ -1,0 +1,240 @@
+"""Time base: timestamp repair and gap-aware resampling onto a uniform grid.
+
+Every later numerical step (Butterworth filtering, differentiation, DTW) assumes a uniform
+sample period, while logged streams are jittery, multi-rate and have dropouts (seed 004 §11:
+"resample it to a uniform grid before filtering, differentiation and DTW"). This module
+
+* repairs a stream's time stamps (:func:`repair_timestamps`): non-monotonic rows are put in
+  order, repeated stamps dropped and clock jumps closed, each counted;
+* builds the grid (:func:`make_grid`) and resamples columns onto it (:func:`resample`) with a
+  declared method per column: ``linear``, ``nearest``, ``previous`` (discrete values such as
+  modes and switch positions), ``slerp`` (quaternions, four columns at once) or ``mean`` (the
+  average of the source samples within ±half a grid period: a boxcar anti-alias filter for
+  sources faster than the grid, e.g. a 200 Hz gyro on a 25 Hz grid; linear where a cell is
+  empty).
+
+A grid point is only filled from the two source samples that bracket it, and only when they
+are at most ``max_gap_ns`` apart (a configured multiple of the source's median period):
+
+.. math:: x(g) = x_k + \\frac{g - t_k}{t_{k+1} - t_k}(x_{k+1} - x_k), \\quad
+          t_k \\le g < t_{k+1},\\; t_{k+1} - t_k \\le \\Delta_{\\max}
+
+Otherwise the point is NaN and flagged invalid (the ``gap`` column of ``state``), so nothing is
+ever interpolated across a dropout.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Mapping
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from ..frames.rotations import quat_continuity, quat_slerp
+
+METHODS = ("linear", "nearest", "previous", "slerp", "mean")
+
+
+def median_period_ns(t_ns: NDArray[np.int64]) -> float:
+    """Median positive step of a sorted time vector (ns); NaN with fewer than two samples."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    d = np.diff(t)
+    d = d[d > 0]
+    return float(np.median(d)) if len(d) else float("nan")
+
+
+def primary_instance(df: pd.DataFrame) -> pd.DataFrame:
+    """Rows of the instance with most samples (lowest id on ties): one sensor per stream."""
+    if not len(df) or "instance" not in df.columns or df["instance"].nunique() <= 1:
+        return df
+    counts = df["instance"].value_counts()
+    best = min(counts.index[counts == counts.max()])
+    return df[df["instance"] == best]
+
+
+def repair_timestamps(df: pd.DataFrame, *, clock_jump_s: float | None = 3600.0
+                      ) -> tuple[pd.DataFrame, dict[str, int]]:
+    """Make one sensor's ``t_ns`` strictly increasing, counting every repair.
+
+    Parameters
+    ----------
+    df : DataFrame
+        Rows of one sensor instance in arrival order, with an int64 ``t_ns`` column.
+    clock_jump_s : float or None
+        A step larger than this (forward or backward, s) is a clock jump, not a dropout:
+        every later sample is shifted by ``-step + median period`` so the sequence continues.
+        ``None`` disables jump repair (long steps stay gaps).
+
+    Returns
+    -------
+    (DataFrame, dict)
+        Repaired rows (index reset) and counts ``{non_monotonic, duplicate, clock_jumps}``:
+        rows that stepped back in arrival order (put in order), rows with a repeated stamp
+        (the first is kept: later ones carry no new time information) and closed jumps.
+    """
+    diag = {"non_monotonic": 0, "duplicate": 0, "clock_jumps": 0}
+    if len(df) < 2:
+        return df.reset_index(drop=True), diag
+    t = df["t_ns"].to_numpy(dtype=np.int64).copy()
+    d = np.diff(t)
+    if clock_jump_s is not None:
+        jump_ns = int(clock_jump_s * 1e9)
+        jumps = np.flatnonzero(np.abs(d) > jump_ns)
+        if len(jumps):
+            normal = d[np.abs(d) <= jump_ns]
+            per = np.median(normal[normal > 0]) if np.any(normal > 0) else 0
+            shift = np.zeros(len(t), dtype=np.int64)
+            for j in jumps:
+                shift[j + 1:] += -d[j] + int(per)
+            t = t + shift
+            diag["clock_jumps"] = int(len(jumps))
+            d = np.diff(t)
+    diag["non_monotonic"] = int(np.sum(d < 0))
+    out = df.assign(t_ns=t)
+    if diag["non_monotonic"]:
+        out = out.iloc[np.argsort(t, kind="stable")]
+    ts = out["t_ns"].to_numpy()
+    dup = np.concatenate([[False], ts[1:] == ts[:-1]])
+    diag["duplicate"] = int(dup.sum())
+    if dup.any():
+        out = out[~dup]
+    return out.reset_index(drop=True), diag
+
+
+def make_grid(t_start_ns: int, t_end_ns: int, rate_hz: float) -> NDArray[np.int64]:
+    """Uniform grid ``t_start + round(k / rate)`` (ns) covering ``[t_start, t_end]``."""
+    if rate_hz <= 0 or not np.isfinite(rate_hz):
+        raise ValueError(f"rate_hz must be positive, got {rate_hz}")
+    if t_end_ns < t_start_ns:
+        return np.empty(0, dtype=np.int64)
+    n = int(np.floor((t_end_ns - t_start_ns) * rate_hz * 1e-9 + 1e-9)) + 1
+    return t_start_ns + np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64)
+
+
+def _bracket(t: NDArray[np.int64], g: NDArray[np.int64], max_gap_ns: float):
+    """Left index, interpolation weight and validity of each grid point."""
+    n = len(t)
+    k = np.searchsorted(t, g, side="right") - 1
+    if n == 0:
+        z = np.zeros(len(g), dtype=np.int64)
+        return z, z, np.zeros(len(g)), np.zeros(len(g), dtype=bool), np.zeros(len(g), dtype=bool)
+    kc = np.clip(k, 0, n - 1)
+    exact = (k >= 0) & (t[kc] == g)
+    if n == 1:
+        return kc, kc, np.zeros(len(g)), exact, exact
+    k0 = np.clip(k, 0, n - 2)
+    t0, t1 = t[k0], t[k0 + 1]
+    inside = (k >= 0) & (k < n - 1) & ((t1 - t0) <= max_gap_ns)
+    w = np.where(inside, (g - t0) / np.maximum(t1 - t0, 1), 0.0)
+    # an exact hit takes the sample itself (w = 0 on its left bracket): bit-exact on-grid values
+    k0 = np.where(exact, kc, k0)
+    w = np.where(exact, 0.0, w)
+    k1 = np.minimum(k0 + 1, n - 1)
+    return k0, k1, w, exact | inside, exact
+
+
+def _cell_mean(t: NDArray, x: NDArray, g: NDArray) -> NDArray[np.float64]:
+    """Mean of the finite source samples in ``[g - T/2, g + T/2)`` (T the grid period); NaN
+    where a cell holds none. Cumulative sums keep it O(n)."""
+    if len(g) < 2 or not len(t):
+        return np.full(len(g), np.nan)
+    half = 0.5 * float(np.median(np.diff(g)))
+    lo = np.searchsorted(t, g - half, side="left")
+    hi = np.searchsorted(t, g + half, side="left")
+    fin = np.isfinite(x)
+    cs = np.concatenate([[0.0], np.cumsum(np.where(fin, x, 0.0))])
+    cn = np.concatenate([[0], np.cumsum(fin)])
+    cnt = cn[hi] - cn[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(cnt > 0, (cs[hi] - cs[lo]) / np.maximum(cnt, 1), np.nan)
+
+
+def resample(df: pd.DataFrame, grid_ns: NDArray[np.int64], methods: Mapping[str, str], *,
+             max_gap_ns: float | None = None, gap_multiple: float = 3.0
+             ) -> tuple[pd.DataFrame, NDArray[np.bool_]]:
+    """Resample columns of one (repaired, strictly increasing) stream onto ``grid_ns``.
+
+    Parameters
+    ----------
+    df : DataFrame
+        Source rows with ``t_ns`` strictly increasing (see :func:`repair_timestamps`).
+    grid_ns : ndarray of int64
+        Target times.
+    methods : mapping
+        ``{column: method}``; ``slerp`` must be given for all four ``q_w, q_x, q_y, q_z``
+        (interpolated together; sign continuity enforced first). Absent columns give NaN.
+    max_gap_ns : float, optional
+        Longest source step bridged by interpolation; default ``gap_multiple`` × the median
+        source period.
+
+    Returns
+    -------
+    (DataFrame, ndarray of bool)
+        One column per ``methods`` key on the grid (float; NaN where invalid) and the
+        validity mask of the stream (False in gaps and outside its time span).
+    """
+    g = np.asarray(grid_ns, dtype=np.int64)
+    t = df["t_ns"].to_numpy(dtype=np.int64) if len(df) else np.empty(0, dtype=np.int64)
+    if len(t) > 1 and np.any(np.diff(t) <= 0):
+        raise ValueError("resample: t_ns must be strictly increasing (run repair_timestamps)")
+    if max_gap_ns is None:
+        per = median_period_ns(t)
+        max_gap_ns = gap_multiple * per if np.isfinite(per) else 0.0
+    k0, k1, w, valid, exact = _bracket(t, g, max_gap_ns)
+    out: dict[str, NDArray] = {}
+    quat_cols = [c for c, m in methods.items() if m == "slerp"]
+    for col, method in methods.items():
+        if method not in METHODS:
+            raise ValueError(f"resample: unknown method {method!r} for column {col!r}; "
+                             f"choose from {METHODS}")
+        if method == "slerp":
+            continue
+        if col not in df.columns or not len(t):
+            out[col] = np.full(len(g), np.nan)
+            continue
+        x = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
+        if method == "linear":
+            y = x[k0] + w * (x[k1] - x[k0])
+            y = np.where(exact | (w == 0.0), x[k0], y)
+            y = np.where(valid, y, np.nan)
+        elif method == "nearest":
+            y = np.where(w < 0.5, x[k0], x[k1])
+            y = np.where(valid, y, np.nan)
+        elif method == "mean":
+            y = _cell_mean(t, x, g)
+            y = np.where(np.isfinite(y), y, x[k0] + w * (x[k1] - x[k0]))
+            y = np.where(valid, y, np.nan)
+        else:  # previous: hold the last sample, at most max_gap after it
+            k = np.searchsorted(t, g, side="right") - 1
+            kc = np.clip(k, 0, len(t) - 1)
+            ok = (k >= 0) & ((g - t[kc]) <= max_gap_ns)
+            y = np.where(ok, x[kc], np.nan)
+        out[col] = y
+    if quat_cols:
+        if sorted(quat_cols) != ["q_w", "q_x", "q_y", "q_z"]:
+            raise ValueError(f"resample: slerp needs exactly q_w, q_x, q_y, q_z, got {quat_cols}")
+        if all(c in df.columns for c in quat_cols) and len(t):
+            q = df[["q_w", "q_x", "q_y", "q_z"]].to_numpy(dtype=np.float64, na_value=np.nan)
+            norm = np.linalg.norm(q, axis=1, keepdims=True)
+            q = quat_continuity(q / np.where(norm > 0, norm, np.nan))
+            qq = quat_slerp(q[k0], q[k1], w)
+            qq = np.where(exact[:, None], q[k0], qq)
+            qq = np.where(valid[:, None], qq, np.nan)
+        else:
+            qq = np.full((len(g), 4), np.nan)
+        for i, c in enumerate(("q_w", "q_x", "q_y", "q_z")):
+            out[c] = qq[:, i]
+    res = pd.DataFrame({c: out[c] for c in methods}, index=pd.RangeIndex(len(g)))
+    return res, valid
+
+
+def valid_segments(valid: Iterable[bool]) -> list[tuple[int, int]]:
+    """Half-open index ranges ``[start, stop)`` of the runs of True in ``valid``."""
+    v = np.asarray(valid, dtype=bool)
+    if not len(v):
+        return []
+    dv = np.diff(np.concatenate([[0], v.astype(np.int8), [0]]))
+    starts = np.flatnonzero(dv == 1)
+    stops = np.flatnonzero(dv == -1)
+    return list(zip(starts.tolist(), stops.tolist()))

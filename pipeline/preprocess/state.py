@@ -1,0 +1,523 @@
+"""Per-flight preprocessing: FlightLog -> ``state``, ``segments`` and calibration tables.
+
+:func:`run_preprocess` implements seed 004 §6 steps 2–8 (and seed 000 §10's differentiation)
+in this order, every constant from the ``preprocess`` config section (:class:`PreprocessConfig`):
+
+1. **Mount**: the vehicle's IMU (and magnetometer) mount rotation (:mod:`.mount`); with
+   ``attitude_from_imu`` (ROS ``Imu.orientation``) the attitude is rotated to the body too.
+2. **Time base**: one sensor instance per stream (the one with most samples); timestamps
+   repaired and counted (:func:`.resample.repair_timestamps`); a uniform grid at ``rate_hz``
+   over the span of the streams used; each column resampled with its declared method, never
+   across a gap longer than ``gap_multiple`` source periods (:mod:`.resample`).
+3. **Filtering**: Butterworth per configured column (``"<stream>.<column>": {order, cutoff_hz}``;
+   default ``baro.alt_rel_m``: 3rd order, 1 Hz, seed 004), per gap-free segment (:mod:`.filters`).
+4. **Position** source, in priority order: ``local_position`` (the autopilot EKF) if it has
+   positions, else ``gps`` converted to NED about ``meta['ned_origin']`` (first 3D fix when
+   absent; ``frames.geodesy``, exact WGS84 or flat Earth), else ``truth``. ``position_source`` in the config
+   forces one.
+5. **Derivatives**: velocity from the source's measured velocity where it has one (else the
+   differentiated position), acceleration and jerk from the velocity by the configured
+   differentiator (:mod:`.derivatives`), per gap-free segment.
+6. **Attitude**: ``attitude`` (else ``truth``) quaternions, slerped, sign-continuous; ZYX Euler
+   angles for display. **Body rates** from the gyro (``imu``, else ``truth``), else from the
+   differentiated attitude (FlightCoach, CSV).
+7. **Controls**: normalised sticks (and physical deflections where the vehicle gives them).
+8. **BPM calibration** of the filtered barometric altitude -> ``alt_cal_m`` (:mod:`.calibrate`).
+9. **Segments** from labels, simulation truth labels, configured windows or mode changes
+   (:mod:`.segment`).
+
+``gap`` is True at grid points where the position source or the attitude stream (those present)
+has no sample within its gap limit. Streams that are absent give NaN columns; a log with no
+usable stream at all gives an empty ``state`` with the full schema. Diagnostics (timestamp
+repairs, sources, filter flags, calibration summary) are returned in ``state.attrs['preprocess']``
+and written into the Parquet metadata and ``preprocess.json``.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from ..config import ConfigError
+from ..frames.geodesy import geodetic_to_ned
+from ..frames.rotations import quat_continuity, quat_to_euler
+from ..io import schema
+from ..io.base import FlightLog
+from ..io.parquet import read_flightlog, write_json, write_table
+from .calibrate import CALIBRATION, BPMConfig, calibrate_baro, pressure_altitude
+from .controls import DEFAULT_CONTROLS, PHYSICAL, controls_from_pwm
+from .derivatives import Differentiator, body_rates_from_quat, differentiate
+from .filters import butterworth
+from .mount import apply_mount, apply_mount_attitude, mount_dcm
+from .resample import (METHODS, make_grid, primary_instance, repair_timestamps, resample)
+from .segment import SOURCES, build_segments
+
+_NED = ("n", "e", "d")
+POS = [f"pos_{a}_m" for a in _NED]
+VEL = [f"vel_{a}_mps" for a in _NED]
+QUAT = ["q_w", "q_x", "q_y", "q_z"]
+GYR = ["gyr_x_radps", "gyr_y_radps", "gyr_z_radps"]
+POSITION_SOURCES = ("auto", "local_position", "gps", "truth")
+
+DEFAULT_BUTTERWORTH = {"baro.alt_rel_m": {"order": 3, "cutoff_hz": 1.0}}
+
+
+@dataclass(frozen=True, kw_only=True)
+class PreprocessConfig:
+    """The ``preprocess`` config section, resolved for one flight/vehicle.
+
+    Parameters
+    ----------
+    rate_hz : float
+        State grid rate.
+    gap_multiple : float
+        Longest bridged source step, in median source periods.
+    clock_jump_s : float or None
+        Steps longer than this are clock jumps and closed (None: never).
+    methods : dict
+        ``{"<stream>" or "<stream>.<column>": method}``; default ``linear``; quaternions are
+        always ``slerp``.
+    butterworth : dict
+        ``{"<stream>.<column>": {order, cutoff_hz, causal}}``.
+    causal : bool
+        Default filter mode (False: zero-phase).
+    derivatives : Differentiator
+    velocity_source : {"measured", "differentiate"}
+    position_source : {"auto", "local_position", "gps", "truth"}
+    ned_method : {"wgs84", "flat"}
+        GPS -> NED conversion (``frames.geodesy``): exact, or seed 004's flat Earth (5.1).
+    bpm : BPMConfig
+    segments : dict
+        ``source`` and ``windows`` (``{flight_id: [{start_s, end_s, label}]}``).
+    vehicle : str or None
+        Vehicle key used; its entry is in ``imu_mount``, ``mag_mount``, ``controls``, ``physical``.
+    """
+
+    rate_hz: float = 25.0
+    gap_multiple: float = 3.0
+    clock_jump_s: float | None = 3600.0
+    methods: dict = field(default_factory=dict)
+    butterworth: dict = field(default_factory=lambda: dict(DEFAULT_BUTTERWORTH))
+    causal: bool = False
+    derivatives: Differentiator = field(default_factory=Differentiator)
+    velocity_source: str = "measured"
+    position_source: str = "auto"
+    ned_method: str = "wgs84"
+    bpm: BPMConfig = field(default_factory=BPMConfig)
+    segments: dict = field(default_factory=dict)
+    vehicle: str | None = None
+    imu_mount: dict | None = None
+    attitude_from_imu: bool = False
+    mag_mount: dict | None = None
+    controls: dict = field(default_factory=lambda: dict(DEFAULT_CONTROLS))
+    physical: dict = field(default_factory=dict)
+
+    KEYS = ("rate_hz", "gap_multiple", "clock_jump_s", "methods", "butterworth", "causal",
+            "derivatives", "velocity_source", "position_source", "ned_method", "bpm", "segments", "vehicles",
+            "flights")
+
+    @classmethod
+    def from_config(cls, cfg: Mapping | None, *, flight_id: str | None = None,
+                    vehicle: str | None = None) -> "PreprocessConfig":
+        """Resolve the section (or a whole config with a ``preprocess`` key) for one flight.
+
+        The vehicle is ``vehicle`` if given, else ``flights.<pattern>.vehicle`` for the first
+        glob pattern matching ``flight_id``, else the ``default`` vehicle entry (if any).
+
+        Raises
+        ------
+        ConfigError
+            Unknown keys, bad values or an unknown vehicle name given explicitly.
+        """
+        sec = dict(cfg or {})
+        if "preprocess" in sec and isinstance(sec["preprocess"], Mapping):
+            sec = dict(sec["preprocess"] or {})
+        bad = set(sec) - set(cls.KEYS)
+        if bad:
+            raise ConfigError(f"preprocess: unknown key(s) {sorted(bad)}")
+        vehicles = sec.get("vehicles") or {}
+        flights = sec.get("flights") or {}
+        fl_entry: dict = {}
+        if flight_id:
+            for pat, entry in flights.items():
+                if fnmatch.fnmatchcase(flight_id, str(pat)):
+                    fl_entry = dict(entry or {})
+                    break
+        vname = vehicle or fl_entry.get("vehicle")
+        # the manifest also names vehicles without special settings: those get `default`
+        vname_used = vname if vname in vehicles else ("default" if "default" in vehicles else None)
+        ventry = dict(vehicles.get(vname_used) or {}) if vname_used else {}
+        vbad = set(ventry) - {"imu_mount", "mag_mount", "attitude_from_imu", "controls", "physical", "doc"}
+        if vbad:
+            raise ConfigError(f"preprocess.vehicles.{vname_used}: unknown key(s) {sorted(vbad)}")
+        try:
+            methods = dict(sec.get("methods") or {})
+            for k, m in methods.items():
+                if m not in METHODS:
+                    raise ValueError(f"methods.{k}: {m!r} not one of {METHODS}")
+            bw = dict(DEFAULT_BUTTERWORTH)
+            if "butterworth" in sec:
+                bw = dict(sec.get("butterworth") or {})
+            for k, v in bw.items():
+                if "." not in k or not isinstance(v, Mapping) or "cutoff_hz" not in v:
+                    raise ValueError(f"butterworth.{k}: need '<stream>.<column>': {{order, cutoff_hz}}")
+            segs = dict(sec.get("segments") or {})
+            if segs.get("source", "auto") not in SOURCES:
+                raise ValueError(f"segments.source must be one of {SOURCES}")
+            windows = dict(segs.get("windows") or {})
+            if fl_entry.get("windows"):
+                windows[flight_id] = fl_entry["windows"]
+            segs["windows"] = windows
+            ps = sec.get("position_source", "auto")
+            if ps not in POSITION_SOURCES:
+                raise ValueError(f"position_source must be one of {POSITION_SOURCES}")
+            ned_method = sec.get("ned_method", "wgs84")
+            if ned_method not in ("wgs84", "flat"):
+                raise ValueError("ned_method must be 'wgs84' or 'flat' (seed 004 eq. 5.1)")
+            vs = sec.get("velocity_source", "measured")
+            if vs not in ("measured", "differentiate"):
+                raise ValueError("velocity_source must be 'measured' or 'differentiate'")
+            rate = float(sec.get("rate_hz", 25.0))
+            if not rate > 0:
+                raise ValueError(f"rate_hz must be positive, got {rate}")
+            imu_mount = ventry.get("imu_mount")
+            mag_mount = ventry.get("mag_mount", imu_mount)
+            mount_dcm(imu_mount)
+            mount_dcm(mag_mount)
+            controls = ventry.get("controls", DEFAULT_CONTROLS)
+            physical = dict(ventry.get("physical") or {})
+            for k in physical:
+                if k not in PHYSICAL:
+                    raise ValueError(f"vehicles.{vname_used}.physical.{k}: not one of {PHYSICAL}")
+            cj = sec.get("clock_jump_s", 3600.0)
+            return cls(rate_hz=rate, gap_multiple=float(sec.get("gap_multiple", 3.0)),
+                       clock_jump_s=None if cj is None else float(cj), methods=methods,
+                       butterworth=bw, causal=bool(sec.get("causal", False)),
+                       derivatives=Differentiator.from_dict(sec.get("derivatives")),
+                       velocity_source=vs, position_source=ps, ned_method=ned_method,
+                       bpm=BPMConfig.from_dict(sec.get("bpm")), segments=segs, vehicle=vname_used,
+                       imu_mount=imu_mount, mag_mount=mag_mount,
+                       attitude_from_imu=bool(ventry.get("attitude_from_imu", False)), controls=dict(controls),
+                       physical=physical)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"preprocess: {exc}") from None
+
+    def method(self, stream: str, column: str, default: str = "linear") -> str:
+        return self.methods.get(f"{stream}.{column}", self.methods.get(stream, default))
+
+
+# --- helpers ---------------------------------------------------------------------------------
+
+def _prepare(df: pd.DataFrame, cfg: PreprocessConfig, name: str, diag: dict) -> pd.DataFrame:
+    """Primary instance, timestamp repair (counted)."""
+    if df is None or not len(df):
+        return schema.empty(name) if name in schema.STREAMS else pd.DataFrame()
+    df = primary_instance(df)
+    df, d = repair_timestamps(df, clock_jump_s=cfg.clock_jump_s)
+    if any(d.values()):
+        diag["timestamp_repairs"][name] = d
+    return df
+
+
+def _has(df: pd.DataFrame, cols) -> bool:
+    return len(df) > 0 and all(c in df.columns for c in cols) and \
+        bool(np.any(np.all(np.isfinite(df[list(cols)].to_numpy(dtype=np.float64, na_value=np.nan)), axis=1)))
+
+
+def _resample_stream(df, name, cols, grid, cfg: PreprocessConfig, diag: dict):
+    methods = {c: ("slerp" if c in QUAT else cfg.method(name, c)) for c in cols}
+    res, valid = resample(df, grid, methods, gap_multiple=cfg.gap_multiple)
+    fs = cfg.rate_hz
+    for key, spec in cfg.butterworth.items():
+        s, c = key.split(".", 1)
+        if s != name or c not in res.columns:
+            continue
+        try:
+            y, short = butterworth(res[c].to_numpy(), fs, order=int(spec.get("order", 3)),
+                                   cutoff_hz=float(spec["cutoff_hz"]),
+                                   causal=bool(spec.get("causal", cfg.causal)), valid=valid)
+        except ValueError as exc:
+            raise ConfigError(f"preprocess.butterworth.{key}: {exc}") from None
+        res[c] = y
+        if short.any():
+            diag["filter_short_samples"][key] = int(short.sum())
+    return res, valid
+
+
+def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84", min_fix: int = 3):
+    """GPS fixes -> NED about the origin; returns (rows used, ndarray (n,3), origin)."""
+    lat = gps["lat_deg"].to_numpy(dtype=np.float64, na_value=np.nan)
+    lon = gps["lon_deg"].to_numpy(dtype=np.float64, na_value=np.nan)
+    alt = gps["alt_wgs84_m"].to_numpy(dtype=np.float64, na_value=np.nan)
+    alt_kind = "alt_wgs84_m"
+    if not np.any(np.isfinite(alt)):
+        alt = gps["alt_msl_m"].to_numpy(dtype=np.float64, na_value=np.nan)
+        alt_kind = "alt_msl_m"
+    fix = gps["fix_type"].to_numpy(dtype=np.float64, na_value=np.nan)
+    ok = np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0)) & (np.isnan(fix) | (fix >= min_fix))
+    if not ok.any():
+        return gps.iloc[:0], np.empty((0, 3)), None
+    g = gps[ok].reset_index(drop=True)
+    lat, lon, alt = lat[ok], lon[ok], alt[ok]
+    org = meta.get("ned_origin") or {}
+    if org and org.get("lat_deg") is not None and org.get("lon_deg") is not None:
+        lat0, lon0 = float(org["lat_deg"]), float(org["lon_deg"])
+        h0 = org.get("alt_wgs84_m")
+        if h0 is None or alt_kind != "alt_wgs84_m":
+            h0 = np.nanmedian(alt[:10]) if np.any(np.isfinite(alt[:10])) else 0.0
+    else:
+        lat0, lon0 = float(lat[0]), float(lon[0])
+        h0 = float(alt[np.isfinite(alt)][0]) if np.any(np.isfinite(alt)) else 0.0
+        diag["notes"].append("no meta ned_origin: GPS NED about the first 3D fix")
+    ned = np.stack(geodetic_to_ned(lat, lon, np.where(np.isfinite(alt), alt, h0), lat0, lon0,
+                                   float(h0), method=ned_method), axis=-1)
+    ned[~np.isfinite(alt), 2] = np.nan
+    return g, ned, {"lat_deg": lat0, "lon_deg": lon0, "alt_m": float(h0), "alt_kind": alt_kind}
+
+
+def _empty_state() -> pd.DataFrame:
+    return pd.DataFrame({c.name: schema._empty_series(c, 0) for c in schema.STATE})
+
+
+# --- the orchestration -----------------------------------------------------------------------
+
+def run_preprocess(log: FlightLog, config: Mapping | PreprocessConfig | None = None, *,
+                   vehicle: str | None = None) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """Preprocess one flight.
+
+    Parameters
+    ----------
+    log : FlightLog
+        Canonical flight (``read_log`` / ``read_flightlog`` output).
+    config : mapping or PreprocessConfig, optional
+        The ``preprocess`` section (or the whole dataset config); defaults throughout.
+    vehicle : str, optional
+        Vehicle key in ``preprocess.vehicles`` (the manifest's ``vehicle`` column).
+
+    Returns
+    -------
+    (state, segments, calibration) : DataFrame
+        ``schema.STATE`` columns on the uniform grid, ``schema.SEGMENTS`` rows and
+        :data:`.calibrate.CALIBRATION` rows. ``state.attrs['preprocess']`` holds the diagnostics.
+    """
+    fid = (log.meta or {}).get("flight_id")
+    cfg = config if isinstance(config, PreprocessConfig) else \
+        PreprocessConfig.from_config(config, flight_id=fid, vehicle=vehicle)
+    diag: dict[str, Any] = {"flight_id": fid, "vehicle": cfg.vehicle, "rate_hz": cfg.rate_hz,
+                            "timestamp_repairs": {}, "filter_short_samples": {}, "sources": {},
+                            "notes": []}
+    if vehicle and vehicle != cfg.vehicle:
+        diag["notes"].append(f"vehicle {vehicle!r} has no preprocess.vehicles entry: "
+                             f"{cfg.vehicle or 'built-in'} defaults used")
+    S = {name: log[name] for name in schema.STREAM_NAMES}
+    # 1. mount
+    S["imu"] = apply_mount(S["imu"], cfg.imu_mount, "imu")
+    S["mag"] = apply_mount(S["mag"], cfg.mag_mount, "mag")
+    if cfg.attitude_from_imu:
+        S["attitude"] = apply_mount_attitude(S["attitude"], cfg.imu_mount)
+    # 2. per-stream preparation
+    P = {n: _prepare(S[n], cfg, n, diag) for n in
+         ("imu", "gps", "baro", "attitude", "local_position", "rangefinder", "control", "truth")}
+
+    # position source
+    pos_src, pos_df, pos_cols, gps_origin = None, None, POS, None
+    choices = [cfg.position_source] if cfg.position_source != "auto" else ["local_position", "gps", "truth"]
+    for src in choices:
+        if src in ("local_position", "truth") and _has(P[src], POS[:2]):
+            pos_src, pos_df = src, P[src]
+            break
+        if src == "gps" and _has(P["gps"], ["lat_deg", "lon_deg"]):
+            g, ned, gps_origin = _gps_ned(P["gps"], log.meta or {}, diag, cfg.ned_method, cfg.bpm.gps_min_fix)
+            if len(g):
+                pos_df = pd.DataFrame({"t_ns": g["t_ns"].to_numpy(), POS[0]: ned[:, 0], POS[1]: ned[:, 1],
+                                       POS[2]: ned[:, 2], **{v: g[v].to_numpy() for v in VEL}})
+                pos_src = "gps"
+                break
+    diag["sources"]["position"] = pos_src
+    att_src = "attitude" if _has(P["attitude"], QUAT) else ("truth" if _has(P["truth"], QUAT) else None)
+    gyr_src = "imu" if _has(P["imu"], GYR) else ("truth" if _has(P["truth"], GYR) else None)
+    diag["sources"]["attitude"] = att_src
+    has_baro = _has(P["baro"], ["alt_rel_m"]) or _has(P["baro"], ["press_Pa"])
+    has_ctrl = len(P["control"]) > 0
+
+    # grid over the span of the streams used
+    used = [d for d in (pos_df, P[att_src] if att_src else None, P[gyr_src] if gyr_src else None,
+                        P["baro"] if has_baro else None, P["control"] if has_ctrl else None)
+            if d is not None and len(d)]
+    if not used:
+        diag["notes"].append("no usable stream: empty state")
+        st = _empty_state()
+        st.attrs["preprocess"] = diag
+        seg = build_segments(S["labels"], S["mode"], windows=cfg.segments.get("windows", {}).get(fid),
+                             source=cfg.segments.get("source", "auto"), flight_id=fid, truth=S["truth"])
+        cal = calibrate_baro(np.empty(0, np.int64), None).points
+        diag["calibration"] = {"method": "none", "regions": [], "notes": ["no data"]}
+        return st, seg, cal
+    t0 = min(int(d["t_ns"].iloc[0]) for d in used)
+    t1 = max(int(d["t_ns"].iloc[-1]) for d in used)
+    grid = make_grid(t0, t1, cfg.rate_hz)
+    n = len(grid)
+    dt = 1.0 / cfg.rate_hz
+    diag["n_samples"] = n
+    st: dict[str, NDArray] = {"t_ns": grid}
+    gap = np.zeros(n, dtype=bool)
+
+    # 4-5. position and derivatives
+    if pos_src:
+        cols = POS + [v for v in VEL if v in pos_df.columns]
+        r, pvalid = _resample_stream(pos_df, pos_src if pos_src != "gps" else "gps", cols, grid, cfg, diag)
+        gap |= ~pvalid
+        pos = r[POS].to_numpy().copy()
+        vel_meas = r[VEL].to_numpy() if all(v in r.columns for v in VEL) else np.full((n, 3), np.nan)
+        use_meas = cfg.velocity_source == "measured" and np.isfinite(vel_meas[pvalid]).all() and pvalid.any()
+        if use_meas:
+            vel = vel_meas
+            acc = differentiate(vel, dt, 1, cfg.derivatives, valid=pvalid)
+            jerk = differentiate(vel, dt, 2, cfg.derivatives, valid=pvalid)
+        else:
+            vel = differentiate(pos, dt, 1, cfg.derivatives, valid=pvalid)
+            acc = differentiate(pos, dt, 2, cfg.derivatives, valid=pvalid)
+            jerk = differentiate(pos, dt, 3, cfg.derivatives, valid=pvalid)
+        diag["sources"]["velocity"] = "measured" if use_meas else "differentiated position"
+    else:
+        pos = vel = acc = jerk = np.full((n, 3), np.nan)
+    for i, a in enumerate(_NED):
+        st[f"pos_{a}_m"] = pos[:, i]
+        st[f"vel_{a}_mps"] = vel[:, i]
+        st[f"acc_{a}_mps2"] = acc[:, i]
+        st[f"jerk_{a}_mps3"] = jerk[:, i]
+
+    # 6. attitude and body rates
+    q = np.full((n, 4), np.nan)
+    qvalid = np.zeros(n, dtype=bool)
+    if att_src:
+        r, qvalid = _resample_stream(P[att_src], att_src, QUAT, grid, cfg, diag)
+        gap |= ~qvalid
+        q = r[QUAT].to_numpy().copy()
+        ok = np.all(np.isfinite(q), axis=1)
+        if ok.any():
+            q[ok] = quat_continuity(q[ok])
+    for i, c in enumerate(QUAT):
+        st[c] = q[:, i]
+    roll, pitch, yaw = quat_to_euler(np.where(np.isfinite(q), q, 1.0))
+    bad = ~np.all(np.isfinite(q), axis=1)
+    roll, pitch, yaw = (np.where(bad, np.nan, x) for x in (roll, pitch, yaw))
+    st["roll_rad"], st["pitch_rad"], st["yaw_rad"] = roll, pitch, yaw
+    if gyr_src:
+        r, _ = _resample_stream(P[gyr_src], gyr_src, GYR, grid, cfg, diag)
+        w = r[GYR].to_numpy().copy()
+        diag["sources"]["body_rates"] = f"gyro ({gyr_src})"
+    elif att_src:
+        w = body_rates_from_quat(q, dt, cfg.derivatives, valid=qvalid)
+        diag["sources"]["body_rates"] = "differentiated attitude"
+    else:
+        w = np.full((n, 3), np.nan)
+        diag["sources"]["body_rates"] = None
+    st["p_radps"], st["q_radps"], st["r_radps"] = w[:, 0], w[:, 1], w[:, 2]
+
+    # 7. controls
+    ctrl_cols = [c for c in P["control"].columns if c.endswith("_us")]
+    if has_ctrl:
+        present = [c for c in ctrl_cols if P["control"][c].notna().any()]
+        r, _ = _resample_stream(P["control"], "control", present, grid, cfg, diag)
+        cdf = controls_from_pwm(r, cfg.controls, cfg.physical)
+    else:
+        cdf = controls_from_pwm(pd.DataFrame(index=pd.RangeIndex(n)), cfg.controls, cfg.physical)
+    for c in ("ail", "ele", "rud", "thr"):
+        st[c] = cdf[c].to_numpy()
+    for c in PHYSICAL:
+        st[c] = cdf[c].to_numpy() if c in cdf.columns else np.full(n, np.nan)
+
+    # 8. BPM calibration
+    baro_f = None
+    if has_baro:
+        b = P["baro"]
+        if not _has(b, ["alt_rel_m"]):
+            b = b.assign(alt_rel_m=pressure_altitude(b["press_Pa"].to_numpy(dtype=np.float64,
+                                                                              na_value=np.nan), cfg.bpm.p0_Pa))
+            diag["notes"].append("baro altitude from pressure (international barometric formula)")
+        r, _ = _resample_stream(b, "baro", ["alt_rel_m"], grid, cfg, diag)
+        baro_f = r["alt_rel_m"].to_numpy().copy()
+    gps_t = gps_up = None
+    if cfg.bpm.gps_fallback and _has(P["gps"], ["lat_deg", "lon_deg"]):
+        g, ned, _ = _gps_ned(P["gps"], log.meta or {}, {"notes": []}, cfg.ned_method, cfg.bpm.gps_min_fix)
+        if len(g):
+            gps_t, gps_up = g["t_ns"].to_numpy(dtype=np.int64), -ned[:, 2]
+    rf = P["rangefinder"]
+    cal = calibrate_baro(grid, baro_f, rangefinder=rf if len(rf) else None,
+                         roll_rad=roll if att_src else None, pitch_rad=pitch if att_src else None,
+                         gps_t_ns=gps_t, gps_up_m=gps_up, cfg=cfg.bpm)
+    st["alt_cal_m"] = cal.alt_cal_m
+    diag["calibration"] = cal.info()
+    st["gap"] = gap
+
+    state = pd.DataFrame({c.name: st[c.name] for c in schema.STATE})
+    state = pd.DataFrame({c.name: schema._cast(c, state[c.name]) for c in schema.STATE})
+    diag["gap_fraction"] = float(gap.mean()) if n else 0.0
+    state.attrs["preprocess"] = diag
+
+    # 9. segments
+    seg = build_segments(S["labels"], S["mode"], windows=cfg.segments.get("windows", {}).get(fid),
+                         source=cfg.segments.get("source", "auto"), t_end_ns=int(grid[-1]), flight_id=fid,
+                         truth=S["truth"])
+    return state, seg, cal.points
+
+
+# --- files -------------------------------------------------------------------------------------
+
+def write_outputs(state: pd.DataFrame, segments: pd.DataFrame, calibration: pd.DataFrame, *,
+                  state_path, segments_path, calibration_path=None, info_path=None) -> None:
+    """Write the per-flight outputs (ZSTD Parquet with units/frames; diagnostics as JSON)."""
+    diag = state.attrs.get("preprocess", {})
+    extra = {"flight_id": diag.get("flight_id"), "preprocess": diag}
+    write_table(state, state_path, schema.STATE, name="state", extra=extra)
+    write_table(segments, segments_path, schema.SEGMENTS, name="segments",
+                extra={"flight_id": diag.get("flight_id")})
+    if calibration_path is not None:
+        write_table(calibration, calibration_path, CALIBRATION, name="calibration",
+                    extra={"flight_id": diag.get("flight_id"), "calibration": diag.get("calibration")})
+    if info_path is not None:
+        write_json(diag, info_path)
+
+
+def preprocess_dir(ingest_dir: str | os.PathLike, out_dir: str | os.PathLike,
+                   config: Mapping | None = None, *, vehicle: str | None = None) -> dict:
+    """Preprocess one ingested flight folder (``write_flightlog`` layout) into ``out_dir``:
+    ``state.parquet``, ``segments.parquet``, ``calibration.parquet``, ``preprocess.json``."""
+    log = read_flightlog(ingest_dir)
+    state, seg, cal = run_preprocess(log, config, vehicle=vehicle)
+    out = Path(out_dir)
+    write_outputs(state, seg, cal, state_path=out / "state.parquet",
+                  segments_path=out / "segments.parquet", calibration_path=out / "calibration.parquet",
+                  info_path=out / "preprocess.json")
+    return state.attrs["preprocess"]
+
+
+def preprocess_files(ingest_dir: str | os.PathLike, *, state_path, segments_path, calibration_path=None,
+                     info_path=None, config: Mapping | None = None, vehicle: str | None = None) -> dict:
+    """Workflow entry point: one ingested flight folder -> the declared output files
+    (``results/state/{flight}.parquet``, ``results/segments/{flight}.parquet``, ...)."""
+    log = read_flightlog(ingest_dir)
+    state, seg, cal = run_preprocess(log, config, vehicle=vehicle)
+    write_outputs(state, seg, cal, state_path=state_path, segments_path=segments_path,
+                  calibration_path=calibration_path, info_path=info_path)
+    return state.attrs["preprocess"]
+
+
+def summary_line(diag: dict) -> str:
+    c = diag.get("calibration") or {}
+    return (f"{diag.get('n_samples', 0)} samples @ {diag.get('rate_hz')} Hz, position "
+            f"{diag['sources'].get('position')}, rates {diag['sources'].get('body_rates')}, "
+            f"BPM {c.get('method')}, gap {100 * diag.get('gap_fraction', 0):.1f}%")
+
+
+def dumps(diag: dict) -> str:
+    return json.dumps(diag, default=str, indent=1)

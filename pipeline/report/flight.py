@@ -1,0 +1,146 @@
+"""Per-flight HTML report: path, ground track, altitude (+ BPM points), attitude, sensors, timeline.
+
+Plotly is not inlined per page: every report references one local copy of ``plotly.min.js``
+(written by :func:`write_plotly_js`) by a relative URL, so the reports open offline from
+``file://`` and the results folder stays small.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import jinja2
+import numpy as np
+import pandas as pd
+
+from ..frames.rotations import quat_to_euler
+from ..io import schema
+from ..io.parquet import read_flightlog, read_table
+from . import plots
+
+
+def write_plotly_js(path: str | os.PathLike) -> None:
+    """Write plotly's bundled JavaScript (from the installed package, no network) to ``path``."""
+    from plotly.offline import get_plotlyjs
+
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(get_plotlyjs())
+
+
+def _first_instance(df: pd.DataFrame) -> pd.DataFrame:
+    return df[df["instance"] == df["instance"].min()] if len(df) else df
+
+
+def _ned_track(log, state: pd.DataFrame | None) -> pd.DataFrame | None:
+    """Local NED track: state, else the autopilot's local_position, else GPS about the NED origin."""
+    cols = ["t_ns", "pos_n_m", "pos_e_m", "pos_d_m"]
+    if state is not None and len(state) and state["pos_n_m"].notna().any():
+        return state[cols]
+    lp = _first_instance(log["local_position"])
+    if len(lp) and lp["pos_n_m"].notna().any():
+        return lp[cols]
+    gps = _first_instance(log["gps"]).dropna(subset=["lat_deg", "lon_deg"])
+    gps = gps[(gps["lat_deg"].abs() > 1e-6) | (gps["lon_deg"].abs() > 1e-6)]
+    if len(gps):
+        from ..frames.geodesy import geodetic_to_ned
+
+        o = log.meta.get("ned_origin") or {}
+        lat0 = o.get("lat_deg") if o.get("lat_deg") is not None else gps["lat_deg"].iloc[0]
+        lon0 = o.get("lon_deg") if o.get("lon_deg") is not None else gps["lon_deg"].iloc[0]
+        # heights in one datum: ellipsoidal when the log has it, else MSL (display only)
+        if gps["alt_wgs84_m"].notna().all():
+            alt, h0 = gps["alt_wgs84_m"].to_numpy(), o.get("alt_wgs84_m")
+        else:
+            alt, h0 = gps["alt_msl_m"].fillna(0.0).to_numpy(), o.get("alt_msl_m")
+        h0 = alt[0] if h0 is None else h0
+        n, e, d = geodetic_to_ned(gps["lat_deg"].to_numpy(), gps["lon_deg"].to_numpy(), alt, lat0, lon0, h0)
+        return pd.DataFrame({"t_ns": gps["t_ns"].to_numpy(), "pos_n_m": n, "pos_e_m": e, "pos_d_m": d})
+    return None
+
+
+def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLike, *,
+                        template: str | os.PathLike, plotly_js: str, index_href: str = "../index.html",
+                        state: str | os.PathLike | None = None,
+                        calibration: str | os.PathLike | None = None,
+                        segments: str | os.PathLike | None = None,
+                        classified: str | os.PathLike | None = None) -> None:
+    """Render one flight's report.
+
+    Parameters
+    ----------
+    ingest_dir : path-like
+        ``results/ingest/<flight>/``.
+    out_html : path-like
+        Output page.
+    template : path-like
+        Jinja2 template (``reports/templates/flight.html.j2``), a declared rule input.
+    plotly_js : str
+        URL of plotly.min.js relative to the page.
+    state, calibration, segments, classified : path-like, optional
+        Derived tables from preprocess / classify when the workflow has them.
+    """
+    log = read_flightlog(ingest_dir)
+    meta = log.meta
+    st = read_table(state) if state and Path(state).exists() else None
+    seg = read_table(segments) if segments and Path(segments).exists() else None
+    if seg is None and len(log["labels"]):
+        seg = log["labels"]
+    cal = read_table(calibration) if calibration and Path(calibration).exists() else None
+    cls = read_table(classified) if classified and Path(classified).exists() else None
+
+    ned = _ned_track(log, st)
+    alt_series = {}
+    baro = _first_instance(log["baro"])
+    if len(baro):
+        alt_series["baro (raw)"] = pd.DataFrame({"t_ns": baro["t_ns"], "alt_m": baro["alt_rel_m"]})
+    if ned is not None:
+        alt_series["−d (track)"] = pd.DataFrame({"t_ns": ned["t_ns"], "alt_m": -ned["pos_d_m"]})
+    if st is not None and "alt_cal_m" in st:
+        alt_series["calibrated"] = pd.DataFrame({"t_ns": st["t_ns"], "alt_m": st["alt_cal_m"]})
+    rf = _first_instance(log["rangefinder"])
+    if len(rf) and rf["dist_m"].notna().any():
+        alt_series["rangefinder"] = pd.DataFrame({"t_ns": rf["t_ns"], "alt_m": rf["dist_m"]})
+    calib_pts = None
+    if cal is not None and {"t_ns", "h_ref_m"} <= set(cal.columns) and len(cal):
+        # the BPM reference heights the fit used (tilt-compensated range or GPS height)
+        used = cal[cal["used"].fillna(False).astype(bool)] if "used" in cal else cal
+        calib_pts = pd.DataFrame({"t_ns": used["t_ns"], "alt_m": used["h_ref_m"]})
+    if cls is not None and len(cls) and "pred" in cls:
+        cls = pd.DataFrame({"t_ns": cls["t_ns"], "label": cls["pred"].astype(str),
+                            "confidence": cls["V_best"]})
+
+    att = _first_instance(log["attitude"]).dropna(subset=["q_w"])
+    euler = quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy()) if len(att) else None
+    imu = log["imu"]
+    figs = [
+        ("3-D path", plots.path_3d(ned)),
+        ("Ground track", plots.ground_track(ned)),
+        ("Altitude", plots.altitude(alt_series, calib_pts)),
+        ("Attitude", plots.attitude(att, euler)),
+        ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"], "Accelerometer (FRD)", "m/s²")),
+        ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"], "Gyroscope (FRD)", "rad/s")),
+        ("Maneuver timeline", plots.timeline(seg, cls)),
+    ]
+    divs = [(title, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
+                                                      div_id=f"plot-{i}", config={"responsive": True}))
+            for i, (title, f) in enumerate(figs)]
+    facts = [("format", meta.get("source_format")), ("reader", f"{meta.get('reader')} v{meta.get('reader_version')}"),
+             ("detected by", meta.get("detected_by")), ("source", meta.get("source_path")),
+             ("sha256", meta.get("source_sha256")), ("status", meta.get("status")),
+             ("duration", f"{log.duration_s:.1f} s"),
+             ("streams", ", ".join(f"{k} ({v['rows']})" for k, v in log.summary().items()) or "none"),
+             ("diagnostics", json.dumps({k: v for k, v in meta.get("diagnostics", {}).items()
+                                         if k in ("bytes_skipped", "records_dropped", "timestamp_anomalies")}))]
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(Path(template).parent)),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]))
+    page = env.get_template(Path(template).name).render(
+        flight_id=meta.get("flight_id"), facts=facts, plots=divs, plotly_js=plotly_js,
+        index_href=index_href, failed=meta.get("status") == "failed", error=meta.get("error"))
+    out = Path(out_html)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(page)
+    os.replace(tmp, out)

@@ -1,0 +1,284 @@
+"""The seed-000 simulated data sets: bulk Parquet sets, a few log files, a summary table.
+
+``run_simulate(out_dir, sim_cfg, seed)`` (the ``uavpipe simulate`` command and, later, the
+workflow's simulate rule) writes under ``out_dir``:
+
+* ``sets/<M>_train.parquet``, ``sets/<M>_test.parquet`` — per maneuver M1–M5, ``runs`` runs
+  (thesis: 2300) split at random 70/30 (``train_fraction``), truth at ``truth_rate_hz`` (5 Hz);
+* ``sets/mc_<M>.parquet`` — ``mc_runs`` padded Monte Carlo runs (same start, new disturbance);
+* ``sets/switch_<A-D>_<t>s.parquet`` — ``switch_runs`` runs per change scenario and switch time;
+* ``logs/`` — ``log_flights`` padded flights per maneuver plus one calibration flight, each
+  written in every format of ``log_formats`` (``bin``, ``tlog``, ``bag``, ``mcap``) with its
+  ``<log>.truth.parquet`` side-car, and ``logs/flights.tsv`` (manifest rows: flight_id, path,
+  vehicle, role, labels, format, notes);
+* ``summary.parquet`` — per maneuver and NED/heading axis: min, max and RMS of acceleration
+  and jerk over all runs of the maneuver at the full truth rate (:class:`SummaryAccumulator`);
+* ``index.json`` — what was written, with sizes, seeds and the config used.
+
+Bulk sets are one Parquet file per set in the ``state`` column schema (``schema.STATE``) plus
+``run_id`` (int64) and ``label`` (string), so models read them exactly as preprocessed
+flights. ``alt_cal_m`` is the true altitude, ``gap`` is False, sticks come from the commands,
+``thrust_N`` is the commanded (= realised) thrust; state columns with no quadcopter
+counterpart (control-surface deflections) are NaN.
+
+Sizes (``simulate.datasets``): ``size`` [small] picks a row of ``sizes``:
+``small`` {runs: 60, mc_runs: 20, switch_runs: 10, log_flights: 1} (minutes on 2 cores) or
+``thesis`` {runs: 2300, mc_runs: 1000, switch_runs: 243, log_flights: 3}; ``batch_runs`` [100]
+runs are integrated at once; ``train_fraction`` [0.7]; ``truth_rate_hz`` [5];
+``log_formats`` [[bin, tlog, bag, mcap]]; ``start_time_utc`` (top level of ``simulate``,
+["2026-01-01T12:00:00Z"]) is the UTC time of every flight's t = 0 — never the wall clock.
+
+Seeding: every set draws from ``np.random.default_rng([seed, crc32(set name), chunk])``, so a set
+does not depend on which other sets were generated; same seed -> byte-identical files.
+"""
+
+from __future__ import annotations
+
+import os
+import zlib
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..config import ConfigError
+from ..io import schema
+from ..io.parquet import write_json, write_table
+from . import maneuvers as mv
+from .quadcopter import Truth, rotate_to_heading
+from .scenarios import SimSettings, run_named
+from .sensors import SensorSettings, sticks
+
+SET_COLUMNS: tuple[schema.Column, ...] = (
+    *schema.STATE,
+    schema.Column("run_id", "int64", "1", "", "run number within the set"),
+    schema.Column("label", "string", "", "", "maneuver label (truth)"),
+)
+
+SUMMARY_COLUMNS: tuple[schema.Column, ...] = (
+    schema.Column("maneuver", "string"),
+    schema.Column("quantity", "string", "", "", "acc (m/s^2) or jerk (m/s^3)"),
+    schema.Column("axis", "string", "", "", "n/e/d (NED), fwd/right/down (heading frame), norm"),
+    schema.Column("min", "float64"),
+    schema.Column("max", "float64"),
+    schema.Column("rms", "float64"),
+    schema.Column("n_runs", "int64"),
+)
+
+SIZES = {
+    "small": {"runs": 60, "mc_runs": 20, "switch_runs": 10, "log_flights": 1},
+    "thesis": {"runs": 2300, "mc_runs": 1000, "switch_runs": 243, "log_flights": 3},
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetSettings:
+    runs: int = 60
+    mc_runs: int = 20
+    switch_runs: int = 10
+    log_flights: int = 1
+    batch_runs: int = 100
+    train_fraction: float = 0.7
+    truth_rate_hz: float = 5.0
+    log_formats: tuple[str, ...] = ("bin", "tlog", "bag", "mcap")
+    start_time_utc_ns: int = 1767268800 * 10 ** 9  # 2026-01-01T12:00:00Z
+    maneuvers: tuple[str, ...] = mv.MANEUVERS
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, sim_sec: dict[str, Any] | None) -> "DatasetSettings":
+        sim_sec = dict(sim_sec or {})
+        sec = dict(sim_sec.get("datasets") or {})
+        size = sec.get("size", "small")
+        sizes = {**SIZES, **(sec.get("sizes") or {})}
+        if size not in sizes:
+            raise ConfigError(f"simulate.datasets.size: {size!r} is not one of {sorted(sizes)}")
+        kw: dict[str, Any] = {k: int(v) for k, v in {**SIZES.get(size, {}), **sizes[size]}.items()}
+        try:
+            if "batch_runs" in sec:
+                kw["batch_runs"] = int(sec["batch_runs"])
+            if "train_fraction" in sec:
+                kw["train_fraction"] = float(sec["train_fraction"])
+            if "truth_rate_hz" in sec:
+                kw["truth_rate_hz"] = float(sec["truth_rate_hz"])
+            if "log_formats" in sec:
+                kw["log_formats"] = tuple(str(f) for f in sec["log_formats"])
+            if "maneuvers" in sec:
+                kw["maneuvers"] = tuple(str(m) for m in sec["maneuvers"])
+            st = sim_sec.get("start_time_utc", "2026-01-01T12:00:00Z")
+            dt = datetime.fromisoformat(str(st).replace("Z", "+00:00"))
+            if dt.tzinfo is None:
+                dt = dt.replace(tzinfo=timezone.utc)
+            kw["start_time_utc_ns"] = int(round(dt.timestamp())) * 10 ** 9 + dt.microsecond * 1000
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"simulate.datasets: invalid value: {exc}") from None
+        bad = sorted(set(kw.get("log_formats", ())) - {"bin", "tlog", "bag", "mcap"})
+        if bad:
+            raise ConfigError(f"simulate.datasets.log_formats: unknown {bad}; known: bin, tlog, bag, mcap")
+        badm = sorted(set(kw.get("maneuvers", ())) - set(mv.MANEUVERS))
+        if badm:
+            raise ConfigError(f"simulate.datasets.maneuvers: unknown {badm}")
+        if not 0 < kw.get("train_fraction", 0.7) < 1:
+            raise ConfigError("simulate.datasets.train_fraction must be in (0, 1)")
+        return cls(**kw)
+
+
+def set_rng(seed: int, name: str, chunk: int = 0) -> np.random.Generator:
+    """The generator of one set (and chunk): independent of which other sets are generated."""
+    return np.random.default_rng([int(seed), zlib.crc32(name.encode()), int(chunk)])
+
+
+def state_table(truth: Truth, step: int, sensors: SensorSettings, run_offset: int = 0) -> pd.DataFrame:
+    """Rows of all runs (every ``step``-th sample) in :data:`SET_COLUMNS`."""
+    tr = truth.subsample(step)
+    n_runs, n_t = tr.pos.shape[:2]
+    cols: dict[str, np.ndarray] = {"t_ns": np.tile(np.round(tr.t_s * 1e9).astype(np.int64), n_runs)}
+    for name, arr, unit in (("pos", tr.pos, "m"), ("vel", tr.vel, "mps"), ("acc", tr.acc, "mps2"),
+                            ("jerk", tr.jerk, "mps3")):
+        for i, a in enumerate("ned"):
+            cols[f"{name}_{a}_{unit}"] = arr[..., i].ravel()
+    for i, c in enumerate("wxyz"):
+        cols[f"q_{c}"] = tr.quat[..., i].ravel()
+    for i, c in enumerate(("roll_rad", "pitch_rad", "yaw_rad")):
+        cols[c] = tr.euler[..., i].ravel()
+    for i, c in enumerate(("p_radps", "q_radps", "r_radps")):
+        cols[c] = tr.rates[..., i].ravel()
+    st = sticks(tr, sensors.control)
+    for k in ("ail", "ele", "rud", "thr"):
+        cols[k] = np.ascontiguousarray(st[k]).ravel()
+    cols["alt_cal_m"] = -tr.pos[..., 2].ravel()
+    cols["gap"] = np.zeros(n_runs * n_t, bool)
+    if any(c.name == "thrust_N" for c in schema.STATE):
+        cols["thrust_N"] = tr.thrust_N.ravel()
+    for c in schema.STATE:  # columns without a simulated counterpart (fixed-wing deflections)
+        if c.name not in cols:
+            cols[c.name] = np.full(n_runs * n_t, np.nan)
+    cols["run_id"] = np.repeat(np.arange(run_offset, run_offset + n_runs, dtype=np.int64), n_t)
+    cols["label"] = pd.array(np.tile(tr.label.astype(str), n_runs), dtype="string")
+    return pd.DataFrame(cols)
+
+
+def _chunks(n: int, size: int):
+    for k, lo in enumerate(range(0, n, size)):
+        yield k, lo, min(n, lo + size)
+
+
+def simulate_set(kind: str, name: str, n_runs: int, settings: SimSettings, ds: DatasetSettings,
+                 sensors: SensorSettings, seed: int, set_name: str, t_switch: float | None = None,
+                 on_truth=None) -> pd.DataFrame:
+    """Integrate one set in chunks of ``batch_runs`` and return its table; ``on_truth(truth)`` sees
+    each full-rate chunk (e.g. :meth:`SummaryAccumulator.add`) before it is dropped."""
+    step = settings.decimation(ds.truth_rate_hz, "datasets.truth")
+    parts = []
+    for k, lo, hi in _chunks(n_runs, ds.batch_runs):
+        tr = run_named(kind, settings, hi - lo, set_rng(seed, set_name, k), name, t_switch)
+        parts.append(state_table(tr, step, sensors, lo))
+        if on_truth is not None:
+            on_truth(tr)
+    return pd.concat(parts, ignore_index=True)
+
+
+SUMMARY_AXES = ("n", "e", "d", "fwd", "right", "down", "norm")
+
+
+class SummaryAccumulator:
+    """Streaming min / max / RMS of acceleration and jerk per maneuver and axis, so a
+    thesis-sized set never has to sit in memory at the full truth rate.
+
+    Axes: NED ``n``/``e``/``d``, heading-frame ``fwd``/``right``/``down`` (the run's start
+    heading) and the vector ``norm``; all samples of all runs at the truth rate.
+    """
+
+    def __init__(self) -> None:
+        self._acc: dict[tuple[str, str, str], list[float]] = {}
+        self._runs: dict[str, int] = {}
+
+    def add(self, man: str, truth: Truth) -> None:
+        self._runs[man] = self._runs.get(man, 0) + truth.n_runs
+        for q in ("acc", "jerk"):
+            arr = getattr(truth, q)
+            hf = rotate_to_heading(arr, truth.yaw0)
+            series = {"n": arr[..., 0], "e": arr[..., 1], "d": arr[..., 2],
+                      "fwd": hf[..., 0], "right": hf[..., 1], "down": hf[..., 2],
+                      "norm": np.linalg.norm(arr, axis=-1)}
+            for ax, v in series.items():
+                key = (man, q, ax)
+                lo, hi, ss, n = self._acc.get(key, [np.inf, -np.inf, 0.0, 0])
+                self._acc[key] = [min(lo, float(v.min())), max(hi, float(v.max())),
+                                  ss + float(np.sum(v * v)), n + v.size]
+
+    def table(self) -> pd.DataFrame:
+        rows = [{"maneuver": m, "quantity": q, "axis": ax, "min": lo, "max": hi,
+                 "rms": float(np.sqrt(ss / n)), "n_runs": int(self._runs[m])}
+                for (m, q, ax), (lo, hi, ss, n) in self._acc.items()]
+        return pd.DataFrame(rows, columns=[c.name for c in SUMMARY_COLUMNS])
+
+
+def summary_table(truths: dict[str, list[Truth]]) -> pd.DataFrame:
+    """Per maneuver, quantity (acc, jerk) and axis: min, max, RMS over all samples of all runs
+    (see :class:`SummaryAccumulator`)."""
+    acc = SummaryAccumulator()
+    for man, trs in truths.items():
+        for t in trs:
+            acc.add(man, t)
+    return acc.table()
+
+
+def run_simulate(out_dir: str | os.PathLike, sim_cfg: dict | None, seed: int, *,
+                 progress=None) -> dict:
+    """Generate every set, the log files and the summary under ``out_dir`` (see module doc)."""
+    out = Path(out_dir)
+    settings = SimSettings.from_config(sim_cfg)
+    sensors = SensorSettings.from_config(sim_cfg)
+    ds = DatasetSettings.from_config(sim_cfg)
+    say = progress or (lambda msg: None)
+    index: dict[str, Any] = {"seed": int(seed), "sets": {}, "logs": [], "config": sim_cfg or {}}
+
+    # per-maneuver train/test
+    summary = SummaryAccumulator()
+    for man in ds.maneuvers:
+        df = simulate_set("maneuver", man, ds.runs, settings, ds, sensors, seed, f"maneuver/{man}",
+                          on_truth=lambda tr, m=man: summary.add(m, tr))
+        rng = set_rng(seed, f"split/{man}")
+        perm = rng.permutation(ds.runs)
+        n_train = int(round(ds.train_fraction * ds.runs))
+        train_ids = np.sort(perm[:n_train])
+        is_train = np.isin(df["run_id"].to_numpy(), train_ids)
+        for part, mask in (("train", is_train), ("test", ~is_train)):
+            p = out / "sets" / f"{man}_{part}.parquet"
+            _write_set(df[mask].reset_index(drop=True), p, f"{man}_{part}", seed)
+            index["sets"][f"{man}_{part}"] = {"path": str(p.relative_to(out)),
+                                              "runs": int(df.loc[mask, "run_id"].nunique())}
+        say(f"maneuver {man}: {ds.runs} runs")
+    write_table(summary.table(), out / "summary.parquet", SUMMARY_COLUMNS, name="simulate_summary",
+                extra={"seed": int(seed)})
+
+    for man in ds.maneuvers:
+        name = f"mc_{man}"
+        df = simulate_set("mc", man, ds.mc_runs, settings, ds, sensors, seed, name)
+        _write_set(df, out / "sets" / f"{name}.parquet", name, seed)
+        index["sets"][name] = {"path": f"sets/{name}.parquet", "runs": ds.mc_runs}
+        say(f"monte carlo {man}: {ds.mc_runs} runs")
+
+    for key in mv.SWITCHES:
+        for ts in settings.switch_times_s:
+            name = f"switch_{key}_{ts:g}s"
+            df = simulate_set("switch", key, ds.switch_runs, settings, ds, sensors, seed, name, t_switch=ts)
+            _write_set(df, out / "sets" / f"{name}.parquet", name, seed)
+            index["sets"][name] = {"path": f"sets/{name}.parquet", "runs": ds.switch_runs}
+        say(f"switch scenario {key}: {ds.switch_runs} runs x {len(settings.switch_times_s)} times")
+
+    if ds.log_formats and ds.log_flights > 0:
+        from .writers import write_flight_logs
+
+        index["logs"] = write_flight_logs(out / "logs", settings, sensors, ds, seed, say=say)
+    write_json(index, out / "index.json")
+    return index
+
+
+def _write_set(df: pd.DataFrame, path: Path, name: str, seed: int) -> None:
+    write_table(df, path, SET_COLUMNS, name=name,
+                extra={"seed": int(seed), "runs": int(df["run_id"].nunique()) if len(df) else 0})

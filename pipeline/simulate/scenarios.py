@@ -1,0 +1,230 @@
+"""Simulation settings and batch runs of maneuvers, Monte Carlo, switch and calibration scenarios.
+
+Parameters (``simulate`` section of ``datasets/config.yaml``; defaults in brackets):
+
+* ``rate_hz`` [200] — integration and truth rate (≥ 100 Hz); every sensor rate must divide it.
+* ``vehicle`` — :class:`pipeline.simulate.quadcopter.QuadParams` (Luukkonen's quadcopter).
+* ``disturbance`` — first-order Gauss–Markov acceleration disturbance per NED axis:
+  ``tau_s`` [0.5], ``sigma_mps2`` [0.2], ``clip_mps2`` [0.8] (norm bound, see quadcopter.py),
+  ``knot_s`` [0.1] (knot spacing of the band-limited process).
+* ``start`` — per-run randomisation of the bare maneuvers: ``north_m`` [[-800, 800]],
+  ``east_m`` [[-800, 800]] (uniform ranges about the NED origin, the radar's neighbourhood),
+  ``heading_deg`` [[-180, 180]] (the command profile is rotated with it). The altitude is the
+  maneuver's own start altitude (M1 10 m, M2 180 m, M3 60 m, M4 70 m, M5 40 m).
+* ``low_dynamic_pitch_deg`` [-5] — pitch of the low-dynamic padding (thrust holds altitude).
+* ``mc`` — padded Monte Carlo runs (seed 000 §2): ``pre_s`` [15], ``post_s`` [per maneuver
+  {M1: 25, M2: 20, M3: 20, M4: 20, M5: 25}, each within 20–25], ``ramp_in_s`` [[12, 14.8]],
+  ``ramp_out_s`` [[40, 50]], fixed ``start_ne_m`` [[500, -300]] and ``heading_deg`` [30]
+  (same start and end for every run, only the disturbance varies). Like the switch scenarios,
+  a Monte Carlo scenario is lifted so its nominal path stays above ``switch.min_alt_m``.
+* ``switch`` — change scenarios A–D: ``times_s`` [[3, 8, 13]], ``blend_s`` [2],
+  ``min_alt_m`` [20] (a scenario whose nominal path dips below is lifted as a whole).
+* ``calibration`` — ``hover_alts_m`` [[2.0, 4.5]], ``hover_s`` [8], ``climb_alt_m`` [25]; flown
+  from rest on the ground with the horizontal disturbance only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..config import ConfigError
+from . import maneuvers as mv
+from .quadcopter import QuadParams, Truth, gauss_markov, simulate
+
+DEFAULT_POST_S = {"M1": 25.0, "M2": 20.0, "M3": 20.0, "M4": 20.0, "M5": 25.0}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimSettings:
+    """Validated ``simulate`` config (dynamics and scenario parts)."""
+
+    rate_hz: float = 200.0
+    vehicle: QuadParams = field(default_factory=QuadParams)
+    dist_tau_s: float = 0.5
+    dist_sigma_mps2: float = 0.2
+    dist_clip_mps2: float | None = 0.8
+    dist_knot_s: float = 0.1
+    north_m: tuple[float, float] = (-800.0, 800.0)
+    east_m: tuple[float, float] = (-800.0, 800.0)
+    heading_deg: tuple[float, float] = (-180.0, 180.0)
+    low_pitch_deg: float = -5.0
+    mc_pre_s: float = 15.0
+    mc_post_s: dict = field(default_factory=lambda: dict(DEFAULT_POST_S))
+    mc_ramp_in: tuple[float, float] = (12.0, 14.8)
+    mc_ramp_out: tuple[float, float] = (40.0, 50.0)
+    mc_start_ne_m: tuple[float, float] = (500.0, -300.0)
+    mc_heading_deg: float = 30.0
+    switch_times_s: tuple[float, ...] = (3.0, 8.0, 13.0)
+    switch_blend_s: float = 2.0
+    switch_min_alt_m: float = 20.0
+    cal_hover_alts_m: tuple[float, ...] = (2.0, 4.5)
+    cal_hover_s: float = 8.0
+    cal_climb_alt_m: float = 25.0
+
+    @classmethod
+    def from_config(cls, sec: dict[str, Any] | None) -> "SimSettings":
+        sec = dict(sec or {})
+        kw: dict[str, Any] = {}
+        try:
+            if "rate_hz" in sec:
+                kw["rate_hz"] = float(sec["rate_hz"])
+            kw["vehicle"] = QuadParams.from_config(sec.get("vehicle"))
+            d = sec.get("disturbance") or {}
+            kw["dist_tau_s"] = float(d.get("tau_s", 0.5))
+            kw["dist_sigma_mps2"] = float(d.get("sigma_mps2", 0.2))
+            clip = d.get("clip_mps2", 0.8)
+            kw["dist_clip_mps2"] = None if clip in (None, 0) else float(clip)
+            kw["dist_knot_s"] = float(d.get("knot_s", 0.1))
+            s = sec.get("start") or {}
+            for key in ("north_m", "east_m", "heading_deg"):
+                if key in s:
+                    lo, hi = (float(x) for x in s[key])
+                    kw[key] = (lo, hi)
+            if "low_dynamic_pitch_deg" in sec:
+                kw["low_pitch_deg"] = float(sec["low_dynamic_pitch_deg"])
+            mc = sec.get("mc") or {}
+            kw["mc_pre_s"] = float(mc.get("pre_s", 15.0))
+            post = dict(DEFAULT_POST_S)
+            pv = mc.get("post_s", None)
+            if isinstance(pv, dict):
+                post.update({k: float(v) for k, v in pv.items()})
+            elif pv is not None:
+                post = {k: float(pv) for k in post}
+            kw["mc_post_s"] = post
+            kw["mc_ramp_in"] = tuple(float(x) for x in mc.get("ramp_in_s", (12.0, 14.8)))
+            kw["mc_ramp_out"] = tuple(float(x) for x in mc.get("ramp_out_s", (40.0, 50.0)))
+            kw["mc_start_ne_m"] = tuple(float(x) for x in mc.get("start_ne_m", (500.0, -300.0)))
+            kw["mc_heading_deg"] = float(mc.get("heading_deg", 30.0))
+            sw = sec.get("switch") or {}
+            kw["switch_times_s"] = tuple(float(x) for x in sw.get("times_s", (3.0, 8.0, 13.0)))
+            kw["switch_blend_s"] = float(sw.get("blend_s", 2.0))
+            kw["switch_min_alt_m"] = float(sw.get("min_alt_m", 20.0))
+            cal = sec.get("calibration") or {}
+            kw["cal_hover_alts_m"] = tuple(float(x) for x in cal.get("hover_alts_m", (2.0, 4.5)))
+            kw["cal_hover_s"] = float(cal.get("hover_s", 8.0))
+            kw["cal_climb_alt_m"] = float(cal.get("climb_alt_m", 25.0))
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"simulate: invalid value: {exc}") from None
+        st = cls(**kw)
+        if st.rate_hz < 100:
+            raise ConfigError(f"simulate.rate_hz: must be >= 100 Hz (seed 000 §1), got {st.rate_hz}")
+        if st.dist_tau_s <= 0 or st.dist_sigma_mps2 < 0 or st.dist_knot_s <= 0:
+            raise ConfigError("simulate.disturbance: tau_s and knot_s must be > 0, sigma_mps2 >= 0")
+        if any(not 0 < h < 6 for h in st.cal_hover_alts_m) or len(st.cal_hover_alts_m) < 2:
+            raise ConfigError("simulate.calibration.hover_alts_m: need >= 2 heights in (0, 6) m")
+        return st
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+    def decimation(self, rate_hz: float, what: str) -> int:
+        """Integer step from the truth rate to ``rate_hz`` (ConfigError when it does not divide)."""
+        step = self.rate_hz / rate_hz
+        if rate_hz <= 0 or abs(step - round(step)) > 1e-9:
+            raise ConfigError(f"simulate: {what} rate {rate_hz} Hz must divide rate_hz {self.rate_hz}")
+        return int(round(step))
+
+
+def maneuvers() -> dict[str, mv.KnotCommand]:
+    return mv.default_maneuvers()
+
+
+def scenario_for(kind: str, settings: SimSettings, name: str | None = None,
+                 t_switch: float | None = None) -> mv.Scenario:
+    """``kind``: ``maneuver`` (name M1..M5), ``mc`` (name), ``switch`` (name A..D, t_switch),
+    ``calibration``."""
+    mans = maneuvers()
+    if kind == "maneuver":
+        return mv.maneuver_scenario(name, mans[name])
+    if kind == "mc":
+        return mv.padded_scenario(name, mans[name], pre_s=settings.mc_pre_s,
+                                  post_s=settings.mc_post_s.get(name, 25.0),
+                                  ramp_in=settings.mc_ramp_in, ramp_out=settings.mc_ramp_out,
+                                  pitch_deg=settings.low_pitch_deg)
+    if kind == "switch":
+        return mv.switch_scenario(name, float(t_switch), mans, settings.switch_blend_s)
+    if kind == "calibration":
+        return mv.calibration_scenario(hover_alts_m=settings.cal_hover_alts_m, hover_s=settings.cal_hover_s,
+                                       climb_alt_m=settings.cal_climb_alt_m, params=settings.vehicle)
+    raise ValueError(f"unknown scenario kind {kind!r}")
+
+
+def time_grid(duration_s: float, rate_hz: float) -> np.ndarray:
+    n = int(round(duration_s * rate_hz)) + 1
+    return np.arange(n) / rate_hz
+
+
+def run_scenario(sc: mv.Scenario, settings: SimSettings, n_runs: int, rng: np.random.Generator | int | None,
+                 *, fixed_start: tuple[float, float, float] | None = None, disturbance: bool = True,
+                 min_alt_m: float | None = None, vel0_zero: bool = False,
+                 vertical_disturbance: bool = True) -> Truth:
+    """Integrate ``n_runs`` runs of one scenario as one batch.
+
+    Parameters
+    ----------
+    sc : Scenario
+    settings : SimSettings
+    n_runs : int
+    rng : Generator or int
+        Draw order: start N, start E, heading, then the disturbance — fixed, so the same seed
+        gives the same runs.
+    fixed_start : (north_m, east_m, heading_deg), optional
+        Same start and heading for every run (Monte Carlo sets).
+    disturbance : bool
+        Add the Gauss–Markov disturbance.
+    min_alt_m : float, optional
+        Lift the whole scenario so the nominal (undisturbed) path stays above this altitude.
+    vel0_zero : bool
+        Start at rest (calibration take-off) instead of the first command's equilibrium.
+    vertical_disturbance : bool
+        False zeroes the disturbance's down axis (calibration: an altitude-hold loop rejects
+        vertical gusts, so the hovers stay at their heights).
+    """
+    rng = np.random.default_rng(rng)
+    t = time_grid(sc.duration_s, settings.rate_hz)
+    cmd = sc.command.sample(t)
+    n_e = rng.uniform(*settings.north_m, n_runs), rng.uniform(*settings.east_m, n_runs)
+    yaw = np.deg2rad(rng.uniform(*settings.heading_deg, n_runs))
+    if fixed_start is not None:
+        n_e = np.full(n_runs, fixed_start[0]), np.full(n_runs, fixed_start[1])
+        yaw = np.full(n_runs, np.deg2rad(fixed_start[2]))
+    alt0 = sc.start_alt_m
+    if min_alt_m is not None:
+        nominal = simulate(cmd, t, settings.vehicle, yaw0=np.zeros(1), pos0=np.zeros((1, 3)),
+                           vel0=np.zeros((1, 3)) if vel0_zero else None)
+        lowest = alt0 + float(np.min(-nominal.pos[0, :, 2]))
+        alt0 += max(0.0, min_alt_m - lowest)
+    pos0 = np.stack([n_e[0], n_e[1], np.full(n_runs, -alt0)], axis=-1)
+    dist = None
+    if disturbance:
+        dist = gauss_markov(n_runs, len(t), settings.dt, settings.dist_tau_s, settings.dist_sigma_mps2,
+                            rng, settings.dist_clip_mps2, settings.dist_knot_s)
+        if not vertical_disturbance:
+            dist[..., 2] = 0.0
+    tr = simulate(cmd, t, settings.vehicle, yaw0=yaw, pos0=pos0, dist=dist,
+                  vel0=np.zeros((n_runs, 3)) if vel0_zero else None, label=sc.labels_at(t))
+    tr.meta.update({"scenario": sc.name, "phases": [(p.t_start, p.t_end, p.label) for p in sc.phases],
+                    "start_alt_m": alt0, **sc.meta})
+    return tr
+
+
+def run_named(kind: str, settings: SimSettings, n_runs: int, rng, name: str | None = None,
+              t_switch: float | None = None, disturbance: bool = True) -> Truth:
+    """Convenience: build the scenario and run it with the kind's conventions (MC: fixed start;
+    switch: lifted above ``switch.min_alt_m``; calibration: from rest on the ground)."""
+    sc = scenario_for(kind, settings, name, t_switch)
+    if kind == "mc":
+        return run_scenario(sc, settings, n_runs, rng, disturbance=disturbance,
+                            fixed_start=(*settings.mc_start_ne_m, settings.mc_heading_deg),
+                            min_alt_m=settings.switch_min_alt_m)
+    if kind == "switch":
+        return run_scenario(sc, settings, n_runs, rng, disturbance=disturbance,
+                            min_alt_m=settings.switch_min_alt_m)
+    if kind == "calibration":
+        return run_scenario(sc, settings, n_runs, rng, disturbance=disturbance, vel0_zero=True,
+                            vertical_disturbance=False)
+    return run_scenario(sc, settings, n_runs, rng, disturbance=disturbance)

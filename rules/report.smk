@@ -1,0 +1,117 @@
+# Reports: one page per flight, the index over all flights, one local copy of plotly.js.
+
+
+rule plotly_js:
+    output:
+        "results/report/assets/plotly.min.js",
+    params:
+        code_version=PIPELINE_VERSION,
+    log:
+        "results/logs/plotly_js/plotly_js.log",
+    benchmark:
+        "results/benchmarks/plotly_js/plotly_js.tsv"
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=5,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/plotly_js.py"
+
+
+rule flight_report:
+    input:
+        ingest=lambda wc: ingest_outputs(wc.flight),
+        state="results/state/{flight}.parquet",
+        segments="results/segments/{flight}.parquet",
+        calibration="results/calibration/{flight}.parquet",
+        classified=flight_classified,
+        template="reports/templates/flight.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        report(
+            "results/report/flights/{flight}.html",
+            caption="../reports/captions/flight.rst",
+            category="Flights",
+            labels={"flight": "{flight}"},
+        ),
+    params:
+        code_version=PIPELINE_VERSION,
+        ingest_dir=lambda wc: f"results/ingest/{wc.flight}",
+    log:
+        "results/logs/flight_report/{flight}.log",
+    benchmark:
+        "results/benchmarks/flight_report/{flight}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/flight_report.py"
+
+
+rule model_report:
+    input:
+        params="results/models/{model}/params.npz",
+        meta="results/models/{model}/meta.json",
+        evaluation="results/models/{model}/evaluation.parquet",
+        template="reports/templates/model.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        report(
+            "results/report/models/{model}.html",
+            caption="../reports/captions/model.rst",
+            category="Models",
+            labels={"model": "{model}"},
+        ),
+    params:
+        code_version=PIPELINE_VERSION,
+        model_dir=lambda wc: f"results/models/{wc.model}",
+    log:
+        "results/logs/model_report/{model}.log",
+    benchmark:
+        "results/benchmarks/model_report/{model}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/model_report.py"
+
+
+rule report_index:
+    input:
+        metas=expand("results/ingest/{flight}/meta.json", flight=FLIGHTS),
+        pages=expand("results/report/flights/{flight}.html", flight=FLIGHTS),
+        segments=expand("results/segments/{flight}.parquet", flight=FLIGHTS),
+        classified=expand("results/classify/{flight}.parquet", flight=CLASSIFIED),
+        models=expand("results/report/models/{model}.html", model=MODELS),
+    output:
+        report("results/index.html", caption="../reports/captions/index.rst", category="Index"),
+    params:
+        code_version=PIPELINE_VERSION,
+        flights=FLIGHTS,
+        classified=CLASSIFIED,
+        models=list(MODELS),
+    log:
+        "results/logs/report_index/index.log",
+    benchmark:
+        "results/benchmarks/report_index/index.tsv"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/report_index.py"
+
+
+rule report:
+    input:
+        "results/index.html",

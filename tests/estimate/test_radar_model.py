@@ -1,0 +1,97 @@
+"""Seed-000 radar model: h(x) closed forms, Jacobian vs central differences, noise statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline.estimate.models import RadarModel, ca_transition
+
+
+def _fd_jacobian(model: RadarModel, x: np.ndarray) -> np.ndarray:
+    """Central differences with a per-component step scaled to the state."""
+    H = np.zeros((4, x.size))
+    for j in range(x.size):
+        h = 1e-6 * max(1.0, abs(x[j]))
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        H[:, j] = (model.h(xp) - model.h(xm)) / (2 * h)
+    return H
+
+
+def _states(rng, n):
+    r = rng.uniform(-2000, 2000, (n, 3))
+    r[:, 2] = -rng.uniform(10, 300, n)
+    v = rng.uniform(-40, 40, (n, 3))
+    a = rng.uniform(-10, 10, (n, 3))
+    return np.concatenate([r, v, a], axis=1)
+
+
+def test_h_closed_form():
+    m = RadarModel(site_ned_m=(10.0, -20.0, 0.0), tau_rd_s=0.01)
+    x = np.array([310.0, 380.0, -500.0, 3.0, -4.0, 12.0, 0, 0, 0])
+    rv = np.array([300.0, 400.0, -500.0])
+    rho = np.sqrt(300 ** 2 + 400 ** 2 + 500 ** 2)
+    rdot = (3 * 300 - 4 * 400 - 12 * 500) / rho
+    np.testing.assert_allclose(m.h(x), [rho + 0.01 * rdot, rv[0] / rho, rv[1] / rho, rdot], rtol=1e-14)
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.05])
+def test_jacobian_matches_central_differences(rng, tau):
+    m = RadarModel(site_ned_m=(100.0, -50.0, -2.0), tau_rd_s=tau)
+    X = _states(rng, 200)
+    Hs = m.jacobian(X)
+    assert Hs.shape == (200, 4, 9)
+    for x, H in zip(X, Hs):
+        Hfd = _fd_jacobian(m, x)
+        for row in range(4):
+            scale = np.max(np.abs(H[row]))
+            assert np.max(np.abs(H[row] - Hfd[row])) <= 1e-6 * scale, (row, x)
+        assert np.all(H[:, 6:] == 0)  # acceleration does not enter the measurement
+
+
+def test_tau_terms_in_first_row_only(rng):
+    x = _states(rng, 1)[0]
+    h0 = RadarModel(tau_rd_s=0.0).jacobian(x)
+    h1 = RadarModel(tau_rd_s=0.1).jacobian(x)
+    np.testing.assert_array_equal(h0[1:], h1[1:])
+    np.testing.assert_allclose(h1[0] - h0[0], 0.1 * h0[3], rtol=1e-12, atol=1e-15)
+    thesis = RadarModel(tau_rd_s=0.1, include_tau_in_h=False).jacobian(x)
+    np.testing.assert_array_equal(thesis, h0)  # seed 000 (2.22) leaves tau out of H
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-3000, 3000), min_size=3, max_size=3),
+       st.lists(st.floats(-40, 40), min_size=3, max_size=3),
+       st.floats(0.0, 0.2))
+def test_direction_cosines_unit_and_rdot_projection(r, v, tau):
+    r = np.asarray(r)
+    if np.linalg.norm(r) < 1.0:
+        r = r + np.array([5.0, 0, 0])
+    m = RadarModel(tau_rd_s=tau)
+    x = np.concatenate([r, v])
+    y = m.h(x)
+    assert y[1] ** 2 + y[2] ** 2 <= 1 + 1e-12
+    assert y[3] == pytest.approx(np.dot(v, r) / np.linalg.norm(r), rel=1e-12, abs=1e-12)
+    assert y[0] == pytest.approx(np.linalg.norm(r) + tau * y[3], rel=1e-12)
+
+
+def test_noise_standard_deviations(rng):
+    m = RadarModel(site_ned_m=(0.0, 0.0, 0.0))
+    x = np.tile(np.array([800.0, -300.0, -120.0, 5.0, 2.0, -1.0, 0, 0, 0]), (10_000, 1))
+    e = m.measure(x, rng) - m.h(x)
+    np.testing.assert_allclose(e.std(axis=0), [1.5, 45e-6, 45e-6, 0.2], rtol=0.03)
+    assert np.all(np.abs(e.mean(axis=0)) < 4 * np.array(m.sigma) / 100)
+    np.testing.assert_allclose(m.R, np.diag([1.5 ** 2, 45e-6 ** 2, 45e-6 ** 2, 0.04]))
+    assert abs(np.corrcoef(e.T)[0, 3]) < 0.05  # independent components
+
+
+def test_from_config_and_ca_transition():
+    m = RadarModel.from_config({"site_ned_m": [1, 2, 3], "tau_rd_s": 0.02, "sigma_range_m": 2.0})
+    assert m.site_ned_m == (1.0, 2.0, 3.0) and m.sigma[0] == 2.0 and m.sigma[1] == 45e-6
+    A = ca_transition(0.2)
+    x = np.array([0, 0, 0, 1.0, 2.0, 3.0, 0.5, 0.5, -1.0])
+    np.testing.assert_allclose((A @ x)[:3], x[3:6] * 0.2 + 0.5 * 0.04 * x[6:])

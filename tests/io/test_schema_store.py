@@ -1,0 +1,110 @@
+"""The canonical schema, FlightLog conformance and the Parquet store round trip."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from pipeline.io import schema
+from pipeline.io.base import FlightLog, IngestError
+from pipeline.io.parquet import read_flightlog, read_table_meta, write_flightlog
+from pipeline.io.registry import detect, flight_id_for, read_log
+
+
+def test_every_stream_has_full_schema_when_absent():
+    log = FlightLog.from_streams({"flight_id": "x"}, {})
+    assert set(log.streams) == set(schema.STREAM_NAMES)
+    for name, df in log.streams.items():
+        assert list(df.columns) == schema.column_names(name)
+        assert len(df) == 0
+    assert log["imu"]["t_ns"].dtype == np.int64
+    assert log["imu"]["instance"].dtype == np.uint8
+
+
+def test_units_in_column_names_are_declared():
+    # every physical column carries its unit suffix and a unit string
+    suffix = {"_m": "m", "_mps": "m/s", "_mps2": "m/s^2", "_radps": "rad/s", "_deg": "deg",
+              "_Pa": "Pa", "_T": "T", "_us": "us", "_degC": "degC", "_ns": "ns", "_mps3": "m/s^3"}
+    for name in schema.STREAM_NAMES:
+        for c in schema.columns(name):
+            for suf, unit in suffix.items():
+                if c.name.endswith(suf):
+                    assert c.unit == unit, (name, c.name, c.unit)
+
+
+def test_conform_sorts_stably_and_counts_anomalies_in_arrival_order():
+    imu = pd.DataFrame({"t_ns": [10, 5, 5, 20, 1], "instance": [0, 0, 0, 0, 1], "src": ["IMU"] * 4 + ["IMU2"],
+                        "gyr_x_radps": [1.0, 2.0, 3.0, 4.0, 5.0]})
+    log = FlightLog.from_streams({}, {"imu": imu})
+    out = log["imu"]
+    assert out["t_ns"].tolist() == [5, 5, 10, 20, 1]
+    assert out["gyr_x_radps"].tolist() == [2.0, 3.0, 1.0, 4.0, 5.0]  # stable: 2 before 3
+    assert log.meta["diagnostics"]["timestamp_anomalies"]["imu"] == {"backwards": 1, "duplicate": 1}
+
+
+def test_unknown_column_or_stream_is_rejected():
+    with pytest.raises(schema.SchemaError, match="unknown column"):
+        FlightLog.from_streams({}, {"imu": pd.DataFrame({"t_ns": [1], "gyro_x": [1.0]})})
+    with pytest.raises(schema.SchemaError, match="unknown stream"):
+        FlightLog.from_streams({}, {"imus": pd.DataFrame({"t_ns": [1]})})
+
+
+def _random_log(rng: np.random.Generator) -> FlightLog:
+    n = int(rng.integers(1, 50))
+    imu = pd.DataFrame({"t_ns": rng.integers(0, 10**12, n), "instance": rng.integers(0, 3, n),
+                        "src": rng.choice(["IMU", "IMU2"], n), "acc_z_mps2": rng.normal(size=n),
+                        "t_boot_ns": pd.array(np.where(rng.random(n) < 0.3, None, rng.integers(0, 10**9, n)),
+                                              dtype="Int64")})
+    mode = pd.DataFrame({"t_ns": np.sort(rng.integers(0, 10**9, 3)), "src": "MODE",
+                         "mode": ["STABILIZE", None, "LOITER"], "armed": pd.array([True, None, False], dtype="boolean")})
+    rf = pd.DataFrame({"t_ns": [1, 2], "dist_m": [0.5, np.nan], "valid": [True, False], "src": "RFND"})
+    labels = pd.DataFrame({"t_start_ns": [5, 1], "t_end_ns": [9, 4], "label": ["M2", "M1"], "source": "sim"})
+    return FlightLog.from_streams({"flight_id": "f-1", "ned_origin": {"lat_deg": 1.0, "lon_deg": 2.0,
+                                   "alt_wgs84_m": 3.0}}, {"imu": imu, "mode": mode, "rangefinder": rf,
+                                                           "labels": labels})
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_parquet_round_trip_is_exact(tmp_path_factory, seed):
+    log = _random_log(np.random.default_rng(seed))
+    d = tmp_path_factory.mktemp("store")
+    write_flightlog(log, d)
+    back = read_flightlog(d)
+    assert back.meta == json.loads(json.dumps(log.meta))
+    for name in schema.STREAM_NAMES:
+        pd.testing.assert_frame_equal(log[name], back[name], check_exact=True)
+
+
+def test_parquet_metadata_has_units_frames_and_schema_version(tmp_path):
+    log = _random_log(np.random.default_rng(1))
+    write_flightlog(log, tmp_path)
+    md = read_table_meta(tmp_path / "imu.parquet")
+    assert md["schema_version"] == schema.SCHEMA_VERSION
+    assert md["columns"]["acc_z_mps2"] == {"unit": "m/s^2", "frame": "FRD"}
+    f = pq.read_schema(tmp_path / "imu.parquet").field("gyr_x_radps")
+    assert f.metadata[b"unit"] == b"rad/s" and f.metadata[b"frame"] == b"FRD"
+    assert pq.ParquetFile(tmp_path / "imu.parquet").metadata.row_group(0).column(0).compression == "ZSTD"
+
+
+def test_registry_errors_name_the_file(tmp_path):
+    with pytest.raises(IngestError, match="no such file"):
+        read_log(tmp_path / "missing.bin")
+    empty = tmp_path / "empty.bin"
+    empty.write_bytes(b"")
+    with pytest.raises(IngestError, match=r"empty\.bin: empty file"):
+        detect(empty)
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(b"this is not a flight log\n" * 10)
+    with pytest.raises(IngestError, match=r"junk\.bin: unrecognised log format"):
+        read_log(junk)
+
+
+def test_flight_id_alphabet():
+    assert flight_id_for("/x/2014-10-18 20-04-24.bin") == "2014-10-18-20-04-24"
+    assert flight_id_for("a_b.c.tlog") == "a-b-c"

@@ -1,0 +1,166 @@
+"""Model set: training from state tables, thresholds, classification, persistence, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.config import ConfigError
+from pipeline.models.base import ModelError, ModelsConfig
+from pipeline.models.classifier import ManeuverModelSet, _pad
+from pipeline.models.features import MinMaxNormaliser, decimate, raw_features
+from pipeline.models.online import classify_batch
+
+FAST = dict(n_states=3, n_iter=15, tol=1e-1, gmm_restarts=1, seed=5)
+
+
+def _train(synth, rng, labels=("M1", "M2", "M3"), n_runs=5, **cfg):
+    _, bulk = synth
+    data = bulk(labels, n_runs, rng)
+    ms = ManeuverModelSet(config=ModelsConfig(**{**FAST, **cfg})).fit(data)
+    return ms, data
+
+
+@pytest.fixture(scope="module")
+def trained3(synth):
+    data = synth[1](("M1", "M2", "M3"), 5, np.random.default_rng(20261123))
+    return ManeuverModelSet(config=ModelsConfig(**FAST)).fit(data), data
+
+
+def test_normaliser_frozen_and_shared(trained3):
+    ms, data = trained3
+    obs = np.concatenate([np.diff(raw_features(g), axis=0) for _, g in data.groupby("run_id")])
+    np.testing.assert_allclose(ms.normaliser_.x_min, obs.min(0))
+    np.testing.assert_allclose(ms.normaliser_.x_max, obs.max(0))
+    n = MinMaxNormaliser(np.zeros(2), np.array([2.0, 0.0]))
+    np.testing.assert_allclose(n.transform([[3.0, 5.0]]), [[1.5, 5.0]])  # may leave [0, 1]
+    np.testing.assert_allclose(n.inverse(n.transform([[3.0, 5.0]])), [[3.0, 5.0]])
+
+
+def test_classify_synthetic_and_unknown(synth, rng, trained3):
+    run, bulk = synth
+    ms, _ = trained3
+    test = pd.concat([bulk(("M1", "M2", "M3", "U"), 3, rng)], ignore_index=True)
+    res = ms.classify(test, decision="confidence")
+    final = res.groupby("run_id").tail(1).set_index("run_id")
+    known = final["truth"] != "U"
+    assert (final.loc[known, "pred"] == final.loc[known, "truth"]).all()
+    # the unknown maneuver gets a known label from the confidence rule alone (its argmax is
+    # clear-cut) but falls below every one-class threshold
+    res1 = ms.classify(test, decision="both")
+    final1 = res1.groupby("run_id").tail(1).set_index("run_id")
+    assert (final1.loc[~known, "pred"] == "unknown").all()
+    assert set(res1["pred"]) <= {*ms.labels_, "unknown"}
+    assert {f"ll_{m}" for m in ms.labels_} <= set(res.columns)
+    assert np.isfinite(res["acc_hmm_n_mps2"]).mean() > 0.9
+
+
+def test_thresholds_percentile_of_training_scores(trained3):
+    ms, data = trained3
+    # recompute model M1's threshold curve from its training sequences
+    seqs = []
+    for _, g in data[data.label == "M1"].groupby("run_id"):
+        seqs.append(ms.normaliser_.transform(np.diff(raw_features(g), axis=0)))
+    clf = ms.classifier(mode="cumulative", decision="confidence")
+    res = classify_batch(clf, np.stack(seqs))
+    ref = np.percentile(res["scores"][:, :, 0], 0.5, axis=0)
+    np.testing.assert_allclose(ms.thresholds_["cumulative"][0], ref, rtol=1e-10)
+    assert ms.training_["M1"]["threshold"] == "training sequences"
+
+
+def test_single_recording_uses_leave_one_phase_out(synth, rng):
+    run, _ = synth
+    df = run("M1", rng, duration_s=25.0, rate_hz=25.0).assign(run_id="only")
+    df2 = run("M2", rng, duration_s=10.0, rate_hz=5.0).assign(run_id="two")
+    df3 = run("M2", rng, duration_s=10.0, rate_hz=5.0).assign(run_id="three")
+    ms = ManeuverModelSet(config=ModelsConfig(**{**FAST, "n_iter": 8})).fit(pd.concat([df, df2, df3]))
+    assert ms.training_["M2"]["threshold"] == "training sequences"
+    assert ms.training_["M1"]["threshold"] == "leave-one-phase-out"
+    assert ms.training_["M1"]["n_sequences"] == 5                   # five 5 Hz phases of 25 Hz
+    # held-out phases score lower than in-sample ones: the LOPO threshold is the stricter test
+    ph = [ms.normaliser_.transform(np.diff(raw_features(decimate(df, 5.0, k)), axis=0)) for k in range(5)]
+    assert len({len(p) for p in ph}) == 2                           # 126 rows: phases differ in length
+    ins = classify_batch(ms.classifier(mode="cumulative", decision="confidence"), _pad(ph))
+    T = min(len(p) for p in ph)
+    assert ms.thresholds_["cumulative"][0, T - 1] <= np.percentile(ins["scores"][:, T - 1, 0], 0.5)
+
+
+def test_save_load_roundtrip_identical(synth, rng, tmp_path):
+    ms, data = _train(synth, rng, labels=("M1", "M2"), n_runs=4)
+    paths = ms.save(tmp_path / "m")
+    assert [p.name for p in paths] == ["params.npz", "meta.json"]
+    z = np.load(tmp_path / "m" / "params.npz", allow_pickle=False)   # no pickles anywhere
+    assert all(z[k].dtype != object for k in z.files)
+    meta = json.loads((tmp_path / "m" / "meta.json").read_text())
+    assert meta["labels"] == ["M1", "M2"] and "normaliser" in meta and "training" in meta
+    ms2 = ManeuverModelSet.load(tmp_path / "m")
+    a = ms.classify(data, mode="windowed")
+    b = ms2.classify(data, mode="windowed")
+    pd.testing.assert_frame_equal(a, b)
+
+
+def test_training_deterministic(synth, rng, tmp_path):
+    _, bulk = synth
+    data = bulk(("M1", "M2"), 3, rng)
+    for k in range(2):
+        ManeuverModelSet(config=ModelsConfig(**FAST)).fit(data).save(tmp_path / f"m{k}")
+    assert (tmp_path / "m0" / "params.npz").read_bytes() == (tmp_path / "m1" / "params.npz").read_bytes()
+
+
+def test_bad_inputs(synth, rng, tmp_path):
+    run, _ = synth
+    with pytest.raises(ConfigError, match="unknown key"):
+        ModelsConfig.from_section({"n_stats": 3})
+    with pytest.raises(ConfigError, match="mode"):
+        ModelsConfig.from_section({"mode": "sliding"})
+    with pytest.raises(ModelError, match="not a model directory"):
+        ManeuverModelSet.load(tmp_path)
+    df = run("M1", rng)
+    with pytest.raises(ModelError, match="labels"):
+        ManeuverModelSet(config=ModelsConfig(**FAST)).fit(df.assign(label=["M1", "M2"] * (len(df) // 2) + ["M1"] * (len(df) % 2)))
+    with pytest.raises(ValueError, match="integer multiple"):
+        ManeuverModelSet(config=ModelsConfig(**FAST)).fit(run("M1", rng, rate_hz=7.0))
+
+
+def test_cli_train_and_classify(synth, rng, tmp_path, capsys):
+    from pipeline.cli import main
+    from pipeline.io.parquet import read_table_meta
+
+    _, bulk = synth
+    train = bulk(("M1", "M2"), 4, rng)
+    train.to_parquet(tmp_path / "train.parquet")
+    test = bulk(("M1", "M2"), 2, rng)
+    test.to_parquet(tmp_path / "test.parquet")
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("models:\n  n_states: 3\n  n_iter: 15\n  tol: 0.1\n  gmm_restarts: 1\n")
+    assert main(["train", str(tmp_path / "train.parquet"), "-o", str(tmp_path / "mdl"),
+                 "--config", str(cfg)]) == 0
+    assert main(["classify", str(tmp_path / "mdl"), str(tmp_path / "test.parquet"),
+                 "-o", str(tmp_path / "out.parquet"), "--mode", "windowed"]) == 0
+    out = pd.read_parquet(tmp_path / "out.parquet")
+    assert {"t_ns", "pred", "V_best", "ll_M1", "ll_M2", "state", "acc_hmm_n_mps2"} <= set(out.columns)
+    final = out.groupby("run_id").tail(1)
+    assert (final["pred"] == final["truth"]).mean() == 1.0
+    assert read_table_meta(tmp_path / "out.parquet")["schema_version"]
+    # a bad model directory: one line, non-zero exit
+    assert main(["classify", str(tmp_path), str(tmp_path / "test.parquet"), "-o", str(tmp_path / "x.parquet")]) == 1
+    assert "not a model directory" in capsys.readouterr().err
+
+
+def test_threshold_slack_auto_is_leave_one_recording_out(synth, rng):
+    run, _ = synth
+    parts = [run("M1", rng, duration_s=8.0, rate_hz=25.0).assign(run_id=f"a{k}") for k in range(2)]
+    parts.append(run("M2", rng, duration_s=8.0, rate_hz=25.0).assign(run_id="b"))
+    data = pd.concat(parts, ignore_index=True)
+    base = ManeuverModelSet(config=ModelsConfig(**{**FAST, "n_iter": 5})).fit(data)
+    auto = ManeuverModelSet(config=ModelsConfig(**{**FAST, "n_iter": 5, "threshold_slack": "auto"})).fit(data)
+    assert base.threshold_slack_ == 0.0
+    assert auto.threshold_slack_ > 0                               # another flight scores lower
+    n = np.arange(1, base.thresholds_["cumulative"].shape[1] + 1)
+    np.testing.assert_allclose(auto.thresholds_["cumulative"],
+                               base.thresholds_["cumulative"] - auto.threshold_slack_ * n, rtol=1e-9)
+    with pytest.raises(ConfigError, match="threshold_slack"):
+        ModelsConfig.from_section({"threshold_slack": "big"})

@@ -1,0 +1,71 @@
+"""Feature sets: differencing/normalisation, decimation phases, heading invariance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.frames.rotations import euler_to_quat, quat_multiply
+from pipeline.models.features import (FEATURE_SETS, decimate, decimation_factor, observations,
+                                      raw_features)
+
+
+def random_state(rng, n=40):
+    df = pd.DataFrame({"t_ns": np.arange(n, dtype=np.int64) * 40_000_000})
+    for i, a in enumerate("ned"):
+        df[f"pos_{a}_m"] = rng.normal(size=n).cumsum()
+        df[f"vel_{a}_mps"] = rng.normal(size=n) * 10
+        df[f"acc_{a}_mps2"] = rng.normal(size=n) * 3
+    q = euler_to_quat(rng.uniform(-3, 3, n), rng.uniform(-1.5, 1.5, n), rng.uniform(-3, 3, n))
+    for i, c in enumerate("wxyz"):
+        df[f"q_{c}"] = q[:, i]
+    for c in ("p_radps", "q_radps", "r_radps"):
+        df[c] = rng.normal(size=n)
+    return df
+
+
+def rotate_world(df, psi):
+    """The same flight seen with the world frame turned by ``psi`` about down."""
+    c, s = np.cos(psi), np.sin(psi)
+    out = df.copy()
+    for k, u in (("pos", "m"), ("vel", "mps"), ("acc", "mps2")):
+        n, e = df[f"{k}_n_{u}"], df[f"{k}_e_{u}"]
+        out[f"{k}_n_{u}"], out[f"{k}_e_{u}"] = c * n - s * e, s * n + c * e
+    qz = euler_to_quat(0.0, 0.0, psi)
+    q = quat_multiply(np.broadcast_to(qz, (len(df), 4)), df[["q_w", "q_x", "q_y", "q_z"]].to_numpy())
+    out[["q_w", "q_x", "q_y", "q_z"]] = q
+    return out
+
+
+@pytest.mark.parametrize("psi", [0.3, -2.0, np.pi])
+def test_aero_and_box_features_are_heading_invariant(rng, psi):
+    df = random_state(rng)
+    rot = rotate_world(df, psi)
+    np.testing.assert_allclose(raw_features(rot, "aero"), raw_features(df, "aero"), atol=1e-9)
+    np.testing.assert_allclose(raw_features(rot, "box", box_heading_rad=0.4 + psi),
+                               raw_features(df, "box", box_heading_rad=0.4), atol=1e-9)
+    # the thesis features are not: they change with the heading
+    assert not np.allclose(raw_features(rot, "state9"), raw_features(df, "state9"))
+
+
+def test_state9_observation_is_the_increment(rng):
+    df = random_state(rng, 10)
+    o = observations(raw_features(df, "state9"), FEATURE_SETS["state9"].differenced)
+    assert o.shape == (9, 9)
+    np.testing.assert_allclose(o[3, :3], df[["pos_n_m", "pos_e_m", "pos_d_m"]].to_numpy()[4]
+                               - df[["pos_n_m", "pos_e_m", "pos_d_m"]].to_numpy()[3])
+
+
+def test_decimation_phases(rng):
+    df = random_state(rng, 23)                                        # 25 Hz
+    assert decimation_factor(df["t_ns"], 5.0) == 5
+    phases = [decimate(df, 5.0, k) for k in range(5)]
+    assert [len(p) for p in phases] == [5, 5, 5, 4, 4]
+    np.testing.assert_array_equal(phases[2]["t_ns"], df["t_ns"].to_numpy()[2::5])
+    with pytest.raises(ValueError):
+        decimate(df, 5.0, 5)
+    with pytest.raises(ValueError, match="slower"):
+        decimation_factor(df["t_ns"], 50.0)
+    with pytest.raises(ValueError, match="unknown feature set"):
+        raw_features(df, "state12")

@@ -1,0 +1,106 @@
+"""GMR against the closed-form conditional Gaussian, de-normalisation, the gate; §5 metrics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.models.features import MinMaxNormaliser
+from pipeline.models.gmr import gate, gmr, gmr_state9
+from pipeline.models.metrics import (UNKNOWN, confusion, final_accuracy, is_correct,
+                                     mean_accuracy_over_time, per_maneuver_table,
+                                     thesis_side_by_side)
+
+
+def random_spd(rng, d):
+    L = rng.normal(size=(d, d))
+    return L @ L.T + d * np.eye(d)
+
+
+def test_gmr_single_gaussian_is_the_conditional_gaussian(rng):
+    d = 5
+    mu = rng.normal(size=d)
+    S = random_spd(rng, d)
+    i, o = [0, 2], [1, 3, 4]
+    x = rng.normal(size=(7, 2))
+    mean, cov = gmr(mu[None], S[None], x, i, o)
+    # closed form via the precision matrix: E[u|k] = μ_u − Λ_uu⁻¹ Λ_uk (x − μ_k)
+    P = np.linalg.inv(S)
+    Puu, Puk = P[np.ix_(o, o)], P[np.ix_(o, i)]
+    ref = mu[o] - (np.linalg.solve(Puu, Puk) @ (x - mu[i]).T).T
+    np.testing.assert_allclose(mean, ref, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(cov[0], np.linalg.inv(Puu), rtol=1e-10)
+
+
+def test_gmr_mixture_weights_and_one_hot(rng):
+    d = 3
+    mus = rng.normal(size=(2, d)) * 3
+    Ss = np.stack([random_spd(rng, d), random_spd(rng, d)])
+    x = rng.normal(size=(4, 1))
+    m0, _ = gmr(mus[:1], Ss[:1], x, [0], [1, 2])
+    m_hot, _ = gmr(mus, Ss, x, [0], [1, 2], weights=np.array([1.0, 0.0]))
+    np.testing.assert_allclose(m_hot, m0, rtol=1e-12)
+    # β_m ∝ w_m N(x; μ_k,m, Σ_k,m) (3.25)
+    from scipy.stats import norm
+    mean, _ = gmr(mus, Ss, x, [0], [1, 2])
+    like = np.stack([norm.pdf(x[:, 0], mus[m, 0], np.sqrt(Ss[m, 0, 0])) for m in range(2)], 1)
+    beta = like / like.sum(1, keepdims=True)
+    ms = np.stack([gmr(mus[m:m + 1], Ss[m:m + 1], x, [0], [1, 2])[0] for m in range(2)], 1)
+    np.testing.assert_allclose(mean, np.einsum("nm,nmo->no", beta, ms), rtol=1e-10)
+
+
+def test_gmr_state9_denormalises_per_correction_13_3(rng):
+    """Outputs exactly linear in the inputs: GMR recovers Δv, Δa; â = Δv/dt, ĵ = Δa/dt."""
+    dt = 0.2
+    norm = MinMaxNormaliser(np.arange(9.0) - 5, np.arange(9.0) + 3)
+    G = rng.normal(size=(6, 3))
+    Z = rng.normal(size=(4000, 3))
+    obs = np.hstack([Z, Z @ G.T])
+    obs[:, 3:] += 1e-6 * rng.normal(size=(4000, 6))
+    mu, cov = obs.mean(0), np.cov(obs.T)
+    xq = rng.normal(size=(5, 3))
+    q = np.hstack([xq, np.zeros((5, 6))])
+    acc, jerk = gmr_state9(mu[None], cov[None], q, np.zeros(5, dtype=int), norm, dt)
+    yn = xq @ G.T                                                   # normalised increments
+    span = norm.x_max - norm.x_min
+    np.testing.assert_allclose(acc, (yn[:, :3] * span[3:6] + norm.x_min[3:6]) / dt, rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(jerk, (yn[:, 3:] * span[6:9] + norm.x_min[6:9]) / dt, rtol=1e-4, atol=1e-4)
+    # a sample without a state gives NaN
+    a2, _ = gmr_state9(mu[None], cov[None], q[:2], np.array([0, -1]), norm, dt)
+    assert np.isfinite(a2[0]).all() and np.isnan(a2[1]).all()
+
+
+def test_gate_per_axis():
+    a = np.array([[0.0, 0.0, 0.0], [10.0, 20.0, 0.0], [12.0, 21.0, -16.0], [12.0, 0.0, -16.0]])
+    g, dropped = gate(a, 15.0)
+    np.testing.assert_array_equal(dropped, [[0, 0, 0], [0, 1, 0], [0, 0, 1], [0, 1, 0]])
+    assert np.isnan(g[1, 1]) and g[1, 0] == 10.0 and g[3, 2] == -16.0
+
+
+def test_is_correct_unknown_rules():
+    known = ["M1", "M2"]
+    pred = np.array(["M1", UNKNOWN, "M2", UNKNOWN, "M1"], dtype=object)
+    truth = np.array(["M1", "M1", "M1", "M5", "M5"], dtype=object)
+    np.testing.assert_array_equal(is_correct(pred, truth, known), [True, False, False, True, False])
+
+
+def test_fa_maot_and_tables():
+    known = ["M1", "M2"]
+    df = pd.DataFrame({
+        "run_id": [0] * 4 + [1] * 4 + [2] * 2,
+        "label": ["M1"] * 8 + ["M5"] * 2,
+        "pred": ["M2", "M1", "M1", "M1", UNKNOWN, "M1", "M2", "M2", UNKNOWN, UNKNOWN],
+    })
+    assert final_accuracy(["M1", "M2"], ["M1", "M1"], known) == 50.0
+    preds = [g["pred"].to_numpy() for _, g in df.groupby("run_id")]
+    truths = [g["label"].to_numpy() for _, g in df.groupby("run_id")]
+    assert mean_accuracy_over_time(preds[:2], truths[:2], known) == pytest.approx((0.75 + 0.25) / 2 * 100)
+    t = per_maneuver_table(df, known).set_index("maneuver")
+    assert t.loc["M1", "FA_pct"] == 50.0 and t.loc["M1", "MAoT_pct"] == pytest.approx(50.0)
+    assert t.loc["M5", "FA_pct"] == 100.0 and t.loc["M5", "MAoT_pct"] == 100.0
+    side = thesis_side_by_side(t.reset_index(), "3.4").set_index("maneuver")
+    assert side.loc["M1", "thesis_MAoT_pct"] == 98.21 and side.loc["M5", "thesis_MAoT_pct"] == 96.09
+    c = confusion(["M1", "M1", "M5"], ["M1", "M2", UNKNOWN], known)
+    assert c.loc["M1", "M1"] == 1 and c.loc["M1", "M2"] == 1 and c.loc["M5", UNKNOWN] == 1
+    assert list(c.columns) == ["M1", "M2", UNKNOWN]

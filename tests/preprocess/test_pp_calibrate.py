@@ -1,0 +1,150 @@
+"""BPM calibration (acceptance §3) on a simulated calibration flight with truth, plus the
+GPS fallback and the no-barometer case.
+
+The profile (generated here; seed 004 §6.3): ground, take-off to 2 m, hover, 4.5 m hover, a
+cruise at 15 m (out of the 6 m rangefinder range), back to a 2 m hover, landing. The barometer
+reads truth + 5 m + 0.01 m/s · t + N(0, 0.1 m); the rangefinder has N(0, 2 cm) noise, reads
+h / (cos φ cos θ) when tilted, and gets injected tilted episodes (20°), out-of-range readings
+and spikes.
+"""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.io.base import FlightLog
+from pipeline.frames.rotations import euler_to_quat
+from pipeline.preprocess.calibrate import BPMConfig, calibrate_baro, pressure_altitude
+from pipeline.preprocess.state import run_preprocess
+
+OFFSET, DRIFT = 5.0, 0.01
+
+
+def _ramp(t, t0, dur, a, b):
+    s = np.clip((t - t0) / dur, 0, 1)
+    return a + (b - a) * (0.5 - 0.5 * np.cos(np.pi * s))
+
+
+def height(t):
+    h = np.full_like(t, 0.1)
+    for t0, dur, a, b in ((5, 6, 0.1, 2.0), (35, 5, 2.0, 4.5), (65, 8, 4.5, 15.0),
+                          (130, 8, 15.0, 2.0), (165, 5, 2.0, 0.1)):
+        m = t >= t0
+        h[m] = _ramp(t[m], t0, dur, a, b)
+    return h
+
+
+def calibration_flight(rng, baro_sigma=0.1):
+    ns = lambda t: np.round(t * 1e9).astype(np.int64)  # noqa: E731
+    tb = np.arange(0, 180, 1 / 25)
+    baro = height(tb) + OFFSET + DRIFT * tb + rng.normal(scale=baro_sigma, size=len(tb))
+    ta = np.arange(0, 180, 1 / 50)
+    roll = np.radians(3) * np.sin(0.7 * ta)
+    pitch = np.radians(2) * np.sin(0.45 * ta + 1)
+    for t0 in (20, 50, 150):  # tilted episodes during the hovers
+        roll[(ta >= t0) & (ta < t0 + 2)] = np.radians(20)
+    q = euler_to_quat(roll, pitch, 0.3 + 0 * ta)
+    tr = np.arange(0, 180, 1 / 10)
+    r_i, p_i = np.interp(tr, ta, roll), np.interp(tr, ta, pitch)
+    dist = height(tr) / (np.cos(r_i) * np.cos(p_i)) + rng.normal(scale=0.02, size=len(tr))
+    dist[dist > 7.0] = 7.0  # beyond range the sensor saturates
+    oor = rng.choice(len(tr), 40, replace=False)
+    dist[oor] = rng.choice([0.05, 6.5, 9.9], size=40)  # injected out-of-range readings
+    spikes = rng.choice(len(tr), 60, replace=False)
+    dist[spikes] += rng.uniform(0.8, 3.0, size=60)  # injected spikes
+    log = FlightLog.from_streams({"flight_id": "bpm-sim"}, {
+        "baro": pd.DataFrame({"t_ns": ns(tb), "alt_rel_m": baro}),
+        "attitude": pd.DataFrame({"t_ns": ns(ta), "q_w": q[:, 0], "q_x": q[:, 1], "q_y": q[:, 2], "q_z": q[:, 3]}),
+        "rangefinder": pd.DataFrame({"t_ns": ns(tr), "dist_m": dist, "orientation": 25.0}),
+    })
+    return log, tr, oor, spikes
+
+
+def test_bpm_calibration_recovers_offset_and_drift(rng):
+    log, tr, oor, spikes = calibration_flight(rng)
+    state, _, cal = run_preprocess(log)
+    t = state["t_ns"].to_numpy() * 1e-9
+    err = state["alt_cal_m"].to_numpy() - height(t)
+    assert np.isfinite(err).all()
+    assert np.max(np.abs(err)) < 0.2, np.max(np.abs(err))
+    info = state.attrs["preprocess"]["calibration"]
+    assert info["method"] == "rangefinder" and len(info["regions"]) >= 3
+    # the gating did the rejecting: tilted, out-of-range and spiky samples are never used
+    used = cal[cal["used"]]
+    tilted = np.zeros(len(tr), bool)
+    for t0 in (20, 50, 150):
+        tilted |= (tr >= t0 + 0.1) & (tr < t0 + 1.9)
+    bad_ns = set(np.round(tr[np.r_[oor, spikes, np.flatnonzero(tilted)]] * 1e9).astype(np.int64))
+    assert not bad_ns & set(used["t_ns"].tolist())
+    assert set(cal["reason"]) >= {"ok", "range", "tilt", "spike"}
+    # offsets are h_ref - h_baro = -(5 + 0.01 t) within noise
+    resid = used["offset_m"] + OFFSET + DRIFT * used["t_ns"] * 1e-9
+    assert abs(resid.median()) < 0.05
+
+
+def test_without_gating_the_spikes_would_hurt(rng):
+    # the same data with the spike/tilt gates disabled calibrates worse: the gates matter
+    log, *_ = calibration_flight(rng)
+    cfg = {"bpm": {"spike_m": 100.0, "max_tilt_deg": 90.0, "outlier_k": 1e9, "max_rate_mps": 1e9}}
+    state, _, _ = run_preprocess(log, cfg)
+    t = state["t_ns"].to_numpy() * 1e-9
+    assert np.max(np.abs(state["alt_cal_m"].to_numpy() - height(t))) > 0.2
+
+
+def test_piecewise_constant_thesis_scheme(rng):
+    log, *_ = calibration_flight(rng, baro_sigma=0.0)
+    state, _, _ = run_preprocess(log, {"bpm": {"drift": False}})
+    t = state["t_ns"].to_numpy() * 1e-9
+    err = np.abs(state["alt_cal_m"].to_numpy() - height(t))
+    # held offsets cannot follow a 0.01 m/s drift over the 60 s cruise
+    assert np.max(err) > 0.2
+    assert np.median(err) < 0.2
+
+
+def test_gps_fallback_and_none():
+    rng = np.random.default_rng(3)
+    n = 1000
+    t = np.arange(n) * 0.1
+    h = 10 + 5 * np.sin(0.05 * t)
+    lat0, lon0, h0 = 47.0, 8.0, 400.0
+    ns = np.round(t * 1e9).astype(np.int64)
+    gps = pd.DataFrame({"t_ns": ns[::2], "lat_deg": lat0 + 1e-5 * np.arange(n // 2) * 0,
+                        "lon_deg": lon0 + 0 * t[::2], "alt_wgs84_m": h0 + h[::2] + rng.normal(scale=1.0, size=n // 2),
+                        "fix_type": 3.0})
+    baro = pd.DataFrame({"t_ns": ns, "alt_rel_m": h - 20.0 + rng.normal(scale=0.1, size=n)})
+    meta = {"flight_id": "g", "ned_origin": {"lat_deg": lat0, "lon_deg": lon0, "alt_wgs84_m": h0}}
+    state, _, cal = run_preprocess(FlightLog.from_streams(meta, {"gps": gps, "baro": baro}))
+    assert state.attrs["preprocess"]["calibration"]["method"] == "gps"
+    assert set(cal["method"]) == {"gps"}
+    tt = state["t_ns"].to_numpy() * 1e-9
+    ok = np.isfinite(state["alt_cal_m"])
+    assert np.max(np.abs(state["alt_cal_m"][ok] - (10 + 5 * np.sin(0.05 * tt[ok])))) < 0.5
+    # a rangefinder with no usable samples also falls back to GPS
+    rf = pd.DataFrame({"t_ns": ns, "dist_m": 12.0})
+    state, _, _ = run_preprocess(FlightLog.from_streams(meta, {"gps": gps, "baro": baro, "rangefinder": rf}))
+    assert state.attrs["preprocess"]["calibration"]["method"] == "gps"
+    # no barometer: method none, NaN
+    state, _, cal = run_preprocess(FlightLog.from_streams(meta, {"gps": gps}))
+    assert state.attrs["preprocess"]["calibration"]["method"] == "none"
+    assert state["alt_cal_m"].isna().all() and len(cal) == 0
+    # barometer, no reference at all: reported as uncalibrated
+    state, _, _ = run_preprocess(FlightLog.from_streams(meta, {"baro": baro}))
+    assert state.attrs["preprocess"]["calibration"]["method"] == "uncalibrated"
+
+
+def test_pressure_altitude_formula():
+    assert pressure_altitude(101325.0) == pytest.approx(0.0)
+    # ISA: 89 874.6 Pa at 1000 m
+    assert pressure_altitude(89874.6) == pytest.approx(1000.0, abs=1.0)
+
+
+def test_calibrate_baro_direct_constant_offset():
+    t = np.arange(0, 60, 0.04)
+    grid = np.round(t * 1e9).astype(np.int64)
+    h = 1.0 + 0.5 * np.sin(0.2 * t)
+    baro = h - 3.0
+    rf = pd.DataFrame({"t_ns": grid[::4], "dist_m": h[::4], "valid": pd.array([True] * len(grid[::4]))})
+    c = calibrate_baro(grid, baro, rangefinder=rf, cfg=BPMConfig(drift=False))
+    assert c.method == "rangefinder"
+    np.testing.assert_allclose(c.alt_cal_m, h, atol=1e-9)
+    assert "no attitude" in " ".join(c.notes)

@@ -1,0 +1,153 @@
+"""End-to-end preprocessing on synthetic FlightLogs: the state table, empty streams, gaps,
+outputs on disk, CLI, config errors."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.cli import main
+from pipeline.config import ConfigError
+from pipeline.frames.geodesy import ned_to_geodetic
+from pipeline.frames.rotations import euler_to_quat
+from pipeline.io import schema
+from pipeline.io.base import FlightLog
+from pipeline.io.parquet import read_table, read_table_meta, write_flightlog
+from pipeline.preprocess.calibrate import CALIBRATION
+from pipeline.preprocess.state import PreprocessConfig, run_preprocess
+
+
+def ns(t):
+    return np.round(np.asarray(t) * 1e9).astype(np.int64)
+
+
+def synthetic_flight(rng, gap=True):
+    """A circle at 20 m radius, 0.5 rad/s, as GPS (5 Hz), attitude (20 Hz), IMU (50 Hz), RC."""
+    tg = np.arange(0, 60, 0.2)
+    if gap:
+        tg = tg[(tg < 30) | (tg > 34)]  # a 4 s GPS dropout
+    w = 0.5
+    n, e = 20 * np.cos(w * tg), 20 * np.sin(w * tg)
+    lat0, lon0, h0 = 46.5, 6.6, 500.0
+    lat, lon, h = ned_to_geodetic(n, e, -10 + 0 * tg, lat0, lon0, h0)
+    gps = pd.DataFrame({"t_ns": ns(tg), "lat_deg": lat, "lon_deg": lon, "alt_wgs84_m": h, "fix_type": 3.0,
+                        "vel_n_mps": -20 * w * np.sin(w * tg), "vel_e_mps": 20 * w * np.cos(w * tg), "vel_d_mps": 0.0})
+    ta = np.arange(0, 60, 0.05)
+    q = euler_to_quat(0.2 + 0 * ta, 0 * ta, w * ta + np.pi / 2)
+    att = pd.DataFrame({"t_ns": ns(ta), **dict(zip(["q_w", "q_x", "q_y", "q_z"], q.T))})
+    ti = np.arange(0, 60, 0.02)
+    imu = pd.DataFrame({"t_ns": ns(ti), "gyr_x_radps": 0.0, "gyr_y_radps": w * np.sin(0.2),
+                        "gyr_z_radps": w * np.cos(0.2), "acc_z_mps2": -9.81})
+    tc = np.arange(0, 60, 0.1)
+    ctrl = pd.DataFrame({"t_ns": ns(tc), "rc_1_us": 1500 + 400 * np.sin(tc), "rc_3_us": 1500.0})
+    mode = pd.DataFrame({"t_ns": ns([0.0, 20.0]), "mode": ["STABILIZE", "LOITER"]})
+    meta = {"flight_id": "synthetic", "ned_origin": {"lat_deg": lat0, "lon_deg": lon0, "alt_wgs84_m": h0}}
+    return FlightLog.from_streams(meta, {"gps": gps, "attitude": att, "imu": imu, "control": ctrl, "mode": mode}), w
+
+
+def test_state_from_gps_circle(rng):
+    log, w = synthetic_flight(rng)
+    state, seg, cal = run_preprocess(log)
+    assert list(state.columns) == [c.name for c in schema.STATE]
+    assert state["t_ns"].dtype == np.int64 and state["gap"].dtype == bool
+    assert np.all(np.diff(state["t_ns"]) == 40_000_000)  # 25 Hz
+    t = state["t_ns"].to_numpy() * 1e-9
+    gap = state["gap"].to_numpy()
+    assert gap[(t > 30.3) & (t < 33.9)].all() and not gap[(t > 1) & (t < 29.5)].any()
+    ok = ~gap & (t > 1.5) & (t < 58)
+    ok &= np.abs(t - 32) > 3.5  # away from the gap edges
+    # linear interpolation of 5 Hz fixes: chord sag R (1 - cos(w dt / 2)) = 0.025 m at most
+    sag = 20 * (1 - np.cos(w * 0.1))
+    np.testing.assert_allclose(state["pos_n_m"][ok], 20 * np.cos(w * t[ok]), atol=sag + 1e-3)
+    np.testing.assert_allclose(state["pos_d_m"][ok], -10.0, atol=1e-3)
+    # centripetal acceleration 20 w^2 = 5 m/s^2 toward the centre
+    acc = np.c_[state["acc_n_mps2"], state["acc_e_mps2"]][ok]
+    np.testing.assert_allclose(np.linalg.norm(acc, axis=1), 20 * w ** 2, rtol=0.02)
+    assert np.isnan(state["acc_n_mps2"][gap]).all()
+    np.testing.assert_allclose(state["roll_rad"][ok], 0.2, atol=1e-9)
+    np.testing.assert_allclose(state["r_radps"][ok], w * np.cos(0.2), atol=1e-9)  # from the gyro
+    np.testing.assert_allclose(state["ail"][ok], np.sin(t[ok]), atol=0.01)
+    assert np.all(state["thr"][ok] == 0.5)
+    assert seg["label"].tolist() == ["mode:STABILIZE", "mode:LOITER"]
+    d = state.attrs["preprocess"]
+    assert d["sources"]["position"] == "gps" and d["calibration"]["method"] == "none"
+
+
+def test_every_stream_empty_or_partial_never_crashes():
+    empty = FlightLog.from_streams({"flight_id": "e"}, {})
+    state, seg, cal = run_preprocess(empty)
+    assert len(state) == 0 and list(state.columns) == [c.name for c in schema.STATE]
+    assert len(seg) == 0 and len(cal) == 0
+    t = np.arange(0, 5, 0.04)
+    q = euler_to_quat(0 * t, 0.1 + 0 * t, 0.3 * t)
+    only_att = FlightLog.from_streams({"flight_id": "a"}, {
+        "attitude": pd.DataFrame({"t_ns": ns(t), **dict(zip(["q_w", "q_x", "q_y", "q_z"], q.T))})})
+    state, _, _ = run_preprocess(only_att)
+    assert len(state) == len(t)
+    assert state["pos_n_m"].isna().all() and state["alt_cal_m"].isna().all()
+    # body rates from differentiated attitude: yaw rate 0.3 rad/s -> (p, q, r) = 0.3 (-sin θ, 0, cos θ)
+    mid = slice(30, -30)
+    np.testing.assert_allclose(state["r_radps"][mid], 0.3 * np.cos(0.1), atol=1e-4)
+    np.testing.assert_allclose(state["p_radps"][mid], -0.3 * np.sin(0.1), atol=1e-4)
+    # a single sample of a single stream
+    one = FlightLog.from_streams({}, {"baro": pd.DataFrame({"t_ns": [5], "alt_rel_m": [1.0]})})
+    state, _, _ = run_preprocess(one)
+    assert len(state) == 1
+
+
+def test_timestamp_repairs_counted():
+    t = ns(np.arange(0, 10, 0.04))
+    t[50] = t[49]  # a duplicate
+    q = np.tile([1.0, 0, 0, 0], (len(t), 1))
+    log = FlightLog.from_streams({}, {"attitude": pd.DataFrame({"t_ns": t, **dict(zip(["q_w", "q_x", "q_y", "q_z"], q.T))})})
+    state, _, _ = run_preprocess(log)
+    assert state.attrs["preprocess"]["timestamp_repairs"]["attitude"]["duplicate"] == 1
+
+
+def test_outputs_and_cli(tmp_path, rng, capsys):
+    log, _ = synthetic_flight(rng, gap=False)
+    ingest = tmp_path / "ingest" / "synthetic"
+    write_flightlog(log, ingest)
+    rc = main(["preprocess", str(ingest), "-o", str(tmp_path / "pp")])
+    assert rc == 0, capsys.readouterr().err
+    out = tmp_path / "pp" / "synthetic"
+    st = read_table(out / "state.parquet", schema.STATE)
+    ref, seg_ref, _ = run_preprocess(log)
+    pd.testing.assert_frame_equal(st, ref, check_like=False)
+    assert read_table_meta(out / "state.parquet")["schema_version"] == schema.SCHEMA_VERSION
+    assert len(read_table(out / "segments.parquet", schema.SEGMENTS)) == len(seg_ref)
+    read_table(out / "calibration.parquet", CALIBRATION)
+    assert json.loads((out / "preprocess.json").read_text())["sources"]["position"] == "gps"
+    # a folder that is not an ingest output: clear message, non-zero exit
+    rc = main(["preprocess", str(tmp_path), "-o", str(tmp_path / "pp")])
+    assert rc == 1 and "not an ingest folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"rate_hz": -1}, "rate_hz"), ({"methods": {"gps": "cubic"}}, "cubic"), ({"bogus": 1}, "unknown key"),
+    ({"butterworth": {"alt": {"order": 3}}}, "butterworth"), ({"derivatives": {"method": "x"}}, "derivatives"),
+    ({"vehicles": {"v": {"imu_mount": {"convention": "enu"}}}, "flights": {"*": {"vehicle": "v"}}}, "convention"),
+])
+def test_bad_config_is_a_clear_error(bad, match):
+    with pytest.raises(ConfigError, match=match):
+        PreprocessConfig.from_config(bad, flight_id="x")
+
+
+def test_cutoff_above_nyquist_names_the_column(rng):
+    log, _ = synthetic_flight(rng, gap=False)
+    with pytest.raises(ConfigError, match="attitude.q_w|gps.pos_n_m"):
+        run_preprocess(log, {"butterworth": {"gps.pos_n_m": {"order": 2, "cutoff_hz": 20.0}}})
+
+
+def test_preprocess_files_entry_point(tmp_path, rng):
+    from pipeline.preprocess.state import preprocess_files
+
+    log, _ = synthetic_flight(rng, gap=False)
+    write_flightlog(log, tmp_path / "in")
+    diag = preprocess_files(tmp_path / "in", state_path=tmp_path / "state" / "f.parquet",
+                            segments_path=tmp_path / "segments" / "f.parquet")
+    assert diag["flight_id"] == "synthetic"
+    st = read_table(tmp_path / "state" / "f.parquet", schema.STATE)
+    assert len(st) == diag["n_samples"]
+    assert read_table_meta(tmp_path / "state" / "f.parquet")["preprocess"]["sources"]["position"] == "gps"

@@ -1,0 +1,70 @@
+"""Truth/labels side-cars: naming, round trip, time-base shift, bad files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.io import schema
+from pipeline.io.base import FlightLog, IngestError
+from pipeline.io.parquet import write_table
+from pipeline.io.sidecar import attach_sidecar, find_sidecar, read_sidecar, sidecar_path, write_sidecar
+
+
+def _truth(n=5):
+    return pd.DataFrame({"t_ns": np.arange(n, dtype=np.int64) * 10_000_000, "src": "simulation",
+                         "pos_n_m": np.arange(n, dtype=float), "label": pd.array(["M1"] * n, dtype="string")})
+
+
+def _labels():
+    return pd.DataFrame({"t_start_ns": np.array([0, 20_000_000], np.int64),
+                         "t_end_ns": np.array([20_000_000, 40_000_000], np.int64),
+                         "label": pd.array(["low", "M1"], dtype="string"),
+                         "source": pd.array(["simulation_truth"] * 2, dtype="string")})
+
+
+def test_names(tmp_path):
+    log = tmp_path / "flight.bin"
+    log.write_bytes(b"x")
+    assert find_sidecar(log) is None
+    alt = tmp_path / "flight.truth.parquet"
+    write_sidecar(alt, _truth(), _labels())
+    assert find_sidecar(log) == alt
+    full = sidecar_path(log)
+    assert full.name == "flight.bin.truth.parquet"
+    write_sidecar(full, _truth(), _labels())
+    assert find_sidecar(log) == full  # the full-name side-car wins
+    bag = tmp_path / "flight-mcap"
+    bag.mkdir()
+    assert sidecar_path(bag).name == "flight-mcap.truth.parquet"
+
+
+def test_round_trip_and_shift(tmp_path):
+    p = write_sidecar(tmp_path / "a.truth.parquet", _truth(), _labels(), t0_utc_ns=1_000_000_000)
+    truth, labels, meta = read_sidecar(p)
+    assert list(truth.columns) == schema.column_names("truth")
+    assert list(labels["label"]) == ["low", "M1"] and meta["t0_utc_ns"] == 1_000_000_000
+    log = FlightLog.from_streams({"t0_utc_ns": 1_000_000_000}, {})
+    attach_sidecar(log, p)
+    assert log["truth"]["t_ns"].tolist() == _truth()["t_ns"].tolist()
+    assert log.meta["labels_path"] == str(p) and not log.meta["diagnostics"]["warnings"]
+    # a log that started 5 ms later: the truth moves back onto the log's t_ns base
+    log2 = FlightLog.from_streams({"t0_utc_ns": 1_005_000_000}, {})
+    attach_sidecar(log2, p)
+    assert log2["truth"]["t_ns"].iloc[1] == 10_000_000 - 5_000_000
+    assert log2["labels"]["t_start_ns"].iloc[1] == 20_000_000 - 5_000_000
+    assert "shifted" in log2.meta["diagnostics"]["warnings"][0]
+
+
+def test_bad_sidecars(tmp_path):
+    with pytest.raises(IngestError, match="not found"):
+        read_sidecar(tmp_path / "missing.truth.parquet")
+    junk = tmp_path / "j.truth.parquet"
+    junk.write_bytes(b"PAR1 nonsense")
+    with pytest.raises(IngestError, match="j.truth.parquet"):
+        read_sidecar(junk)
+    other = tmp_path / "o.truth.parquet"
+    write_table(schema.empty("imu"), other, schema.columns("imu"), name="imu")
+    with pytest.raises(IngestError, match="not a truth side-car"):
+        read_sidecar(other)

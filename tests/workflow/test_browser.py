@@ -1,0 +1,150 @@
+"""The HTML reports in a real headless Chromium, offline from file://.
+
+Debian's Chromium (installed by .ci/run) is driven through Playwright's protocol client with
+name resolution disabled; every request must be file://, the console must stay free of
+errors, and every plot container must have drawn content with a non-zero bounding box.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from helpers import REQUIRE_SHARED
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def _need_browser():
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        if REQUIRE_SHARED:
+            pytest.fail("UAVPIPE_REQUIRE_SHARED=1 but playwright is not installed")
+        pytest.skip("playwright not installed")
+    if not CHROMIUM:
+        if REQUIRE_SHARED:
+            pytest.fail("UAVPIPE_REQUIRE_SHARED=1 but Debian's chromium is not installed")
+        pytest.skip("chromium not installed (apt-get install chromium)")
+
+
+@pytest.fixture(scope="module")
+def report_tree(tmp_path_factory) -> Path:
+    """A results/ tree with the demo flight ingested, its report, plotly.js and the index."""
+    from pipeline.io.dataflash_writer import write_demo_flight
+    from pipeline.io.ingest import run_ingest
+    from pipeline.report.flight import build_flight_report, write_plotly_js
+    from pipeline.report.index import build_index
+
+    res = tmp_path_factory.mktemp("results")
+    log = res / "sim" / "demo-quad.bin"
+    log.parent.mkdir(parents=True)
+    write_demo_flight(log, seed=1)
+    run_ingest(log, res / "ingest" / "demo-quad", flight_id="demo-quad")
+    bad = res / "bad.bin"
+    bad.write_bytes(b"garbage" * 50)
+    run_ingest(bad, res / "ingest" / "bad", flight_id="bad")
+    write_plotly_js(res / "report" / "assets" / "plotly.min.js")
+    for f in ("demo-quad", "bad"):
+        build_flight_report(res / "ingest" / f, res / "report" / "flights" / f"{f}.html",
+                            template=ROOT / "reports" / "templates" / "flight.html.j2",
+                            plotly_js="../assets/plotly.min.js", index_href="../../index.html")
+    # a tiny model trained on tiny simulated sets, evaluated, and its report
+    import yaml
+
+    from pipeline.models.run import evaluate_model, train_model
+    from pipeline.report.model import build_model_report
+    from pipeline.simulate.run import run_simulate_sets
+
+    cfg = yaml.safe_load((ROOT / "datasets" / "config.yaml").read_text())
+    sim = cfg["simulate"]
+    sim["datasets"] = {**sim["datasets"], "size": "tiny", "maneuvers": ["M1", "M2"],
+                       "sizes": {"tiny": {"runs": 4, "mc_runs": 1, "switch_runs": 1, "log_flights": 0}}}
+    sim["switch"] = {**sim["switch"], "times_s": [3]}
+    run_simulate_sets(res / "sim", sim, 7)
+    spec = {"data": "simulated", "labels": ["M1", "M2"], "vehicles": ["sim-quad"]}
+    sets = [res / "sim" / "sets" / f"{m}_train.parquet" for m in ("M1", "M2")]
+    train_model("sim", spec, res / "models" / "sim", {**cfg["models"], "n_iter": 5, "gmm_restarts": 1,
+                                                       "init_min_samples": 20}, sets=sets)
+    evaluate_model("sim", spec, res / "models" / "sim", res / "models" / "sim" / "evaluation.parquet",
+                   train_sets=sets, test_sets=[res / "sim" / "sets" / f"{m}_test.parquet" for m in ("M1", "M2")])
+    build_model_report(res / "models" / "sim", res / "models" / "sim" / "evaluation.parquet",
+                       res / "report" / "models" / "sim.html", template=ROOT / "reports" / "templates" / "model.html.j2",
+                       plotly_js="../assets/plotly.min.js")
+    build_index(["demo-quad", "bad"], [res / "ingest" / f / "meta.json" for f in ("demo-quad", "bad")],
+                res / "index.html", links={f: f"report/flights/{f}.html" for f in ("demo-quad", "bad")},
+                models={"sim": "report/models/sim.html"})
+    return res
+
+
+def _open(page_path: Path, shot: Path) -> dict:
+    from playwright.sync_api import sync_playwright
+
+    requests, console_errors, page_errors = [], [], []
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(
+            executable_path=CHROMIUM, headless=True,
+            args=["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                  '--host-resolver-rules=MAP * ~NOTFOUND'])
+        page = browser.new_page(viewport={"width": 1280, "height": 900})
+        page.on("request", lambda r: requests.append(r.url))
+        page.on("console", lambda m: console_errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: page_errors.append(str(e)))
+        page.goto(page_path.as_uri(), wait_until="load")
+        page.wait_for_timeout(1500)
+        plots = page.evaluate("""() => Array.from(document.querySelectorAll('.plotly-graph-div')).map(d => {
+            const r = d.getBoundingClientRect();
+            return {id: d.id, traces: (d.data || []).length, w: r.width, h: r.height,
+                    drawn: d.querySelectorAll('.main-svg, canvas').length};
+        })""")
+        imgs = page.evaluate("() => Array.from(document.images).map(i => i.naturalWidth)")
+        text = page.inner_text("body")
+        page.screenshot(path=str(shot), full_page=True)
+        browser.close()
+    return {"requests": requests, "console": console_errors, "errors": page_errors, "plots": plots,
+            "imgs": imgs, "text": text}
+
+
+def _check_offline(r: dict) -> None:
+    assert r["requests"], "no request recorded"
+    bad = [u for u in r["requests"] if not u.startswith("file://")]
+    assert not bad, f"non-file requests: {bad}"
+    assert not r["console"], r["console"]
+    assert not r["errors"], r["errors"]
+    assert all(w > 0 for w in r["imgs"]), r["imgs"]
+
+
+def test_index_in_headless_chromium(report_tree, tmp_path):
+    _need_browser()
+    r = _open(report_tree / "index.html", tmp_path / "index.png")
+    _check_offline(r)
+    assert "demo-quad" in r["text"] and "bad" in r["text"] and "failed" in r["text"]
+    assert (tmp_path / "index.png").stat().st_size > 1000
+
+
+def test_flight_report_in_headless_chromium(report_tree, tmp_path):
+    _need_browser()
+    r = _open(report_tree / "report" / "flights" / "demo-quad.html", tmp_path / "flight.png")
+    _check_offline(r)
+    assert len(r["plots"]) >= 5, r["plots"]
+    for p in r["plots"]:
+        assert p["traces"] > 0 and p["w"] > 0 and p["h"] > 0 and p["drawn"] > 0, p
+    assert (tmp_path / "flight.png").stat().st_size > 1000
+
+
+def test_model_report_in_headless_chromium(report_tree, tmp_path):
+    _need_browser()
+    r = _open(report_tree / "report" / "models" / "sim.html", tmp_path / "model.png")
+    _check_offline(r)
+    # training curves + one HMM figure per maneuver
+    assert len(r["plots"]) == 3, r["plots"]
+    for p in r["plots"]:
+        assert p["traces"] > 0 and p["w"] > 0 and p["h"] > 0 and p["drawn"] > 0, p
+    for table in ("Table 3.1", "Table 3.4"):
+        assert table in r["text"]
+    assert "98.21" in r["text"]  # the thesis's M1 MAoT beside ours
+    assert (tmp_path / "model.png").stat().st_size > 1000

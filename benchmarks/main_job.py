@@ -5,7 +5,10 @@ has it), runs the main-job workflow with this environment's snakemake, then runs
 (which must do nothing). Prints ``RESULT main_job_seconds`` (target < 600 on 2 cores),
 ``RESULT noop_rerun_seconds`` (target < 10) and the path of ``results/index.html``.
 
-Usage: .venv/bin/python benchmarks/main_job.py [--keep]
+``--worktree`` copies the working tree (tracked and untracked, not ignored files) instead of
+cloning HEAD, to time uncommitted changes.
+
+Usage: .venv/bin/python benchmarks/main_job.py [--keep] [--worktree]
 """
 
 from __future__ import annotations
@@ -24,10 +27,20 @@ ROOT = Path(__file__).resolve().parents[1]
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--keep", action="store_true", help="keep the scratch clone")
+    ap.add_argument("--worktree", action="store_true", help="copy the working tree instead of cloning HEAD")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="uavpipe-mainjob-"))
     clone = work / "main"
-    subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
+    if args.worktree:
+        files = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT, check=True,
+                               capture_output=True, text=True).stdout.split("\0")
+        for f in filter(None, files):
+            src, dst = ROOT / f, clone / f
+            if src.is_file():
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(src, dst)
+    else:
+        subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
     shared = ROOT.parent / "shared"
     if shared.is_dir():
         (work / "shared").symlink_to(shared)

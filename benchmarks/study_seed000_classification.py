@@ -16,7 +16,11 @@ Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
    point is also measured with the switch moved by ±1 s.
 5. GMR (§3.6.4, §7): on test runs, per maneuver and NED axis, mean error and error variance
    over time of the HMM acceleration and jerk estimates, and scalar RMSE against the
-   finite-difference acceleration from the last three 5 Hz truth positions.
+   finite-difference acceleration from the last three 5 Hz truth positions, all on the same
+   samples. Besides the configured GMR (``acc``/``jerk``: ``models.gmr_input``/``gmr_align``,
+   default (3.28) on ``Δr`` with the half-sample alignment ``â = Δv/dt + (dt/2)ĵ``) it scores
+   ``acc_interval`` (``â = Δv/dt`` as printed, §13.3) and ``acc_posvel`` (conditioned on
+   ``Δr`` and ``Δv``: uses velocity information the position-only FD does not have).
 
 Outputs (Parquet, ``--out`` [results/studies/seed000]): ``tables_3_1_3_4.parquet``,
 ``confusion.parquet``, ``switch_tables.parquet``, ``switch_shift.parquet``,
@@ -117,33 +121,63 @@ def switch_cell(ms, key, ts, args, mode):
             "thesis_MAoT_initial_pct": thesis[2], "thesis_MAoT_final_pct": thesis[3]}
 
 
+#: GMR variants scored besides the configured one: (quantity suffix, config overrides)
+GMR_VARIANTS = (("_interval", {"gmr_align": "interval"}),        # â = Δv/dt as printed (§13.3)
+                ("_posvel", {"gmr_input": "pos_vel"}))            # conditions on Δr and Δv
+
+
 def gmr_errors(ms, test):
+    """GMR and finite-difference acceleration errors on the same samples.
+
+    Every estimate at ``t_k`` uses data up to ``t_k`` only and is compared with the truth
+    acceleration (jerk) at ``t_k``; RMSEs are over the samples where the FD (which needs three
+    positions) and every GMR variant exist, so all quantities share one sample set.
+    """
+    import copy
+    import dataclasses
+
     rows, rmse = [], []
     dt = 1.0 / ms.config.rate_hz
+    variants = [("", ms)]
+    for suffix, over in GMR_VARIANTS:
+        if all(getattr(ms.config, k) == v for k, v in over.items()):
+            continue
+        v = copy.copy(ms)
+        v.config = dataclasses.replace(ms.config, **over)
+        variants.append((suffix, v))
     for man in KNOWN:
         truth = test[man].assign(run_id=test[man]["run_id"].astype(str))
         truth = truth.sort_values(["run_id", "t_ns"], kind="stable")
-        res = ms.classify(truth, mode="cumulative", decision="confidence")
-        res["run_id"] = res["run_id"].astype(str)
-        truth = truth.drop(columns=["label"])
-        merged = res.merge(truth, on=["run_id", "t_ns"], how="left")
+        merged = None
+        for suffix, v in variants:
+            res = v.classify(truth, mode="cumulative", decision="confidence")
+            res["run_id"] = res["run_id"].astype(str)
+            cols = {f"{q}_hmm_{ax}_{u}": f"{q}_hmm_{ax}_{u}{suffix}"
+                    for q, u in (("acc", "mps2"), ("jerk", "mps3")) for ax in "ned"}
+            res = res[["run_id", "t_ns", *cols]].rename(columns=cols)
+            merged = res if merged is None else merged.merge(res, on=["run_id", "t_ns"])
+        tr = truth.drop(columns=["label"])
+        g = tr.groupby("run_id", sort=False)
+        for ax in "ned":
+            # finite-difference acceleration from the last three 5 Hz truth positions
+            p = g[f"pos_{ax}_m"]
+            tr[f"fd_{ax}"] = (tr[f"pos_{ax}_m"] - 2 * p.shift(1) + p.shift(2)) / dt ** 2
+        m = merged.merge(tr, on=["run_id", "t_ns"], how="left")
         errs = {}
         for ax in "ned":
-            pos = truth.pivot(index="run_id", columns="t_ns", values=f"pos_{ax}_m")
-            # finite-difference acceleration from the last three 5 Hz truth positions
-            fd = (pos - 2 * pos.shift(1, axis=1) + pos.shift(2, axis=1)) / dt ** 2
-            fd_long = fd.stack().rename("fd").reset_index()
-            m = merged.merge(fd_long, on=["run_id", "t_ns"], how="left")
-            e_acc = m[f"acc_hmm_{ax}_mps2"] - m[f"acc_{ax}_mps2"]
-            e_jerk = m[f"jerk_hmm_{ax}_mps3"] - m[f"jerk_{ax}_mps3"]
-            e_fd = m["fd"] - m[f"acc_{ax}_mps2"]
-            t_s = m["t_ns"] * 1e-9
-            for q, e in (("acc", e_acc), ("jerk", e_jerk), ("acc_fd", e_fd)):
-                g = pd.DataFrame({"t_s": t_s, "e": e}).dropna().groupby("t_s")["e"]
+            qs = {"acc_fd": m[f"fd_{ax}"] - m[f"acc_{ax}_mps2"]}
+            for suffix, _ in variants:
+                qs["acc" + suffix] = m[f"acc_hmm_{ax}_mps2{suffix}"] - m[f"acc_{ax}_mps2"]
+                qs["jerk" + suffix] = m[f"jerk_hmm_{ax}_mps3{suffix}"] - m[f"jerk_{ax}_mps3"]
+            common = np.logical_and.reduce([e.notna().to_numpy() for e in qs.values()])
+            t_s = m["t_ns"].to_numpy()[common] * 1e-9
+            for q, e in qs.items():
+                e = e.to_numpy()[common]
+                gq = pd.DataFrame({"t_s": t_s, "e": e}).groupby("t_s")["e"]
                 rows.append(pd.DataFrame({"maneuver": man, "quantity": q, "axis": ax,
-                                          "t_s": g.mean().index, "mean_err": g.mean().to_numpy(),
-                                          "err_var": g.var().to_numpy()}))
-                errs.setdefault(q, []).append(e.dropna().to_numpy())
+                                          "t_s": gq.mean().index, "mean_err": gq.mean().to_numpy(),
+                                          "err_var": gq.var().to_numpy()}))
+                errs.setdefault(q, []).append(e)
         for q, es in errs.items():
             e = np.concatenate(es)
             rmse.append({"maneuver": man, "quantity": q, "rmse": float(np.sqrt(np.mean(e ** 2))),
@@ -160,6 +194,10 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("results/studies/seed000"))
     ap.add_argument("--alt-mode", default="windowed", choices=("reset", "windowed"),
                     help="mode whose switch results are the headline (both are tabulated)")
+    ap.add_argument("--features", default=None, help="override models.feature_set (state9, state9h)")
+    ap.add_argument("--n-states", default=None,
+                    help="override models.n_states for every maneuver: an int or 'auto' (BIC over "
+                         "n_states_range); default: the config (thesis 5/6)")
     ap.add_argument("--skip-switch", action="store_true")
     ap.add_argument("--skip-gmr", action="store_true")
     args = ap.parse_args()
@@ -168,7 +206,10 @@ def main() -> None:
     t0 = time.perf_counter()
 
     train, test = load_sets(args)
-    cfg = ModelsConfig.from_section(section(load_config(), "models"))
+    over = {"feature_set": args.features} if args.features else {}
+    if args.n_states is not None:
+        over["n_states"] = args.n_states if args.n_states == "auto" else int(args.n_states)
+    cfg = ModelsConfig.from_section(section(load_config(), "models"), **over)
     mdir = out / "models"
     ms = ManeuverModelSet(config=cfg).fit(pd.concat([tag(train[m], m) for m in KNOWN], ignore_index=True))
     ms.save(mdir)
@@ -233,6 +274,8 @@ def main() -> None:
     cf = tables[(tables.table == "3.4") & tables.maneuver.isin(KNOWN)]
     oc = tables[(tables.table == "3.3")]
     print(f"RESULT seed000_runs_per_maneuver {args.runs}")
+    print(f"RESULT seed000_feature_set {cfg.feature_set}")
+    print(f"RESULT seed000_n_states {'/'.join(str(ms.training_[k]['n_states']) for k in ms.labels_)}")
     print(f"RESULT seed000_cf_test_min_FA_pct {cf['FA_pct'].min():.2f}")
     print(f"RESULT seed000_cf_test_min_MAoT_minus_thesis_pct {(cf['MAoT_pct'] - cf['thesis_MAoT_pct']).min():.2f}")
     ock = oc[oc.maneuver.isin(KNOWN)]
@@ -256,6 +299,11 @@ def main() -> None:
         print(f"RESULT seed000_gmr_acc_rmse_mps2 {r['acc'].mean():.3f}")
         print(f"RESULT seed000_fd_acc_rmse_mps2 {r['acc_fd'].mean():.3f}")
         print(f"RESULT seed000_gmr_jerk_rmse_mps3 {r['jerk'].mean():.3f}")
+        print(f"RESULT seed000_gmr_align_{cfg.gmr_align}_input_{cfg.gmr_input} 1")
+        print(f"RESULT seed000_gmr_maneuvers_below_fd {int((r['acc'] < r['acc_fd']).sum())}")
+        for suffix, _ in GMR_VARIANTS:
+            if "acc" + suffix in r:
+                print(f"RESULT seed000_gmr_acc{suffix}_rmse_mps2 {r['acc' + suffix].mean():.3f}")
     print(f"RESULT seed000_study_wall_s {time.perf_counter() - t0:.0f}")
 
 

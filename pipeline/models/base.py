@@ -27,7 +27,7 @@ class ModelsConfig:
     Parameters
     ----------
     feature_set : str
-        ``state9`` (thesis), ``box`` or ``aero`` (see :mod:`pipeline.models.features`).
+        ``state9`` (thesis), ``state9h`` (initial-heading frame), ``box`` or ``aero`` (see :mod:`pipeline.models.features`).
     rate_hz : float
         Model sample rate (thesis: 5 Hz, dt = 0.2 s).
     n_states : int, "auto" or dict
@@ -78,6 +78,12 @@ class ModelsConfig:
         ``confidence`` (thesis's chosen classifier), ``oneclass`` or ``both``.
     gate_mps2 : float
         GMR outlier gate, per axis and step (seed 000 §8: 15 m/s²).
+    gmr_input : str
+        GMR conditioning block: ``pos`` (thesis 3.28, position increments) or ``pos_vel``
+        (position and velocity increments; ``Δv`` then observed). See :mod:`.gmr`.
+    gmr_align : str
+        ``sample`` (default): ``â = Δv/dt + (dt/2)ĵ``, the acceleration at the sample time as
+        the EKF+HMM uses it; ``interval``: ``â = Δv/dt`` as printed (§13.3), half a sample late.
     phases : bool
         Train on every phase-offset decimation of a faster source (more sequences; required
         for the single-sequence leave-one-phase-out threshold).
@@ -105,6 +111,8 @@ class ModelsConfig:
     confidence_threshold: float = -1.0
     decision: str = "confidence"
     gate_mps2: float = 15.0
+    gmr_input: str = "pos"
+    gmr_align: str = "sample"
     phases: bool = True
 
     @classmethod
@@ -127,6 +135,10 @@ class ModelsConfig:
             raise ConfigError(f"models.mode must be one of {_MODES}, got {self.mode!r}")
         if self.decision not in _DECISIONS:
             raise ConfigError(f"models.decision must be one of {_DECISIONS}, got {self.decision!r}")
+        if self.gmr_input not in ("pos", "pos_vel"):
+            raise ConfigError(f"models.gmr_input must be 'pos' or 'pos_vel', got {self.gmr_input!r}")
+        if self.gmr_align not in ("interval", "sample"):
+            raise ConfigError(f"models.gmr_align must be 'interval' or 'sample', got {self.gmr_align!r}")
         if not 0.0 < self.self_prob < 1.0:
             raise ConfigError("models.self_prob must lie in (0, 1)")
         if not 0.0 <= self.restart_prob < 1.0:

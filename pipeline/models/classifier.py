@@ -270,7 +270,7 @@ class ManeuverModelSet:
         """
         runs = run_sequences(state, run_col=run_col)
         fs = self.feature_set
-        seqs, tks, truths, rids = [], [], [], []
+        seqs, tks, truths, rids, yaws = [], [], [], [], []
         for rid, run in runs:
             k = decimation_factor(run["t_ns"].to_numpy(), self.config.rate_hz)
             dec = run.iloc[::k].reset_index(drop=True)
@@ -281,6 +281,7 @@ class ManeuverModelSet:
             tks.append(dec["t_ns"].to_numpy()[off:])
             truths.append(dec["label"].to_numpy(dtype=object)[off:] if "label" in dec else None)
             rids.append(rid)
+            yaws.append(float(dec["yaw_rad"].iloc[0]) if "yaw_rad" in dec and len(dec) else 0.0)
         if not seqs or max(len(s) for s in seqs) == 0:
             raise ModelError("no observations to classify (runs shorter than two samples?)")
         seqs = [s if len(s) else np.full((1, len(self.normaliser_.x_min)), np.nan) for s in seqs]
@@ -315,7 +316,7 @@ class ManeuverModelSet:
             d["change"] = res["change"][r, :n]
             ca = res["change_at"][r, :n]
             d["change_t_ns"] = np.where(ca >= 0, tks[r][np.clip(ca, 0, n - 1)], -1)
-            if gmr and self.config.feature_set == "state9":
+            if gmr and self.config.feature_set in ("state9", "state9h"):
                 acc = np.full((n, 3), np.nan)
                 jerk = np.full((n, 3), np.nan)
                 for m, model in enumerate(self.models_):
@@ -323,8 +324,14 @@ class ManeuverModelSet:
                     if rows.any():
                         p = model.params_
                         a, j = gmr_state9(p.means[:, 0], p.covars[:, 0], X[r, :n][rows],
-                                          d["state"][rows], self.normaliser_, dt)
+                                          d["state"][rows], self.normaliser_, dt,
+                                          inputs=self.config.gmr_input, align=self.config.gmr_align)
                         acc[rows], jerk[rows] = a, j
+                if self.config.feature_set == "state9h":
+                    yaw0 = yaws[r]                              # heading frame -> NED
+                    c, s_ = np.cos(yaw0), np.sin(yaw0)
+                    rot = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+                    acc, jerk = acc @ rot.T, jerk @ rot.T
                 gated, dropped = gate(acc, self.config.gate_mps2)
                 for i, ax in enumerate("ned"):
                     d[f"acc_hmm_{ax}_mps2"] = acc[:, i]

@@ -14,6 +14,10 @@ Feature sets (``FEATURE_SETS``):
 ``state9``
     Thesis-faithful: NED position, velocity and acceleration (9-D), differenced at 5 Hz.
     Differencing makes the features position-invariant; they are *not* heading-invariant.
+``state9h``
+    ``state9`` with the horizontal components rotated into the run's initial heading frame
+    (``yaw_rad`` of its first sample, known online), so runs flown on different headings share
+    one model; GMR outputs are rotated back to NED.
 ``box``
     Velocity and acceleration in the aerobatic box frame (NED rotated about down by the box
     heading ``box_heading_rad``), the gravity direction in the body frame (attitude without
@@ -72,6 +76,8 @@ class FeatureSet:
 FEATURE_SETS: dict[str, FeatureSet] = {
     "state9": FeatureSet("state9", tuple(f"d_{c}" for c in (*POS, *VEL, *ACC)), True,
                          (*POS, *VEL, *ACC)),
+    "state9h": FeatureSet("state9h", tuple(f"d_{c}_h" for c in (*POS, *VEL, *ACC)), True,
+                          (*POS, *VEL, *ACC, "yaw_rad")),
     "box": FeatureSet(
         "box",
         ("vel_x_box_mps", "vel_y_box_mps", "vel_z_box_mps", "acc_x_box_mps2", "acc_y_box_mps2",
@@ -121,6 +127,14 @@ def raw_features(state: pd.DataFrame, feature_set: str = "state9", *,
         raise ValueError(f"feature set {feature_set!r} needs state column(s) {missing}")
     if fs.name == "state9":
         return state[list(fs.needs)].to_numpy(dtype=np.float64)
+    if fs.name == "state9h":
+        x = state[list(fs.needs[:9])].to_numpy(dtype=np.float64).copy()
+        yaw0 = float(state["yaw_rad"].iloc[0]) if len(state) else 0.0
+        c, s = np.cos(yaw0), np.sin(yaw0)
+        for i in (0, 3, 6):                                   # NED -> initial-heading frame
+            n, e = x[:, i].copy(), x[:, i + 1].copy()
+            x[:, i], x[:, i + 1] = c * n + s * e, -s * n + c * e
+        return x
     v = state[list(VEL)].to_numpy(dtype=np.float64)
     a = state[list(ACC)].to_numpy(dtype=np.float64)
     q = state[list(QUAT)].to_numpy(dtype=np.float64)

@@ -15,6 +15,18 @@ velocity and acceleration increments. De-normalisation follows the corrected §1
 ``Δv = v̂_n (v_max − v_min) + v_min``, ``â = Δv / dt``; likewise ``Δa`` and ``ĵ = Δa / dt``.
 The outlier gate (§8) drops an estimate whose per-axis change from the previous accepted one
 exceeds 15 m/s² per step.
+
+**Time alignment** (``align``). The observation stamped ``t_k`` is ``x_k − x_{k−1}``, so
+``Δv/dt`` is the *mean* acceleration over ``[t_{k−1}, t_k]``, i.e. ``a(t_{k−½})`` to second
+order: as printed (``"interval"``) the estimate lags the current acceleration by half a sample.
+The EKF+HMM uses ``â_HMM`` as the acceleration *at* ``t_k`` (``a_{k+1} = â + dt ĵ``, 4.2–4.3),
+so ``"sample"`` moves it there with the model's own jerk, ``â_k = Δv̂/dt + (dt/2)·ĵ`` (exact for
+piecewise-constant jerk); ``ĵ`` is unchanged. Neither uses data after ``t_k``.
+
+**Inputs** (``inputs``). ``"pos"`` is (3.28): only ``r_n`` is conditioned on. ``"pos_vel"``
+conditions on the position *and* velocity increments (the EKF state carries both), so ``Δv``
+is the observed one and the regression supplies only ``Δa`` (hence ``ĵ`` and the alignment
+term); this uses velocity information that a position-only finite difference does not have.
 """
 
 from __future__ import annotations
@@ -73,8 +85,12 @@ def gmr(means: F64, covars: F64, x_in: F64, in_idx, out_idx, weights: F64 | None
     return mean, cov
 
 
+GMR_INPUTS = ("pos", "pos_vel")
+GMR_ALIGN = ("interval", "sample")
+
+
 def gmr_state9(means: F64, covars: F64, obs: F64, states, normaliser: MinMaxNormaliser,
-               dt: float) -> tuple[F64, F64]:
+               dt: float, *, inputs: str = "pos", align: str = "interval") -> tuple[F64, F64]:
     """HMM acceleration and jerk from single-Gaussian GMR on the current Viterbi state (3.28).
 
     Parameters
@@ -90,6 +106,12 @@ def gmr_state9(means: F64, covars: F64, obs: F64, states, normaliser: MinMaxNorm
         The model's frozen statistics.
     dt : float
         Sample period, s.
+    inputs : {"pos", "pos_vel"}
+        Conditioning block: position increments (thesis 3.28) or position and velocity
+        increments (then ``Δv`` is taken as observed).
+    align : {"interval", "sample"}
+        ``"interval"``: ``â = Δv/dt`` as printed (§13.3), centred half a sample back;
+        ``"sample"``: ``â = Δv/dt + (dt/2)·ĵ``, the acceleration at the sample's own time.
 
     Returns
     -------
@@ -98,18 +120,27 @@ def gmr_state9(means: F64, covars: F64, obs: F64, states, normaliser: MinMaxNorm
     jerk : ndarray, shape (n, 3)
         ``ĵ_HMM = Δâ / dt``, m/s³ (NED).
     """
+    if inputs not in GMR_INPUTS:
+        raise ValueError(f"inputs must be one of {GMR_INPUTS}, got {inputs!r}")
+    if align not in GMR_ALIGN:
+        raise ValueError(f"align must be one of {GMR_ALIGN}, got {align!r}")
     obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
     states = np.asarray(states, dtype=np.int64)
+    in_idx = STATE9_POS if inputs == "pos" else (*STATE9_POS, *STATE9_VEL)
+    out_idx = (*STATE9_VEL, *STATE9_ACC) if inputs == "pos" else STATE9_ACC
     out = np.full((len(obs), 6), np.nan)
     ok = (states >= 0) & np.isfinite(obs).all(axis=1)
     for s in np.unique(states[ok]):
         rows = ok & (states == s)
-        m, _ = gmr(means[s:s + 1], covars[s:s + 1], obs[rows][:, list(STATE9_POS)], STATE9_POS,
-                   (*STATE9_VEL, *STATE9_ACC))
-        out[rows] = m
-    dv = normaliser.inverse(out[:, :3], STATE9_VEL)
-    da = normaliser.inverse(out[:, 3:], STATE9_ACC)
-    return dv / dt, da / dt
+        m, _ = gmr(means[s:s + 1], covars[s:s + 1], obs[rows][:, list(in_idx)], in_idx, out_idx)
+        out[rows, 6 - len(out_idx):] = m
+    if inputs == "pos_vel":
+        out[ok, :3] = obs[ok][:, list(STATE9_VEL)]
+    acc = normaliser.inverse(out[:, :3], STATE9_VEL) / dt
+    jerk = normaliser.inverse(out[:, 3:], STATE9_ACC) / dt
+    if align == "sample":
+        acc = acc + 0.5 * dt * jerk
+    return acc, jerk
 
 
 def gate(acc: F64, limit: float = 15.0) -> tuple[F64, NDArray[np.bool_]]:

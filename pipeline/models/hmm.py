@@ -215,10 +215,15 @@ def _fast_gaussian_hmm_class():
         def _do_mstep(self, stats):
             super()._do_mstep(stats)
             # hmmlearn applies min_covar only at initialisation; a state that collapses onto a
-            # near-constant feature (real logs) would become singular, so regularise every
-            # M-step like scikit-learn's ``reg_covar``
+            # near-constant feature (real logs) would become singular. Floor the smallest
+            # eigenvalue at min_covar: states already above it are untouched, so EM stays
+            # the plain (monotone) Baum-Welch wherever no floor is needed
             if "c" in self.params:
-                self._covars_ = self._covars_ + self.min_covar * np.eye(self._covars_.shape[-1])
+                cov = self._covars_
+                lam = np.linalg.eigvalsh(cov)[:, 0]
+                lift = np.maximum(self.min_covar - lam, 0.0)
+                if np.any(lift > 0):
+                    self._covars_ = cov + lift[:, None, None] * np.eye(cov.shape[-1])
 
         def _compute_posteriors_log(self, fwdlattice, bwdlattice):
             # hmmlearn normalises with scipy.special.logsumexp, whose per-call overhead is

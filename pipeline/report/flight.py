@@ -17,7 +17,7 @@ import pandas as pd
 
 from ..frames.rotations import quat_to_euler
 from ..io import schema
-from ..io.parquet import read_flightlog, read_table
+from ..io.parquet import read_flightlog, read_table, read_table_meta
 from . import plots
 
 
@@ -134,6 +134,17 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
              ("streams", ", ".join(f"{k} ({v['rows']})" for k, v in log.summary().items()) or "none"),
              ("diagnostics", json.dumps({k: v for k, v in meta.get("diagnostics", {}).items()
                                          if k in ("bytes_skipped", "records_dropped", "timestamp_anomalies")}))]
+    if state and Path(state).exists():
+        pre = read_table_meta(state).get("preprocess") or {}
+        src = pre.get("sources") or {}
+        cinfo = pre.get("calibration") or {}
+        facts.append(("preprocess", f"{pre.get('n_samples', 0)} samples @ {pre.get('rate_hz')} Hz; position "
+                                    f"{src.get('position')}; body rates {src.get('body_rates')}; BPM "
+                                    f"{cinfo.get('method')}" if pre else read_table_meta(state).get("error", "–")))
+    if classified and Path(classified).exists():
+        cm = read_table_meta(classified)
+        facts.append(("classifier", f"model {cm.get('model')}: {cm.get('status')}"
+                                    + (f" ({cm.get('error')})" if cm.get("error") else "")))
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(Path(template).parent)),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     page = env.get_template(Path(template).name).render(

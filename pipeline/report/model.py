@@ -54,7 +54,7 @@ def hmm_figure(label: str, startprob: np.ndarray, transmat: np.ndarray, means: n
                   row=1, col=2)
     fig.update_yaxes(autorange="reversed", row=1, col=1)
     fig.update_yaxes(autorange="reversed", row=1, col=2)
-    return _layout(fig, f"HMM of {label}: {n} states", height=320 + 12 * n)
+    return _layout(fig, f"HMM of {label}: {n} states", height=340 + 12 * n, margin=dict(l=60, r=20, t=90, b=80))
 
 
 def _table_html(df: pd.DataFrame) -> str:

@@ -164,3 +164,22 @@ def test_threshold_slack_auto_is_leave_one_recording_out(synth, rng):
                                base.thresholds_["cumulative"] - auto.threshold_slack_ * n, rtol=1e-9)
     with pytest.raises(ConfigError, match="threshold_slack"):
         ModelsConfig.from_section({"threshold_slack": "big"})
+
+
+def test_state9h_is_heading_invariant_and_gmr_rotates_back(synth, rng):
+    _, bulk = synth
+    data = bulk(("M1", "M2"), 3, rng).assign(yaw_rad=0.0)
+    ms = ManeuverModelSet(config=ModelsConfig(**{**FAST, "n_iter": 5, "feature_set": "state9h"})).fit(data)
+    run = data[data.run_id == "M1-0"].copy()
+    psi = 1.1
+    c, s = np.cos(psi), np.sin(psi)
+    rot = run.copy()
+    for k, u in (("pos", "m"), ("vel", "mps"), ("acc", "mps2")):
+        n, e = run[f"{k}_n_{u}"], run[f"{k}_e_{u}"]
+        rot[f"{k}_n_{u}"], rot[f"{k}_e_{u}"] = c * n - s * e, s * n + c * e
+    rot["yaw_rad"] = psi
+    a, b = ms.classify(run), ms.classify(rot)
+    for col in ("ll_M1", "ll_M2", "acc_hmm_d_mps2"):
+        np.testing.assert_allclose(b[col], a[col], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(b["acc_hmm_n_mps2"], c * a["acc_hmm_n_mps2"] - s * a["acc_hmm_e_mps2"], atol=1e-9)
+    np.testing.assert_allclose(b["acc_hmm_e_mps2"], s * a["acc_hmm_n_mps2"] + c * a["acc_hmm_e_mps2"], atol=1e-9)

@@ -17,7 +17,9 @@ def random_state(rng, n=40):
         df[f"pos_{a}_m"] = rng.normal(size=n).cumsum()
         df[f"vel_{a}_mps"] = rng.normal(size=n) * 10
         df[f"acc_{a}_mps2"] = rng.normal(size=n) * 3
-    q = euler_to_quat(rng.uniform(-3, 3, n), rng.uniform(-1.5, 1.5, n), rng.uniform(-3, 3, n))
+    yaw = rng.uniform(-3, 3, n)
+    q = euler_to_quat(rng.uniform(-3, 3, n), rng.uniform(-1.5, 1.5, n), yaw)
+    df["yaw_rad"] = yaw
     for i, c in enumerate("wxyz"):
         df[f"q_{c}"] = q[:, i]
     for c in ("p_radps", "q_radps", "r_radps"):
@@ -35,6 +37,7 @@ def rotate_world(df, psi):
     qz = euler_to_quat(0.0, 0.0, psi)
     q = quat_multiply(np.broadcast_to(qz, (len(df), 4)), df[["q_w", "q_x", "q_y", "q_z"]].to_numpy())
     out[["q_w", "q_x", "q_y", "q_z"]] = q
+    out["yaw_rad"] = df["yaw_rad"] + psi
     return out
 
 
@@ -45,6 +48,7 @@ def test_aero_and_box_features_are_heading_invariant(rng, psi):
     np.testing.assert_allclose(raw_features(rot, "aero"), raw_features(df, "aero"), atol=1e-9)
     np.testing.assert_allclose(raw_features(rot, "box", box_heading_rad=0.4 + psi),
                                raw_features(df, "box", box_heading_rad=0.4), atol=1e-9)
+    np.testing.assert_allclose(raw_features(rot, "state9h"), raw_features(df, "state9h"), atol=1e-9)
     # the thesis features are not: they change with the heading
     assert not np.allclose(raw_features(rot, "state9"), raw_features(df, "state9"))
 

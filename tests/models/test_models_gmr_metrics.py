@@ -104,3 +104,29 @@ def test_fa_maot_and_tables():
     c = confusion(["M1", "M1", "M5"], ["M1", "M2", UNKNOWN], known)
     assert c.loc["M1", "M1"] == 1 and c.loc["M1", "M2"] == 1 and c.loc["M5", UNKNOWN] == 1
     assert list(c.columns) == ["M1", "M2", UNKNOWN]
+
+
+def test_gmr_state9_sample_alignment_and_pos_vel_inputs(rng):
+    """``align="sample"`` adds (dt/2)·ĵ to Δv/dt; ``inputs="pos_vel"`` takes Δv as observed and
+    regresses Δa on (Δr, Δv), exactly for linear data."""
+    dt = 0.2
+    norm = MinMaxNormaliser(np.arange(9.0) - 5, np.arange(9.0) + 3)
+    G = rng.normal(size=(6, 3))
+    Z = rng.normal(size=(4000, 3))
+    obs = np.hstack([Z, Z @ G.T]) + 1e-6 * rng.normal(size=(4000, 9))
+    mu, cov = obs.mean(0), np.cov(obs.T)
+    q = obs[:5]
+    st = np.zeros(5, dtype=int)
+    a_i, j_i = gmr_state9(mu[None], cov[None], q, st, norm, dt, align="interval")
+    a_s, j_s = gmr_state9(mu[None], cov[None], q, st, norm, dt, align="sample")
+    np.testing.assert_allclose(j_s, j_i)
+    np.testing.assert_allclose(a_s, a_i + 0.5 * dt * j_i)
+    span = norm.x_max - norm.x_min
+    phys = q * span + norm.x_min
+    a_pv, j_pv = gmr_state9(mu[None], cov[None], q, st, norm, dt, inputs="pos_vel", align="interval")
+    np.testing.assert_allclose(a_pv, phys[:, 3:6] / dt, rtol=1e-12)        # observed Δv
+    np.testing.assert_allclose(j_pv, phys[:, 6:9] / dt, rtol=1e-4, atol=1e-3)
+    # Δa depends on Δr only here, so the (Δr, Δv) and Δr regressions agree on Δa
+    np.testing.assert_allclose(j_pv, j_i, rtol=1e-4, atol=1e-3)
+    with pytest.raises(ValueError, match="align"):
+        gmr_state9(mu[None], cov[None], q, st, norm, dt, align="centre")

@@ -110,6 +110,14 @@ def test_bad_manifest_value_fails_at_start_naming_it(tmp_path):
     assert "sometimes" in p.stdout + p.stderr
 
 
+def test_manifest_row_for_unsimulated_log_fails_at_start(tmp_path):
+    # the tiny config simulates M1 and M2 only
+    wd = _copy_workflow(tmp_path / "wf", [SIM.replace("M1", "M3")])
+    p = _smk(wd, "-n", check=False)
+    assert p.returncode != 0
+    assert "sim-M3-000-bin" in p.stdout + p.stderr and "not written by the simulate stage" in p.stdout + p.stderr
+
+
 def test_absent_real_log_is_skipped_with_notice(tmp_path):
     wd = _copy_workflow(tmp_path / "wf", [DEMO, "ghost\t/nonexistent/x.bin\tq\tnone\tnone\t\tgone"])
     p = _smk(wd, "-n")

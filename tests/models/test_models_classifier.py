@@ -116,6 +116,10 @@ def test_bad_inputs(synth, rng, tmp_path):
         ModelsConfig.from_section({"n_stats": 3})
     with pytest.raises(ConfigError, match="mode"):
         ModelsConfig.from_section({"mode": "sliding"})
+    with pytest.raises(ConfigError, match="gmr_align"):
+        ModelsConfig.from_section({"gmr_align": "centre"})
+    with pytest.raises(ConfigError, match="gmr_input"):
+        ModelsConfig.from_section({"gmr_input": "acc"})
     with pytest.raises(ModelError, match="not a model directory"):
         ManeuverModelSet.load(tmp_path)
     df = run("M1", rng)
@@ -183,3 +187,34 @@ def test_state9h_is_heading_invariant_and_gmr_rotates_back(synth, rng):
         np.testing.assert_allclose(b[col], a[col], rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(b["acc_hmm_n_mps2"], c * a["acc_hmm_n_mps2"] - s * a["acc_hmm_e_mps2"], atol=1e-9)
     np.testing.assert_allclose(b["acc_hmm_e_mps2"], s * a["acc_hmm_n_mps2"] + c * a["acc_hmm_e_mps2"], atol=1e-9)
+
+
+def test_gmr_estimates_are_causal_and_follow_config(synth, rng, trained3):
+    """The HMM acceleration at ``t_k`` uses samples up to ``t_k`` only: truncating the run (or
+    changing its future) leaves earlier estimates bit-identical; ``gmr_align`` only adds the
+    (dt/2)·ĵ term."""
+    import copy
+    import dataclasses
+
+    run, _ = synth
+    ms, _ = trained3
+    df = run("M2", rng)
+    full = ms.classify(df)
+    n = len(df) // 2
+    head = ms.classify(df.iloc[:n])
+    fut = df.copy()
+    fut.iloc[n:, fut.columns.get_indexer(["pos_n_m", "vel_n_mps", "acc_n_mps2"])] += 3.0
+    changed = ms.classify(fut)
+    cols = [f"{q}_hmm_{a}_{u}" for q, u in (("acc", "mps2"), ("jerk", "mps3")) for a in "ned"]
+    k = len(head)
+    np.testing.assert_array_equal(full[cols].to_numpy()[:k], head[cols].to_numpy())
+    np.testing.assert_array_equal(full[cols].to_numpy()[:k], changed[cols].to_numpy()[:k])
+    assert not np.allclose(full[cols].to_numpy()[k:], changed[cols].to_numpy()[k:], equal_nan=True)
+    iv = copy.copy(ms)
+    iv.config = dataclasses.replace(ms.config, gmr_align="interval")
+    other = iv.classify(df)
+    dt = 1.0 / ms.config.rate_hz
+    assert ms.config.gmr_align == "sample"
+    for a in "ned":
+        np.testing.assert_allclose(full[f"acc_hmm_{a}_mps2"], other[f"acc_hmm_{a}_mps2"]
+                                   + 0.5 * dt * other[f"jerk_hmm_{a}_mps3"], rtol=1e-12, atol=1e-12)

@@ -36,3 +36,25 @@ def realdata_file(rel: str) -> Path:
             pytest.fail(f"missing real log {p}")
         pytest.skip(f"missing real log {p}")
     return p
+
+
+def pymavlink_messages(path) -> list:
+    """Every message of a tlog through the documented pymavlink loop (the test oracle):
+    ``mavutil.mavlink_connection`` + ``recv_msg``, restoring the global dialect state that
+    mavutil mutates (``MAVLINK20`` and the module-level ``mavlink``)."""
+    from pymavlink import mavutil
+
+    saved = (os.environ.get("MAVLINK20"), mavutil.mavlink, mavutil.current_dialect)
+    try:
+        conn = mavutil.mavlink_connection(str(path), robust_parsing=True)
+        out = []
+        while (msg := conn.recv_msg()) is not None:
+            out.append(msg)
+        conn.close()
+        return out
+    finally:
+        if saved[0] is None:
+            os.environ.pop("MAVLINK20", None)
+        else:
+            os.environ["MAVLINK20"] = saved[0]
+        mavutil.mavlink, mavutil.current_dialect = saved[1], saved[2]

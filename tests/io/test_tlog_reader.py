@@ -4,7 +4,6 @@ on synthetic tlogs written with pymavlink's encoder, sniffing and routing."""
 from __future__ import annotations
 
 import math
-import os
 import shutil
 from collections import Counter, defaultdict
 
@@ -12,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from helpers import realdata_file
+from helpers import pymavlink_messages, realdata_file
 from pipeline.frames.rotations import euler_to_quat, quat_to_euler
 from pipeline.io import registry
 from pipeline.io.base import IngestError
@@ -23,28 +22,7 @@ REAL_BIN = "pymavlink_test_bin/test.BIN"
 T0_US = 1_700_000_000_123_456  # arbitrary 2023 framing time
 
 
-# ---- pymavlink oracle ---------------------------------------------------------------------
-
-def pymavlink_messages(path) -> list:
-    """Every message of ``path`` through the documented pymavlink tlog loop
-    (``mavutil.mavlink_connection`` + ``recv_msg``), restoring the global dialect state that
-    mavutil mutates (``MAVLINK20`` and the module-level ``mavlink``)."""
-    from pymavlink import mavutil
-
-    saved = (os.environ.get("MAVLINK20"), mavutil.mavlink, mavutil.current_dialect)
-    try:
-        conn = mavutil.mavlink_connection(str(path), robust_parsing=True)
-        out = []
-        while (msg := conn.recv_msg()) is not None:
-            out.append(msg)
-        conn.close()
-        return out
-    finally:
-        if saved[0] is None:
-            os.environ.pop("MAVLINK20", None)
-        else:
-            os.environ["MAVLINK20"] = saved[0]
-        mavutil.mavlink, mavutil.current_dialect = saved[1], saved[2]
+# pymavlink oracle: helpers.pymavlink_messages
 
 
 @pytest.fixture(scope="module")

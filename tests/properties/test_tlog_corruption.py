@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from helpers import realdata_file
+from helpers import pymavlink_messages, realdata_file
 from pipeline.io import registry
 from pipeline.io.base import IngestError
 from pipeline.io.tlog import TlogReader, encode_tlog
@@ -34,24 +34,9 @@ SETTINGS = settings(max_examples=N_EXAMPLES, deadline=None, derandomize=True, da
 
 def _oracle(data: bytes, tmp) -> list:
     """pymavlink's own tlog loop over ``data``: the messages and their framing times."""
-    from pymavlink import mavutil
-
     path = tmp / "oracle.tlog"
     path.write_bytes(data)
-    saved = (os.environ.get("MAVLINK20"), mavutil.mavlink, mavutil.current_dialect)
-    try:
-        conn = mavutil.mavlink_connection(str(path), robust_parsing=True)
-        out = []
-        while (m := conn.recv_msg()) is not None:
-            out.append(m)
-        conn.close()
-        return out
-    finally:
-        if saved[0] is None:
-            os.environ.pop("MAVLINK20", None)
-        else:
-            os.environ["MAVLINK20"] = saved[0]
-        mavutil.mavlink, mavutil.current_dialect = saved[1], saved[2]
+    return pymavlink_messages(path)
 
 
 def _synthetic(mavlink1: bool) -> bytes:

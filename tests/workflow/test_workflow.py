@@ -90,6 +90,11 @@ def test_dry_run_default_config_plans_every_stage():
     ("ingest", {"demo_log", "simulate_logs", "ingest_flight", "ingest"}),
     ("preprocess", {"demo_log", "simulate_logs", "ingest_flight", "preprocess_flight", "preprocess"}),
     ("train", {"simulate_sets", "train_model", "evaluate_model", "train"}),
+    ("classify", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+                  "train_model", "classify_flight", "classify"}),
+    ("report", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+                "train_model", "evaluate_model", "classify_flight", "plotly_js", "flight_report",
+                "model_report", "report_index", "report"}),
 ])
 def test_named_stage_targets(tmp_path, target, rules):
     wd = _copy_workflow(tmp_path / "wf", [DEMO, SIM])

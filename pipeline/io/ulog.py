@@ -453,26 +453,25 @@ def _diff_press(d, conv: _Conv) -> pd.DataFrame | None:
     return conv.frame(d, {"diff_press_Pa": dp, "temp_degC": temp if temp is not None else _nan(d)})
 
 
-def _input_rc(d, conv: _Conv) -> pd.DataFrame | None:
-    n_ch = _f(d, "channel_count")
+def _channels(d, conv: _Conv, count_field: str, field_fmt: str, n_max: int, col_fmt: str) -> pd.DataFrame | None:
+    """Array topic ``field_fmt.format(i)`` → ``col_fmt.format(i + 1)`` columns; channels at or
+    beyond the logged ``count_field`` are NaN (unused slots, not zero pulses)."""
+    n_used = _f(d, count_field)
     cols = {}
-    for i in range(schema.N_RC):
-        v = _f(d, f"values[{i}]")
+    for i in range(n_max):
+        v = _f(d, field_fmt.format(i))
         if v is None:
             break
-        cols[f"rc_{i + 1}_us"] = np.where(n_ch > i, v, np.nan) if n_ch is not None else v
+        cols[col_fmt.format(i + 1)] = np.where(n_used > i, v, np.nan) if n_used is not None else v
     return conv.frame(d, cols) if cols else None
+
+
+def _input_rc(d, conv: _Conv) -> pd.DataFrame | None:
+    return _channels(d, conv, "channel_count", "values[{}]", schema.N_RC, "rc_{}_us")
 
 
 def _actuator_outputs(d, conv: _Conv) -> pd.DataFrame | None:
-    n_out = _f(d, "noutputs")
-    cols = {}
-    for i in range(schema.N_SERVO):
-        v = _f(d, f"output[{i}]")
-        if v is None:
-            break
-        cols[f"servo_{i + 1}_us"] = np.where(n_out > i, v, np.nan) if n_out is not None else v
-    return conv.frame(d, cols) if cols else None
+    return _channels(d, conv, "noutputs", "output[{}]", schema.N_SERVO, "servo_{}_us")
 
 
 def _mode(d, conv: _Conv) -> pd.DataFrame | None:

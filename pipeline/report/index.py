@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..frames.geodesy import geodetic_to_ned
 from ..io.parquet import read_table
 from ..io import schema
 
@@ -37,13 +38,10 @@ def _track_stats(flight_dir: Path) -> tuple[float, float]:
         g = g.dropna(subset=["lat_deg", "lon_deg"])
         g = g[(g["lat_deg"].abs() > 1e-6) | (g["lon_deg"].abs() > 1e-6)]
         if len(g) > 1:
-            # small-distance spherical approximation is adequate for a summary figure
-            lat = np.radians(g["lat_deg"].to_numpy())
-            lon = np.radians(g["lon_deg"].to_numpy())
-            r = 6371008.8
-            dn = np.diff(lat) * r
-            de = np.diff(lon) * r * np.cos(lat[:-1])
-            dist = float(np.sum(np.hypot(dn, de)))
+            # horizontal track length in the local NED about the first fix (heights left out)
+            lat, lon = g["lat_deg"].to_numpy(), g["lon_deg"].to_numpy()
+            n, e, _ = geodetic_to_ned(lat, lon, np.zeros(len(g)), lat[0], lon[0], 0.0)
+            dist = float(np.sum(np.hypot(np.diff(n), np.diff(e))))
         if len(g) and np.isnan(vmax):
             v = g[["vel_n_mps", "vel_e_mps", "vel_d_mps"]].to_numpy()
             if np.isfinite(v).any():

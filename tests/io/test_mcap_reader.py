@@ -5,13 +5,11 @@ inside it to the MCAP reader, and both give identical canonical values."""
 from __future__ import annotations
 
 import importlib.util
-import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
-from helpers import realdata_file
 from pipeline.io import registry
 from pipeline.io.mcap_reader import McapReader
 from pipeline.io.rosbag import Ros2BagReader
@@ -27,10 +25,7 @@ MCAP = "ros2mcap_husky_imu_gps/husky_mcap.mcap"
 
 @pytest.fixture(scope="module")
 def mcap_log():
-    path = realdata_file(MCAP)
-    t = time.perf_counter()
-    log = registry.read_log(path)
-    return log, time.perf_counter() - t, path
+    return _rb.timed_read(MCAP)
 
 
 def test_mcap_file_equals_rosbags_oracle(mcap_log):

@@ -117,20 +117,22 @@ def mcap_oracle(path: Path) -> dict[str, list[tuple[int, object]]]:
     return out
 
 
-@pytest.fixture(scope="module")
-def ros1_log():
-    path = realdata_file(BAG1)
+def timed_read(rel: str):
+    """Ingest one real file: (FlightLog, seconds taken, path)."""
+    path = realdata_file(rel)
     t = time.perf_counter()
     log = registry.read_log(path)
     return log, time.perf_counter() - t, path
+
+
+@pytest.fixture(scope="module")
+def ros1_log():
+    return timed_read(BAG1)
 
 
 @pytest.fixture(scope="module")
 def ros2_log():
-    path = realdata_file(BAG2)
-    t = time.perf_counter()
-    log = registry.read_log(path)
-    return log, time.perf_counter() - t, path
+    return timed_read(BAG2)
 
 
 def test_ros1_bag_equals_rosbags_oracle(ros1_log):

@@ -79,8 +79,11 @@ class ModelsConfig:
     gate_mps2 : float
         GMR outlier gate, per axis and step (seed 000 §8: 15 m/s²).
     gmr_input : str
-        GMR conditioning block: ``pos`` (thesis 3.28, position increments) or ``pos_vel``
-        (position and velocity increments; ``Δv`` then observed). See :mod:`.gmr`.
+        GMR conditioning block: ``pos_fd`` (default: position increments and the
+        position-only velocity increment from the last three positions — the information of
+        a finite difference, which it beats on every simulated maneuver), ``pos`` (thesis
+        3.28, position increments only) or ``pos_vel`` (position and velocity increments;
+        ``Δv`` then observed). See :mod:`.gmr`.
     gmr_align : str
         ``sample`` (default): ``â = Δv/dt + (dt/2)ĵ``, the acceleration at the sample time as
         the EKF+HMM uses it; ``interval``: ``â = Δv/dt`` as printed (§13.3), half a sample late.
@@ -105,13 +108,13 @@ class ModelsConfig:
     threshold_percentile: float = 0.5
     threshold_slack: Any = 0.0
     mode: str = "cumulative"
-    window_s: float = 3.0
+    window_s: float = 1.6
     restart_prob: float = 0.05
     confirm_s: float = 1.0
     confidence_threshold: float = -1.0
     decision: str = "confidence"
     gate_mps2: float = 15.0
-    gmr_input: str = "pos"
+    gmr_input: str = "pos_fd"
     gmr_align: str = "sample"
     phases: bool = True
 
@@ -135,8 +138,8 @@ class ModelsConfig:
             raise ConfigError(f"models.mode must be one of {_MODES}, got {self.mode!r}")
         if self.decision not in _DECISIONS:
             raise ConfigError(f"models.decision must be one of {_DECISIONS}, got {self.decision!r}")
-        if self.gmr_input not in ("pos", "pos_vel"):
-            raise ConfigError(f"models.gmr_input must be 'pos' or 'pos_vel', got {self.gmr_input!r}")
+        if self.gmr_input not in ("pos", "pos_vel", "pos_fd"):
+            raise ConfigError(f"models.gmr_input must be 'pos', 'pos_vel' or 'pos_fd', got {self.gmr_input!r}")
         if self.gmr_align not in ("interval", "sample"):
             raise ConfigError(f"models.gmr_align must be 'interval' or 'sample', got {self.gmr_align!r}")
         if not 0.0 < self.self_prob < 1.0:

@@ -36,7 +36,7 @@ from ..io.parquet import write_json
 from .base import ModelError, ModelsConfig
 from .features import (MinMaxNormaliser, decimation_factor, get_feature_set, observations,
                        raw_features, run_sequences)
-from .gmr import gate, gmr_state9
+from .gmr import fd_velocity_increments, gate, gmr_state9
 from .hmm import HMMParams, ManeuverHMM
 from .metrics import UNKNOWN
 from .online import OnlineClassifier, classify_batch
@@ -319,11 +319,14 @@ class ManeuverModelSet:
             if gmr and self.config.feature_set in ("state9", "state9h"):
                 acc = np.full((n, 3), np.nan)
                 jerk = np.full((n, 3), np.nan)
+                Xg = X[r, :n]
+                if self.config.gmr_input == "pos_fd":
+                    Xg = fd_velocity_increments(Xg, self.normaliser_, dt)
                 for m, model in enumerate(self.models_):
                     rows = best == m
                     if rows.any():
                         p = model.params_
-                        a, j = gmr_state9(p.means[:, 0], p.covars[:, 0], X[r, :n][rows],
+                        a, j = gmr_state9(p.means[:, 0], p.covars[:, 0], Xg[rows],
                                           d["state"][rows], self.normaliser_, dt,
                                           inputs=self.config.gmr_input, align=self.config.gmr_align)
                         acc[rows], jerk[rows] = a, j

@@ -27,6 +27,14 @@ piecewise-constant jerk); ``ĵ`` is unchanged. Neither uses data after ``t_k``.
 conditions on the position *and* velocity increments (the EKF state carries both), so ``Δv``
 is the observed one and the regression supplies only ``Δa`` (hence ``ĵ`` and the alignment
 term); this uses velocity information that a position-only finite difference does not have.
+``"pos_fd"`` uses exactly the information of the finite difference from the last three
+positions: it conditions on ``r_n`` and on the position-only velocity increment
+``Δv̂_k = (Δr_k − Δr_{k−1})/dt`` (normalised with the frozen velocity statistics; see
+:func:`fd_velocity_increments`). ``Δv̂_k/dt`` is the second difference of the positions, i.e.
+``a(t_{k−1})``; the regression supplies ``ĵ`` from the Viterbi state's Gaussian, and the
+acceleration is moved to the sample time with it, ``â_k = Δv̂_k/dt + dt·ĵ`` (``"sample"``) or
+to ``t_{k−½}`` with ``(dt/2)·ĵ`` (``"interval"``). The first sample of a run, which has no
+``Δr_{k−1}``, gets no estimate (as the finite difference).
 """
 
 from __future__ import annotations
@@ -85,8 +93,24 @@ def gmr(means: F64, covars: F64, x_in: F64, in_idx, out_idx, weights: F64 | None
     return mean, cov
 
 
-GMR_INPUTS = ("pos", "pos_vel")
+GMR_INPUTS = ("pos", "pos_vel", "pos_fd")
 GMR_ALIGN = ("interval", "sample")
+
+
+def fd_velocity_increments(obs: F64, normaliser: MinMaxNormaliser, dt: float) -> F64:
+    """Replace the velocity block of a run's observations by its position-only estimate.
+
+    ``Δv̂_k = (Δr_k − Δr_{k−1})/dt`` from the de-normalised position increments of consecutive
+    rows (one run, time order), re-normalised with the velocity statistics; row 0 becomes NaN.
+    This is the input of ``inputs="pos_fd"`` (the finite difference of the last three
+    positions, expressed as a velocity increment).
+    """
+    obs = np.array(np.atleast_2d(obs), dtype=np.float64)
+    dr = normaliser.inverse(obs[:, list(STATE9_POS)], STATE9_POS)
+    dv = np.full_like(dr, np.nan)
+    dv[1:] = (dr[1:] - dr[:-1]) / dt
+    obs[:, list(STATE9_VEL)] = (dv - normaliser.x_min[list(STATE9_VEL)]) / normaliser.span[list(STATE9_VEL)]
+    return obs
 
 
 def gmr_state9(means: F64, covars: F64, obs: F64, states, normaliser: MinMaxNormaliser,
@@ -106,9 +130,10 @@ def gmr_state9(means: F64, covars: F64, obs: F64, states, normaliser: MinMaxNorm
         The model's frozen statistics.
     dt : float
         Sample period, s.
-    inputs : {"pos", "pos_vel"}
-        Conditioning block: position increments (thesis 3.28) or position and velocity
-        increments (then ``Δv`` is taken as observed).
+    inputs : {"pos", "pos_vel", "pos_fd"}
+        Conditioning block: position increments (thesis 3.28), position and velocity
+        increments (then ``Δv`` is taken as observed), or position increments and the
+        position-only velocity increment (``obs`` from :func:`fd_velocity_increments`).
     align : {"interval", "sample"}
         ``"interval"``: ``â = Δv/dt`` as printed (§13.3), centred half a sample back;
         ``"sample"``: ``â = Δv/dt + (dt/2)·ĵ``, the acceleration at the sample's own time.
@@ -134,12 +159,14 @@ def gmr_state9(means: F64, covars: F64, obs: F64, states, normaliser: MinMaxNorm
         rows = ok & (states == s)
         m, _ = gmr(means[s:s + 1], covars[s:s + 1], obs[rows][:, list(in_idx)], in_idx, out_idx)
         out[rows, 6 - len(out_idx):] = m
-    if inputs == "pos_vel":
+    if inputs != "pos":
         out[ok, :3] = obs[ok][:, list(STATE9_VEL)]
     acc = normaliser.inverse(out[:, :3], STATE9_VEL) / dt
     jerk = normaliser.inverse(out[:, 3:], STATE9_ACC) / dt
-    if align == "sample":
-        acc = acc + 0.5 * dt * jerk
+    # Δv/dt is centred at t_{k-1/2} (observed/regressed increment) or t_{k-1} (pos_fd)
+    lag = (1.0 if inputs == "pos_fd" else 0.5) - (0.0 if align == "sample" else 0.5)
+    if lag:
+        acc = acc + lag * dt * jerk
     return acc, jerk
 
 

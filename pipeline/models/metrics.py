@@ -104,8 +104,9 @@ def confusion(truth_final: Sequence, pred_final: Sequence, labels: Sequence[str]
 
 
 def thesis_side_by_side(ours: pd.DataFrame, table: str) -> pd.DataFrame:
-    """Our per-maneuver FA/MAoT beside the thesis values of Table ``table`` (3.1–3.4)."""
-    ref = THESIS_TRUTH[table]
+    """Our per-maneuver FA/MAoT beside the thesis values of Table ``table`` (3.1–3.4; any other
+    table name, e.g. an extension of ours, gets NaN thesis columns)."""
+    ref = THESIS_TRUTH.get(table, {})                      # our extensions have no thesis column
     out = ours.copy()
     out.insert(0, "table", table)
     out["thesis_FA_pct"] = [ref.get(m, (np.nan, np.nan))[0] for m in out["maneuver"]]

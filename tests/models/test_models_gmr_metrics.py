@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from pipeline.models.features import MinMaxNormaliser
-from pipeline.models.gmr import gate, gmr, gmr_state9
+from pipeline.models.gmr import fd_velocity_increments, gate, gmr, gmr_state9
 from pipeline.models.metrics import (UNKNOWN, confusion, final_accuracy, is_correct,
                                      mean_accuracy_over_time, per_maneuver_table,
                                      thesis_side_by_side)
@@ -69,6 +69,40 @@ def test_gmr_state9_denormalises_per_correction_13_3(rng):
     # a sample without a state gives NaN
     a2, _ = gmr_state9(mu[None], cov[None], q[:2], np.array([0, -1]), norm, dt)
     assert np.isfinite(a2[0]).all() and np.isnan(a2[1]).all()
+
+
+def test_gmr_pos_fd_is_exact_on_a_constant_jerk_trajectory():
+    """``pos_fd``: Δv̂ from the last three positions plus ``dt·ĵ`` gives a(t_k) exactly for a
+    cubic path when the state's Gaussian carries the (constant) Δa = j·dt; the plain second
+    difference is one sample late, ``a(t_{k−1})``."""
+    dt, j = 0.2, np.array([0.7, -1.3, 0.4])
+    a0, v0 = np.array([1.0, 0.5, -2.0]), np.array([3.0, -1.0, 0.5])
+    t = np.arange(30) * dt
+    pos = v0 * t[:, None] + a0 * t[:, None] ** 2 / 2 + j * t[:, None] ** 3 / 6
+    vel = v0 + a0 * t[:, None] + j * t[:, None] ** 2 / 2
+    acc = a0 + j * t[:, None]
+    x = np.hstack([pos, vel, acc])
+    inc = x[1:] - x[:-1]                                           # observation at t_k = x_k − x_{k−1}
+    norm = MinMaxNormaliser(inc.min(0) - 1.0, inc.max(0) + 1.0)
+    obs = norm.transform(inc)
+    Xfd = fd_velocity_increments(obs, norm, dt)
+    assert np.isnan(Xfd[0, 3:6]).all()
+    np.testing.assert_allclose(Xfd[:, :3], obs[:, :3])             # positions untouched
+    fd = (pos[2:] - 2 * pos[1:-1] + pos[:-2]) / dt ** 2             # second difference at t_k
+    np.testing.assert_allclose(norm.inverse(Xfd[1:, 3:6], (3, 4, 5)) / dt, fd, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(fd, acc[1:-1], rtol=1e-9, atol=1e-9)  # = a(t_{k−1})
+    # one state whose Δa is constant j·dt and independent of the inputs
+    mu = np.concatenate([obs[1:, :6].mean(0), norm.transform(np.r_[np.zeros(6), j * dt])[6:]])
+    cov = np.eye(9)
+    cov[:6, :6] = np.cov(Xfd[1:, :6].T) + 1e-9 * np.eye(6)
+    a_hat, j_hat = gmr_state9(mu[None], cov[None], Xfd, np.zeros(len(Xfd), dtype=int), norm, dt,
+                              inputs="pos_fd", align="sample")
+    np.testing.assert_allclose(j_hat[1:], np.broadcast_to(j, (len(Xfd) - 1, 3)), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(a_hat[1:], acc[2:], rtol=1e-9, atol=1e-9)  # a(t_k)
+    assert np.isnan(a_hat[0]).all()
+    a_int, _ = gmr_state9(mu[None], cov[None], Xfd, np.zeros(len(Xfd), dtype=int), norm, dt,
+                          inputs="pos_fd", align="interval")
+    np.testing.assert_allclose(a_int[1:], (acc[1:-1] + acc[2:]) / 2, rtol=1e-9, atol=1e-9)  # a(t_{k−½})
 
 
 def test_gate_per_axis():

@@ -40,6 +40,7 @@ Outputs (``--out`` [results/studies/flightcoach]): ``p23_segments.parquet``,
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -51,7 +52,8 @@ from pipeline.io.registry import read_log
 from pipeline.models import ManeuverModelSet, ModelsConfig
 from pipeline.preprocess.state import run_preprocess
 
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "flightcoach_f3a_json"
+REALDATA = Path(os.environ.get("UAVPIPE_REALDATA", Path(__file__).resolve().parents[2] / "shared" / "realdata")
+                ) / "flightcoach_f3a_json"
 TRAIN = "manual_F3A_P23_22_02_18_00000036.json"
 TEST_P23 = "manual_F3A_P23_22_05_31_00000350.json"
 TEST_F23 = "manual_F3A_F23_22_02_18_00000035.json"

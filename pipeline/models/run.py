@@ -101,7 +101,8 @@ def train_model(name: str, spec: Mapping, out_dir: str | os.PathLike, models_cfg
     name : str
         Model name (key of the ``train`` section).
     spec : mapping
-        Its entry: ``data`` (``simulated``/``flights``), optional ``labels``, ``exclude``.
+        Its entry: ``data`` (``simulated``/``flights``), optional ``labels``, ``exclude`` and
+        ``models`` (overrides of the ``models`` section for this model only).
     out_dir : path-like
         ``results/models/<name>``.
     models_cfg : mapping
@@ -119,7 +120,7 @@ def train_model(name: str, spec: Mapping, out_dir: str | os.PathLike, models_cfg
     from .classifier import ManeuverModelSet
 
     out = Path(out_dir)
-    cfg = ModelsConfig.from_section(models_cfg)
+    cfg = ModelsConfig.from_section(models_cfg, **dict(spec.get("models") or {}))
     try:
         df = _read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments)
         if not len(df) or "label" not in df.columns:

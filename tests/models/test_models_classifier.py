@@ -218,3 +218,27 @@ def test_gmr_estimates_are_causal_and_follow_config(synth, rng, trained3):
     for a in "ned":
         np.testing.assert_allclose(full[f"acc_hmm_{a}_mps2"], other[f"acc_hmm_{a}_mps2"]
                                    + 0.5 * dt * other[f"jerk_hmm_{a}_mps3"], rtol=1e-12, atol=1e-12)
+
+
+def test_train_model_spec_overrides_models_section(synth, rng, tmp_path):
+    """A ``train`` entry's ``models:`` overrides the global section for that model only; a bad
+    override key is a clear configuration error naming the key."""
+    from pipeline.models.run import train_model
+
+    _, bulk = synth
+    sets = []
+    for lab in ("M1", "M2"):
+        p = tmp_path / f"{lab}_train.parquet"
+        bulk([lab], 4, rng).to_parquet(p)
+        sets.append(p)
+    base = {"n_states": 5, "n_iter": 5, "seed": 3}
+    spec = {"data": "simulated", "vehicles": ["x"], "models": {"n_states": 3, "threshold_slack": 1.5}}
+    meta = train_model("m", spec, tmp_path / "m", base, sets=sets)
+    assert meta["status"] == "ok"
+    assert meta["config"]["n_states"] == 3 and meta["config"]["n_iter"] == 5
+    assert meta["threshold_slack"] == 1.5
+    meta0 = train_model("m0", {"data": "simulated", "vehicles": ["x"]}, tmp_path / "m0", base, sets=sets)
+    assert meta0["config"]["n_states"] == 5
+    with pytest.raises(ConfigError, match=r"unknown key\(s\) \['n_stats'\]"):
+        train_model("bad", {"data": "simulated", "vehicles": ["x"], "models": {"n_stats": 3}},
+                    tmp_path / "bad", base, sets=sets)

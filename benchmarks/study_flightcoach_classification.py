@@ -12,7 +12,8 @@ the attitude, ``segments`` from the labels).
    maneuvers flown once get the leave-one-phase-out one-class threshold.
 2. **P23 #350** (same schedule, 3 months later): forward passes reset at each labelled segment
    start; the label at segment end is scored (17 maneuvers), per-maneuver MAoT reported; then
-   the same models over the whole flight without resets (``windowed`` mode) as a timeline.
+   the same models over the whole flight without resets (``windowed`` mode, window ``auto``:
+   half the median training maneuver) as a timeline.
 3. **F23 #35** (another schedule; shares hB, rEt, hSqL with P23): reset at each segment start,
    decision ``both`` (unknown when ``LL_c`` is below the one-class threshold or ``V_c ≥ −1``);
    of the maneuvers P23 does not fly, the share labelled unknown at segment end.
@@ -131,6 +132,9 @@ def main() -> None:
                          "(on the P21 flight, default), 'auto' or a number")
     ap.add_argument("--slack-grid", default="0,0.5,1,1.5,2,2.5,3,3.5,4,5,6,8",
                     help="slacks (nats/sample) searched by the P21 calibration")
+    ap.add_argument("--window-s", default="auto",
+                    help="windowed/reset window (s) for the whole-flight timeline; 'auto': half the "
+                         "median training maneuver (fixed before looking at the test flights)")
     ap.add_argument("--seed", type=int, default=20261123)
     ap.add_argument("--out", type=Path, default=Path("results/studies/flightcoach"))
     args = ap.parse_args()
@@ -141,7 +145,8 @@ def main() -> None:
     ns = args.n_states if args.n_states == "auto" else int(args.n_states)
     cfg = ModelsConfig(feature_set=args.features, n_states=ns, min_covar=args.min_covar,
                        n_iter=args.n_iter, seed=args.seed,
-                       threshold_slack="auto")
+                       threshold_slack="auto",
+                       window_s=args.window_s if args.window_s == "auto" else float(args.window_s))
 
     st_tr, seg_tr = load(TRAIN)
     train = labelled(st_tr, seg_tr)
@@ -237,7 +242,10 @@ def main() -> None:
     print(f"RESULT flightcoach_oneclass_slack_used {chosen:.3f}")
     print(f"RESULT flightcoach_oneclass_slack_source {args.threshold_slack}")
     print(f"RESULT flightcoach_p23_both_decision_correct_at_segment_end {int(p23b['correct_end'].sum())}/{len(p23b)}")
+    print(f"RESULT flightcoach_window_s {ms.config.window_s:g}")
     print(f"RESULT flightcoach_p23_whole_flight_windowed_mean_MAoT_pct {whole['MAoT_pct'].mean():.1f}")
+    print(f"RESULT flightcoach_p23_whole_flight_windowed_correct_at_segment_end "
+          f"{int(whole['correct_end'].sum())}/{len(whole)}")
     print(f"RESULT flightcoach_f23_new_maneuvers_unknown_pct {unk:.1f}")
     shared = f23[f23["known"]]
     print(f"RESULT flightcoach_f23_shared_maneuvers_accepted {int((shared['pred_end'] != 'unknown').sum())}/{len(shared)}")

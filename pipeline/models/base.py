@@ -65,8 +65,10 @@ class ModelsConfig:
         ``cumulative`` (thesis, from t = 1), ``windowed`` (sliding window of predictive
         log-likelihood increments with a restart transition) or ``reset`` (windowed change
         detection that restarts the cumulative forward pass).
-    window_s : float
-        Window length of ``windowed``/``reset``, s.
+    window_s : float or "auto"
+        Window length of ``windowed``/``reset``, s. ``auto``: half the median length of the
+        training recordings, resolved at training and stored with the model (aerobatic
+        maneuvers last 10–60 s; the seed-000 switch scenarios want ~1.6 s).
     restart_prob : float
         Per-step probability of jumping back to π in ``windowed``/``reset`` (lets a model
         re-enter its first state after a maneuver switch).
@@ -108,7 +110,7 @@ class ModelsConfig:
     threshold_percentile: float = 0.5
     threshold_slack: Any = 0.0
     mode: str = "cumulative"
-    window_s: float = 1.6
+    window_s: Any = 1.6
     restart_prob: float = 0.05
     confirm_s: float = 1.0
     confidence_threshold: float = -1.0
@@ -148,8 +150,9 @@ class ModelsConfig:
             raise ConfigError("models.restart_prob must lie in [0, 1)")
         if not 0.0 <= self.threshold_percentile <= 100.0:
             raise ConfigError("models.threshold_percentile must lie in [0, 100]")
-        if self.rate_hz <= 0 or self.window_s <= 0:
-            raise ConfigError("models.rate_hz and models.window_s must be positive")
+        if self.rate_hz <= 0 or not (self.window_s == "auto" or (
+                isinstance(self.window_s, (int, float)) and self.window_s > 0)):
+            raise ConfigError("models.rate_hz must be positive and models.window_s positive or 'auto'")
         if not (self.threshold_slack == "auto" or isinstance(self.threshold_slack, (int, float))):
             raise ConfigError("models.threshold_slack must be a number or 'auto'")
         lo, hi = self.n_states_range
@@ -171,6 +174,8 @@ class ModelsConfig:
     @property
     def window(self) -> int:
         """Window length in samples."""
+        if self.window_s == "auto":
+            raise ModelError("models.window_s 'auto' is resolved when the models are trained")
         return max(1, int(round(self.window_s * self.rate_hz)))
 
     def to_dict(self) -> dict:

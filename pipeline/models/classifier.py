@@ -23,6 +23,8 @@ labels that have several recordings) lowers the curve by ``slack · n`` after ``
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 import os
 from pathlib import Path
@@ -114,6 +116,12 @@ class ManeuverModelSet:
         cfg = self.config
         if not recordings:
             raise ModelError("no training data")
+        if cfg.window_s == "auto":
+            # half the median training maneuver: long enough to recognise a maneuver from part
+            # of it, short enough to follow the next one (resolved once, stored in meta.json)
+            lens = [max(len(s) for s in rec) for lab in recordings for rec in recordings[lab] if rec]
+            w = max(2.0, 0.5 * float(np.median(lens))) / cfg.rate_hz
+            cfg = self.config = dataclasses.replace(cfg, window_s=round(w, 3))
         self.labels_ = sorted(recordings)
         allobs = np.concatenate([s for lab in self.labels_ for rec in recordings[lab] for s in rec])
         self.normaliser_ = MinMaxNormaliser.fit(allobs)

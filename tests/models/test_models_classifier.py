@@ -242,3 +242,19 @@ def test_train_model_spec_overrides_models_section(synth, rng, tmp_path):
     with pytest.raises(ConfigError, match=r"unknown key\(s\) \['n_stats'\]"):
         train_model("bad", {"data": "simulated", "vehicles": ["x"], "models": {"n_stats": 3}},
                     tmp_path / "bad", base, sets=sets)
+
+
+def test_window_auto_is_half_the_median_training_run(synth, rng, tmp_path):
+    _, bulk = synth
+    data = pd.concat([bulk(["M1"], 3, rng, duration_s=20.0), bulk(["M2"], 3, rng, duration_s=30.0),
+                      bulk(["M3"], 1, rng, duration_s=40.0)], ignore_index=True)
+    with pytest.raises(ModelError, match="auto"):
+        ModelsConfig(window_s="auto").window
+    ms = ManeuverModelSet(config=ModelsConfig(n_states=3, n_iter=5, window_s="auto", phases=False)).fit(data)
+    # 7 runs of 20/20/20/30/30/30/40 s at 5 Hz -> 100/100/100/150/150/150/200 increments
+    assert ms.config.window_s == pytest.approx(0.5 * 150 / 5.0)
+    assert ms.config.window == 75
+    ms.save(tmp_path / "m")
+    assert ManeuverModelSet.load(tmp_path / "m").config.window_s == ms.config.window_s
+    with pytest.raises(ConfigError, match="window_s"):
+        ModelsConfig.from_section({"window_s": "long"})

@@ -29,6 +29,12 @@ The maneuvers (25 s each, heading frame x forward, y right, z down; figures of s
   tilts afterwards.
 * **M5** (the "unknown"): climbs for 10 s, then descends, with large changes on every axis.
 
+A run starts at the equilibrium velocity of its first command
+(:func:`pipeline.simulate.quadcopter.equilibrium_velocity`), and the first commands differ: M1
+is already climbing (vertical thrust 1.10), M2 descending (0.85), M3 in slow forward flight
+(pitch −4°, 0.96), M4 and M5 at hover. With a common hover start the maneuvers are identical
+for their first 1–1.5 s and an online classifier loses those samples whatever it does.
+
 Limits |φ|,|θ| ≤ 50°, |v| ≤ 40 m/s and |a| ≤ 10 m/s² (vector norms, disturbance included)
 are met by construction margins and asserted on 100-run samples in the tests.
 """

@@ -225,6 +225,11 @@ def main() -> None:
                 "p23": per_segment(m_s.classify(flight, mode="cumulative", decision="both", reset_t_ns=starts,
                                                 gmr=False), seg, known)}
     f23, p23b = by_slack[chosen]["f23"], by_slack[chosen]["p23"]
+    # threshold-free alternative: the background model as one more rival in V
+    f23_bg = per_segment(ms.classify(flight3, mode="cumulative", decision="confidence_bg",
+                                     reset_t_ns=starts3, gmr=False), seg3, known)
+    p23_bg = per_segment(ms.classify(flight, mode="cumulative", decision="confidence_bg",
+                                     reset_t_ns=starts, gmr=False), seg, known)
     write_table(sw, args.out / "oneclass_slack_sweep.parquet", name="flightcoach_slack_sweep")
     write_table(f23, args.out / "f23_segments.parquet", name="flightcoach_f23_segments",
                 extra={"threshold_slack": chosen})
@@ -250,6 +255,9 @@ def main() -> None:
     shared = f23[f23["known"]]
     print(f"RESULT flightcoach_f23_shared_maneuvers_accepted {int((shared['pred_end'] != 'unknown').sum())}/{len(shared)}")
     print(f"RESULT flightcoach_f23_shared_maneuvers_correct {int(shared['correct_end'].sum())}/{len(shared)}")
+    new_bg = f23_bg[f23_bg["label"].isin(F23_NEW)]
+    print(f"RESULT flightcoach_bg_p23_correct_at_segment_end {int(p23_bg['correct_end'].sum())}/{len(p23_bg)}")
+    print(f"RESULT flightcoach_bg_f23_new_maneuvers_unknown_pct {100 * float(np.mean(new_bg['pred_end'] == 'unknown')):.1f}")
     print(f"RESULT flightcoach_study_wall_s {time.perf_counter() - t0:.0f}")
 
 

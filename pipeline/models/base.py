@@ -17,7 +17,7 @@ class ModelError(ValueError):
 
 
 _MODES = ("cumulative", "windowed", "reset")
-_DECISIONS = ("confidence", "oneclass", "both")
+_DECISIONS = ("confidence", "oneclass", "both", "confidence_bg")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,7 +77,15 @@ class ModelsConfig:
     confidence_threshold : float
         Label ``c`` only when ``V_c`` is below this (thesis: −1).
     decision : str
-        ``confidence`` (thesis's chosen classifier), ``oneclass`` or ``both``.
+        ``confidence`` (thesis's chosen classifier), ``oneclass``, ``both`` (confidence and
+        one-class) or ``confidence_bg`` (confidence with the background model as one more rival:
+        where it is the most likely hypothesis, or too close to the best maneuver, the label is
+        unknown).
+    background : int
+        Gaussians of the background model fitted at training to the pooled normalised
+        observations of every maneuver (a universal background model; 0 = none). It is never a
+        label; ``confidence_bg`` uses it so a maneuver unlike all trained ones is unknown
+        without a threshold (the thesis's M5 under the confidence classifier, Table 3.4).
     gate_mps2 : float
         GMR outlier gate, per axis and step (seed 000 §8: 15 m/s²).
     gmr_input : str
@@ -115,6 +123,7 @@ class ModelsConfig:
     confirm_s: float = 1.0
     confidence_threshold: float = -1.0
     decision: str = "confidence"
+    background: int = 1
     gate_mps2: float = 15.0
     gmr_input: str = "pos_fd"
     gmr_align: str = "sample"
@@ -144,6 +153,10 @@ class ModelsConfig:
             raise ConfigError(f"models.gmr_input must be 'pos', 'pos_vel' or 'pos_fd', got {self.gmr_input!r}")
         if self.gmr_align not in ("interval", "sample"):
             raise ConfigError(f"models.gmr_align must be 'interval' or 'sample', got {self.gmr_align!r}")
+        if not (isinstance(self.background, int) and self.background >= 0):
+            raise ConfigError(f"models.background must be an int >= 0, got {self.background!r}")
+        if self.decision == "confidence_bg" and self.background == 0:
+            raise ConfigError("models.decision 'confidence_bg' needs models.background >= 1")
         if not 0.0 < self.self_prob < 1.0:
             raise ConfigError("models.self_prob must lie in (0, 1)")
         if not 0.0 <= self.restart_prob < 1.0:

@@ -75,6 +75,7 @@ class ManeuverModelSet:
 
     def __init__(self, *, config: ModelsConfig | None = None):
         self.config = config or ModelsConfig()
+        self.background_: HMMParams | None = None
 
     # -- features ------------------------------------------------------------------------
     @property
@@ -125,6 +126,7 @@ class ManeuverModelSet:
         self.labels_ = sorted(recordings)
         allobs = np.concatenate([s for lab in self.labels_ for rec in recordings[lab] for s in rec])
         self.normaliser_ = MinMaxNormaliser.fit(allobs)
+        self.background_ = self._fit_background(self.normaliser_.transform(allobs))
         self.models_, self.training_ = [], {}
         curves: dict[str, list[F64]] = {"cumulative": [], "windowed": []}
         for li, lab in enumerate(self.labels_):
@@ -211,6 +213,23 @@ class ManeuverModelSet:
                     gaps.append((curve[T - 1] - sc[r, T - 1]) / T)
         return max(0.0, float(np.median(gaps))) if gaps else 0.0
 
+    def _fit_background(self, X: F64) -> HMMParams | None:
+        """The background model: a ``background``-component full-covariance GMM on the pooled
+        normalised observations, as a one-state HMM (i.i.d. samples). At most 50,000 rows,
+        drawn with the training seed."""
+        from sklearn.mixture import GaussianMixture
+
+        cfg = self.config
+        if cfg.background == 0:
+            return None
+        rng = np.random.default_rng(cfg.seed + 104729)
+        if len(X) > 50_000:
+            X = X[np.sort(rng.choice(len(X), 50_000, replace=False))]
+        g = GaussianMixture(cfg.background, covariance_type="full", reg_covar=cfg.min_covar,
+                            random_state=int(rng.integers(2 ** 31)), n_init=1).fit(X)
+        return HMMParams(np.ones(1), np.ones((1, 1)), g.weights_[None].copy(), g.means_[None].copy(),
+                         g.covariances_[None].copy())
+
     def _new_hmm(self, label: str, index: int, n_states=None) -> ManeuverHMM:
         cfg = self.config
         return ManeuverHMM(n_states=n_states or cfg.states_for(label), n_states_range=cfg.n_states_range,
@@ -243,13 +262,23 @@ class ManeuverModelSet:
     def classifier(self, *, mode: str | None = None, decision: str | None = None) -> OnlineClassifier:
         cfg = self.config
         mode = mode or cfg.mode
+        decision = decision or cfg.decision
         thr = self.thresholds_["windowed" if mode == "windowed" else "cumulative"]
-        return OnlineClassifier([m.params_ for m in self.models_], mode=mode, window=cfg.window,
+        params = [m.params_ for m in self.models_]
+        bg = decision == "confidence_bg"
+        if bg:
+            if self.background_ is None:
+                raise ModelError("decision 'confidence_bg' needs a background model "
+                                 "(train with models.background >= 1)")
+            params.append(self.background_)
+            thr = np.vstack([thr, np.full((1, thr.shape[1]), -1e300)])     # never gates (finite: extrapolated)
+            decision = "confidence"
+        return OnlineClassifier(params, mode=mode, window=cfg.window,
                                 restart_prob=cfg.restart_prob,
                                 confirm=max(1, int(round(cfg.confirm_s * cfg.rate_hz))),
                                 confidence_threshold=cfg.confidence_threshold,
-                                decision=decision or cfg.decision, thresholds=thr,
-                                thresholds_stationary=(mode == "windowed"))
+                                decision=decision, thresholds=thr,
+                                thresholds_stationary=(mode == "windowed"), background=bg)
 
     def classify(self, state: pd.DataFrame, *, mode: str | None = None, decision: str | None = None,
                  run_col: str = "run_id", reset_t_ns=None, box_heading_rad: float = 0.0,
@@ -304,7 +333,8 @@ class ManeuverModelSet:
                         resets[r, i] = True
         clf = self.classifier(mode=mode, decision=decision)
         res = classify_batch(clf, X, resets)
-        labels = np.array([*self.labels_, UNKNOWN], dtype=object)
+        # index M is the background hypothesis when it takes part; -1 is unknown
+        labels = np.array([*self.labels_, "background", UNKNOWN], dtype=object)
         frames = []
         dt = 1.0 / self.config.rate_hz
         for r, rid in enumerate(rids):
@@ -320,6 +350,8 @@ class ManeuverModelSet:
             d["oneclass_ok"] = res["oneclass_ok"][r, :n]
             for m, name in enumerate(self.labels_):
                 d[f"ll_{name}"] = res["scores"][r, :n, m]
+            if clf.background:
+                d["ll_background"] = res["scores"][r, :n, len(self.labels_)]
             d["state"] = res["state"][r, :n]
             d["change"] = res["change"][r, :n]
             ca = res["change_at"][r, :n]
@@ -362,6 +394,9 @@ class ManeuverModelSet:
         arrays["norm_min"], arrays["norm_max"] = self.normaliser_.x_min, self.normaliser_.x_max
         for mode, thr in self.thresholds_.items():
             arrays[f"threshold_{mode}"] = thr
+        if self.background_ is not None:
+            arrays.update({f"bg_{k}": getattr(self.background_, k)
+                           for k in ("startprob", "transmat", "weights", "means", "covars")})
         tmp = out / ".params.tmp.npz"
         np.savez(tmp, **arrays)
         os.replace(tmp, out / "params.npz")
@@ -395,4 +430,6 @@ class ManeuverModelSet:
             p = HMMParams(*(z[f"m{i}_{k}"] for k in ("startprob", "transmat", "weights", "means", "covars")))
             self.models_.append(ManeuverHMM.from_params(p))
         self.thresholds_ = {k[len("threshold_"):]: z[k] for k in z.files if k.startswith("threshold_")}
+        self.background_ = (HMMParams(*(z[f"bg_{k}"] for k in ("startprob", "transmat", "weights", "means", "covars")))
+                            if "bg_means" in z.files else None)
         return self

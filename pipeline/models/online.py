@@ -190,12 +190,15 @@ class OnlineClassifier:
         ``both``); ``thresholds_stationary`` says how to extend it beyond T.
     viterbi : bool
         Track the online Viterbi state (``argmax_j δ_t(j)``) of every model.
+    background : bool
+        The last model is a background hypothesis: it counts in ``V`` like any rival but is
+        never a label (a step where it is the best hypothesis is unknown).
     """
 
     def __init__(self, models: Sequence[HMMParams], *, mode: str = "cumulative", window: int = 20,
                  restart_prob: float = 0.02, confirm: int = 5, confidence_threshold: float = -1.0,
                  decision: str = "confidence", thresholds: F64 | None = None,
-                 thresholds_stationary: bool = False, viterbi: bool = True):
+                 thresholds_stationary: bool = False, viterbi: bool = True, background: bool = False):
         if mode not in ("cumulative", "windowed", "reset"):
             raise ValueError(f"unknown mode {mode!r}")
         if decision not in ("confidence", "oneclass", "both"):
@@ -212,6 +215,7 @@ class OnlineClassifier:
         self.thresholds = None if thresholds is None else np.asarray(thresholds, dtype=np.float64)
         self.thr_stationary = thresholds_stationary
         self.viterbi = viterbi
+        self.background = bool(background)
         self.trans_cum = self.stack.trans
         self.trans_win = self.stack.restart_trans(self.eps)
         self.logtrans_cum = safe_log(self.trans_cum)
@@ -368,6 +372,8 @@ class OnlineClassifier:
         else:
             oc_ok = np.ones(len(best), dtype=bool)
         ok = {"confidence": conf_ok, "oneclass": oc_ok, "both": conf_ok & oc_ok}[self.decision]
+        if self.background:
+            ok = ok & (best != scores.shape[1] - 1)
         label = np.where(ok, best, UNKNOWN)
         if self.viterbi:
             state = np.argmax(np.take_along_axis(self.ld, best[:, None, None], axis=1)[:, 0], axis=-1)

@@ -258,3 +258,33 @@ def test_window_auto_is_half_the_median_training_run(synth, rng, tmp_path):
     assert ManeuverModelSet.load(tmp_path / "m").config.window_s == ms.config.window_s
     with pytest.raises(ConfigError, match="window_s"):
         ModelsConfig.from_section({"window_s": "long"})
+
+
+def test_background_model_makes_an_unseen_maneuver_unknown(synth, rng, tmp_path):
+    """``confidence_bg``: the background GMM is one more rival in V (never a label). A run of a
+    class no model was trained on loses to it and is unknown; trained classes keep their
+    labels; the plain confidence rule still forces one of the models."""
+    _, bulk = synth
+    train = bulk(["M1", "M2", "M3"], 12, rng)
+    cfg = ModelsConfig(n_states=3, n_iter=20, background=1, seed=5)
+    ms = ManeuverModelSet(config=cfg).fit(train)
+    assert ms.background_.n_states == 1 and ms.background_.n_mix == 1
+    test = bulk(["M1", "M2", "M3", "U"], 3, rng)
+    res = ms.classify(test, decision="confidence_bg", gmr=False)
+    assert "ll_background" in res.columns
+    fin = res.groupby("run_id", sort=False).tail(1)
+    known = fin[fin["truth"] != "U"]
+    assert (known["pred"] == known["truth"]).all()
+    assert (fin.loc[fin["truth"] == "U", "pred"] == "unknown").all()
+    plain = ms.classify(test, decision="confidence", gmr=False).groupby("run_id", sort=False).tail(1)
+    assert (plain.loc[plain["truth"] == "U", "pred"] != "unknown").any()
+    # persisted with the model; a model without one refuses the decision clearly
+    ms.save(tmp_path / "m")
+    back = ManeuverModelSet.load(tmp_path / "m")
+    np.testing.assert_array_equal(back.background_.covars, ms.background_.covars)
+    pd.testing.assert_frame_equal(back.classify(test, decision="confidence_bg", gmr=False), res)
+    none = ManeuverModelSet(config=ModelsConfig(n_states=3, n_iter=5, background=0)).fit(train)
+    with pytest.raises(ModelError, match="background"):
+        none.classify(test, decision="confidence_bg")
+    with pytest.raises(ConfigError, match="background"):
+        ModelsConfig(decision="confidence_bg", background=0).validate()

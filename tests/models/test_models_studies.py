@@ -38,7 +38,8 @@ def test_seed000_study_smoke(tmp_path):
     assert float(r["seed000_gmr_acc_rmse_mps2"]) < float(r["seed000_fd_acc_rmse_mps2"])
     assert float(r["seed000_switch_windowed_min_final_MAoT_pct_where_thesis_below_50"]) > 50
     tables = pd.read_parquet(tmp_path / "tables_3_1_3_4.parquet")
-    assert set(tables["table"]) == {"3.1", "3.2", "3.3", "3.4", "3.4+1c"}
+    assert set(tables["table"]) == {"3.1", "3.2", "3.3", "3.4", "3.4+1c", "3.4+bg"}
+    assert float(r["seed000_cfbg_M5_unknown_FA_pct"]) == 100.0        # background rival: unknown
     sw = pd.read_parquet(tmp_path / "switch_tables.parquet")
     assert len(sw) == 3 * 4 * 3 and set(sw["mode"]) == {"cumulative", "windowed", "reset"}
     gerr = pd.read_parquet(tmp_path / "gmr_error.parquet")

@@ -1,7 +1,9 @@
 """``uavpipe classify MODEL_DIR STATE.parquet -o OUT.parquet``: per-sample online labels.
 
 Output columns: ``run_id``, ``t_ns``, ``truth`` (when the input has ``label``), ``pred``
-(maneuver or ``unknown``), ``best``, ``V_best`` (confidence), ``oneclass_ok``, ``ll_<label>``,
+(maneuver or ``unknown``), ``best`` (``background`` when that rival wins under
+``--decision confidence_bg``), ``V_best`` (confidence), ``oneclass_ok``, ``ll_<label>``
+(and ``ll_background``),
 ``state`` (online Viterbi state), ``change``/``change_t_ns`` (reset mode) and the GMR
 acceleration/jerk estimates (``state9`` models).
 """
@@ -24,7 +26,7 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--out", type=Path, required=True, metavar="OUT.parquet",
                    help="output file (one input) or directory (several inputs)")
     p.add_argument("--mode", choices=("cumulative", "windowed", "reset"), default=None)
-    p.add_argument("--decision", choices=("confidence", "oneclass", "both"), default=None)
+    p.add_argument("--decision", choices=("confidence", "oneclass", "both", "confidence_bg"), default=None)
     p.add_argument("--reset-at-segments", type=Path, default=None, metavar="SEGMENTS.parquet",
                    help="restart the forward passes at each segment's t_start_ns")
     p.set_defaults(func=run)

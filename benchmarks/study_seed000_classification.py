@@ -273,6 +273,13 @@ def write_report(path: Path, args, cfg, ms, tables, conf, per_sample, m5_diag, s
     path.write_text("\n".join(L) + "\n")
 
 
+def progress(msg: str, t0: float) -> None:
+    """A stage line on stderr (stdout carries the tables and RESULT lines)."""
+    import sys
+
+    print(f"[{time.perf_counter() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=2300, help="runs per maneuver (thesis 2300)")
@@ -293,7 +300,10 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
 
+    progress(f"simulating {args.runs} runs of each of {', '.join(ALL)}" if not args.sets
+             else f"reading {args.sets}", t0)
     train, test = load_sets(args)
+    progress("training one HMM per known maneuver", t0)
     over = {"feature_set": args.features} if args.features else {}
     if args.n_states is not None:
         over["n_states"] = args.n_states if args.n_states == "auto" else int(args.n_states)
@@ -308,6 +318,7 @@ def main() -> None:
               f"{tr['n_iter']} iterations, converged={tr['converged']}")
 
     # Tables 3.1-3.4 (cumulative, truth input)
+    progress("Tables 3.1-3.4 (cumulative, truth input)", t0)
     tabs, confs = [], []
     # "3.4+1c" (ours): the confidence decision gated by the one-class threshold (decision
     # "both", as used on real data); "3.4+bg" (ours): the confidence decision with the
@@ -361,6 +372,7 @@ def main() -> None:
         for ts in (3.0, 8.0, 13.0):
             for key in "ABCD":
                 for mode in ("cumulative", "windowed", "reset"):
+                    progress(f"switch scenario {key} at {ts:g} s, {mode}", t0)
                     cells.append(switch_cell(ms, key, ts, args, mode))
         sw = pd.DataFrame(cells)
         write_table(sw, out / "switch_tables.parquet", name="seed000_tables_3_10_3_12",
@@ -381,6 +393,7 @@ def main() -> None:
         print(sh.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
 
     if not args.skip_gmr:
+        progress("GMR errors on the test runs", t0)
         gerr, grmse = gmr_errors(ms, test)
         write_table(gerr, out / "gmr_error.parquet", name="seed000_gmr_error")
         write_table(grmse, out / "gmr_rmse.parquet", name="seed000_gmr_rmse")

@@ -24,7 +24,6 @@ labels that have several recordings) lowers the curve by ``slack · n`` after ``
 from __future__ import annotations
 
 import dataclasses
-
 import json
 import os
 from pathlib import Path
@@ -395,8 +394,7 @@ class ManeuverModelSet:
         for mode, thr in self.thresholds_.items():
             arrays[f"threshold_{mode}"] = thr
         if self.background_ is not None:
-            arrays.update({f"bg_{k}": getattr(self.background_, k)
-                           for k in ("startprob", "transmat", "weights", "means", "covars")})
+            arrays.update(self.background_.to_arrays(prefix="bg_"))
         tmp = out / ".params.tmp.npz"
         np.savez(tmp, **arrays)
         os.replace(tmp, out / "params.npz")
@@ -427,9 +425,7 @@ class ManeuverModelSet:
         self.normaliser_ = MinMaxNormaliser(z["norm_min"], z["norm_max"])
         self.models_ = []
         for i, lab in enumerate(self.labels_):
-            p = HMMParams(*(z[f"m{i}_{k}"] for k in ("startprob", "transmat", "weights", "means", "covars")))
-            self.models_.append(ManeuverHMM.from_params(p))
+            self.models_.append(ManeuverHMM.from_params(HMMParams.from_arrays(z, prefix=f"m{i}_")))
         self.thresholds_ = {k[len("threshold_"):]: z[k] for k in z.files if k.startswith("threshold_")}
-        self.background_ = (HMMParams(*(z[f"bg_{k}"] for k in ("startprob", "transmat", "weights", "means", "covars")))
-                            if "bg_means" in z.files else None)
+        self.background_ = HMMParams.from_arrays(z, prefix="bg_") if "bg_means" in z.files else None
         return self

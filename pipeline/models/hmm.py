@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import logging
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -88,6 +88,15 @@ class HMMParams:
     @property
     def n_features(self) -> int:
         return self.means.shape[2]
+
+    def to_arrays(self, prefix: str = "") -> dict[str, F64]:
+        """The five arrays keyed ``<prefix><field>`` (npz persistence, no pickles)."""
+        return {f"{prefix}{f.name}": getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_arrays(cls, arrays, prefix: str = "") -> "HMMParams":
+        """Inverse of :meth:`to_arrays` (``arrays``: a mapping such as an open npz)."""
+        return cls(*(arrays[f"{prefix}{f.name}"] for f in fields(cls)))
 
     def n_parameters(self) -> int:
         """Free parameters (for BIC)."""
@@ -432,9 +441,7 @@ class ManeuverHMM:
 
     # -- persistence (no pickles) ----------------------------------------------------------
     def to_arrays(self, prefix: str = "") -> dict[str, F64]:
-        p = self.params_
-        return {f"{prefix}startprob": p.startprob, f"{prefix}transmat": p.transmat,
-                f"{prefix}weights": p.weights, f"{prefix}means": p.means, f"{prefix}covars": p.covars}
+        return self.params_.to_arrays(prefix)
 
     def training_meta(self) -> dict:
         return {"n_states": int(self.n_states_), "n_iter": int(self.n_iter_),

@@ -185,14 +185,18 @@ def main() -> None:
     starts1 = seg1["t_start_ns"].to_numpy()
     auto = ms.threshold_slack_
     grid = sorted({float(x) for x in args.slack_grid.split(",")} | {auto})
+    flights = {"p21": (flight1, seg1, starts1), "f23": (flight3, seg3, starts3), "p23": (flight, seg, starts)}
+
+    def at_slack(slack: float, keys) -> dict[str, pd.DataFrame]:
+        """Per-segment results of flights ``keys`` with the combined decision at ``slack``."""
+        m_s = ms.with_slack(slack)
+        return {k: per_segment(m_s.classify(flights[k][0], mode="cumulative", decision="both",
+                                            reset_t_ns=flights[k][2], gmr=False), flights[k][1], known)
+                for k in keys}
+
     sweep, by_slack = [], {}
     for slack in grid:
-        m_s = ms.with_slack(slack)
-        runs = {}
-        for key, fl, sg, st_ in (("p21", flight1, seg1, starts1), ("f23", flight3, seg3, starts3),
-                                 ("p23", flight, seg, starts)):
-            runs[key] = per_segment(m_s.classify(fl, mode="cumulative", decision="both", reset_t_ns=st_,
-                                                 gmr=False), sg, known)
+        runs = at_slack(slack, flights)
         c = runs["p21"]
         acc_known = float(np.mean(c.loc[c["known"], "pred_end"] != "unknown")) if c["known"].any() else np.nan
         acc_unk = float(np.mean(c.loc[~c["known"], "pred_end"] == "unknown")) if (~c["known"]).any() else np.nan
@@ -218,12 +222,7 @@ def main() -> None:
     else:
         chosen = float(args.threshold_slack)
         if chosen not in by_slack:
-            m_s = ms.with_slack(chosen)
-            by_slack[chosen] = {
-                "f23": per_segment(m_s.classify(flight3, mode="cumulative", decision="both", reset_t_ns=starts3,
-                                                gmr=False), seg3, known),
-                "p23": per_segment(m_s.classify(flight, mode="cumulative", decision="both", reset_t_ns=starts,
-                                                gmr=False), seg, known)}
+            by_slack[chosen] = at_slack(chosen, ("f23", "p23"))
     f23, p23b = by_slack[chosen]["f23"], by_slack[chosen]["p23"]
     # threshold-free alternative: the background model as one more rival in V
     f23_bg = per_segment(ms.classify(flight3, mode="cumulative", decision="confidence_bg",

@@ -1,21 +1,23 @@
-# Classify: each flight whose vehicle has a model -> per-sample maneuver labels and confidence.
+# Classify: each flight, with every model set whose vehicles include the flight's vehicle ->
+# per-sample maneuver labels and confidence.
 
 
 rule classify_flight:
     input:
-        unpack(classify_model),
+        params="results/models/{model_set}/params.npz",
+        meta="results/models/{model_set}/meta.json",
         state="results/state/{flight}.parquet",
         segments="results/segments/{flight}.parquet",
     output:
-        "results/classify/{flight}.parquet",
+        classification="results/classify/{model_set}/{flight}.parquet",
     params:
         code_version=PIPELINE_VERSION,
-        model=lambda wc: model_of(wc.flight),
-        reset=lambda wc: MODELS[model_of(wc.flight)].get("reset_at_segments", True),
+        config=lambda wc: set_config(wc.model_set),
+        job=lambda wc: {"model_set": wc.model_set},
     log:
-        "results/logs/classify_flight/{flight}.log",
+        "results/logs/classify_flight/{model_set}/{flight}.log",
     benchmark:
-        "results/benchmarks/classify_flight/{flight}.tsv"
+        "results/benchmarks/classify_flight/{model_set}/{flight}.tsv"
     threads: 1
     resources:
         mem_mb=2000,
@@ -28,4 +30,4 @@ rule classify_flight:
 
 rule classify:
     input:
-        expand("results/classify/{flight}.parquet", flight=CLASSIFIED),
+        classified_paths(),

@@ -1,4 +1,5 @@
-# Helpers shared by all rules: config + manifest validation, flight selection, wildcards.
+# Helpers shared by all rules: config + manifest validation, flight selection, wildcards, the
+# declared inputs and outputs of every stage.
 import sys
 from pathlib import Path
 
@@ -6,6 +7,8 @@ import pandas as pd
 from snakemake.utils import validate
 
 import pipeline
+from pipeline.io.schema import STREAM_NAMES
+from pipeline.models.run import model_set_config
 from pipeline.simulate.run import planned_logs, planned_sets
 
 PIPELINE_VERSION = pipeline.__version__
@@ -32,7 +35,7 @@ def _expand_path(p):
 SIM_SETS = planned_sets(config["simulate"])
 SIM_LOGS = planned_logs(config["simulate"])
 SIM_MANEUVERS = sorted({n.rsplit("_", 1)[0] for n in SIM_SETS if n.endswith("_test")})
-MODELS = config["train"]
+MODEL_SETS = config["model_sets"]
 for _row in _manifest.itertuples():
     _p = _row.path.rstrip("/")
     if _p.startswith("results/sim/logs/") and _p.split("/")[-1] not in {
@@ -60,15 +63,15 @@ flights = _manifest[[_available(r) for r in _manifest.itertuples()]].set_index(
     "flight_id", drop=False
 )
 FLIGHTS = list(flights.flight_id)
-STREAMS = [
-    "imu", "gps", "baro", "mag", "attitude", "local_position", "odometry",
-    "rangefinder", "airspeed", "control", "mode", "radar", "truth", "labels",
-]
+STREAMS = list(STREAM_NAMES)
 
 
 wildcard_constraints:
     flight="|".join(FLIGHTS) if FLIGHTS else "NO_FLIGHTS",
-    model="|".join(MODELS) if MODELS else "NO_MODELS",
+    model_set="|".join(MODEL_SETS) if MODEL_SETS else "NO_MODEL_SETS",
+
+
+# --- ingest -----------------------------------------------------------------------------------
 
 
 def flight_log(wildcards):
@@ -80,52 +83,88 @@ def flight_labels(wildcards):
     return [] if lab in ("", "none", "embedded") else [_expand_path(lab)]
 
 
-def flight_format(wildcards):
-    return flights.loc[wildcards.flight, "format"] or ""
+def ingest_job(wildcards):
+    return {
+        "flight_id": wildcards.flight,
+        "fmt": flights.loc[wildcards.flight, "format"] or None,
+    }
+
+
+def ingest_streams(flight):
+    return [f"results/ingest/{flight}/{s}.parquet" for s in STREAMS]
 
 
 def ingest_outputs(flight):
-    return [f"results/ingest/{flight}/{s}.parquet" for s in STREAMS] + [
-        f"results/ingest/{flight}/meta.json"
-    ]
+    return ingest_streams(flight) + [f"results/ingest/{flight}/meta.json"]
+
+
+def ingest_inputs(wildcards):
+    return {
+        "meta": f"results/ingest/{wildcards.flight}/meta.json",
+        "streams": ingest_streams(wildcards.flight),
+    }
+
+
+# --- simulate ---------------------------------------------------------------------------------
 
 
 def sim_log_outputs():
     return [
-        directory(f"results/sim/logs/{s['log']}") if s["is_dir"] else f"results/sim/logs/{s['log']}"
+        (
+            directory(f"results/sim/logs/{s['log']}")
+            if s["is_dir"]
+            else f"results/sim/logs/{s['log']}"
+        )
         for s in SIM_LOGS
     ]
 
 
-def flight_vehicle(wildcards):
-    return flights.loc[wildcards.flight, "vehicle"]
+# --- preprocess -------------------------------------------------------------------------------
 
 
-def model_of(flight):
-    """The first model of config['train'] whose vehicles include the flight's vehicle."""
+def preprocess_job(wildcards):
+    return {"vehicle": flights.loc[wildcards.flight, "vehicle"]}
+
+
+# --- model sets -------------------------------------------------------------------------------
+
+
+def model_sets_of(flight):
+    """The model sets whose vehicles include the flight's vehicle (each classifies it)."""
     veh = flights.loc[flight, "vehicle"]
-    return next((m for m, spec in MODELS.items() if veh in spec["vehicles"]), None)
+    return [m for m, spec in MODEL_SETS.items() if veh in spec["vehicles"]]
 
 
-CLASSIFIED = [f for f in FLIGHTS if model_of(f)]
+CLASSIFIED = [(m, f) for f in FLIGHTS for m in model_sets_of(f)]
 
 
-def classify_model(wildcards):
-    m = model_of(wildcards.flight)
-    return {"params": f"results/models/{m}/params.npz", "meta": f"results/models/{m}/meta.json"}
+def classified_paths():
+    return [f"results/classify/{m}/{f}.parquet" for m, f in CLASSIFIED]
 
 
-def flights_of(model, role):
-    vehicles = MODELS[model]["vehicles"]
-    return [f for f in FLIGHTS if flights.loc[f, "role"] == role and flights.loc[f, "vehicle"] in vehicles]
+def set_config(model_set):
+    return model_set_config(config, model_set)
+
+
+def flights_of(model_set, role):
+    vehicles = MODEL_SETS[model_set]["vehicles"]
+    return [
+        f
+        for f in FLIGHTS
+        if flights.loc[f, "role"] == role and flights.loc[f, "vehicle"] in vehicles
+    ]
+
+
+def _set_labels(model_set):
+    spec = MODEL_SETS[model_set]
+    return [m for m in SIM_MANEUVERS if m in spec.get("labels", SIM_MANEUVERS)]
 
 
 def train_inputs(wildcards):
-    spec = MODELS[wildcards.model]
-    if spec["data"] == "simulated":
-        labels = [m for m in SIM_MANEUVERS if m in spec.get("labels", SIM_MANEUVERS)]
-        return {"sets": [f"results/sim/sets/{m}_train.parquet" for m in labels]}
-    fl = flights_of(wildcards.model, "train")
+    m = wildcards.model_set
+    if MODEL_SETS[m]["data"] == "simulated":
+        return {"sets": [f"results/sim/sets/{l}_train.parquet" for l in _set_labels(m)]}
+    fl = flights_of(m, "train")
     return {
         "states": [f"results/state/{f}.parquet" for f in fl],
         "segments": [f"results/segments/{f}.parquet" for f in fl],
@@ -133,22 +172,30 @@ def train_inputs(wildcards):
 
 
 def evaluate_inputs(wildcards):
-    spec = MODELS[wildcards.model]
-    if spec["data"] == "simulated":
-        labels = [m for m in SIM_MANEUVERS if m in spec.get("labels", SIM_MANEUVERS)]
+    m = wildcards.model_set
+    if MODEL_SETS[m]["data"] == "simulated":
         return {
-            "train_sets": [f"results/sim/sets/{m}_train.parquet" for m in labels],
-            "test_sets": [f"results/sim/sets/{m}_test.parquet" for m in SIM_MANEUVERS],
+            "train_sets": [f"results/sim/sets/{l}_train.parquet" for l in _set_labels(m)],
+            "test_sets": [f"results/sim/sets/{l}_test.parquet" for l in SIM_MANEUVERS],
         }
     return {
-        "classified": [f"results/classify/{f}.parquet" for f in flights_of(wildcards.model, "test")]
+        "classified": [
+            f"results/classify/{m}/{f}.parquet" for f in flights_of(m, "test")
+        ]
     }
 
 
 def flight_classified(wildcards):
-    return [f"results/classify/{wildcards.flight}.parquet"] if model_of(wildcards.flight) else []
+    return [
+        f"results/classify/{m}/{wildcards.flight}.parquet"
+        for m in model_sets_of(wildcards.flight)
+    ]
 
 
 def get_final_output():
     # the simulated sets and logs are always made (the seed-000 datasets), used by a flight or not
-    return ["results/index.html", "results/sim/index.json", "results/sim/logs/flights.tsv"]
+    return [
+        "results/index.html",
+        "results/sim/index.json",
+        "results/sim/logs/flights.tsv",
+    ]

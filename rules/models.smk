@@ -1,21 +1,21 @@
-# Models: one HMM set per config["train"] entry, and its evaluation against seed 000's tables.
+# Model sets: one HMM set per config["model_sets"] entry, and its evaluation against seed 000's
+# tables.
 
 
 rule train_model:
     input:
         unpack(train_inputs),
     output:
-        params="results/models/{model}/params.npz",
-        meta="results/models/{model}/meta.json",
+        params="results/models/{model_set}/params.npz",
+        meta="results/models/{model_set}/meta.json",
     params:
         code_version=PIPELINE_VERSION,
-        models=config["models"],
-        spec=lambda wc: MODELS[wc.model],
-        outdir=lambda wc: f"results/models/{wc.model}",
+        config=lambda wc: set_config(wc.model_set),
+        job=lambda wc: {"model_set": wc.model_set, "seed": config["seed"]},
     log:
-        "results/logs/train_model/{model}.log",
+        "results/logs/train_model/{model_set}.log",
     benchmark:
-        "results/benchmarks/train_model/{model}.tsv"
+        "results/benchmarks/train_model/{model_set}.tsv"
     threads: 1
     resources:
         mem_mb=4000,
@@ -29,18 +29,18 @@ rule train_model:
 rule evaluate_model:
     input:
         unpack(evaluate_inputs),
-        params="results/models/{model}/params.npz",
-        meta="results/models/{model}/meta.json",
+        params="results/models/{model_set}/params.npz",
+        meta="results/models/{model_set}/meta.json",
     output:
-        "results/models/{model}/evaluation.parquet",
+        evaluation="results/models/{model_set}/evaluation.parquet",
     params:
         code_version=PIPELINE_VERSION,
-        spec=lambda wc: MODELS[wc.model],
-        outdir=lambda wc: f"results/models/{wc.model}",
+        config=lambda wc: set_config(wc.model_set),
+        job=lambda wc: {"model_set": wc.model_set},
     log:
-        "results/logs/evaluate_model/{model}.log",
+        "results/logs/evaluate_model/{model_set}.log",
     benchmark:
-        "results/benchmarks/evaluate_model/{model}.tsv"
+        "results/benchmarks/evaluate_model/{model_set}.tsv"
     threads: 1
     resources:
         mem_mb=4000,
@@ -53,4 +53,4 @@ rule evaluate_model:
 
 rule train:
     input:
-        expand("results/models/{model}/evaluation.parquet", model=MODELS),
+        expand("results/models/{model_set}/evaluation.parquet", model_set=MODEL_SETS),

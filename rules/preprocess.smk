@@ -3,7 +3,7 @@
 
 rule preprocess_flight:
     input:
-        lambda wc: ingest_outputs(wc.flight),
+        unpack(ingest_inputs),
     output:
         state="results/state/{flight}.parquet",
         segments="results/segments/{flight}.parquet",
@@ -11,9 +11,8 @@ rule preprocess_flight:
         info="results/state/{flight}.json",
     params:
         code_version=PIPELINE_VERSION,
-        pre=config["preprocess"],
-        vehicle=flight_vehicle,
-        ingest_dir=lambda wc: f"results/ingest/{wc.flight}",
+        config=config["preprocess"],
+        job=preprocess_job,
     log:
         "results/logs/preprocess_flight/{flight}.log",
     benchmark:

@@ -1,9 +1,10 @@
-# Reports: one page per flight, the index over all flights, one local copy of plotly.js.
+# Reports: one page per flight and per model set, the index over all of them, one local copy of
+# plotly.js.
 
 
 rule plotly_js:
     output:
-        "results/report/assets/plotly.min.js",
+        js="results/report/assets/plotly.min.js",
     params:
         code_version=PIPELINE_VERSION,
     log:
@@ -22,7 +23,7 @@ rule plotly_js:
 
 rule flight_report:
     input:
-        ingest=lambda wc: ingest_outputs(wc.flight),
+        unpack(ingest_inputs),
         state="results/state/{flight}.parquet",
         segments="results/segments/{flight}.parquet",
         calibration="results/calibration/{flight}.parquet",
@@ -30,7 +31,7 @@ rule flight_report:
         template="reports/templates/flight.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
-        report(
+        page=report(
             "results/report/flights/{flight}.html",
             caption="../reports/captions/flight.rst",
             category="Flights",
@@ -38,7 +39,8 @@ rule flight_report:
         ),
     params:
         code_version=PIPELINE_VERSION,
-        ingest_dir=lambda wc: f"results/ingest/{wc.flight}",
+        config={},
+        job={"index": "results/index.html"},
     log:
         "results/logs/flight_report/{flight}.log",
     benchmark:
@@ -55,25 +57,26 @@ rule flight_report:
 
 rule model_report:
     input:
-        params="results/models/{model}/params.npz",
-        meta="results/models/{model}/meta.json",
-        evaluation="results/models/{model}/evaluation.parquet",
+        params="results/models/{model_set}/params.npz",
+        meta="results/models/{model_set}/meta.json",
+        evaluation="results/models/{model_set}/evaluation.parquet",
         template="reports/templates/model.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
-        report(
-            "results/report/models/{model}.html",
+        page=report(
+            "results/report/models/{model_set}.html",
             caption="../reports/captions/model.rst",
             category="Models",
-            labels={"model": "{model}"},
+            labels={"model_set": "{model_set}"},
         ),
     params:
         code_version=PIPELINE_VERSION,
-        model_dir=lambda wc: f"results/models/{wc.model}",
+        config={},
+        job={"index": "results/index.html"},
     log:
-        "results/logs/model_report/{model}.log",
+        "results/logs/model_report/{model_set}.log",
     benchmark:
-        "results/benchmarks/model_report/{model}.tsv"
+        "results/benchmarks/model_report/{model_set}.tsv"
     threads: 1
     resources:
         mem_mb=2000,
@@ -89,15 +92,16 @@ rule report_index:
         metas=expand("results/ingest/{flight}/meta.json", flight=FLIGHTS),
         pages=expand("results/report/flights/{flight}.html", flight=FLIGHTS),
         segments=expand("results/segments/{flight}.parquet", flight=FLIGHTS),
-        classified=expand("results/classify/{flight}.parquet", flight=CLASSIFIED),
-        models=expand("results/report/models/{model}.html", model=MODELS),
+        classified=classified_paths(),
+        models=expand("results/report/models/{model_set}.html", model_set=MODEL_SETS),
     output:
-        report("results/index.html", caption="../reports/captions/index.rst", category="Index"),
+        index=report(
+            "results/index.html", caption="../reports/captions/index.rst", category="Index"
+        ),
     params:
         code_version=PIPELINE_VERSION,
-        flights=FLIGHTS,
-        classified=CLASSIFIED,
-        models=list(MODELS),
+        config={},
+        job={"flights": FLIGHTS, "model_sets": list(MODEL_SETS)},
     log:
         "results/logs/report_index/index.log",
     benchmark:

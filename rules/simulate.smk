@@ -1,4 +1,5 @@
-# Simulation: the seed-000 bulk sets and the log-file flights, names fixed by config["simulate"].
+# Simulation: the seed-000 bulk sets, the log-file flights and the demo flight, names fixed by
+# config["simulate"] (static DAG).
 
 
 rule simulate_sets:
@@ -8,9 +9,8 @@ rule simulate_sets:
         index="results/sim/index.json",
     params:
         code_version=PIPELINE_VERSION,
-        sim=config["simulate"],
-        seed=config["seed"],
-        outdir=lambda wc, output: str(Path(output.index).parent),
+        config=config["simulate"],
+        job={"seed": config["seed"]},
     log:
         "results/logs/simulate_sets/simulate_sets.log",
     benchmark:
@@ -32,9 +32,8 @@ rule simulate_logs:
         manifest="results/sim/logs/flights.tsv",
     params:
         code_version=PIPELINE_VERSION,
-        sim=config["simulate"],
-        seed=config["seed"],
-        outdir=lambda wc, output: str(Path(output.manifest).parent),
+        config=config["simulate"],
+        job={"seed": config["seed"]},
     log:
         "results/logs/simulate_logs/simulate_logs.log",
     benchmark:
@@ -47,6 +46,27 @@ rule simulate_logs:
         "envs/pipeline.yaml"
     script:
         "scripts/simulate_logs.py"
+
+
+rule demo_log:
+    output:
+        log="results/sim/demo/demo-quad.bin",
+    params:
+        code_version=PIPELINE_VERSION,
+        config=config["simulate"],
+        job={"seed": config["seed"]},
+    log:
+        "results/logs/demo_log/demo-quad.log",
+    benchmark:
+        "results/benchmarks/demo_log/demo-quad.tsv"
+    threads: 1
+    resources:
+        mem_mb=500,
+        runtime=5,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/demo_log.py"
 
 
 rule simulate:

@@ -1,11 +1,16 @@
-"""``uavpipe classify MODEL_DIR STATE.parquet -o OUT.parquet``: per-sample online labels.
+"""``uavpipe classify MODEL_DIR STATE.parquet... -o OUT``: per-sample online maneuver labels.
 
-Output columns: ``run_id``, ``t_ns``, ``truth`` (when the input has ``label``), ``pred``
-(maneuver or ``unknown``), ``best`` (``background`` when that rival wins under
-``--decision confidence_bg``), ``V_best`` (confidence), ``oneclass_ok``, ``ll_<label>``
-(and ``ll_background``),
-``state`` (online Viterbi state), ``change``/``change_t_ns`` (reset mode) and the GMR
-acceleration/jerk estimates (``state9`` models).
+The same entry point as the workflow's ``classify_flight`` rule
+(:func:`pipeline.models.run.run_classify`). With ``--segments SEG...`` (one per table) samples
+carry their segment's label in ``truth`` and, with ``--reset-at-segments``, the forward passes
+restart at every segment start (the workflow's default for its model sets); without it a table
+that carries ``run_id``/``label`` (a simulated set) is classified run by run.
+
+Output columns: ``run_id``, ``t_ns``, ``truth`` (when the input has labels), ``pred`` (maneuver
+or ``unknown``), ``best`` (``background`` when that rival wins under ``--decision
+confidence_bg``), ``V_best`` (confidence), ``oneclass_ok``, ``ll_<label>`` (and
+``ll_background``), ``state`` (online Viterbi state), ``change``/``change_t_ns`` (reset mode)
+and the GMR acceleration/jerk estimates (``state9`` models).
 """
 
 from __future__ import annotations
@@ -13,50 +18,48 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import pandas as pd
-
-from ..io.parquet import write_table
-from ..models.base import ModelError
-
 
 def add_parser(sub) -> None:
     p = sub.add_parser("classify", help="classify maneuvers online with trained HMMs")
     p.add_argument("model", type=Path, metavar="MODEL_DIR")
     p.add_argument("tables", nargs="+", type=Path, metavar="STATE.parquet")
-    p.add_argument("-o", "--out", type=Path, required=True, metavar="OUT.parquet",
+    p.add_argument("-o", "--out", type=Path, required=True, metavar="OUT",
                    help="output file (one input) or directory (several inputs)")
+    p.add_argument("--segments", nargs="+", type=Path, default=None, metavar="SEGMENTS",
+                   help="segments tables (one per STATE table): labels in 'truth'")
+    p.add_argument("--reset-at-segments", action="store_true",
+                   help="restart the forward passes at each segment's t_start_ns (needs --segments)")
     p.add_argument("--mode", choices=("cumulative", "windowed", "reset"), default=None)
     p.add_argument("--decision", choices=("confidence", "oneclass", "both", "confidence_bg"), default=None)
-    p.add_argument("--reset-at-segments", type=Path, default=None, metavar="SEGMENTS.parquet",
-                   help="restart the forward passes at each segment's t_start_ns")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..models.classifier import ManeuverModelSet
+    from ..models.base import ModelError
+    from ..models.run import run_classify
 
-    try:
-        ms = ManeuverModelSet.load(args.model)
-    except ModelError as exc:
-        print(f"uavpipe classify: {exc}", file=sys.stderr)
+    if not (args.model / "meta.json").is_file():
+        print(f"uavpipe classify: {args.model}: not a model directory (no meta.json)", file=sys.stderr)
         return 1
-    resets = None
-    if args.reset_at_segments is not None:
-        resets = pd.read_parquet(args.reset_at_segments)["t_start_ns"].to_numpy()
+    if args.segments is not None and len(args.segments) != len(args.tables):
+        print(f"uavpipe classify: --segments: {len(args.segments)} given for {len(args.tables)} tables",
+              file=sys.stderr)
+        return 1
     failed = 0
-    for path in args.tables:
+    for k, path in enumerate(args.tables):
         out = args.out if len(args.tables) == 1 else args.out / f"{path.stem}.parquet"
+        inputs = {"params": args.model / "params.npz", "meta": args.model / "meta.json", "state": path,
+                  "segments": args.segments[k] if args.segments else None}
         try:
-            df = pd.read_parquet(path)
-            res = ms.classify(df, mode=args.mode, decision=args.decision, reset_t_ns=resets)
-            res["run_id"] = res["run_id"].astype(str)
-            write_table(res, out, name="classification",
-                        extra={"model": str(args.model), "labels": ms.labels_,
-                               "mode": args.mode or ms.config.mode})
+            res = run_classify(inputs, {"classification": out}, {"reset_at_segments": args.reset_at_segments},
+                               model_set=args.model.name, mode=args.mode, decision=args.decision)
         except (ModelError, ValueError, OSError, KeyError) as exc:
             print(f"uavpipe classify: {path}: {exc}", file=sys.stderr)
             failed += 1
             continue
-        n_unknown = int((res["pred"] == "unknown").sum())
-        print(f"{path} -> {out} ({len(res)} samples, {n_unknown} unknown)")
+        if res.status != "ok":
+            print(f"uavpipe classify: {path}: {res.error}", file=sys.stderr)
+            failed += 1
+            continue
+        print(f"{path} -> {out} ({res.diagnostics['n_samples']} samples, {res.diagnostics['n_unknown']} unknown)")
     return 1 if failed else 0

@@ -11,7 +11,7 @@ import json
 import sys
 from pathlib import Path
 
-from ..config import ConfigError, load_config
+from ..config import ConfigError, load_config, section
 
 
 def add_parser(sub) -> None:
@@ -25,10 +25,11 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from ..preprocess.state import preprocess_dir, summary_line
+    from ..preprocess.run import run_preprocess
+    from ..preprocess.state import summary_line
 
     try:
-        cfg = load_config(args.config)
+        sec = section(load_config(args.config), "preprocess")
     except ConfigError as exc:
         print(f"uavpipe preprocess: {exc}", file=sys.stderr)
         return 2
@@ -41,13 +42,20 @@ def run(args) -> int:
             print(f"uavpipe preprocess: {d}: not an ingest folder ({meta}: {exc})", file=sys.stderr)
             failed.append(d)
             continue
+        out = args.out / fid
+        outputs = {"state": out / "state.parquet", "segments": out / "segments.parquet",
+                   "calibration": out / "calibration.parquet", "info": out / "preprocess.json"}
         try:
-            diag = preprocess_dir(d, args.out / fid, cfg, vehicle=args.vehicle)
+            res = run_preprocess({"meta": meta}, outputs, sec, vehicle=args.vehicle)
         except (ConfigError, ValueError, OSError) as exc:
             print(f"uavpipe preprocess: {d}: {exc}", file=sys.stderr)
             failed.append(d)
             continue
-        print(f"{d} -> {args.out / fid}: {summary_line(diag)}")
+        if res.status == "failed":
+            print(f"uavpipe preprocess: {d}: {res.diagnostics.get('error')}", file=sys.stderr)
+            failed.append(d)
+            continue
+        print(f"{d} -> {out}: {summary_line(res.diagnostics)}")
     if failed:
         print(f"uavpipe preprocess: {len(failed)} of {len(args.ingest_dirs)} flight(s) failed", file=sys.stderr)
         return 1

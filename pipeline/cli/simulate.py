@@ -1,5 +1,9 @@
 """``uavpipe simulate OUT_DIR``: the seed-000 simulated data sets, log files and summary table.
 
+The same entry points as the workflow's ``simulate_sets`` and ``simulate_logs`` rules, with the
+same layout: ``OUT_DIR/sets/<name>.parquet``, ``OUT_DIR/summary.parquet``, ``OUT_DIR/index.json``
+and ``OUT_DIR/logs/`` (log files, truth side-cars, ``flights.tsv``).
+
 Reads the ``simulate`` section and ``seed`` of the dataset config (see
 :mod:`pipeline.simulate.datasets` for what is written). ``--size thesis`` switches to the
 thesis-sized sets; ``--seed`` overrides the config's master seed.
@@ -24,7 +28,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from ..simulate.datasets import run_simulate
+    from ..simulate.run import planned_logs, planned_sets, run_simulate_logs, run_simulate_sets
 
     try:
         cfg = load_config(args.config)
@@ -36,11 +40,17 @@ def run(args) -> int:
             ds["log_formats"] = []
         sim["datasets"] = ds
         seed = args.seed if args.seed is not None else int(cfg.get("seed", 0))
-        index = run_simulate(args.out_dir, sim, seed, progress=lambda m: print(f"uavpipe simulate: {m}",
-                                                                               file=sys.stderr))
+        out = args.out_dir
+        sets = run_simulate_sets({}, {"sets": [out / "sets" / f"{n}.parquet" for n in planned_sets(sim)],
+                                      "summary": out / "summary.parquet", "index": out / "index.json"},
+                                 sim, seed=seed)
+        logs = planned_logs(sim)
+        if logs:
+            run_simulate_logs({}, {"logs": [out / "logs" / r["log"] for r in logs],
+                                   "sidecars": [out / "logs" / r["sidecar"] for r in logs],
+                                   "manifest": out / "logs" / "flights.tsv"}, sim, seed=seed)
     except ConfigError as exc:
         print(f"uavpipe simulate: {exc}", file=sys.stderr)
         return 2
-    print(f"uavpipe simulate: {len(index['sets'])} sets, {len(index['logs'])} log files -> {args.out_dir}",
-          file=sys.stderr)
+    print(f"uavpipe simulate: {len(sets.paths)} sets, {len(logs)} log files -> {args.out_dir}", file=sys.stderr)
     return 0

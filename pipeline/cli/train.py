@@ -1,8 +1,15 @@
-"""``uavpipe train STATE.parquet... -o MODEL_DIR``: one HMM per maneuver label (seed 000 §3.3).
+"""``uavpipe train TABLE... -o MODEL_DIR``: one HMM per maneuver label (seed 000 §3.3).
 
-Input tables carry the ``schema.STATE`` columns plus ``label`` (one maneuver per run) and,
-for bulk sets, ``run_id``; several files are concatenated (``run_id`` made unique per file).
-Writes ``MODEL_DIR/params.npz`` and ``MODEL_DIR/meta.json``.
+The same entry point as the workflow's ``train_model`` rule (:func:`pipeline.models.run.run_train`):
+
+* without ``--segments`` the tables are *sets*: ``schema.STATE`` columns plus ``label`` (one
+  maneuver per run) and ``run_id`` (the simulated bulk sets; run ids made unique per file);
+* with ``--segments SEG...`` (one per table, same order) they are flights' ``state`` tables and
+  every labelled segment is one training run.
+
+Hyperparameters come from the config's ``hmm`` section, or with ``--model-set NAME`` from that
+entry of ``model_sets`` (its ``hmm`` overrides, ``labels`` and ``exclude``) exactly as the
+workflow trains it. Writes ``MODEL_DIR/params.npz`` and ``MODEL_DIR/meta.json``.
 """
 
 from __future__ import annotations
@@ -10,56 +17,53 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import pandas as pd
-
-from ..config import ConfigError, load_config, section
-from ..models.base import ModelError, ModelsConfig
+from ..config import ConfigError, load_config
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("train", help="train per-maneuver HMMs from labelled state tables")
-    p.add_argument("tables", nargs="+", type=Path, metavar="STATE.parquet")
+    p.add_argument("tables", nargs="+", type=Path, metavar="TABLE")
     p.add_argument("-o", "--out", type=Path, required=True, metavar="MODEL_DIR")
+    p.add_argument("--segments", nargs="+", type=Path, default=None, metavar="SEGMENTS",
+                   help="segments tables of the flights (one per TABLE): train on flights")
     p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    p.add_argument("--model-set", default=None, help="use this model_sets entry of the config")
     p.add_argument("--labels", nargs="*", default=None, help="train only these maneuver labels")
-    p.add_argument("--exclude", nargs="*", default=[], help="labels to leave out (e.g. take-off, landing)")
-    p.add_argument("--seed", type=int, default=None, help="override models.seed")
+    p.add_argument("--exclude", nargs="*", default=None, help="labels to leave out (e.g. take-off, landing)")
+    p.add_argument("--seed", type=int, default=None, help="override the config's master seed")
     p.set_defaults(func=run)
 
 
-def load_tables(paths: list[Path]) -> pd.DataFrame:
-    frames = []
-    for i, path in enumerate(paths):
-        try:
-            df = pd.read_parquet(path)
-        except (OSError, ValueError) as exc:
-            raise ModelError(f"{path}: cannot read Parquet: {exc}") from None
-        if "run_id" not in df.columns:
-            df = df.assign(run_id=0)
-        df["run_id"] = [f"{i}:{r}" for r in df["run_id"]] if len(paths) > 1 else df["run_id"]
-        frames.append(df)
-    return pd.concat(frames, ignore_index=True)
-
-
 def run(args) -> int:
-    from ..models.classifier import ManeuverModelSet
+    from ..models.base import ModelError
+    from ..models.run import model_set_config, run_train
 
     try:
-        sec = section(load_config(args.config), "models")
-        cfg = ModelsConfig.from_section(sec, **({"seed": args.seed} if args.seed is not None else {}))
-        df = load_tables(args.tables)
-        if "label" not in df.columns:
-            raise ModelError("training tables need a 'label' column")
-        keep = df["label"].notna() & ~df["label"].isin(args.exclude)
-        if args.labels:
-            keep &= df["label"].isin(args.labels)
-        ms = ManeuverModelSet(config=cfg).fit(df[keep])
-        ms.save(args.out)
-    except (ConfigError, ModelError, ValueError) as exc:
+        cfg = load_config(args.config)
+        if args.model_set:
+            spec = model_set_config(cfg, args.model_set)
+            name = args.model_set
+        else:
+            spec = {"data": "flights" if args.segments else "simulated", "hmm": dict(cfg.get("hmm") or {})}
+            name = args.out.name
+        if args.labels is not None:
+            spec["labels"] = list(args.labels)
+        if args.exclude is not None:
+            spec["exclude"] = list(args.exclude)
+        if args.segments is not None and len(args.segments) != len(args.tables):
+            raise ConfigError(f"--segments: {len(args.segments)} given for {len(args.tables)} tables")
+        inputs = ({"states": args.tables, "segments": args.segments} if args.segments
+                  else {"sets": args.tables})
+        seed = args.seed if args.seed is not None else int(cfg.get("seed", 0))
+        res = run_train(inputs, {"params": args.out / "params.npz", "meta": args.out / "meta.json"}, spec,
+                        model_set=name, seed=seed)
+    except (ConfigError, ModelError, ValueError, OSError) as exc:
         print(f"uavpipe train: {exc}", file=sys.stderr)
         return 1
-    for lab in ms.labels_:
-        t = ms.training_[lab]
+    if res.status != "ok":
+        print(f"uavpipe train: {res.error}", file=sys.stderr)
+        return 1
+    for lab, t in res.diagnostics["training"].items():
         print(f"{lab}: {t['n_states']} states, {t['n_sequences']} sequences, {t['n_samples']} samples, "
               f"{t['n_iter']} iterations, converged={t['converged']}")
     print(f"models -> {args.out}")

@@ -17,7 +17,7 @@ from .parquet import write_flightlog
 from .registry import read_log
 
 
-def run_ingest(log_path: str | os.PathLike, out_dir: str | os.PathLike, *, flight_id: str,
+def _run_ingest_old(log_path: str | os.PathLike, out_dir: str | os.PathLike, *, flight_id: str,
                fmt: str | None = None, labels: str | os.PathLike | None = None,
                config: dict | None = None) -> FlightLog:
     """Decode ``log_path`` and write ``out_dir/<stream>.parquet`` + ``out_dir/meta.json``.
@@ -56,3 +56,11 @@ def run_ingest(log_path: str | os.PathLike, out_dir: str | os.PathLike, *, fligh
               f"{log.duration_s:.1f} s, {log.meta['status']})", file=sys.stderr)
     write_flightlog(log, Path(out_dir))
     return log
+
+
+def run_ingest(inputs, outputs, config=None, *, flight_id, fmt=None):  # TEMP shim until h-perf merge
+    labels = list(inputs.labels) if hasattr(inputs, "labels") else list(inputs.get("labels", []))
+    log = inputs.log if hasattr(inputs, "log") else inputs["log"]
+    meta = outputs.meta if hasattr(outputs, "meta") else outputs["meta"]
+    return _run_ingest_old(log, Path(meta).parent, flight_id=flight_id, fmt=fmt,
+                           labels=labels[0] if labels else None, config=config)

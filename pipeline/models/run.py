@@ -1,16 +1,24 @@
-"""Workflow entry points of the model stages: train one model set, classify one flight, and
-evaluate a model against the seed-000 result tables.
+"""Entry points of the model stages: train one model set, classify one flight with it, and
+evaluate it against the seed-000 result tables.
 
-A *model* of the workflow is one entry of the config's ``train`` section::
+A *model set* is one entry of the config's ``model_sets`` section (keyed by name; results under
+``results/models/<model_set>/``)::
 
     sim: {data: simulated, labels: [M1, M2, M3, M4], vehicles: [sim-quad]}
-    f3a: {data: flights, vehicles: [f3a-plane], exclude: [tkoff, lnd]}
+    f3a: {data: flights, vehicles: [f3a-plane], exclude: [tkoff, lnd], hmm: {feature_set: aero}}
 
 ``data: simulated`` trains on the simulated bulk sets ``<label>_train.parquet``; ``data:
 flights`` on the labelled segments of the manifest's ``role: train`` flights of ``vehicles``
-(each segment is one training run). ``vehicles`` also names the flights the model classifies.
+(each segment is one training run). ``vehicles`` also names the flights the set classifies
+(``results/classify/<model_set>/<flight>.parquet``); two model sets may name one vehicle. The
+entry's ``hmm`` block overrides the ``hmm`` hyperparameter section for that set only; the
+workflow passes the merged block as ``config["hmm"]``.
 
-Failures are data, not crashes: a model that cannot be trained (no data, degenerate
+Each entry point takes the declared ``inputs``/``outputs`` paths, the set's config and the
+per-job values (:func:`run_train`, :func:`run_classify`, :func:`run_evaluate`); the workflow
+rules and ``uavpipe train``/``uavpipe classify`` call the same functions.
+
+Failures are data, not crashes: a model set that cannot be trained (no data, degenerate
 covariances) is written as a placeholder (``meta.json`` ``status: failed`` with the reason, an
 empty ``params.npz``); classifying with it, or classifying a flight whose preprocessing failed,
 writes an empty classification table whose metadata carries the status and reason.
@@ -21,14 +29,16 @@ from __future__ import annotations
 import json
 import os
 import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
 from .. import __version__
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
+from ..config import ConfigError
 from .base import ModelError, ModelsConfig
 from .metrics import THESIS_TRUTH, per_maneuver_table, thesis_side_by_side
 
@@ -40,6 +50,54 @@ THESIS_TABLES = {("train", "oneclass"): "3.1", ("train", "confidence"): "3.2",
                  ("test", "oneclass"): "3.3", ("test", "confidence"): "3.4"}
 
 
+@dataclass(frozen=True)
+class ModelStageResult:
+    """What a model-stage entry point did: ``status`` (``ok``/``failed``), the reason, and the
+    stage's diagnostics (training summary, sample counts, evaluation rows)."""
+
+    model_set: str
+    status: str
+    error: str = ""
+    diagnostics: dict | None = None
+
+
+def _get(paths: Any, name: str, default: Any = None):
+    # snakemake namedlists and plain dicts alike
+    if isinstance(paths, Mapping):
+        return paths.get(name, default)
+    return getattr(paths, name, default)
+
+
+def _list(paths: Any, name: str) -> list:
+    v = _get(paths, name, None)
+    if v is None:
+        return []
+    return [v] if isinstance(v, (str, os.PathLike)) else list(v)
+
+
+def model_set_config(config: Mapping, model_set: str) -> dict:
+    """The entry ``config["model_sets"][model_set]`` with ``hmm`` = the ``hmm`` section merged
+    with the entry's own ``hmm`` overrides (what the train/classify/evaluate entry points take).
+
+    Raises
+    ------
+    ConfigError
+        When the config has no such model set.
+    """
+    sets = config.get("model_sets") or {}
+    if model_set not in sets:
+        raise ConfigError(f"model_sets: no model set {model_set!r} (defined: {sorted(sets) or 'none'})")
+    spec = dict(sets[model_set])
+    spec["hmm"] = {**dict(config.get("hmm") or {}), **dict(spec.get("hmm") or {})}
+    return spec
+
+
+def hmm_config(config: Mapping, seed: int) -> ModelsConfig:
+    """The model set's hyperparameters: ``config["hmm"]`` (the ``hmm`` section merged with the
+    set's overrides) and the master seed."""
+    return ModelsConfig.from_section({**dict(config.get("hmm") or {}), "seed": int(seed)})
+
+
 def _say(msg: str) -> None:
     print(f"uavpipe models: {msg}", file=sys.stderr, flush=True)
 
@@ -49,6 +107,8 @@ def _read_sets(paths: Sequence[str | os.PathLike]) -> pd.DataFrame:
     frames = []
     for i, p in enumerate(paths):
         df = pd.read_parquet(p)
+        if "run_id" not in df.columns:  # one run per file (a single labelled state table)
+            df["run_id"] = 0
         df["run_id"] = [f"{Path(p).stem}:{r}" for r in df["run_id"]]
         frames.append(df)
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
@@ -92,35 +152,39 @@ def _write_failed_model(out_dir: Path, spec: Mapping, reason: str) -> None:
                 "code_version": __version__}, out_dir / "meta.json")
 
 
-def train_model(name: str, spec: Mapping, out_dir: str | os.PathLike, models_cfg: Mapping | None, *,
-                sets: Sequence = (), states: Sequence = (), segments: Sequence = ()) -> dict:
-    """Train model ``name`` from its inputs and write ``out_dir/{params.npz, meta.json}``.
+def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) -> ModelStageResult:
+    """Train model set ``model_set`` and write ``outputs.params`` (npz) and ``outputs.meta`` (JSON).
 
     Parameters
     ----------
-    name : str
-        Model name (key of the ``train`` section).
-    spec : mapping
-        Its entry: ``data`` (``simulated``/``flights``), optional ``labels``, ``exclude`` and
-        ``models`` (overrides of the ``models`` section for this model only).
-    out_dir : path-like
-        ``results/models/<name>``.
-    models_cfg : mapping
-        The ``models`` section (hyperparameters, seed).
-    sets : paths
-        Simulated ``<label>_train.parquet`` sets (``data: simulated``).
-    states, segments : paths
-        ``state`` and ``segments`` tables of the training flights, in the same order.
+    inputs : mapping
+        ``sets``: simulated ``<label>_train.parquet`` sets (``data: simulated``); or ``states``
+        and ``segments``: the training flights' tables, in the same order (``data: flights``).
+    outputs : mapping
+        ``params`` and ``meta``, in one folder (``results/models/<model_set>/``).
+    config : mapping
+        The set's entry of ``model_sets``: ``data``, optional ``labels``/``exclude``, and
+        ``hmm`` (the hyperparameters with the set's overrides merged in).
+    model_set : str
+        Its name.
+    seed : int
+        The master seed (every random choice of training derives from it).
 
     Returns
     -------
-    dict
-        The written ``meta.json`` content.
+    ModelStageResult
+        ``diagnostics`` holds the written ``meta.json`` content.
     """
     from .classifier import ManeuverModelSet
 
-    out = Path(out_dir)
-    cfg = ModelsConfig.from_section(models_cfg, **dict(spec.get("models") or {}))
+    params, meta_path = Path(_get(outputs, "params")), Path(_get(outputs, "meta"))
+    out = params.parent
+    if meta_path.parent != out or params.name != "params.npz" or meta_path.name != "meta.json":
+        raise ModelError(f"model set {model_set}: outputs must be <dir>/params.npz and <dir>/meta.json, "
+                         f"got {params} and {meta_path}")
+    spec = {k: v for k, v in dict(config).items() if k != "hmm"}
+    sets, states, segments = _list(inputs, "sets"), _list(inputs, "states"), _list(inputs, "segments")
+    cfg = hmm_config(config, seed)  # a bad hyperparameter is a config error, not a placeholder
     try:
         df = _read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments)
         if not len(df) or "label" not in df.columns:
@@ -133,16 +197,16 @@ def train_model(name: str, spec: Mapping, out_dir: str | os.PathLike, models_cfg
         ms = ManeuverModelSet(config=cfg).fit(df[keep].reset_index(drop=True))
     except ValueError as exc:  # ModelError, numpy LinAlgError, bad tables: a placeholder model
         reason = f"training failed: {type(exc).__name__}: {exc}"
-        _say(f"{name}: {reason}")
+        _say(f"{model_set}: {reason}")
         _write_failed_model(out, spec, reason)
-        return json.loads((out / "meta.json").read_text())
+        return ModelStageResult(model_set, "failed", reason, json.loads(meta_path.read_text()))
     ms.save(out)
-    meta = json.loads((out / "meta.json").read_text())
-    meta.update({"status": "ok", "name": name, "spec": dict(spec),
+    meta = json.loads(meta_path.read_text())
+    meta.update({"status": "ok", "name": model_set, "spec": spec,
                  "training_inputs": [str(p) for p in (*sets, *states)]})
-    write_json(meta, out / "meta.json")
-    _say(f"{name}: trained {len(ms.labels_)} maneuver models {ms.labels_}")
-    return meta
+    write_json(meta, meta_path)
+    _say(f"{model_set}: trained {len(ms.labels_)} maneuver models {ms.labels_}")
+    return ModelStageResult(model_set, "ok", "", meta)
 
 
 def model_status(model_dir: str | os.PathLike) -> tuple[str, str]:
@@ -157,47 +221,68 @@ def _empty_classification() -> pd.DataFrame:
                          "best": pd.Series([], dtype=str), "V_best": pd.Series([], dtype=np.float64)})
 
 
-def classify_flight(state_path, segments_path, model_dir, out_path, *, model: str = "",
-                    reset_at_segments: bool = True) -> pd.DataFrame:
-    """Classify one preprocessed flight with a trained model set; write ``out_path``.
+def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str | None = None,
+                 decision: str | None = None) -> ModelStageResult:
+    """Classify one preprocessed flight with a trained model set; write ``outputs.classification``.
 
-    Samples inside a labelled segment carry its label in ``truth`` (``""`` elsewhere); with
-    ``reset_at_segments`` the forward passes restart at every segment start, as the thesis
-    classifies each maneuver from its first sample.
+    Parameters
+    ----------
+    inputs : mapping
+        ``params``/``meta`` of the model set, ``state`` (the flight's state table) and optional
+        ``segments``. Samples inside a labelled segment carry its label in ``truth`` (``""``
+        elsewhere). Without segments, a table that carries its own ``run_id``/``label`` columns
+        (a simulated bulk set) is classified run by run.
+    outputs : mapping
+        ``classification``: the per-sample Parquet table.
+    config : mapping
+        The set's entry of ``model_sets``; ``reset_at_segments`` (default true) restarts the
+        forward passes at every segment start, as the thesis classifies each maneuver from its
+        first sample.
+    model_set : str
+        Its name (recorded in the table metadata).
+    mode, decision : str, optional
+        Override the model set's classification mode / decision rule.
     """
     from .classifier import ManeuverModelSet
 
-    extra = {"model": model, "flight_id": read_table_meta(state_path).get("flight_id")}
+    model_dir = Path(_get(inputs, "params")).parent
+    state_path, segments_path = _get(inputs, "state"), _get(inputs, "segments")
+    out_path = _get(outputs, "classification")
+    st_meta = read_table_meta(state_path)
+    extra = {"model_set": model_set, "model": model_set, "flight_id": st_meta.get("flight_id")}
     m_status, m_error = model_status(model_dir)
     state = read_table(state_path)
-    st_meta = read_table_meta(state_path)
     reason = ""
     if m_status == "failed":
-        reason = f"model {model} failed: {m_error}"
+        reason = f"model set {model_set} failed: {m_error}"
     elif st_meta.get("status") == "failed":
         reason = st_meta.get("error") or "preprocessing failed"
     elif not len(state) or not state["pos_n_m"].notna().any():
         reason = "no position data to classify"
     if not reason:
-        seg = read_table(segments_path)
-        lab = label_state(state, seg)
+        seg = read_table(segments_path) if segments_path else None
+        lab = label_state(state, seg).drop(columns="segment_id") if seg is not None else state
+        resets = None
+        if seg is not None and len(seg) and config.get("reset_at_segments", True):
+            resets = seg["t_start_ns"].to_numpy()
         try:
             ms = ManeuverModelSet.load(model_dir)
-            res = ms.classify(lab.drop(columns="segment_id"),
-                              reset_t_ns=seg["t_start_ns"].to_numpy() if reset_at_segments and len(seg) else None)
+            res = ms.classify(lab, mode=mode, decision=decision, reset_t_ns=resets)
         except ValueError as exc:  # ModelError and numerical failures on odd flights
             reason = f"classification failed: {type(exc).__name__}: {exc}"
         else:
             res["run_id"] = res["run_id"].astype(str)
-            res["truth"] = res["truth"].replace({"<NA>": "", "nan": "", "None": ""})
+            if "truth" in res:
+                res["truth"] = res["truth"].replace({"<NA>": "", "nan": "", "None": ""})
             write_table(res, out_path, name="classification",
-                        extra={**extra, "status": "ok", "labels": ms.labels_, "mode": ms.config.mode})
-            _say(f"{extra['flight_id']}: {len(res)} samples classified with {model}")
-            return res
+                        extra={**extra, "status": "ok", "labels": ms.labels_, "mode": mode or ms.config.mode})
+            _say(f"{extra['flight_id']}: {len(res)} samples classified with {model_set}")
+            return ModelStageResult(model_set, "ok", "", {"n_samples": len(res),
+                                                          "n_unknown": int((res["pred"] == "unknown").sum())})
     _say(f"{extra['flight_id']}: placeholder classification ({reason})")
-    res = _empty_classification()
-    write_table(res, out_path, name="classification", extra={**extra, "status": "failed", "error": reason})
-    return res
+    write_table(_empty_classification(), out_path, name="classification",
+                extra={**extra, "status": "failed", "error": reason})
+    return ModelStageResult(model_set, "failed", reason, {"n_samples": 0})
 
 
 def _runs_from_truth(df: pd.DataFrame, flight: str) -> pd.Series:
@@ -206,17 +291,22 @@ def _runs_from_truth(df: pd.DataFrame, flight: str) -> pd.Series:
     return flight + ":" + change.astype(str)
 
 
-def evaluate_model(name: str, spec: Mapping, model_dir, out_path, *, train_sets: Sequence = (),
-                   test_sets: Sequence = (), classified: Sequence = ()) -> pd.DataFrame:
-    """FA / MAoT per maneuver (seed 000 §5) beside the thesis values; writes ``out_path``.
+def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelStageResult:
+    """FA / MAoT per maneuver (seed 000 §5) beside the thesis values; writes ``outputs.evaluation``.
 
-    ``data: simulated``: the model classifies the simulated train and test sets with both
-    decision rules, as Tables 3.1-3.4 (truth input; labels the model lacks, e.g. M5, are correct
-    only as ``unknown``). ``data: flights``: the classifications of the ``role: test`` flights,
-    one run per labelled segment (no thesis values).
+    ``data: simulated``: the model classifies the simulated ``inputs.train_sets`` and
+    ``inputs.test_sets`` with both decision rules, as Tables 3.1-3.4 (truth input; labels the
+    model lacks, e.g. M5, are correct only as ``unknown``). ``data: flights``: the
+    classifications of the ``role: test`` flights (``inputs.classified``), one run per labelled
+    segment (no thesis values). ``inputs.params``/``inputs.meta``: the trained set.
     """
     from .classifier import ManeuverModelSet
 
+    spec, name = config, model_set
+    model_dir = Path(_get(inputs, "params")).parent
+    out_path = _get(outputs, "evaluation")
+    train_sets, test_sets = _list(inputs, "train_sets"), _list(inputs, "test_sets")
+    classified = _list(inputs, "classified")
     status, error = model_status(model_dir)
     rows = []
     if status == "ok":
@@ -250,7 +340,7 @@ def evaluate_model(name: str, spec: Mapping, model_dir, out_path, *, train_sets:
     table = pd.concat(rows, ignore_index=True)[list(EVAL_COLUMNS)] if rows else \
         pd.DataFrame({c: pd.Series([], dtype=float if c.endswith("pct") else str) for c in EVAL_COLUMNS})
     write_table(table, out_path, name="model_evaluation",
-                extra={"model": name, "status": status, "error": error,
+                extra={"model_set": name, "model": name, "status": status, "error": error,
                        "thesis_tables": sorted(THESIS_TRUTH) if spec.get("data", "simulated") == "simulated" else []})
     _say(f"{name}: evaluation with {len(table)} rows ({status})")
-    return table
+    return ModelStageResult(name, status, error, {"n_rows": len(table)})

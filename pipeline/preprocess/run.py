@@ -1,54 +1,92 @@
-"""Workflow entry point of the preprocessing stage: one ingested flight -> its derived tables.
+"""Entry point of the preprocessing stage: one ingested flight -> its derived tables.
+
+:func:`run_preprocess` is what the workflow's ``preprocess_flight`` rule and ``uavpipe
+preprocess`` both call, with the declared paths:
+
+* ``inputs.meta``: the flight's ingest ``meta.json`` (its streams beside it, ``write_flightlog``
+  layout; ``inputs.streams`` may list them, they are read from the same folder);
+* ``outputs.state``, ``outputs.segments``, ``outputs.calibration``: Parquet tables;
+  ``outputs.info``: the diagnostics as JSON.
 
 A flight whose ingest failed (``meta.json`` ``status: failed``) gets *placeholder* outputs:
-empty ``state``/``segments``/``calibration`` tables with the full schema and
-``status: failed`` plus the ingest's reason in the table metadata and the JSON diagnostics, so
-every downstream job still finds its inputs and reports the failure instead of crashing.
+empty ``state``/``segments``/``calibration`` tables with the full schema and ``status: failed``
+plus the ingest's reason in the table metadata and the JSON diagnostics, so every downstream job
+still finds its inputs and reports the failure instead of crashing.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import sys
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
-
-import pandas as pd
+from typing import Any, Mapping
 
 from ..io import schema
 from ..io.parquet import read_flightlog, write_json, write_table
 from .calibrate import CALIBRATION
-from .state import run_preprocess, summary_line, write_outputs
+from .state import PreprocessResult, preprocess_log, summary_line, write_outputs
 
 
-def _empty(cols) -> pd.DataFrame:
+@dataclass(frozen=True)
+class PreprocessStageResult:
+    """What :func:`run_preprocess` did: ``status`` (``ok``/``failed``) and the diagnostics."""
+
+    flight_id: str | None
+    status: str
+    diagnostics: dict
+
+
+def _empty(cols):  # MERGE: schema.empty(table) from the schema API
+    import pandas as pd
     return pd.DataFrame({c.name: schema._empty_series(c, 0) for c in cols})
 
 
-def run_preprocess_flight(ingest_dir: str | os.PathLike, *, state_path, segments_path,
-                          calibration_path, info_path, config: Mapping | None = None,
-                          vehicle: str | None = None) -> dict:
-    """Preprocess ``ingest_dir`` (``write_flightlog`` layout) into the four declared outputs.
+def _get(paths: Any, name: str):
+    # snakemake namedlists and plain dicts alike
+    return paths[name] if isinstance(paths, Mapping) else getattr(paths, name)
 
-    Returns the diagnostics dict (``status`` is ``ok`` or ``failed``).
+
+def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
+                   vehicle: str | None = None) -> PreprocessStageResult:
+    """Preprocess one ingested flight into the four declared outputs.
+
+    Parameters
+    ----------
+    inputs : mapping
+        ``meta``: the ingest ``meta.json`` (its ``<stream>.parquet`` files beside it).
+    outputs : mapping
+        ``state``, ``segments``, ``calibration`` (Parquet) and ``info`` (JSON diagnostics).
+    config : mapping, optional
+        The validated ``preprocess`` section.
+    vehicle : str, optional
+        The manifest's vehicle key (``preprocess.vehicles``).
+
+    Returns
+    -------
+    PreprocessStageResult
     """
-    meta = json.loads((Path(ingest_dir) / "meta.json").read_text())
+    meta_path = Path(_get(inputs, "meta"))
+    meta = json.loads(meta_path.read_text())
     fid = meta.get("flight_id")
+    paths = {k: _get(outputs, k) for k in ("state", "segments", "calibration", "info")}
     if meta.get("status") == "failed":
         reason = f"ingest failed: {meta.get('error') or 'unknown reason'}"
         diag = {"flight_id": fid, "status": "failed", "error": reason}
         extra = {"flight_id": fid, "status": "failed", "error": reason}
-        write_table(_empty(schema.STATE), state_path, schema.STATE, name="state", extra=extra)
-        write_table(_empty(schema.SEGMENTS), segments_path, schema.SEGMENTS, name="segments", extra=extra)
-        write_table(_empty(CALIBRATION), calibration_path, CALIBRATION, name="calibration", extra=extra)
-        write_json(diag, info_path)
+        write_table(_empty(schema.STATE), paths["state"], schema.STATE, name="state", extra=extra)
+        write_table(_empty(schema.SEGMENTS), paths["segments"], schema.SEGMENTS,
+                    name="segments", extra=extra)
+        write_table(_empty(CALIBRATION), paths["calibration"], CALIBRATION, name="calibration",
+                    extra=extra)
+        write_json(diag, paths["info"])
         print(f"uavpipe preprocess: {fid}: placeholder outputs ({reason})", file=sys.stderr)
-        return diag
-    state, seg, cal = run_preprocess(read_flightlog(ingest_dir), config, vehicle=vehicle or None)
-    state.attrs["preprocess"]["status"] = "ok"
-    write_outputs(state, seg, cal, state_path=state_path, segments_path=segments_path,
-                  calibration_path=calibration_path, info_path=info_path)
-    diag = state.attrs["preprocess"]
+        return PreprocessStageResult(flight_id=fid, status="failed", diagnostics=diag)
+    res = preprocess_log(read_flightlog(meta_path.parent), config, vehicle=vehicle or None)
+    diag = {**res.diagnostics, "status": "ok"}
+    res = PreprocessResult(state=res.state, segments=res.segments, calibration=res.calibration,
+                           diagnostics=diag)
+    write_outputs(res, state_path=paths["state"], segments_path=paths["segments"],
+                  calibration_path=paths["calibration"], info_path=paths["info"])
     print(f"uavpipe preprocess: {fid}: {summary_line(diag)}", file=sys.stderr)
-    return diag
+    return PreprocessStageResult(flight_id=fid, status="ok", diagnostics=diag)

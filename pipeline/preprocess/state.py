@@ -1,6 +1,6 @@
 """Per-flight preprocessing: FlightLog -> ``state``, ``segments`` and calibration tables.
 
-:func:`run_preprocess` implements seed 004 §6 steps 2–8 (and seed 000 §10's differentiation)
+:func:`preprocess_log` implements seed 004 §6 steps 2–8 (and seed 000 §10's differentiation)
 in this order, every constant from the ``preprocess`` config section (:class:`PreprocessConfig`):
 
 1. **Mount**: the vehicle's IMU (and magnetometer) mount rotation (:mod:`.mount`); with
@@ -29,17 +29,16 @@ in this order, every constant from the ``preprocess`` config section (:class:`Pr
 ``gap`` is True at grid points where the position source or the attitude stream (those present)
 has no sample within its gap limit. Streams that are absent give NaN columns; a log with no
 usable stream at all gives an empty ``state`` with the full schema. Diagnostics (timestamp
-repairs, sources, filter flags, calibration summary) are returned in ``state.attrs['preprocess']``
-and written into the Parquet metadata and ``preprocess.json``.
+repairs, sources, filter flags, calibration summary) are returned in
+:attr:`PreprocessResult.diagnostics` and written into the Parquet metadata and the JSON
+diagnostics file. The stage entry point that reads and writes files is
+:func:`pipeline.preprocess.run.run_preprocess`.
 """
 
 from __future__ import annotations
 
 import fnmatch
-import json
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
@@ -51,7 +50,7 @@ from ..frames.geodesy import geodetic_to_ned
 from ..frames.rotations import quat_continuity, quat_to_euler
 from ..io import schema
 from ..io.base import FlightLog
-from ..io.parquet import read_flightlog, write_json, write_table
+from ..io.parquet import write_json, write_table
 from .calibrate import CALIBRATION, BPMConfig, calibrate_baro, pressure_altitude
 from .controls import DEFAULT_CONTROLS, PHYSICAL, controls_from_pwm
 from .derivatives import Differentiator, body_rates_from_quat, differentiate
@@ -289,8 +288,35 @@ def _empty_state() -> pd.DataFrame:
 
 # --- the orchestration -----------------------------------------------------------------------
 
-def run_preprocess(log: FlightLog, config: Mapping | PreprocessConfig | None = None, *,
-                   vehicle: str | None = None) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+@dataclass(frozen=True)
+class PreprocessResult:
+    """One preprocessed flight.
+
+    Attributes
+    ----------
+    state : DataFrame
+        ``schema.STATE`` columns on the uniform grid.
+    segments : DataFrame
+        ``schema.SEGMENTS`` rows.
+    calibration : DataFrame
+        :data:`.calibrate.CALIBRATION` rows (the BPM calibration points).
+    diagnostics : dict
+        Timestamp repairs, sources, filter flags, calibration summary, notes.
+    """
+
+    state: pd.DataFrame
+    segments: pd.DataFrame
+    calibration: pd.DataFrame
+    diagnostics: dict
+
+    @property
+    def tables(self) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+        """``(state, segments, calibration)``."""
+        return self.state, self.segments, self.calibration
+
+
+def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = None, *,
+                   vehicle: str | None = None) -> PreprocessResult:
     """Preprocess one flight.
 
     Parameters
@@ -304,9 +330,8 @@ def run_preprocess(log: FlightLog, config: Mapping | PreprocessConfig | None = N
 
     Returns
     -------
-    (state, segments, calibration) : DataFrame
-        ``schema.STATE`` columns on the uniform grid, ``schema.SEGMENTS`` rows and
-        :data:`.calibrate.CALIBRATION` rows. ``state.attrs['preprocess']`` holds the diagnostics.
+    PreprocessResult
+        ``state``, ``segments``, ``calibration`` and the ``diagnostics`` dict.
     """
     fid = (log.meta or {}).get("flight_id")
     cfg = config if isinstance(config, PreprocessConfig) else \
@@ -355,12 +380,11 @@ def run_preprocess(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     if not used:
         diag["notes"].append("no usable stream: empty state")
         st = _empty_state()
-        st.attrs["preprocess"] = diag
         seg = build_segments(S["labels"], S["mode"], windows=cfg.segments.get("windows", {}).get(fid),
                              source=cfg.segments.get("source", "auto"), flight_id=fid, truth=S["truth"])
         cal = calibrate_baro(np.empty(0, np.int64), None).points
         diag["calibration"] = {"method": "none", "regions": [], "notes": ["no data"]}
-        return st, seg, cal
+        return PreprocessResult(state=st, segments=seg, calibration=cal, diagnostics=diag)
     t0 = min(int(d["t_ns"].iloc[0]) for d in used)
     t1 = max(int(d["t_ns"].iloc[-1]) for d in used)
     grid = make_grid(t0, t1, cfg.rate_hz)
@@ -462,54 +486,32 @@ def run_preprocess(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     state = pd.DataFrame({c.name: st[c.name] for c in schema.STATE})
     state = pd.DataFrame({c.name: schema._cast(c, state[c.name]) for c in schema.STATE})
     diag["gap_fraction"] = float(gap.mean()) if n else 0.0
-    state.attrs["preprocess"] = diag
 
     # 9. segments
     seg = build_segments(S["labels"], S["mode"], windows=cfg.segments.get("windows", {}).get(fid),
                          source=cfg.segments.get("source", "auto"), t_end_ns=int(grid[-1]), flight_id=fid,
                          truth=S["truth"])
-    return state, seg, cal.points
+    return PreprocessResult(state=state, segments=seg, calibration=cal.points, diagnostics=diag)
 
 
 # --- files -------------------------------------------------------------------------------------
 
-def write_outputs(state: pd.DataFrame, segments: pd.DataFrame, calibration: pd.DataFrame, *,
-                  state_path, segments_path, calibration_path=None, info_path=None) -> None:
-    """Write the per-flight outputs (ZSTD Parquet with units/frames; diagnostics as JSON)."""
-    diag = state.attrs.get("preprocess", {})
+def write_outputs(result: PreprocessResult, *, state_path, segments_path, calibration_path=None,
+                  info_path=None) -> None:
+    """Write one flight's outputs (ZSTD Parquet with units/frames; diagnostics as JSON).
+
+    The diagnostics ride in the ``state`` table's metadata (``preprocess``) and in ``info_path``.
+    """
+    diag = result.diagnostics
     extra = {"flight_id": diag.get("flight_id"), "preprocess": diag}
-    write_table(state, state_path, schema.STATE, name="state", extra=extra)
-    write_table(segments, segments_path, schema.SEGMENTS, name="segments",
+    write_table(result.state, state_path, schema.STATE, name="state", extra=extra)
+    write_table(result.segments, segments_path, schema.SEGMENTS, name="segments",
                 extra={"flight_id": diag.get("flight_id")})
     if calibration_path is not None:
-        write_table(calibration, calibration_path, CALIBRATION, name="calibration",
+        write_table(result.calibration, calibration_path, CALIBRATION, name="calibration",
                     extra={"flight_id": diag.get("flight_id"), "calibration": diag.get("calibration")})
     if info_path is not None:
         write_json(diag, info_path)
-
-
-def preprocess_dir(ingest_dir: str | os.PathLike, out_dir: str | os.PathLike,
-                   config: Mapping | None = None, *, vehicle: str | None = None) -> dict:
-    """Preprocess one ingested flight folder (``write_flightlog`` layout) into ``out_dir``:
-    ``state.parquet``, ``segments.parquet``, ``calibration.parquet``, ``preprocess.json``."""
-    log = read_flightlog(ingest_dir)
-    state, seg, cal = run_preprocess(log, config, vehicle=vehicle)
-    out = Path(out_dir)
-    write_outputs(state, seg, cal, state_path=out / "state.parquet",
-                  segments_path=out / "segments.parquet", calibration_path=out / "calibration.parquet",
-                  info_path=out / "preprocess.json")
-    return state.attrs["preprocess"]
-
-
-def preprocess_files(ingest_dir: str | os.PathLike, *, state_path, segments_path, calibration_path=None,
-                     info_path=None, config: Mapping | None = None, vehicle: str | None = None) -> dict:
-    """Workflow entry point: one ingested flight folder -> the declared output files
-    (``results/state/{flight}.parquet``, ``results/segments/{flight}.parquet``, ...)."""
-    log = read_flightlog(ingest_dir)
-    state, seg, cal = run_preprocess(log, config, vehicle=vehicle)
-    write_outputs(state, seg, cal, state_path=state_path, segments_path=segments_path,
-                  calibration_path=calibration_path, info_path=info_path)
-    return state.attrs["preprocess"]
 
 
 def summary_line(diag: dict) -> str:
@@ -517,7 +519,3 @@ def summary_line(diag: dict) -> str:
     return (f"{diag.get('n_samples', 0)} samples @ {diag.get('rate_hz')} Hz, position "
             f"{diag['sources'].get('position')}, rates {diag['sources'].get('body_rates')}, "
             f"BPM {c.get('method')}, gap {100 * diag.get('gap_fraction', 0):.1f}%")
-
-
-def dumps(diag: dict) -> str:
-    return json.dumps(diag, default=str, indent=1)

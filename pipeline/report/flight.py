@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Mapping
 
 import jinja2
 import numpy as np
@@ -66,7 +67,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
                         state: str | os.PathLike | None = None,
                         calibration: str | os.PathLike | None = None,
                         segments: str | os.PathLike | None = None,
-                        classified: str | os.PathLike | None = None) -> None:
+                        classified: Mapping[str, str | os.PathLike] | None = None) -> None:
     """Render one flight's report.
 
     Parameters
@@ -79,8 +80,10 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         Jinja2 template (``reports/templates/flight.html.j2``), a declared rule input.
     plotly_js : str
         URL of plotly.min.js relative to the page.
-    state, calibration, segments, classified : path-like, optional
-        Derived tables from preprocess / classify when the workflow has them.
+    state, calibration, segments : path-like, optional
+        Derived tables from preprocess when the workflow has them.
+    classified : mapping, optional
+        ``{model_set: path}`` of the flight's classification tables (one timeline each).
     """
     log = read_flightlog(ingest_dir)
     meta = log.meta
@@ -89,7 +92,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     if seg is None and len(log["labels"]):
         seg = log["labels"]
     cal = read_table(calibration) if calibration and Path(calibration).exists() else None
-    cls = read_table(classified) if classified and Path(classified).exists() else None
+    classified = {m: p for m, p in (classified or {}).items() if p and Path(p).exists()}
+    timelines = {}
 
     ned = _ned_track(log, st)
     alt_series = {}
@@ -108,9 +112,13 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         # the BPM reference heights the fit used (tilt-compensated range or GPS height)
         used = cal[cal["used"].fillna(False).astype(bool)] if "used" in cal else cal
         calib_pts = pd.DataFrame({"t_ns": used["t_ns"], "alt_m": used["h_ref_m"]})
-    if cls is not None and len(cls) and "pred" in cls:
-        cls = pd.DataFrame({"t_ns": cls["t_ns"], "label": cls["pred"].astype(str),
-                            "confidence": cls["V_best"]})
+    for m, p in classified.items():
+        cls = read_table(p)
+        if len(cls) and "pred" in cls:
+            timelines[m] = pd.DataFrame({"t_ns": cls["t_ns"], "label": cls["pred"].astype(str),
+                                         "confidence": cls["V_best"]})
+        else:
+            timelines[m] = None
 
     att = _first_instance(log["attitude"]).dropna(subset=["q_w"])
     euler = quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy()) if len(att) else None
@@ -122,8 +130,11 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("Attitude", plots.attitude(att, euler)),
         ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"], "Accelerometer (FRD)", "m/s²")),
         ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"], "Gyroscope (FRD)", "rad/s")),
-        ("Maneuver timeline", plots.timeline(seg, cls)),
     ]
+    if len(timelines) <= 1:
+        figs.append(("Maneuver timeline", plots.timeline(seg, next(iter(timelines.values()), None))))
+    else:
+        figs += [(f"Maneuver timeline ({m})", plots.timeline(seg, c)) for m, c in timelines.items()]
     divs = [(title, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
                                                       div_id=f"plot-{i}", config={"responsive": True}))
             for i, (title, f) in enumerate(figs)]
@@ -141,9 +152,9 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         facts.append(("preprocess", f"{pre.get('n_samples', 0)} samples @ {pre.get('rate_hz')} Hz; position "
                                     f"{src.get('position')}; body rates {src.get('body_rates')}; BPM "
                                     f"{cinfo.get('method')}" if pre else read_table_meta(state).get("error", "–")))
-    if classified and Path(classified).exists():
-        cm = read_table_meta(classified)
-        facts.append(("classifier", f"model {cm.get('model')}: {cm.get('status')}"
+    for m, p in classified.items():
+        cm = read_table_meta(p)
+        facts.append(("classifier", f"model set {m}: {cm.get('status')}"
                                     + (f" ({cm.get('error')})" if cm.get("error") else "")))
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(Path(template).parent)),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))

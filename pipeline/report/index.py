@@ -9,6 +9,7 @@ import html
 import json
 import os
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 import pandas as pd
@@ -97,20 +98,23 @@ def _fmt(x: float, nd: int = 1) -> str:
     return "–" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:,.{nd}f}"
 
 
-def maneuver_summary(segments: str | os.PathLike | None, classified: str | os.PathLike | None) -> str:
-    """``"<n> segments; classifier: M1 62%, M3 20%"`` from the segments and classify tables
-    (share of classified samples per predicted maneuver, ``unknown`` left out)."""
+def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | None) -> str:
+    """``"<n> segments; sim classifier: M1 62%, M3 20%"`` from the segments and the classify
+    tables ``{model_set: path}`` (share of classified samples per predicted maneuver, ``unknown``
+    left out), one part per model set."""
     parts = []
     if segments and Path(segments).exists():
         seg = pd.read_parquet(segments, columns=["label"])
         parts.append(f"{len(seg)} segment{'s' if len(seg) != 1 else ''}")
-    if classified and Path(classified).exists():
-        c = pd.read_parquet(classified)
+    for m, p in (classified or {}).items():
+        if not (p and Path(p).exists()):
+            continue
+        c = pd.read_parquet(p)
         if len(c) and "pred" in c:
             share = c["pred"].astype(str).value_counts(normalize=True)
             share = share[share.index != "unknown"]
             found = ", ".join(f"{k} {100 * v:.0f}%" for k, v in share.head(4).items())
-            parts.append(f"classifier: {found or 'unknown only'}" + (" …" if len(share) > 4 else ""))
+            parts.append(f"{m} classifier: {found or 'unknown only'}" + (" …" if len(share) > 4 else ""))
     return "; ".join(parts)
 
 
@@ -127,10 +131,12 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         Output HTML path.
     links : dict, optional
         ``{flight_id: relative URL}`` of per-flight reports.
-    segments, classified : dict, optional
-        ``{flight_id: path}`` of the segments / classification tables (maneuvers found).
+    segments : dict, optional
+        ``{flight_id: path}`` of the segments tables.
+    classified : dict, optional
+        ``{flight_id: {model_set: path}}`` of the classification tables (maneuvers found).
     models : dict, optional
-        ``{model: relative URL}`` of the per-model reports.
+        ``{model_set: relative URL}`` of the per-model-set reports.
     """
     rows = [flight_summary(f, m) for f, m in zip(flight_ids, meta_paths)]
     for r in rows:
@@ -156,7 +162,7 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     n_failed = sum(r["status"] == "failed" for r in rows)
     model_links = "".join(f'<li><a href="{html.escape(u)}">{html.escape(m)}</a></li>'
                           for m, u in (models or {}).items())
-    models_html = f"<h2>Models</h2><ul>{model_links}</ul>" if model_links else ""
+    models_html = f"<h2>Model sets</h2><ul>{model_links}</ul>" if model_links else ""
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>uavpipe flights</title>
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>

@@ -11,7 +11,9 @@ are independent jobs (a change of a log format does not regenerate the bulk sets
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Mapping
 
 from ..io.sidecar import sidecar_path
 
@@ -53,22 +55,80 @@ def planned_logs(sim_cfg: dict | None) -> list[dict]:
     return out
 
 
-def run_simulate_sets(out_dir: str | os.PathLike, sim_cfg: dict | None, seed: int) -> dict:
-    """Bulk sets, ``summary.parquet`` and ``index.json`` under ``out_dir`` (no log files)."""
+@dataclass(frozen=True)
+class SimulateResult:
+    """What a simulate entry point wrote: the paths, and the index/manifest rows."""
+
+    paths: tuple[str, ...]
+    diagnostics: dict
+
+
+def _get(paths: Any, name: str):
+    return paths[name] if isinstance(paths, Mapping) else getattr(paths, name)
+
+
+def _as_list(v) -> list[str]:
+    return [str(v)] if isinstance(v, (str, os.PathLike)) else [str(x) for x in v]
+
+
+def _check_written(declared: list[str], written: list[str], what: str) -> None:
+    # the DAG is static: the planned names must be exactly what the simulation wrote
+    missing = sorted(set(map(os.path.normpath, declared)) - set(map(os.path.normpath, written)))
+    if missing:
+        raise RuntimeError(f"simulate {what}: declared outputs not written: {missing[:5]}"
+                           f"{' …' if len(missing) > 5 else ''}")
+
+
+def run_simulate_sets(inputs, outputs, config: dict | None, *, seed: int) -> SimulateResult:
+    """Bulk sets, ``summary.parquet`` and ``index.json`` (no log files).
+
+    Parameters
+    ----------
+    inputs : mapping
+        Unused (the simulation has no inputs); kept for the one entry-point signature.
+    outputs : mapping
+        ``sets`` (``<dir>/sets/<name>.parquet`` for every :func:`planned_sets` name),
+        ``summary`` and ``index`` (``<dir>/summary.parquet``, ``<dir>/index.json``).
+    config : dict
+        The ``simulate`` section.
+    seed : int
+        The master seed.
+    """
     from .datasets import run_simulate
 
-    sim = dict(sim_cfg or {})
+    out_dir = Path(_get(outputs, "index")).parent
+    sim = dict(config or {})
     sim["datasets"] = {**(sim.get("datasets") or {}), "log_formats": []}
-    return run_simulate(out_dir, sim, seed, progress=_say)
+    index = run_simulate(out_dir, sim, seed, progress=_say)
+    written = [str(out_dir / v["path"]) for v in index["sets"].values()]
+    _check_written(_as_list(_get(outputs, "sets")), written, "sets")
+    return SimulateResult(paths=tuple(written), diagnostics=index)
 
 
-def run_simulate_logs(out_dir: str | os.PathLike, sim_cfg: dict | None, seed: int) -> list[dict]:
-    """The log-file flights and their truth side-cars plus ``flights.tsv`` under ``out_dir``."""
+def run_simulate_logs(inputs, outputs, config: dict | None, *, seed: int) -> SimulateResult:
+    """The log-file flights and their truth side-cars plus ``flights.tsv``.
+
+    ``outputs``: ``logs`` (files, and the ``mcap`` bag directories), ``sidecars`` and
+    ``manifest`` (``<dir>/flights.tsv``), all in one folder; names from :func:`planned_logs`.
+    """
     from .sensors import SensorSettings
     from .writers import write_flight_logs
 
-    settings, ds = _settings(sim_cfg)
-    return write_flight_logs(Path(out_dir), settings, SensorSettings.from_config(sim_cfg), ds, seed, say=_say)
+    out_dir = Path(_get(outputs, "manifest")).parent
+    settings, ds = _settings(config)
+    rows = write_flight_logs(out_dir, settings, SensorSettings.from_config(config), ds, seed, say=_say)
+    _check_written(_as_list(_get(outputs, "logs")) + _as_list(_get(outputs, "sidecars")),
+                   [r["path"] for r in rows] + [r["labels"] for r in rows], "logs")
+    return SimulateResult(paths=tuple(r["path"] for r in rows), diagnostics={"flights": rows})
+
+
+def run_demo_log(inputs, outputs, config: dict | None, *, seed: int) -> SimulateResult:
+    """The demo DataFlash flight (``outputs.log``): uavpipe's own writer, always available."""
+    from ..io.dataflash_writer import write_demo_flight  # MERGE: from .demo import write_demo_flight
+
+    path = _get(outputs, "log")
+    write_demo_flight(path, seed=seed)
+    return SimulateResult(paths=(str(path),), diagnostics={})
 
 
 def _say(msg: str) -> None:

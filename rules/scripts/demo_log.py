@@ -1,6 +1,6 @@
 import sys
 
 sys.stderr = open(snakemake.log[0], "w")
-from pipeline.io.dataflash_writer import write_demo_flight
+from pipeline.simulate.run import run_demo_log
 
-write_demo_flight(snakemake.output[0], seed=snakemake.params.seed)
+run_demo_log(snakemake.input, snakemake.output, snakemake.params.config, **snakemake.params.job)

@@ -1,8 +1,6 @@
 import sys
 
 sys.stderr = open(snakemake.log[0], "w")
-from pipeline.report.model import build_model_report
+from pipeline.report.run import run_model_report
 
-build_model_report(snakemake.params.model_dir, snakemake.input.evaluation, snakemake.output[0],
-                   template=snakemake.input.template, plotly_js="../assets/plotly.min.js",
-                   index_href="../../index.html")
+run_model_report(snakemake.input, snakemake.output, snakemake.params.config, **snakemake.params.job)

@@ -1,6 +1,6 @@
 import sys
 
 sys.stderr = open(snakemake.log[0], "w")
-from pipeline.report.flight import write_plotly_js
+from pipeline.report.run import run_plotly_js
 
-write_plotly_js(snakemake.output[0])
+run_plotly_js(snakemake.input, snakemake.output)

@@ -3,4 +3,4 @@ import sys
 sys.stderr = open(snakemake.log[0], "w")
 from pipeline.simulate.run import run_simulate_logs
 
-run_simulate_logs(snakemake.params.outdir, snakemake.params.sim, snakemake.params.seed)
+run_simulate_logs(snakemake.input, snakemake.output, snakemake.params.config, **snakemake.params.job)

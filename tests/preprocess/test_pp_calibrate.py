@@ -15,7 +15,7 @@ import pytest
 from pipeline.io.base import FlightLog
 from pipeline.frames.rotations import euler_to_quat
 from pipeline.preprocess.calibrate import BPMConfig, calibrate_baro, pressure_altitude
-from pipeline.preprocess.state import run_preprocess
+from pipeline.preprocess.state import preprocess_log
 
 OFFSET, DRIFT = 5.0, 0.01
 
@@ -62,12 +62,13 @@ def calibration_flight(rng, baro_sigma=0.1):
 
 def test_bpm_calibration_recovers_offset_and_drift(rng):
     log, tr, oor, spikes = calibration_flight(rng)
-    state, _, cal = run_preprocess(log)
+    res = preprocess_log(log)
+    state, _, cal = res.tables
     t = state["t_ns"].to_numpy() * 1e-9
     err = state["alt_cal_m"].to_numpy() - height(t)
     assert np.isfinite(err).all()
     assert np.max(np.abs(err)) < 0.2, np.max(np.abs(err))
-    info = state.attrs["preprocess"]["calibration"]
+    info = res.diagnostics["calibration"]
     assert info["method"] == "rangefinder" and len(info["regions"]) >= 3
     # the gating did the rejecting: tilted, out-of-range and spiky samples are never used
     used = cal[cal["used"]]
@@ -86,14 +87,16 @@ def test_without_gating_the_spikes_would_hurt(rng):
     # the same data with the spike/tilt gates disabled calibrates worse: the gates matter
     log, *_ = calibration_flight(rng)
     cfg = {"bpm": {"spike_m": 100.0, "max_tilt_deg": 90.0, "outlier_k": 1e9, "max_rate_mps": 1e9}}
-    state, _, _ = run_preprocess(log, cfg)
+    res = preprocess_log(log, cfg)
+    state, _, _ = res.tables
     t = state["t_ns"].to_numpy() * 1e-9
     assert np.max(np.abs(state["alt_cal_m"].to_numpy() - height(t))) > 0.2
 
 
 def test_piecewise_constant_thesis_scheme(rng):
     log, *_ = calibration_flight(rng, baro_sigma=0.0)
-    state, _, _ = run_preprocess(log, {"bpm": {"drift": False}})
+    res = preprocess_log(log, {"bpm": {"drift": False}})
+    state, _, _ = res.tables
     t = state["t_ns"].to_numpy() * 1e-9
     err = np.abs(state["alt_cal_m"].to_numpy() - height(t))
     # held offsets cannot follow a 0.01 m/s drift over the 60 s cruise
@@ -113,23 +116,27 @@ def test_gps_fallback_and_none():
                         "fix_type": 3.0})
     baro = pd.DataFrame({"t_ns": ns, "alt_rel_m": h - 20.0 + rng.normal(scale=0.1, size=n)})
     meta = {"flight_id": "g", "ned_origin": {"lat_deg": lat0, "lon_deg": lon0, "alt_wgs84_m": h0}}
-    state, _, cal = run_preprocess(FlightLog.from_streams(meta, {"gps": gps, "baro": baro}))
-    assert state.attrs["preprocess"]["calibration"]["method"] == "gps"
+    res = preprocess_log(FlightLog.from_streams(meta, {"gps": gps, "baro": baro}))
+    state, _, cal = res.tables
+    assert res.diagnostics["calibration"]["method"] == "gps"
     assert set(cal["method"]) == {"gps"}
     tt = state["t_ns"].to_numpy() * 1e-9
     ok = np.isfinite(state["alt_cal_m"])
     assert np.max(np.abs(state["alt_cal_m"][ok] - (10 + 5 * np.sin(0.05 * tt[ok])))) < 0.5
     # a rangefinder with no usable samples also falls back to GPS
     rf = pd.DataFrame({"t_ns": ns, "dist_m": 12.0})
-    state, _, _ = run_preprocess(FlightLog.from_streams(meta, {"gps": gps, "baro": baro, "rangefinder": rf}))
-    assert state.attrs["preprocess"]["calibration"]["method"] == "gps"
+    res = preprocess_log(FlightLog.from_streams(meta, {"gps": gps, "baro": baro, "rangefinder": rf}))
+    state, _, _ = res.tables
+    assert res.diagnostics["calibration"]["method"] == "gps"
     # no barometer: method none, NaN
-    state, _, cal = run_preprocess(FlightLog.from_streams(meta, {"gps": gps}))
-    assert state.attrs["preprocess"]["calibration"]["method"] == "none"
+    res = preprocess_log(FlightLog.from_streams(meta, {"gps": gps}))
+    state, _, cal = res.tables
+    assert res.diagnostics["calibration"]["method"] == "none"
     assert state["alt_cal_m"].isna().all() and len(cal) == 0
     # barometer, no reference at all: reported as uncalibrated
-    state, _, _ = run_preprocess(FlightLog.from_streams(meta, {"baro": baro}))
-    assert state.attrs["preprocess"]["calibration"]["method"] == "uncalibrated"
+    res = preprocess_log(FlightLog.from_streams(meta, {"baro": baro}))
+    state, _, _ = res.tables
+    assert res.diagnostics["calibration"]["method"] == "uncalibrated"
 
 
 def test_pressure_altitude_formula():

@@ -10,7 +10,7 @@ from pipeline.io import schema
 from pipeline.io.registry import read_log
 from pipeline.preprocess.mount import apply_mount
 from pipeline.preprocess.resample import repair_timestamps, resample
-from pipeline.preprocess.state import PreprocessConfig, run_preprocess
+from pipeline.preprocess.state import PreprocessConfig, preprocess_log
 
 # (file, vehicle as in datasets/flights.tsv)
 REAL_LOGS = [
@@ -54,11 +54,12 @@ def _read(rel):
 @pytest.mark.parametrize("rel, vehicle", REAL_LOGS, ids=[r.split("/")[-1] for r, _ in REAL_LOGS])
 def test_every_real_log_gives_a_state_table(rel, vehicle):
     log = _read(rel)
-    state, seg, cal = run_preprocess(log, CFG, vehicle=vehicle)
+    res = preprocess_log(log, CFG, vehicle=vehicle)
+    state, seg, cal = res.tables
     assert list(state.columns) == [c.name for c in schema.STATE]
     assert len(state) > 0
     assert np.all(np.diff(state["t_ns"].to_numpy()) > 0)
-    d = state.attrs["preprocess"]
+    d = res.diagnostics
     # where the log has a position or attitude source, the state carries it
     assert d["sources"]["position"] or d["sources"]["attitude"]
     if d["sources"]["attitude"]:
@@ -83,8 +84,9 @@ def test_every_real_log_gives_a_state_table(rel, vehicle):
 @pytest.mark.realdata
 def test_motor_failure_bpm_calibration():
     log = _read("ulg_px4_flight_review_fixtures/motor_failure.ulg")
-    state, _, cal = run_preprocess(log, CFG, vehicle="px4-hexa")
-    assert state.attrs["preprocess"]["calibration"]["method"] == "rangefinder"
+    res = preprocess_log(log, CFG, vehicle="px4-hexa")
+    state, _, cal = res.tables
+    assert res.diagnostics["calibration"]["method"] == "rangefinder"
     used_t = cal.loc[cal["used"], "t_ns"].to_numpy() * 1e-9
     assert len(used_t) >= 20 and used_t.min() >= 33.6 and used_t.max() <= 43.91
     # touchdown: the first reading within 5 cm of the resting value (median of the last 2 s)
@@ -117,7 +119,8 @@ def test_husky_imu_mount(rel):
     r = np.corrcoef(imu["gyr_z_radps"].to_numpy()[good], -wz[good])[0, 1]
     assert r >= 0.8
     # and through the whole preprocessing: the state's r_radps (FRD, from the mounted gyro)
-    state, _, _ = run_preprocess(log, CFG, vehicle="husky")
+    res = preprocess_log(log, CFG, vehicle="husky")
+    state, _, _ = res.tables
     o2, ok2 = resample(repair_timestamps(log["odometry"])[0], state["t_ns"].to_numpy(), {"yaw_rate_radps": "linear"})
     g2 = ok2 & state["r_radps"].notna().to_numpy()
     assert np.corrcoef(state["r_radps"][g2], -o2["yaw_rate_radps"][g2])[0, 1] >= 0.8

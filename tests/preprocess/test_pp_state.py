@@ -15,7 +15,7 @@ from pipeline.io import schema
 from pipeline.io.base import FlightLog
 from pipeline.io.parquet import read_table, read_table_meta, write_flightlog
 from pipeline.preprocess.calibrate import CALIBRATION
-from pipeline.preprocess.state import PreprocessConfig, run_preprocess
+from pipeline.preprocess.state import PreprocessConfig, preprocess_log
 
 
 def ns(t):
@@ -48,7 +48,8 @@ def synthetic_flight(rng, gap=True):
 
 def test_state_from_gps_circle(rng):
     log, w = synthetic_flight(rng)
-    state, seg, cal = run_preprocess(log)
+    res = preprocess_log(log)
+    state, seg, cal = res.tables
     assert list(state.columns) == [c.name for c in schema.STATE]
     assert state["t_ns"].dtype == np.int64 and state["gap"].dtype == bool
     assert np.all(np.diff(state["t_ns"]) == 40_000_000)  # 25 Hz
@@ -70,20 +71,22 @@ def test_state_from_gps_circle(rng):
     np.testing.assert_allclose(state["ail"][ok], np.sin(t[ok]), atol=0.01)
     assert np.all(state["thr"][ok] == 0.5)
     assert seg["label"].tolist() == ["mode:STABILIZE", "mode:LOITER"]
-    d = state.attrs["preprocess"]
+    d = res.diagnostics
     assert d["sources"]["position"] == "gps" and d["calibration"]["method"] == "none"
 
 
 def test_every_stream_empty_or_partial_never_crashes():
     empty = FlightLog.from_streams({"flight_id": "e"}, {})
-    state, seg, cal = run_preprocess(empty)
+    res = preprocess_log(empty)
+    state, seg, cal = res.tables
     assert len(state) == 0 and list(state.columns) == [c.name for c in schema.STATE]
     assert len(seg) == 0 and len(cal) == 0
     t = np.arange(0, 5, 0.04)
     q = euler_to_quat(0 * t, 0.1 + 0 * t, 0.3 * t)
     only_att = FlightLog.from_streams({"flight_id": "a"}, {
         "attitude": pd.DataFrame({"t_ns": ns(t), **dict(zip(["q_w", "q_x", "q_y", "q_z"], q.T))})})
-    state, _, _ = run_preprocess(only_att)
+    res = preprocess_log(only_att)
+    state, _, _ = res.tables
     assert len(state) == len(t)
     assert state["pos_n_m"].isna().all() and state["alt_cal_m"].isna().all()
     # body rates from differentiated attitude: yaw rate 0.3 rad/s -> (p, q, r) = 0.3 (-sin θ, 0, cos θ)
@@ -92,7 +95,8 @@ def test_every_stream_empty_or_partial_never_crashes():
     np.testing.assert_allclose(state["p_radps"][mid], -0.3 * np.sin(0.1), atol=1e-4)
     # a single sample of a single stream
     one = FlightLog.from_streams({}, {"baro": pd.DataFrame({"t_ns": [5], "alt_rel_m": [1.0]})})
-    state, _, _ = run_preprocess(one)
+    res = preprocess_log(one)
+    state, _, _ = res.tables
     assert len(state) == 1
 
 
@@ -101,8 +105,9 @@ def test_timestamp_repairs_counted():
     t[50] = t[49]  # a duplicate
     q = np.tile([1.0, 0, 0, 0], (len(t), 1))
     log = FlightLog.from_streams({}, {"attitude": pd.DataFrame({"t_ns": t, **dict(zip(["q_w", "q_x", "q_y", "q_z"], q.T))})})
-    state, _, _ = run_preprocess(log)
-    assert state.attrs["preprocess"]["timestamp_repairs"]["attitude"]["duplicate"] == 1
+    res = preprocess_log(log)
+    state, _, _ = res.tables
+    assert res.diagnostics["timestamp_repairs"]["attitude"]["duplicate"] == 1
 
 
 def test_outputs_and_cli(tmp_path, rng, capsys):
@@ -113,7 +118,8 @@ def test_outputs_and_cli(tmp_path, rng, capsys):
     assert rc == 0, capsys.readouterr().err
     out = tmp_path / "pp" / "synthetic"
     st = read_table(out / "state.parquet", schema.STATE)
-    ref, seg_ref, _ = run_preprocess(log)
+    res = preprocess_log(log)
+    ref, seg_ref, _ = res.tables
     pd.testing.assert_frame_equal(st, ref, check_like=False)
     assert read_table_meta(out / "state.parquet")["schema_version"] == schema.SCHEMA_VERSION
     assert len(read_table(out / "segments.parquet", schema.SEGMENTS)) == len(seg_ref)
@@ -137,17 +143,20 @@ def test_bad_config_is_a_clear_error(bad, match):
 def test_cutoff_above_nyquist_names_the_column(rng):
     log, _ = synthetic_flight(rng, gap=False)
     with pytest.raises(ConfigError, match="attitude.q_w|gps.pos_n_m"):
-        run_preprocess(log, {"butterworth": {"gps.pos_n_m": {"order": 2, "cutoff_hz": 20.0}}})
+        preprocess_log(log, {"butterworth": {"gps.pos_n_m": {"order": 2, "cutoff_hz": 20.0}}})
 
 
-def test_preprocess_files_entry_point(tmp_path, rng):
-    from pipeline.preprocess.state import preprocess_files
+def test_stage_entry_point_writes_the_declared_outputs(tmp_path, rng):
+    from pipeline.preprocess.run import run_preprocess
 
     log, _ = synthetic_flight(rng, gap=False)
     write_flightlog(log, tmp_path / "in")
-    diag = preprocess_files(tmp_path / "in", state_path=tmp_path / "state" / "f.parquet",
-                            segments_path=tmp_path / "segments" / "f.parquet")
-    assert diag["flight_id"] == "synthetic"
-    st = read_table(tmp_path / "state" / "f.parquet", schema.STATE)
+    out = {"state": tmp_path / "state" / "f.parquet", "segments": tmp_path / "segments" / "f.parquet",
+           "calibration": tmp_path / "calibration" / "f.parquet", "info": tmp_path / "state" / "f.json"}
+    res = run_preprocess({"meta": tmp_path / "in" / "meta.json"}, out, {})
+    diag = res.diagnostics
+    assert res.status == "ok" and diag["flight_id"] == "synthetic"
+    st = read_table(out["state"], schema.STATE)
     assert len(st) == diag["n_samples"]
-    assert read_table_meta(tmp_path / "state" / "f.parquet")["preprocess"]["sources"]["position"] == "gps"
+    assert read_table_meta(out["state"])["preprocess"]["sources"]["position"] == "gps"
+    assert json.loads(out["info"].read_text())["status"] == "ok"

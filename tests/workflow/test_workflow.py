@@ -153,7 +153,7 @@ def test_run_incremental_and_corrupt_flight(tmp_path):
     assert len(read_table(res / "state" / "broken.parquet")) == 0
     # the simulated flight: ingested with its truth side-car, preprocessed, classified
     assert len(read_table(res / "segments" / "sim-M1-000-bin.parquet")) >= 1
-    cls = read_table(res / "classify" / "sim-M1-000-bin.parquet")
+    cls = read_table(res / "classify" / "sim" / "sim-M1-000-bin.parquet")
     assert len(cls) > 10 and set(cls["pred"]) <= {"M1", "M2", "unknown"}
     assert 'report/models/sim.html' in index and (res / "report" / "models" / "sim.html").exists()
     ev = read_table(res / "models" / "sim" / "evaluation.parquet")

@@ -1,0 +1,86 @@
+"""Entry points of the report stage: flight pages, model-set pages, the index, plotly.js.
+
+Each takes the declared ``inputs``/``outputs`` paths (Snakemake's namedlists or plain dicts),
+the ``report`` config (unused today, kept for the one signature) and per-job values; links
+between pages are made relative to the page written, so the tree opens from ``file://``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Mapping
+
+from .flight import build_flight_report, write_plotly_js
+from .index import build_index
+from .model import build_model_report
+
+
+def _get(paths: Any, name: str, default: Any = None):
+    if isinstance(paths, Mapping):
+        return paths.get(name, default)
+    return getattr(paths, name, default)
+
+
+def _list(paths: Any, name: str) -> list[str]:
+    v = _get(paths, name)
+    if v is None:
+        return []
+    return [str(v)] if isinstance(v, (str, os.PathLike)) else [str(x) for x in v]
+
+
+def _rel(target: str | os.PathLike, page: str | os.PathLike) -> str:
+    """``target`` relative to the folder of ``page`` (POSIX separators, for an href)."""
+    return Path(os.path.relpath(Path(target).resolve(), Path(page).resolve().parent)).as_posix()
+
+
+def _model_set_of(classification: str) -> str:
+    # results/classify/<model_set>/<flight>.parquet
+    return Path(classification).parent.name
+
+
+def run_plotly_js(inputs, outputs, config: Mapping | None = None) -> None:
+    """Copy plotly's bundled ``plotly.min.js`` to ``outputs.js`` (one local copy for every page)."""
+    write_plotly_js(_get(outputs, "js"))
+
+
+def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
+    """One flight's page ``outputs.page``.
+
+    ``inputs``: ``meta`` (ingest ``meta.json``, its streams beside it), ``state``, ``segments``,
+    ``calibration``, ``classified`` (``results/classify/<model_set>/<flight>.parquet`` for each
+    model set that classifies the flight), ``template``, ``plotly``. ``index``: the path of the
+    index page, for the back link.
+    """
+    page = _get(outputs, "page")
+    build_flight_report(Path(_get(inputs, "meta")).parent, page, template=_get(inputs, "template"),
+                        plotly_js=_rel(_get(inputs, "plotly"), page), index_href=_rel(index, page),
+                        state=_get(inputs, "state"), segments=_get(inputs, "segments"),
+                        calibration=_get(inputs, "calibration"),
+                        classified={_model_set_of(p): p for p in _list(inputs, "classified")})
+
+
+def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
+    """One model set's page ``outputs.page`` from ``inputs.params``/``meta``/``evaluation``."""
+    page = _get(outputs, "page")
+    build_model_report(Path(_get(inputs, "params")).parent, _get(inputs, "evaluation"), page,
+                       template=_get(inputs, "template"), plotly_js=_rel(_get(inputs, "plotly"), page),
+                       index_href=_rel(index, page))
+
+
+def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[str],
+              model_sets: list[str]) -> None:
+    """The index page ``outputs.index``.
+
+    ``inputs``: ``metas`` and ``pages`` (one per flight, in ``flights`` order), ``segments``
+    (idem), ``classified`` (``results/classify/<model_set>/<flight>.parquet``), ``models``
+    (one page per model set, in ``model_sets`` order).
+    """
+    out = _get(outputs, "index")
+    classified: dict[str, dict[str, str]] = {}
+    for p in _list(inputs, "classified"):
+        classified.setdefault(Path(p).stem, {})[_model_set_of(p)] = p
+    build_index(flights, _list(inputs, "metas"), out,
+                links={f: _rel(p, out) for f, p in zip(flights, _list(inputs, "pages"))},
+                segments=dict(zip(flights, _list(inputs, "segments"))), classified=classified,
+                models={m: _rel(p, out) for m, p in zip(model_sets, _list(inputs, "models"))})

@@ -1,0 +1,86 @@
+"""The allowed import graph of ``pipeline/`` (developers' guide, "Engineering rules").
+
+frames -> io -> preprocess -> models -> estimate -> align -> report: each subpackage may import
+the ones before it; ``simulate`` may import frames, io and estimate; ``studies`` may import all of
+these; nothing imports ``studies`` or ``cli``; nothing imports Snakemake. ``pipeline/config.py``
+(the one config schema) and the package root are importable from everywhere. Checked on the
+source (AST), so a function-level import counts like a module-level one.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "pipeline"
+CHAIN = ("frames", "io", "preprocess", "models", "estimate", "align", "report")
+SHARED = {"config", "__init__"}  # modules directly under pipeline/, importable from everywhere
+ALLOWED = {name: set(CHAIN[:i]) for i, name in enumerate(CHAIN)}
+ALLOWED["simulate"] = {"frames", "io", "estimate"}
+ALLOWED["studies"] = set(CHAIN) | {"simulate"}
+ALLOWED["cli"] = set(CHAIN) | {"simulate"}
+
+
+def _subpackage(path: Path) -> str:
+    rel = path.relative_to(PKG)
+    if rel.as_posix() == "__main__.py":
+        return "cli"  # `python -m pipeline` is the command line
+    return rel.parts[0] if len(rel.parts) > 1 else rel.stem
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every import in one module."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    pkg_parts = list(rel.parts[:-1]) if rel.name != "__init__" else list(rel.parts[:-1])
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg_parts[: len(pkg_parts) - (node.level - 1)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+                if node.module is None:  # from . import x, y
+                    out += [(node.lineno, f"{mod}.{a.name}") for a in node.names]
+                    continue
+            else:
+                mod = node.module or ""
+            out.append((node.lineno, mod))
+    return out
+
+
+MODULES = sorted(PKG.rglob("*.py"))
+SUBPACKAGES = {p.name for p in PKG.iterdir() if p.is_dir() and (p / "__init__.py").exists()} | \
+    {p.stem for p in PKG.glob("*.py")}
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: p.relative_to(PKG).as_posix())
+def test_module_imports_only_what_the_graph_allows(path):
+    me = _subpackage(path)
+    bad = []
+    for line, mod in _imports(path):
+        top = mod.split(".")[0]
+        if top == "snakemake":
+            bad.append(f"line {line}: imports snakemake")
+        if top != "pipeline":
+            continue
+        parts = mod.split(".")
+        if len(parts) == 1:
+            continue  # `import pipeline` / `from pipeline import __version__`
+        target = parts[1]
+        if target not in SUBPACKAGES or target in SHARED or target == me:  # root attributes: __version__
+            continue
+        if me in SHARED:
+            bad.append(f"line {line}: pipeline/{me}.py imports {mod}")
+        elif target not in ALLOWED.get(me, set()):
+            bad.append(f"line {line}: {me} imports {mod}")
+    assert not bad, f"{path.relative_to(PKG)}: " + "; ".join(bad)
+
+
+def test_the_graph_test_sees_relative_imports():
+    mods = dict((m, line) for line, m in _imports(PKG / "preprocess" / "state.py"))
+    assert "pipeline.io.schema" in {m for m in mods} or "pipeline.io" in mods
+    assert any(m.startswith("pipeline.frames") for m in mods)

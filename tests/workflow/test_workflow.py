@@ -25,7 +25,8 @@ SNAKEMAKE = str(Path(sys.executable).parent / "snakemake")
 HEADER = "flight_id\tpath\tvehicle\trole\tlabels\tformat\tnotes\n"
 
 
-def _copy_workflow(dst: Path, rows: list[str], extra_config: str = "", tiny: bool = True) -> Path:
+def _copy_workflow(dst: Path, rows: list[str], extra_config: str = "", tiny: bool = True,
+                   extra_tiny: str = "") -> Path:
     dst.mkdir(parents=True, exist_ok=True)
     for name in ("Snakefile", "rules", "reports", "profiles"):
         src = ROOT / name
@@ -35,7 +36,8 @@ def _copy_workflow(dst: Path, rows: list[str], extra_config: str = "", tiny: boo
     (dst / "datasets" / "config.yaml").write_text(cfg + extra_config)
     (dst / "datasets" / "flights.tsv").write_text(HEADER + "".join(r + "\n" for r in rows))
     # the tiny sizes of tests/workflow/config.yaml, merged over the default config by _smk
-    shutil.copy(ROOT / "tests" / "workflow" / "config.yaml", dst / "datasets" / ("tiny.yaml" if tiny else "unused.yaml"))
+    tiny_cfg = (ROOT / "tests" / "workflow" / "config.yaml").read_text() + extra_tiny
+    (dst / "datasets" / ("tiny.yaml" if tiny else "unused.yaml")).write_text(tiny_cfg)
     return dst
 
 
@@ -130,16 +132,153 @@ def test_absent_real_log_is_skipped_with_notice(tmp_path):
     assert "ghost" not in _planned_jobs(wd).keys()
 
 
+#: a second model set for the same vehicle (each must be trained, evaluated, reported on its own)
+SECOND_SET = "model_sets:\n  sim2: {data: simulated, labels: [M1, M2], vehicles: [sim-quad], hmm: {n_states: 3}}\n"
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """One tiny run of the whole workflow (demo, simulated M1 with truth, a corrupt log; model
+    sets sim, sim2 for the same vehicle, and f3a without training flights)."""
+    wd = _copy_workflow(tmp_path_factory.mktemp("tiny") / "wf",
+                        [DEMO, SIM, "broken\tlogs/broken.bin\tq\ttest\tnone\t\tcorrupt"], extra_tiny=SECOND_SET)
+    (wd / "logs").mkdir()
+    (wd / "logs" / "broken.bin").write_bytes(b"\xa3\x95" + bytes(range(256)) * 3)
+    _smk(wd)
+    return wd
+
+
+def _merged_config(wd: Path, out: Path) -> Path:
+    """datasets/config.yaml with datasets/tiny.yaml deep-merged over it, as Snakemake's
+    --configfile does: one file for the CLI's --config."""
+    import yaml
+
+    def merge(a, b):
+        return {**a, **{k: merge(a[k], v) if isinstance(v, dict) and isinstance(a.get(k), dict) else v
+                        for k, v in b.items()}}
+
+    cfg = merge(yaml.safe_load((wd / "datasets" / "config.yaml").read_text()),
+                yaml.safe_load((wd / "datasets" / "tiny.yaml").read_text()))
+    out.write_text(yaml.safe_dump(cfg))
+    return out
+
+
+def _cli(*args: str) -> None:
+    from pipeline.cli import main
+
+    assert main(list(args)) == 0, args
+
+
+def _frames_equal(a: Path, b: Path) -> None:
+    import pandas as pd
+
+    pd.testing.assert_frame_equal(pd.read_parquet(a), pd.read_parquet(b), obj=f"{a} vs {b}")
+
+
 @pytest.mark.slow
-def test_run_incremental_and_corrupt_flight(tmp_path):
+def test_two_model_sets_for_one_vehicle_are_each_trained_evaluated_and_reported(tiny_run):
+    res = tiny_run / "results"
+    index = (res / "index.html").read_text()
+    for m in ("sim", "sim2"):
+        meta = json.loads((res / "models" / m / "meta.json").read_text())
+        assert meta["status"] == "ok" and meta["name"] == m
+        assert meta["config"]["n_states"] == (3 if m == "sim2" else {"default": 6, "M1": 5})
+        cls = read_table(res / "classify" / m / "sim-M1-000-bin.parquet")
+        assert read_table_meta(res / "classify" / m / "sim-M1-000-bin.parquet")["model_set"] == m
+        assert len(cls) > 10
+        ev = read_table_meta(res / "models" / m / "evaluation.parquet")
+        assert ev["model_set"] == m and ev["status"] == "ok"
+        page = (res / "report" / "models" / f"{m}.html").read_text()
+        assert m in page
+        assert f"report/models/{m}.html" in index and f"{m} classifier:" in index
+    a = read_table(res / "classify" / "sim" / "sim-M1-000-bin.parquet")
+    b = read_table(res / "classify" / "sim2" / "sim-M1-000-bin.parquet")
+    assert not a["V_best"].equals(b["V_best"])  # each set classifies with its own models
+    flight = (res / "report" / "flights" / "sim-M1-000-bin.html").read_text()
+    assert "Maneuver timeline (sim)" in flight and "Maneuver timeline (sim2)" in flight
+
+
+@pytest.mark.slow
+def test_cli_simulate_equals_the_workflow(tiny_run, tmp_path):
+    import hashlib
+
+    res = tiny_run / "results" / "sim"
+    _cli("simulate", str(tmp_path / "sim"), "--config", str(_merged_config(tiny_run, tmp_path / "c.yaml")))
+    sets = sorted((res / "sets").glob("*.parquet"))
+    assert sets and sorted(p.name for p in (tmp_path / "sim" / "sets").glob("*.parquet")) == [p.name for p in sets]
+    for p in [*sets, res / "summary.parquet", *sorted((res / "logs").glob("*.truth.parquet"))]:
+        _frames_equal(p, tmp_path / "sim" / p.relative_to(res))
+    for p in sorted((res / "logs").glob("*.bin")):
+        assert hashlib.sha256(p.read_bytes()).digest() == \
+            hashlib.sha256((tmp_path / "sim" / "logs" / p.name).read_bytes()).digest(), p.name
+
+
+@pytest.mark.slow
+def test_cli_ingest_equals_the_workflow(tiny_run, tmp_path):
+    res = tiny_run / "results"
+    log = res / "sim" / "logs" / "sim-M1-000.bin"
+    _cli("ingest", str(log), "--labels", str(res / "sim" / "logs" / "sim-M1-000.bin.truth.parquet"),
+         "-o", str(tmp_path / "ing"), "--config", str(_merged_config(tiny_run, tmp_path / "c.yaml")))
+    (out,) = [d for d in (tmp_path / "ing").iterdir() if d.is_dir()]
+    ref = res / "ingest" / "sim-M1-000-bin"
+    for p in sorted(ref.glob("*.parquet")):
+        _frames_equal(p, out / p.name)
+    a, b = (json.loads((d / "meta.json").read_text()) for d in (ref, out))
+    for k in ("flight_id", "source_path"):
+        a.pop(k, None), b.pop(k, None)
+    assert a == b
+
+
+@pytest.mark.slow
+def test_cli_preprocess_equals_the_workflow(tiny_run, tmp_path):
+    res = tiny_run / "results"
+    _cli("preprocess", str(res / "ingest" / "sim-M1-000-bin"), "-o", str(tmp_path / "pp"), "--vehicle", "sim-quad",
+         "--config", str(_merged_config(tiny_run, tmp_path / "c.yaml")))
+    (out,) = [d for d in (tmp_path / "pp").iterdir() if d.is_dir()]
+    for stage in ("state", "segments", "calibration"):
+        _frames_equal(res / stage / "sim-M1-000-bin.parquet", out / f"{stage}.parquet")
+    assert read_table_meta(out / "state.parquet")["preprocess"] == \
+        read_table_meta(res / "state" / "sim-M1-000-bin.parquet")["preprocess"]
+
+
+@pytest.mark.slow
+def test_cli_train_and_classify_equal_the_workflow(tiny_run, tmp_path):
+    import numpy as np
+
+    res = tiny_run / "results"
+    cfg = str(_merged_config(tiny_run, tmp_path / "c.yaml"))
+    sets = [str(res / "sim" / "sets" / f"{m}_train.parquet") for m in ("M1", "M2")]
+    _cli("train", *sets, "-o", str(tmp_path / "sim"), "--model-set", "sim", "--config", cfg)
+    a, b = np.load(res / "models" / "sim" / "params.npz"), np.load(tmp_path / "sim" / "params.npz")
+    assert sorted(a.files) == sorted(b.files)
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    ma, mb = (json.loads((d / "meta.json").read_text()) for d in (res / "models" / "sim", tmp_path / "sim"))
+    assert ma["training"] == mb["training"] and ma["config"] == mb["config"]
+    _cli("classify", str(tmp_path / "sim"), str(res / "state" / "sim-M1-000-bin.parquet"),
+         "--segments", str(res / "segments" / "sim-M1-000-bin.parquet"), "--reset-at-segments",
+         "-o", str(tmp_path / "cls.parquet"))
+    _frames_equal(res / "classify" / "sim" / "sim-M1-000-bin.parquet", tmp_path / "cls.parquet")
+
+
+@pytest.mark.slow
+def test_changing_only_the_seed_reruns_exactly_the_simulated_and_trained_outputs(tiny_run):
+    jobs = _planned_jobs(tiny_run, "--config", "seed=7")
+    assert {"simulate_sets", "simulate_logs", "demo_log", "train_model"} <= set(jobs), jobs
+    assert jobs["train_model"] == 3  # sim, sim2 and f3a
+    # a hyperparameter change retrains and reclassifies, but simulates and ingests nothing
+    jobs = _planned_jobs(tiny_run, "--config", "hmm={n_iter: 4}")
+    assert "train_model" in jobs and not {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight",
+                                          "preprocess_flight"} & set(jobs), jobs
+
+
+@pytest.mark.slow
+def test_run_incremental_and_corrupt_flight(tiny_run):
     """Full tiny run with a corrupt log: exit 0, every other report, the index lists the failure
     with its reason; every stage's outputs exist (failed placeholders for the broken flight);
     then adding one test flight reruns only that flight's jobs plus the index, and changing one
     preprocessing parameter reruns preprocessing and what depends on it, nothing upstream."""
-    wd = _copy_workflow(tmp_path / "wf", [DEMO, SIM, "broken\tlogs/broken.bin\tq\ttest\tnone\t\tcorrupt"])
-    (wd / "logs").mkdir()
-    (wd / "logs" / "broken.bin").write_bytes(b"\xa3\x95" + bytes(range(256)) * 3)
-    _smk(wd)
+    wd = tiny_run
     res = wd / "results"
     index = (res / "index.html").read_text()
     assert "broken" in index and "failed" in index
@@ -168,7 +307,8 @@ def test_run_incremental_and_corrupt_flight(tmp_path):
     with open(wd / "datasets" / "flights.tsv", "a") as fh:
         fh.write("extra\tlogs/extra.bin\tsim-quad\ttest\tnone\t\tadded\n")
     jobs = _planned_jobs(wd)
-    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 1, "flight_report": 1,
+    # classified by both model sets of its vehicle (sim, sim2)
+    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "flight_report": 1,
                     "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
@@ -179,7 +319,7 @@ def test_run_incremental_and_corrupt_flight(tmp_path):
     assert "\n  rate_hz: 25 " in text
     cfg.write_text(text.replace("\n  rate_hz: 25 ", "\n  rate_hz: 20 ", 1))
     jobs = _planned_jobs(wd)
-    assert jobs == {"preprocess_flight": 4, "classify_flight": 3, "flight_report": 4, "report_index": 1,
+    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "flight_report": 4, "report_index": 1,
                     "all": 1}, jobs
 
     # snakemake --report over the finished run

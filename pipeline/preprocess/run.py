@@ -23,7 +23,7 @@ from .state import run_preprocess, summary_line, write_outputs
 
 
 def _empty(cols) -> pd.DataFrame:
-    return pd.DataFrame({c.name: schema._empty_series(c, 0) for c in cols})
+    return schema.empty(cols)
 
 
 def run_preprocess_flight(ingest_dir: str | os.PathLike, *, state_path, segments_path,

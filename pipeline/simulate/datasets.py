@@ -53,21 +53,9 @@ from .seeds import set_rng
 from .sensors import SensorSettings, sticks
 from .writers import write_flight_logs
 
-SET_COLUMNS: tuple[schema.Column, ...] = (
-    *schema.STATE,
-    schema.Column("run_id", "int64", "1", "", "run number within the set"),
-    schema.Column("label", "string", "", "", "maneuver label (truth)"),
-)
-
-SUMMARY_COLUMNS: tuple[schema.Column, ...] = (
-    schema.Column("maneuver", "string"),
-    schema.Column("quantity", "string", "", "", "acc (m/s^2) or jerk (m/s^3)"),
-    schema.Column("axis", "string", "", "", "n/e/d (NED), fwd/right/down (heading frame), norm"),
-    schema.Column("min", "float64"),
-    schema.Column("max", "float64"),
-    schema.Column("rms", "float64"),
-    schema.Column("n_runs", "int64"),
-)
+#: the columns of a bulk set and of the summary (declared with every table in io.schema)
+SET_COLUMNS: tuple[schema.Column, ...] = schema.SIM_SET
+SUMMARY_COLUMNS: tuple[schema.Column, ...] = schema.SIM_SUMMARY
 
 SIZES = {
     "small": {"runs": 60, "mc_runs": 20, "switch_runs": 10, "log_flights": 1},

@@ -24,6 +24,7 @@ from typing import Callable
 
 import pandas as pd
 
+from ..io import schema
 from ..io.dataflash_writer import write_bin
 from ..io.ros_writer import write_ros1, write_ros2_mcap
 from ..io.sidecar import sidecar_path, write_sidecar
@@ -101,7 +102,7 @@ def write_flight_logs(out_dir: Path, settings, sensors, ds, seed: int, say=lambd
                          "role": "test", "labels": str(sidecar_path(p)), "format": "",
                          "notes": f"simulated {sc.name} ({fmt})"})
         say(f"log files {stem}: {', '.join(paths)}")
-    df = pd.DataFrame(rows, columns=["flight_id", "path", "vehicle", "role", "labels", "format", "notes"])
+    df = pd.DataFrame(rows, columns=schema.column_names("flights"))
     out_dir.mkdir(parents=True, exist_ok=True)
     df.to_csv(out_dir / "flights.tsv", sep="\t", index=False)
     return rows

@@ -32,14 +32,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..frames.rotations import quat_to_euler
-
 from . import dataflash_catalogue as cat
 from .dataflash import FMT_LEN, FMT_TYPE, FORMAT_CHARS, HEAD1, HEAD2, _format_dtype
 
 if TYPE_CHECKING:  # annotations only: writing a log needs no pandas import
     import pandas as pd
 
-#: Unit and multiplier ids (re-exported from the catalogue for the writer's callers)
+#: Unit and multiplier ids and the fixed type ids (from the catalogue)
 UNITS, MULTS = cat.UNITS, cat.MULTS
 FMTU_TYPE, UNIT_TYPE, MULT_TYPE, PARM_TYPE = cat.FMTU_TYPE, cat.UNIT_TYPE, cat.MULT_TYPE, cat.PARM_TYPE
 

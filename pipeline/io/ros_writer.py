@@ -34,7 +34,7 @@ RADAR_TYPE = "uavpipe_msgs/msg/Radar"
 
 
 def _ros_messages(streams: Mapping[str, pd.DataFrame], t0_utc_ns: int, store, ros2: bool):
-    """Yield (topic, msgtype, t_abs_ns, message) in time order for the ROS writers."""
+    """(topic, msgtype, t_ns, message) of every message, sorted by (time, topic)."""
     T = store.types
     Header = T["std_msgs/msg/Header"]
     Time = T["builtin_interfaces/msg/Time"]
@@ -104,7 +104,23 @@ def _typestore(ros2: bool):
 
 
 def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int) -> Path:
-    """ROS 1 bag (rosbags writer); the radar type's definition is stored in its connection."""
+    """Write canonical streams as a ROS 1 bag (rosbags writer).
+
+    Parameters
+    ----------
+    path : path-like
+        Output ``.bag`` (replaced if it exists).
+    streams : mapping of str to DataFrame
+        Canonical ``imu``, ``attitude``, ``gps``, ``baro``, ``rangefinder`` and ``radar``
+        streams (``t_ns`` since the flight's t = 0).
+    t0_utc_ns : int
+        UTC of ``t_ns = 0``: header stamps and bag times are ``t0_utc_ns + t_ns``.
+
+    Returns
+    -------
+    Path
+        ``path``; the radar type's definition is stored in its connection.
+    """
     from rosbags.rosbag1 import Writer
 
     path = Path(path)
@@ -123,7 +139,22 @@ def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, 
 
 
 def write_ros2_mcap(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int) -> Path:
-    """ROS 2 bag directory with MCAP storage (rosbags writer, CDR; radar schema in the file)."""
+    """Write canonical streams as a ROS 2 bag directory with MCAP storage (rosbags writer, CDR).
+
+    Parameters
+    ----------
+    path : path-like
+        Output bag directory (replaced if it exists).
+    streams : mapping of str to DataFrame
+        As :func:`write_ros1`.
+    t0_utc_ns : int
+        UTC of ``t_ns = 0``: header stamps and log times are ``t0_utc_ns + t_ns``.
+
+    Returns
+    -------
+    Path
+        ``path``; the radar schema is stored in the ``.mcap`` file.
+    """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     path = Path(path)

@@ -85,8 +85,7 @@ def read_table(path: str | os.PathLike, cols: tuple[schema.Column, ...] | None =
     df = pq.read_table(path).to_pandas()
     if cols is None:
         return df
-    return pd.DataFrame({c.name: schema._cast(c, df[c.name]) if len(df) else schema._empty_series(c, 0)
-                         for c in cols})
+    return pd.DataFrame({c.name: schema.cast(c, df[c.name]) for c in cols}) if len(df) else schema.empty(cols)
 
 
 def _json_default(o: Any):

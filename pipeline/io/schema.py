@@ -7,8 +7,12 @@ int64, the source's own boot-time stamp). Units are in the column names (SI; deg
 ``_deg`` columns); the world frame is NED, the body frame FRD; quaternions are Hamilton,
 scalar-first, body FRD -> NED.
 
-This module is the single place where streams, columns, dtypes, units and frames are declared.
-Readers build loose DataFrames and call :func:`conform` (through ``FlightLog.from_streams``),
+This module is the single place where streams, columns, dtypes, units and frames are declared,
+for the canonical streams and for every derived table of every stage (``state``,
+``segments``, ``calibration``, the simulated sets and summary, the flight manifest,
+``classification``, ``model_evaluation``): :data:`TABLES` maps each name to its columns, and
+:func:`columns`, :func:`empty`, :func:`conform` and :func:`cast` are the one way to shape a
+table. Readers build loose DataFrames and call :func:`conform` (through ``FlightLog.from_streams``),
 which orders and casts columns, adds every missing column (NaN / NA), sorts stably by
 (``instance``, ``t_ns``) and rejects unknown columns, so a typo in a reader fails loudly.
 """
@@ -184,22 +188,128 @@ SEGMENTS: tuple[Column, ...] = (
     Column("label", "string"),
 )
 
+#: Columns of the per-flight calibration table (preprocess; one row per candidate reference
+#: sample of the BPM calibration, :mod:`pipeline.preprocess.calibrate`).
+CALIBRATION: tuple[Column, ...] = (
+    Column("t_ns", "int64", "ns"),
+    _f("h_ref_m", "m", "up", "reference height (tilt-compensated range, or GPS above origin)"),
+    _f("h_baro_m", "m", "up", "filtered barometric altitude at t_ns"),
+    _f("offset_m", "m", "up", "h_ref_m - h_baro_m"),
+    Column("region", "int64", "1", "", "calibration region (-1: not used)"),
+    Column("used", "bool", "", "", "point used in the fit"),
+    Column("reason", "string", "", "", "ok, or why the point was rejected"),
+    Column("method", "string", "", "", "rangefinder, gps"),
+)
+
+#: Columns of a simulated bulk set (simulate ``sets/<name>.parquet``): the ``state`` columns of
+#: every run, so models read sets exactly as preprocessed flights, plus the run and its label.
+SIM_SET: tuple[Column, ...] = (
+    *STATE,
+    Column("run_id", "int64", "1", "", "run number within the set"),
+    Column("label", "string", "", "", "maneuver label (truth)"),
+)
+
+#: Columns of the simulation summary (simulate ``summary.parquet``): per maneuver, quantity and
+#: axis, min / max / RMS over all samples of all runs at the truth rate.
+SIM_SUMMARY: tuple[Column, ...] = (
+    Column("maneuver", "string"),
+    Column("quantity", "string", "", "", "acc (m/s^2) or jerk (m/s^3)"),
+    Column("axis", "string", "", "", "n/e/d (NED), fwd/right/down (heading frame), norm"),
+    Column("min", "float64"),
+    Column("max", "float64"),
+    Column("rms", "float64"),
+    Column("n_runs", "int64"),
+)
+
+#: Columns of the simulated log flights' manifest (simulate ``logs/flights.tsv``; the layout of
+#: the workflow's flight manifest).
+FLIGHTS: tuple[Column, ...] = (
+    Column("flight_id", "string"),
+    Column("path", "string", "", "", "log file or ROS 2 bag directory"),
+    Column("vehicle", "string"),
+    Column("role", "string", "", "", "train, test"),
+    Column("labels", "string", "", "", "labels / truth side-car path"),
+    Column("format", "string", "", "", "reader name, empty: detected"),
+    Column("notes", "string"),
+)
+
+#: Columns of a classification table (models ``classify``; one row per model-rate sample).
+#: The first six (:data:`CLASSIFY_MIN_COLUMNS`) are the placeholder layout of a failed
+#: classification. ``ll_*`` stands for one ``ll_<label>`` column per model of the set (and
+#: ``ll_background``); the ``*_hmm_*`` columns are written with GMR only.
+CLASSIFICATION: tuple[Column, ...] = (
+    Column("run_id", "string", "", "", "run (simulated sets) or flight run id"),
+    Column("t_ns", "int64", "ns"),
+    Column("truth", "string", "", "", "label of the enclosing segment, '' outside"),
+    Column("pred", "string", "", "", "decided label, or unknown"),
+    Column("best", "string", "", "", "most likely model"),
+    Column("V_best", "float64", "1", "", "online Viterbi score of best"),
+    Column("oneclass_ok", "bool", "", "", "best passes its one-class threshold"),
+    Column("ll_*", "float64", "1", "", "log-likelihood score per model label"),
+    Column("state", "int64", "1", "", "online Viterbi state of best (-1: none)"),
+    Column("change", "bool", "", "", "a maneuver change detected here"),
+    Column("change_t_ns", "int64", "ns", "", "where the change began (-1: none)"),
+    *(_f(f"acc_hmm_{a}_mps2", "m/s^2", "NED", "GMR acceleration estimate") for a in _NED),
+    *(_f(f"jerk_hmm_{a}_mps3", "m/s^3", "NED", "GMR jerk estimate") for a in _NED),
+    *(Column(f"acc_hmm_gated_{a}", "boolean", "", "", "GMR acceleration dropped by the gate") for a in _NED),
+)
+CLASSIFY_MIN_COLUMNS: tuple[str, ...] = ("run_id", "t_ns", "truth", "pred", "best", "V_best")
+
+#: Columns of a model evaluation table (models ``evaluate``): FA / MAoT per maneuver beside the
+#: thesis values (seed 000 §5, Tables 3.1-3.4).
+MODEL_EVALUATION: tuple[Column, ...] = (
+    Column("table", "string", "", "", "thesis table, or flights"),
+    Column("split", "string", "", "", "train, test, test flights"),
+    Column("decision", "string", "", "", "oneclass, confidence"),
+    Column("maneuver", "string"),
+    Column("n_runs", "int64"),
+    _f("FA_pct", "%", "", "final accuracy"),
+    _f("MAoT_pct", "%", "", "mean accuracy over time"),
+    _f("thesis_FA_pct", "%"),
+    _f("thesis_MAoT_pct", "%"),
+)
+EVAL_COLUMNS: tuple[str, ...] = tuple(c.name for c in MODEL_EVALUATION)
+
+#: Every table of every stage by name: the canonical streams (common columns first), ``labels``
+#: and the derived tables. :func:`columns`, :func:`empty` and :func:`conform` take these names.
+TABLES: dict[str, tuple[Column, ...]] = {
+    **{name: (*COMMON, *cols) for name, cols in STREAMS.items()},
+    "labels": LABELS,
+    "state": STATE,
+    "segments": SEGMENTS,
+    "calibration": CALIBRATION,
+    "simulate_set": SIM_SET,
+    "simulate_summary": SIM_SUMMARY,
+    "flights": FLIGHTS,
+    "classification": CLASSIFICATION,
+    "model_evaluation": MODEL_EVALUATION,
+}
+
 
 class SchemaError(ValueError):
     """A DataFrame does not fit its canonical stream (unknown column, uncastable dtype)."""
 
 
-def columns(stream: str) -> tuple[Column, ...]:
-    """All columns of ``stream`` in canonical order (common columns first)."""
-    if stream == "labels":
-        return LABELS
-    if stream not in STREAMS:
-        raise SchemaError(f"unknown stream {stream!r}; known: {', '.join(STREAM_NAMES)}")
-    return (*COMMON, *STREAMS[stream])
+def columns(table: str) -> tuple[Column, ...]:
+    """All columns of ``table`` (a key of :data:`TABLES`) in canonical order (a stream's
+    common columns first)."""
+    if table not in TABLES:
+        raise SchemaError(f"unknown table {table!r}; known: {', '.join(TABLES)}")
+    return TABLES[table]
 
 
-def column_names(stream: str) -> list[str]:
-    return [c.name for c in columns(stream)]
+def column_names(table: str) -> list[str]:
+    """Column names of ``table`` in canonical order."""
+    return [c.name for c in columns(table)]
+
+
+def _cols(table: str | tuple[Column, ...]) -> tuple[Column, ...]:
+    return columns(table) if isinstance(table, str) else tuple(table)
+
+
+def _is_wildcard(col: Column) -> bool:
+    # ``ll_*``: a family of columns named at run time (one per model label)
+    return col.name.endswith("*")
 
 
 def _empty_series(col: Column, n: int) -> pd.Series:
@@ -214,7 +324,16 @@ def _empty_series(col: Column, n: int) -> pd.Series:
     return pd.Series(pd.array([None] * n, dtype=col.dtype))
 
 
-def _cast(col: Column, s: pd.Series) -> pd.Series:
+def cast(column: Column, series: pd.Series) -> pd.Series:
+    """``series`` cast to the declared dtype of ``column``.
+
+    Raises
+    ------
+    SchemaError
+        Naming the column, when a value cannot be cast or an ``int64``/``uint8`` column has
+        missing values.
+    """
+    col, s = column, series
     try:
         if col.dtype == "category":
             return s.astype("string").astype("category")
@@ -229,45 +348,56 @@ def _cast(col: Column, s: pd.Series) -> pd.Series:
         raise SchemaError(f"column {col.name!r} cannot be cast to {col.dtype}: {exc}") from None
 
 
-def empty(stream: str) -> pd.DataFrame:
-    """An empty DataFrame with the full schema of ``stream``."""
-    return pd.DataFrame({c.name: _empty_series(c, 0) for c in columns(stream)})
+def empty(table: str | tuple[Column, ...]) -> pd.DataFrame:
+    """An empty DataFrame with the full schema of ``table`` (a :data:`TABLES` name, or its
+    columns; wildcard column families such as ``ll_*`` have no member yet and are left out)."""
+    return pd.DataFrame({c.name: _empty_series(c, 0) for c in _cols(table) if not _is_wildcard(c)})
 
 
-def conform(stream: str, df: pd.DataFrame | None) -> pd.DataFrame:
-    """Return ``df`` in the canonical layout of ``stream``.
+def conform(table: str | tuple[Column, ...], df: pd.DataFrame | None) -> pd.DataFrame:
+    """Return ``df`` in the canonical layout of ``table`` (a :data:`TABLES` name, or columns).
 
-    Adds missing optional columns (NaN/NA), casts dtypes, orders columns canonically and sorts
-    rows stably by (``instance``, ``t_ns``) (``labels``: by ``t_start_ns``). Samples are never
-    dropped or repaired here: timestamp anomalies are counted by :func:`timestamp_anomalies`
-    and repaired in preprocessing.
+    Adds missing optional columns (NaN/NA), casts dtypes and orders columns canonically
+    (columns of a wildcard family such as ``ll_*`` at its place, in their given order). A
+    stream also gets ``instance`` 0 where it has none, and its rows are sorted stably by
+    (``instance``, ``t_ns``) (``labels``: by ``t_start_ns``); derived tables keep their row
+    order. Samples are never dropped or repaired here: timestamp anomalies are counted by
+    :func:`timestamp_anomalies` and repaired in preprocessing.
 
     Raises
     ------
     SchemaError
-        On an unknown column or a value that cannot be cast.
+        On an unknown table or column, or a value that cannot be cast.
     """
+    stream = table if isinstance(table, str) else ""
     if df is None or (len(df) == 0 and len(df.columns) == 0):
-        return empty(stream)
-    cols = columns(stream)
+        return empty(table)
+    cols = _cols(table)
     known = {c.name for c in cols}
-    unknown = [c for c in df.columns if c not in known]
+    prefixes = tuple(c.name[:-1] for c in cols if _is_wildcard(c))
+    unknown = [c for c in df.columns if c not in known and not (prefixes and str(c).startswith(prefixes))]
     if unknown:
-        raise SchemaError(f"stream {stream!r}: unknown column(s) {unknown}")
+        kind = "stream" if stream in STREAM_NAMES else "table"
+        raise SchemaError(f"{kind} {stream or 'given'!r}: unknown column(s) {unknown}")
     n = len(df)
-    if stream != "labels" and "instance" not in df.columns:
+    if stream in STREAMS and "instance" not in df.columns:
         df = df.assign(instance=np.zeros(n, dtype=np.uint8))
     out = {}
     for c in cols:
-        if c.name in df.columns:
-            out[c.name] = _cast(c, df[c.name].reset_index(drop=True))
+        if _is_wildcard(c):
+            for name in df.columns:
+                if str(name).startswith(c.name[:-1]) and name not in known:
+                    out[name] = cast(Column(name, c.dtype, c.unit, c.frame, c.doc), df[name].reset_index(drop=True))
+        elif c.name in df.columns:
+            out[c.name] = cast(c, df[c.name].reset_index(drop=True))
         else:
             out[c.name] = _empty_series(c, n)
     res = pd.DataFrame(out)
-    keys = ["t_start_ns"] if stream == "labels" else ["instance", "t_ns"]
-    order = np.lexsort([res[k].to_numpy() for k in reversed(keys)])
-    if not np.array_equal(order, np.arange(n)):
-        res = res.iloc[order].reset_index(drop=True)
+    keys = ["t_start_ns"] if stream == "labels" else ["instance", "t_ns"] if stream in STREAMS else []
+    if keys:
+        order = np.lexsort([res[k].to_numpy() for k in reversed(keys)])
+        if not np.array_equal(order, np.arange(n)):
+            res = res.iloc[order].reset_index(drop=True)
     return res
 
 
@@ -296,13 +426,14 @@ def timestamp_anomalies(df: pd.DataFrame, by_src: bool = True) -> dict[str, int]
     return {"backwards": int(np.sum((d < 0) & same)), "duplicate": int(np.sum((d == 0) & same))}
 
 
-def arrow_schema(stream: str) -> pa.Schema:
-    """pyarrow schema of ``stream`` with per-column ``unit``/``frame`` field metadata."""
-    return _arrow_schema(columns(stream))
+def arrow_schema(table: str) -> pa.Schema:
+    """pyarrow schema of ``table`` (any :data:`TABLES` name) with per-column
+    ``unit``/``frame`` field metadata (wildcard families left out)."""
+    return _arrow_schema(columns(table))
 
 
 def arrow_schema_for(cols: tuple[Column, ...]) -> pa.Schema:
-    """pyarrow schema for a derived table (``STATE``, ``SEGMENTS``)."""
+    """pyarrow schema for given columns (``STATE``, ``SEGMENTS``...)."""
     return _arrow_schema(cols)
 
 
@@ -327,13 +458,14 @@ def _arrow_schema(cols: tuple[Column, ...]) -> pa.Schema:
             metadata={"unit": c.unit, "frame": c.frame, "doc": c.doc},
         )
         for c in cols
+        if not _is_wildcard(c)
     ]
     return pa.schema(fields)
 
 
-def units(stream: str) -> dict[str, dict[str, str]]:
+def units(table: str) -> dict[str, dict[str, str]]:
     """``{column: {"unit": ..., "frame": ...}}`` for the file metadata."""
-    return {c.name: {"unit": c.unit, "frame": c.frame} for c in columns(stream)}
+    return {c.name: {"unit": c.unit, "frame": c.frame} for c in columns(table)}
 
 
 def new_meta(**kw) -> dict:

@@ -163,8 +163,8 @@ class ManeuverModelSet:
                 # extend short curves linearly so every model has a value at every t
                 for i, c in enumerate(cs):
                     if len(c) < T:
-                        from .online import _extend_threshold
-                        arr[i, len(c):] = _extend_threshold(c, np.arange(len(c) + 1, T + 1), False)
+                        from .online import extend_threshold
+                        arr[i, len(c):] = extend_threshold(c, np.arange(len(c) + 1, T + 1), False)
             n = np.arange(1, T + 1)
             if mode == "windowed":
                 n = np.minimum(n, cfg.window)

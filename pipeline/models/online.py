@@ -140,7 +140,7 @@ def confidence(scores: F64) -> F64:
         return (logsumexp(others, axis=-1) - scores) / LN10
 
 
-def _extend_threshold(curve: F64, n: NDArray[np.int64], stationary: bool) -> F64:
+def extend_threshold(curve: F64, n: NDArray[np.int64], stationary: bool) -> F64:
     """Threshold at elapsed samples ``n`` (1-based) from a curve for n = 1..T; beyond T a
     cumulative curve is extended linearly (slope of its last tenth), a windowed one by its
     last value."""
@@ -358,7 +358,7 @@ class OnlineClassifier:
     def threshold_now(self) -> F64:
         """One-class threshold of every model at each run's elapsed samples, shape (R, M)."""
         n = self.n_cum if self.mode != "windowed" else self.t
-        thr = _extend_threshold(self.thresholds, n, self.thr_stationary)  # (M, R)
+        thr = extend_threshold(self.thresholds, n, self.thr_stationary)  # (M, R)
         return thr.T
 
     def _decide(self, scores, change, change_at) -> StepResult:

@@ -39,12 +39,10 @@ import pandas as pd
 from .. import __version__
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
+from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
 from .base import ModelError, ModelsConfig
 from .metrics import THESIS_TRUTH, per_maneuver_table, thesis_side_by_side
 
-CLASSIFY_MIN_COLUMNS = ("run_id", "t_ns", "truth", "pred", "best", "V_best")
-EVAL_COLUMNS = ("table", "split", "decision", "maneuver", "n_runs", "FA_pct", "MAoT_pct",
-                "thesis_FA_pct", "thesis_MAoT_pct")
 #: (split, decision) -> seed 000 table of truth-input results
 THESIS_TABLES = {("train", "oneclass"): "3.1", ("train", "confidence"): "3.2",
                  ("test", "oneclass"): "3.3", ("test", "confidence"): "3.4"}

@@ -39,23 +39,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..io.schema import Column
-
-
-def _f(name: str, unit: str, frame: str = "", doc: str = "") -> Column:
-    return Column(name, "float64", unit, frame, doc)
-
-#: Columns of the per-flight calibration table (one row per candidate reference sample).
-CALIBRATION: tuple[Column, ...] = (
-    Column("t_ns", "int64", "ns"),
-    _f("h_ref_m", "m", "up", "reference height (tilt-compensated range, or GPS above origin)"),
-    _f("h_baro_m", "m", "up", "filtered barometric altitude at t_ns"),
-    _f("offset_m", "m", "up", "h_ref_m - h_baro_m"),
-    Column("region", "int64", "1", "", "calibration region (-1: not used)"),
-    Column("used", "bool", "", "", "point used in the fit"),
-    Column("reason", "string", "", "", "ok, or why the point was rejected"),
-    Column("method", "string", "", "", "rangefinder, gps"),
-)
+from ..io.schema import CALIBRATION  # noqa: F401  (declared with every table in io.schema)
 
 
 @dataclass(frozen=True, kw_only=True)

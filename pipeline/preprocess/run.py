@@ -37,11 +37,6 @@ class PreprocessStageResult:
     diagnostics: dict
 
 
-def _empty(cols):  # MERGE: schema.empty(table) from the schema API
-    import pandas as pd
-    return pd.DataFrame({c.name: schema._empty_series(c, 0) for c in cols})
-
-
 def _get(paths: Any, name: str):
     # snakemake namedlists and plain dicts alike
     return paths[name] if isinstance(paths, Mapping) else getattr(paths, name)
@@ -74,10 +69,10 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
         reason = f"ingest failed: {meta.get('error') or 'unknown reason'}"
         diag = {"flight_id": fid, "status": "failed", "error": reason}
         extra = {"flight_id": fid, "status": "failed", "error": reason}
-        write_table(_empty(schema.STATE), paths["state"], schema.STATE, name="state", extra=extra)
-        write_table(_empty(schema.SEGMENTS), paths["segments"], schema.SEGMENTS,
+        write_table(schema.empty("state"), paths["state"], schema.STATE, name="state", extra=extra)
+        write_table(schema.empty("segments"), paths["segments"], schema.SEGMENTS,
                     name="segments", extra=extra)
-        write_table(_empty(CALIBRATION), paths["calibration"], CALIBRATION, name="calibration",
+        write_table(schema.empty("calibration"), paths["calibration"], CALIBRATION, name="calibration",
                     extra=extra)
         write_json(diag, paths["info"])
         print(f"uavpipe preprocess: {fid}: placeholder outputs ({reason})", file=sys.stderr)

@@ -283,7 +283,7 @@ def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84
 
 
 def _empty_state() -> pd.DataFrame:
-    return pd.DataFrame({c.name: schema._empty_series(c, 0) for c in schema.STATE})
+    return schema.empty("state")
 
 
 # --- the orchestration -----------------------------------------------------------------------
@@ -484,7 +484,7 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     st["gap"] = gap
 
     state = pd.DataFrame({c.name: st[c.name] for c in schema.STATE})
-    state = pd.DataFrame({c.name: schema._cast(c, state[c.name]) for c in schema.STATE})
+    state = pd.DataFrame({c.name: schema.cast(c, state[c.name]) for c in schema.STATE})
     diag["gap_fraction"] = float(gap.mean()) if n else 0.0
 
     # 9. segments

@@ -20,7 +20,7 @@ import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from ..io.parquet import read_table, read_table_meta
-from .plots import _layout
+from .plots import layout
 
 
 def training_curves(training: dict) -> go.Figure | None:
@@ -34,7 +34,7 @@ def training_curves(training: dict) -> go.Figure | None:
         return None
     fig.update_xaxes(title="Baum-Welch iteration")
     fig.update_yaxes(title="training log-likelihood")
-    return _layout(fig, "Training log-likelihood")
+    return layout(fig, "Training log-likelihood")
 
 
 def hmm_figure(label: str, startprob: np.ndarray, transmat: np.ndarray, means: np.ndarray,
@@ -54,7 +54,7 @@ def hmm_figure(label: str, startprob: np.ndarray, transmat: np.ndarray, means: n
                   row=1, col=2)
     fig.update_yaxes(autorange="reversed", row=1, col=1)
     fig.update_yaxes(autorange="reversed", row=1, col=2)
-    return _layout(fig, f"HMM of {label}: {n} states", height=340 + 12 * n, margin=dict(l=60, r=20, t=90, b=80))
+    return layout(fig, f"HMM of {label}: {n} states", height=340 + 12 * n, margin=dict(l=60, r=20, t=90, b=80))
 
 
 def _table_html(df: pd.DataFrame) -> str:

@@ -28,7 +28,9 @@ def _t(df: pd.DataFrame) -> np.ndarray:
     return df["t_ns"].to_numpy() * 1e-9
 
 
-def _layout(fig: go.Figure, title: str, **kw) -> go.Figure:
+def layout(fig: go.Figure, title: str, **kw) -> go.Figure:
+    """Apply the report's figure style (margins, height, template, horizontal legend) and
+    ``title`` to ``fig``; ``kw`` overrides any of those options. Returns ``fig``."""
     opts = {"margin": dict(l=50, r=20, t=40, b=40), "height": 360, "template": "plotly_white",
             "legend": dict(orientation="h"), **kw}
     fig.update_layout(title=title, **opts)
@@ -44,7 +46,7 @@ def path_3d(ned: pd.DataFrame) -> go.Figure | None:
                                  line=dict(width=3, color=_t(d), colorscale="Viridis"), name="path"))
     fig.update_layout(scene=dict(xaxis_title="east [m]", yaxis_title="north [m]", zaxis_title="up [m]",
                                  aspectmode="data"))
-    return _layout(fig, "3-D path (local NED, up = −d)", height=480)
+    return layout(fig, "3-D path (local NED, up = −d)", height=480)
 
 
 def _nice_length(span: float) -> float:
@@ -72,7 +74,7 @@ def ground_track(ned: pd.DataFrame) -> go.Figure | None:
     fig.add_annotation(x=x0 + bar / 2, y=y0, text=f"{bar:g} m", showarrow=False, yshift=12)
     fig.update_yaxes(scaleanchor="x", scaleratio=1, title="north [m]")
     fig.update_xaxes(title="east [m]")
-    return _layout(fig, "Ground track", height=480)
+    return layout(fig, "Ground track", height=480)
 
 
 def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None = None) -> go.Figure | None:
@@ -89,7 +91,7 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
         return None
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title="altitude [m, up]")
-    return _layout(fig, "Altitude")
+    return layout(fig, "Altitude")
 
 
 def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> go.Figure | None:
@@ -103,7 +105,7 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
         fig.add_trace(go.Scatter(x=d["t"], y=d["v"], mode="lines", name=name))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title="angle [deg]")
-    return _layout(fig, "Attitude (ZYX Euler)")
+    return layout(fig, "Attitude (ZYX Euler)")
 
 
 def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> go.Figure | None:
@@ -118,7 +120,7 @@ def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> g
     fig = go.Figure([go.Scatter(x=_t(d), y=d[c], mode="lines", name=c) for c in cols])
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title=ylabel)
-    return _layout(fig, title)
+    return layout(fig, title)
 
 
 def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = None) -> go.Figure | None:
@@ -142,4 +144,4 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
     if not fig.data:
         return None
     fig.update_xaxes(title="t [s]")
-    return _layout(fig, "Maneuver timeline", height=260)
+    return layout(fig, "Maneuver timeline", height=260)

@@ -35,7 +35,6 @@ does not depend on which other sets were generated; same seed -> byte-identical 
 from __future__ import annotations
 
 import os
-import zlib
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -50,23 +49,13 @@ from ..io.parquet import write_json, write_table
 from . import maneuvers as mv
 from .quadcopter import Truth, rotate_to_heading
 from .scenarios import SimSettings, run_named
+from .seeds import set_rng
 from .sensors import SensorSettings, sticks
+from .writers import write_flight_logs
 
-SET_COLUMNS: tuple[schema.Column, ...] = (
-    *schema.STATE,
-    schema.Column("run_id", "int64", "1", "", "run number within the set"),
-    schema.Column("label", "string", "", "", "maneuver label (truth)"),
-)
-
-SUMMARY_COLUMNS: tuple[schema.Column, ...] = (
-    schema.Column("maneuver", "string"),
-    schema.Column("quantity", "string", "", "", "acc (m/s^2) or jerk (m/s^3)"),
-    schema.Column("axis", "string", "", "", "n/e/d (NED), fwd/right/down (heading frame), norm"),
-    schema.Column("min", "float64"),
-    schema.Column("max", "float64"),
-    schema.Column("rms", "float64"),
-    schema.Column("n_runs", "int64"),
-)
+#: the columns of a bulk set and of the summary (declared with every table in io.schema)
+SET_COLUMNS: tuple[schema.Column, ...] = schema.SIM_SET
+SUMMARY_COLUMNS: tuple[schema.Column, ...] = schema.SIM_SUMMARY
 
 SIZES = {
     "small": {"runs": 60, "mc_runs": 20, "switch_runs": 10, "log_flights": 1},
@@ -124,11 +113,6 @@ class DatasetSettings:
         if not 0 < kw.get("train_fraction", 0.7) < 1:
             raise ConfigError("simulate.datasets.train_fraction must be in (0, 1)")
         return cls(**kw)
-
-
-def set_rng(seed: int, name: str, chunk: int = 0) -> np.random.Generator:
-    """The generator of one set (and chunk): independent of which other sets are generated."""
-    return np.random.default_rng([int(seed), zlib.crc32(name.encode()), int(chunk)])
 
 
 def state_table(truth: Truth, step: int, sensors: SensorSettings, run_offset: int = 0) -> pd.DataFrame:
@@ -272,8 +256,6 @@ def run_simulate(out_dir: str | os.PathLike, sim_cfg: dict | None, seed: int, *,
         say(f"switch scenario {key}: {ds.switch_runs} runs x {len(settings.switch_times_s)} times")
 
     if ds.log_formats and ds.log_flights > 0:
-        from .writers import write_flight_logs
-
         index["logs"] = write_flight_logs(out / "logs", settings, sensors, ds, seed, say=say)
     write_json(index, out / "index.json")
     return index

@@ -124,7 +124,7 @@ def run_simulate_logs(inputs, outputs, config: dict | None, *, seed: int) -> Sim
 
 def run_demo_log(inputs, outputs, config: dict | None, *, seed: int) -> SimulateResult:
     """The demo DataFlash flight (``outputs.log``): uavpipe's own writer, always available."""
-    from ..io.dataflash_writer import write_demo_flight  # MERGE: from .demo import write_demo_flight
+    from .demo import write_demo_flight
 
     path = _get(outputs, "log")
     write_demo_flight(path, seed=seed)

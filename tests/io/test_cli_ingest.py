@@ -11,9 +11,9 @@ import pandas as pd
 import pytest
 
 from pipeline.cli import main
-from pipeline.io.dataflash_writer import write_demo_flight
 from pipeline.io.ingest import run_ingest
 from pipeline.io.parquet import read_flightlog
+from pipeline.simulate.demo import write_demo_flight
 
 
 @pytest.fixture(scope="module")

@@ -20,8 +20,9 @@ from helpers import realdata_file
 from pipeline.frames.rotations import quat_to_euler
 from pipeline.io import dataflash as df
 from pipeline.io.base import IngestError
-from pipeline.io.dataflash_writer import RADR, DataFlashWriter, write_demo_flight
+from pipeline.io.dataflash_writer import RADR, DataFlashWriter
 from pipeline.io.registry import detect, read_log
+from pipeline.simulate.demo import write_demo_flight
 
 REAL_LOGS = {
     "ap_copter313_austin_4flights/2014-10-18_20-04-24.bin":

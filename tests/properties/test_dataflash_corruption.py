@@ -23,8 +23,9 @@ from hypothesis import HealthCheck, Phase, given, settings, strategies as st
 from helpers import REALDATA, TEST_SEED
 from pipeline.io import dataflash as df
 from pipeline.io.base import FlightLog, IngestError
-from pipeline.io.dataflash_writer import DataFlashWriter, write_demo_flight
+from pipeline.io.dataflash_writer import DataFlashWriter
 from pipeline.io.registry import detect, read_log
+from pipeline.simulate.demo import write_demo_flight
 
 # no shrinking phase: a failure is reported as found (shrinking a MB-sized case takes minutes)
 SETTINGS = dict(deadline=None, derandomize=True, print_blob=True,

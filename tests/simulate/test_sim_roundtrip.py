@@ -150,6 +150,21 @@ def test_bin_radar_params_and_pymavlink(written):
     assert counts["GPS"] == len(sim["gps"]) and counts["BARO"] == len(sim["baro"])
 
 
+def test_bin_declares_exactly_the_catalogue_ardupilot4_layout(written):
+    from pymavlink import mavutil
+
+    from pipeline.io import dataflash_catalogue as cat
+
+    (paths, _), _, _ = written
+    m = mavutil.mavlink_connection(str(paths["bin"]))
+    fmts = {}
+    while (msg := m.recv_match(type="FMT")) is not None:
+        fmts[msg.Name] = (msg.Type, msg.Format, msg.Columns)
+    m.close()
+    want = {d.name: (d.type_id, d.fmt, d.labels) for d in (*cat.layout("ardupilot4"), cat.UNIT, cat.MULT, cat.FMTU)}
+    assert fmts == {"FMT": (128, "BBnNZ", "Type,Length,Name,Format,Columns"), **want}
+
+
 def test_tlog_pymavlink(written):
     from pymavlink import mavutil
 

@@ -34,7 +34,7 @@ def _need_browser():
 @pytest.fixture(scope="module")
 def report_tree(tmp_path_factory) -> Path:
     """A results/ tree with the demo flight ingested, its report, plotly.js and the index."""
-    from pipeline.io.dataflash_writer import write_demo_flight
+    from pipeline.simulate.demo import write_demo_flight
     from pipeline.io.ingest import run_ingest
     from pipeline.report.flight import build_flight_report, write_plotly_js
     from pipeline.report.index import build_index

@@ -199,7 +199,11 @@ def validate_section(path: str, sec: Mapping[str, Any] | None) -> dict[str, Any]
     and return a defaulted copy; errors name the full key path."""
     parts = [p for p in path.split(".") if p]
     root = _schema()
-    node: dict[str, Any] = dict(_subschema(path))
+    try:
+        node: dict[str, Any] = dict(_subschema(path))
+    except KeyError:
+        allowed = ", ".join(root.get("properties") or {})
+        raise ConfigError(f"{path}: unknown section (allowed: {allowed})") from None
     inst: Any = _plain(sec if sec is not None else {})
     for part in reversed(parts):
         node = {"type": "object", "properties": {part: node}}

@@ -23,7 +23,7 @@ def add_parser(sub) -> None:
     p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
     p.add_argument("--labels", nargs="*", default=None, help="train only these maneuver labels")
     p.add_argument("--exclude", nargs="*", default=[], help="labels to leave out (e.g. take-off, landing)")
-    p.add_argument("--seed", type=int, default=None, help="override models.seed")
+    p.add_argument("--seed", type=int, default=None, help="override the master seed")
     p.set_defaults(func=run)
 
 
@@ -45,8 +45,9 @@ def run(args) -> int:
     from ..models.classifier import ManeuverModelSet
 
     try:
-        sec = section(load_config(args.config), "models")
-        cfg = ModelsConfig.from_section(sec, **({"seed": args.seed} if args.seed is not None else {}))
+        config = load_config(args.config)
+        cfg = ModelsConfig.from_section(section(config, "hmm"),
+                                        seed=config["seed"] if args.seed is None else args.seed)
         df = load_tables(args.tables)
         if "label" not in df.columns:
             raise ModelError("training tables need a 'label' column")

@@ -93,7 +93,7 @@ def _write_failed_model(out_dir: Path, spec: Mapping, reason: str) -> None:
 
 
 def train_model(name: str, spec: Mapping, out_dir: str | os.PathLike, models_cfg: Mapping | None, *,
-                sets: Sequence = (), states: Sequence = (), segments: Sequence = ()) -> dict:
+                seed: int = 0, sets: Sequence = (), states: Sequence = (), segments: Sequence = ()) -> dict:
     """Train model ``name`` from its inputs and write ``out_dir/{params.npz, meta.json}``.
 
     Parameters
@@ -120,7 +120,7 @@ def train_model(name: str, spec: Mapping, out_dir: str | os.PathLike, models_cfg
     from .classifier import ManeuverModelSet
 
     out = Path(out_dir)
-    cfg = ModelsConfig.from_section(models_cfg, **dict(spec.get("models") or {}))
+    cfg = ModelsConfig.from_section(models_cfg, seed=seed, **dict(spec.get("hmm") or {}))
     try:
         df = _read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments)
         if not len(df) or "label" not in df.columns:

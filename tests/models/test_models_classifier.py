@@ -139,7 +139,7 @@ def test_cli_train_and_classify(synth, rng, tmp_path, capsys):
     test = bulk(("M1", "M2"), 2, rng)
     test.to_parquet(tmp_path / "test.parquet")
     cfg = tmp_path / "cfg.yaml"
-    cfg.write_text("models:\n  n_states: 3\n  n_iter: 15\n  tol: 0.1\n  gmm_restarts: 1\n")
+    cfg.write_text("hmm:\n  n_states: 3\n  n_iter: 15\n  tol: 0.1\n  gmm_restarts: 1\n")
     assert main(["train", str(tmp_path / "train.parquet"), "-o", str(tmp_path / "mdl"),
                  "--config", str(cfg)]) == 0
     assert main(["classify", str(tmp_path / "mdl"), str(tmp_path / "test.parquet"),
@@ -221,8 +221,8 @@ def test_gmr_estimates_are_causal_and_follow_config(synth, rng, trained3):
 
 
 def test_train_model_spec_overrides_models_section(synth, rng, tmp_path):
-    """A ``train`` entry's ``models:`` overrides the global section for that model only; a bad
-    override key is a clear configuration error naming the key."""
+    """A ``model_sets`` entry's ``hmm:`` overrides the global section for that model set only;
+    a bad override key is a clear configuration error naming the key."""
     from pipeline.models.run import train_model
 
     _, bulk = synth
@@ -231,16 +231,16 @@ def test_train_model_spec_overrides_models_section(synth, rng, tmp_path):
         p = tmp_path / f"{lab}_train.parquet"
         bulk([lab], 4, rng).to_parquet(p)
         sets.append(p)
-    base = {"n_states": 5, "n_iter": 5, "seed": 3}
-    spec = {"data": "simulated", "vehicles": ["x"], "models": {"n_states": 3, "threshold_slack": 1.5}}
-    meta = train_model("m", spec, tmp_path / "m", base, sets=sets)
+    base = {"n_states": 5, "n_iter": 5}
+    spec = {"data": "simulated", "vehicles": ["x"], "hmm": {"n_states": 3, "threshold_slack": 1.5}}
+    meta = train_model("m", spec, tmp_path / "m", base, seed=3, sets=sets)
     assert meta["status"] == "ok"
     assert meta["config"]["n_states"] == 3 and meta["config"]["n_iter"] == 5
     assert meta["threshold_slack"] == 1.5
-    meta0 = train_model("m0", {"data": "simulated", "vehicles": ["x"]}, tmp_path / "m0", base, sets=sets)
+    meta0 = train_model("m0", {"data": "simulated", "vehicles": ["x"]}, tmp_path / "m0", base, seed=3, sets=sets)
     assert meta0["config"]["n_states"] == 5
-    with pytest.raises(ConfigError, match=r"unknown key\(s\) \['n_stats'\]"):
-        train_model("bad", {"data": "simulated", "vehicles": ["x"], "models": {"n_stats": 3}},
+    with pytest.raises(ConfigError, match=r"hmm\.n_stats: unknown key"):
+        train_model("bad", {"data": "simulated", "vehicles": ["x"], "hmm": {"n_stats": 3}},
                     tmp_path / "bad", base, sets=sets)
 
 

@@ -141,6 +141,102 @@ def defaults() -> dict[str, Any]:
     return validate_config({})
 
 
+#: ``$defs`` documented once as types (``<mount>.roll_deg``) rather than at every use
+SHARED_TYPES = ("mount", "stick", "physical", "window", "ros_custom", "columnmap", "size_row", "hmm_override")
+
+
+def _shared_ref(node: Any) -> str | None:
+    """The shared type a schema node refers to (directly or as a oneOf branch), if any."""
+    if not isinstance(node, Mapping):
+        return None
+    refs = [node.get("$ref")] + [b.get("$ref") for b in [*node.get("oneOf", ()), *node.get("anyOf", ())]
+                                 if isinstance(b, Mapping)]
+    for r in refs:
+        if r and r.startswith("#/$defs/") and r[len("#/$defs/"):] in SHARED_TYPES:
+            return r[len("#/$defs/"):]
+    items = node.get("items")
+    return _shared_ref(items) if isinstance(items, Mapping) else None
+
+
+def key_paths(max_depth: int = 8) -> list[tuple[str, dict[str, Any]]]:
+    """Every key of the schema as ``(dotted path, resolved schema)``, in schema order.
+
+    Map entries appear as ``<name>`` (``preprocess.vehicles.<name>.imu_mount``); the keys of the
+    :data:`SHARED_TYPES` appear once, as ``<type>.<key>`` (``<mount>.roll_deg``), and where
+    they are used the path ends at the key that takes the type.
+    """
+    root = _schema()
+    out: dict[str, dict[str, Any]] = {}
+
+    def walk(node: Mapping[str, Any], prefix: str, depth: int) -> None:
+        if depth > max_depth:
+            return
+        node = _resolve(node, root)
+        branches = [node, *(_resolve(b, root) for b in [*node.get("oneOf", ()), *node.get("anyOf", ())])]
+        for b in branches:
+            for k, sub in (b.get("properties") or {}).items():
+                path = f"{prefix}.{k}" if prefix else k
+                out.setdefault(path, {**_resolve(sub, root), "x-shared": _shared_ref(sub)})
+                if not _shared_ref(sub):
+                    walk(sub, path, depth + 1)
+            addl = b.get("additionalProperties")
+            if isinstance(addl, Mapping) and prefix and not _shared_ref(addl):
+                walk(addl, f"{prefix}.<name>", depth + 1)
+
+    walk(root, "", 0)
+    for t in SHARED_TYPES:
+        if t != "hmm_override":   # the keys of the hmm section
+            walk(root["$defs"][t], f"<{t}>", 1)
+    return list(out.items())
+
+
+def _type_word(s: Mapping[str, Any]) -> str:
+    root = _schema()
+    shared = s.get("x-shared") or _shared_ref(s)
+    if shared == "hmm_override":
+        return "mapping of hmm keys"
+    if shared and s.get("type") != "array" and "oneOf" not in s:
+        return f"<{shared}>"
+    if "enum" in s:
+        return " \\| ".join(str(v) for v in s["enum"])
+    if "const" in s:
+        return str(s["const"])
+    if "oneOf" in s or "anyOf" in s:
+        return " or ".join(f"<{_shared_ref(b)}>" if _shared_ref(b) else _type_word(_resolve(b, root))
+                           for b in s.get("oneOf", s.get("anyOf", ())))
+    t = s.get("type")
+    ts = t if isinstance(t, list) else [t] if t else ["any"]
+    words = []
+    for x in ts:
+        if x == "array":
+            it = s.get("items")
+            inner = (f"<{_shared_ref(it)}>" if _shared_ref(it) else _type_word(_resolve(it, root))) \
+                if isinstance(it, Mapping) else "any"
+            n = f"{s['minItems']} " if s.get("minItems") is not None and s.get("minItems") == s.get("maxItems") else ""
+            words.append(f"list of {n}{inner}")
+        elif x == "object" and isinstance(s.get("additionalProperties"), Mapping):
+            ad = s["additionalProperties"]
+            words.append(f"map of <{_shared_ref(ad)}>" if _shared_ref(ad) else f"map of {_type_word(_resolve(ad, root))}")
+        else:
+            words.append({"object": "mapping"}.get(x, x))
+    return " or ".join(words)
+
+
+def markdown_reference() -> str:
+    """The key reference of ``datasets/README.md`` (generated: ``python -m pipeline.config``)."""
+    import json
+
+    lines = ["| key | type | default | meaning |", "|---|---|---|---|"]
+    for path, s in key_paths():
+        dflt = json.dumps(s["default"]) if "default" in s else ""
+        if path.startswith("<") and "." not in path:
+            continue
+        desc = " ".join(str(s.get("description", "")).split()).replace("|", "\\|")
+        typ = _type_word(s)
+        lines.append(f"| `{path}` | {typ} | {('`' + dflt + '`') if dflt else ''} | {desc} |")
+    return "\n".join(lines) + "\n"
+
+
 # --- validation --------------------------------------------------------------------------------
 
 @functools.lru_cache(maxsize=1)
@@ -555,3 +651,7 @@ def build(cls: type, sec: Mapping[str, Any] | None, /, **values: Any):
     if unknown:
         raise TypeError(f"build({cls.__name__}): no field(s) {sorted(unknown)}")
     return cls(**kw)
+
+
+if __name__ == "__main__":  # python -m pipeline.config: the key reference of datasets/README.md
+    print(markdown_reference(), end="")

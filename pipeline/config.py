@@ -301,6 +301,8 @@ def validate_section(path: str, sec: Mapping[str, Any] | None) -> dict[str, Any]
         allowed = ", ".join(root.get("properties") or {})
         raise ConfigError(f"{path}: unknown section (allowed: {allowed})") from None
     inst: Any = _plain(sec if sec is not None else {})
+    if inst == {} and node.get("type") == "object" and not node.get("required"):
+        return default_at(path)    # nothing to check: the defaults (no jsonschema import)
     for part in reversed(parts):
         node = {"type": "object", "properties": {part: node}}
         inst = {part: inst}

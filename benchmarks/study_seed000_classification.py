@@ -312,7 +312,8 @@ def main() -> None:
     over = {"feature_set": args.features} if args.features else {}
     if args.n_states is not None:
         over["n_states"] = args.n_states if args.n_states == "auto" else int(args.n_states)
-    cfg = ModelsConfig.from_section(section(load_config(), "models"), **over)
+    config = load_config()
+    cfg = ModelsConfig.from_section(section(config, "hmm"), seed=config["seed"], **over)
     mdir = out / "models"
     ms = ManeuverModelSet(config=cfg).fit(pd.concat([tag(train[m], m) for m in KNOWN], ignore_index=True))
     ms.save(mdir)

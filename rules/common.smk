@@ -7,13 +7,21 @@ import pandas as pd
 from snakemake.utils import validate
 
 import pipeline
+from pipeline.config import ConfigError, validate_config
 from pipeline.io.schema import STREAM_NAMES
 from pipeline.models.run import model_set_config
 from pipeline.simulate.run import planned_logs, planned_sets
 
 PIPELINE_VERSION = pipeline.__version__
 
-validate(config, schema="schemas/config.schema.yaml", set_default=True)
+# one schema for the workflow and the CLI: every key typed and defaulted, unknown keys rejected;
+# a bad key or value stops the run here with one line naming it
+try:
+    _validated = validate_config(config, source=" + ".join(map(str, workflow.configfiles)) or "config")
+except ConfigError as _exc:
+    sys.exit(f"uavpipe: {_exc}")
+config.clear()
+config.update(_validated)
 
 _manifest = pd.read_csv(
     config["manifest"], sep="\t", dtype=str, keep_default_na=False, comment="#"

@@ -38,16 +38,22 @@ Also here: the constant-acceleration transition ``A(dt)`` of seed 000 eq. 2.16 (
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..config import build, cfield, validate_section
+
 F64 = NDArray[np.float64]
 
 #: radar measurement components, in order
 RADAR_FIELDS: tuple[str, ...] = ("range_m", "dcos_u", "dcos_v", "range_rate_mps")
+
+_radar = functools.partial(cfield, "simulate.sensors.radar")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,27 +72,21 @@ class RadarModel:
         Whether the Jacobian's range row includes ∂(τ_RD ρ̇)/∂x (True: exact).
     """
 
-    site_ned_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    tau_rd_s: float = 0.0
-    sigma: tuple[float, float, float, float] = (1.5, 45e-6, 45e-6, 0.2)
-    include_tau_in_h: bool = True
-    rate_hz: float = 5.0
-    sensor_id: int = 0
-    extra: dict = field(default_factory=dict, compare=False)
+    site_ned_m: tuple[float, float, float] = _radar("site_ned_m")
+    tau_rd_s: float = _radar("tau_rd_s")
+    sigma: tuple[float, float, float, float] = _radar(
+        ("sigma_range_m", "sigma_dcos", "sigma_dcos", "sigma_range_rate_mps"))
+    include_tau_in_h: bool = field(default=True, metadata={"config_key": None})
+    rate_hz: float = _radar("rate_hz")
+    sensor_id: int = _radar("sensor_id")
+    extra: dict = field(default_factory=dict, compare=False, metadata={"config_key": None})
 
     @classmethod
-    def from_config(cls, sec: dict[str, Any] | None) -> "RadarModel":
-        """From ``simulate.sensors.radar``: ``site_ned_m``, ``tau_rd_s``, ``rate_hz``,
-        ``sigma_range_m``, ``sigma_dcos``, ``sigma_range_rate_mps``, ``sensor_id``."""
-        sec = dict(sec or {})
-        site = tuple(float(x) for x in sec.get("site_ned_m", (0.0, 0.0, 0.0)))
-        if len(site) != 3:
-            raise ValueError(f"simulate.sensors.radar.site_ned_m: need 3 values, got {len(site)}")
-        sd = float(sec.get("sigma_dcos", 45e-6))
-        return cls(site_ned_m=site, tau_rd_s=float(sec.get("tau_rd_s", 0.0)),
-                   sigma=(float(sec.get("sigma_range_m", 1.5)), sd, sd,
-                          float(sec.get("sigma_range_rate_mps", 0.2))),
-                   rate_hz=float(sec.get("rate_hz", 5.0)), sensor_id=int(sec.get("sensor_id", 0)))
+    def from_config(cls, sec: Mapping[str, Any] | None) -> "RadarModel":
+        """From ``simulate.sensors.radar`` (validated and defaulted by the config schema):
+        ``site_ned_m``, ``tau_rd_s``, ``rate_hz``, ``sigma_range_m``, ``sigma_dcos`` (u and v),
+        ``sigma_range_rate_mps``, ``sensor_id``."""
+        return build(cls, validate_section("simulate.sensors.radar", sec))
 
     @property
     def R(self) -> F64:

@@ -95,6 +95,7 @@ from typing import Any, Callable, Iterable, Mapping
 import numpy as np
 import pandas as pd
 
+from ..config import ConfigError, build, cfield, default_at, validate_section
 from ..frames.rotations import enu_to_ned, flu_to_frd, quat_enu_flu_to_ned_frd, quat_normalize, quat_rotate
 from . import schema
 from .base import FlightLog, IngestError
@@ -130,7 +131,8 @@ DEFAULT_CUSTOM_TYPES: dict[str, dict[str, Any]] = {
 
 #: ``header.frame_id`` values taken as world-fixed, north-aligned ENU frames for TwistStamped.
 #: ``odom`` is deliberately absent: wheel odometry frames are not north-aligned.
-DEFAULT_WORLD_FRAMES: tuple[str, ...] = ("map", "world", "earth", "enu", "local_origin")
+#: (the schema default of ``ingest.ros.world_frames``: map, world, earth, enu, local_origin)
+DEFAULT_WORLD_FRAMES: tuple[str, ...] = tuple(default_at("ingest.ros.world_frames"))
 
 #: ``sensor_msgs/NavSatStatus.status`` -> canonical ``fix_type`` (schema: 1 no fix, 3 3D,
 #: 4 DGPS). SBAS and GBAS (ground-based augmentation, used by RTK drivers) are both
@@ -167,7 +169,7 @@ class RosConfig:
     topics: Mapping[str, Mapping[str, Any] | None] = field(default_factory=dict)
     custom: Mapping[str, CustomSpec] = field(default_factory=dict)
     custom_types: Mapping[str, CustomSpec] = field(default_factory=dict)
-    world_frames: tuple[str, ...] = DEFAULT_WORLD_FRAMES
+    world_frames: tuple[str, ...] = cfield("ingest.ros", "world_frames")
 
     @classmethod
     def from_config(cls, ingest: Mapping[str, Any] | None, path: Path | str | None = None) -> "RosConfig":
@@ -178,18 +180,21 @@ class RosConfig:
         ``custom_types`` ({msgtype: {stream, fields, stamp?}}, merged over the defaults),
         ``world_frames`` (list of frame ids).
 
+        The section is validated (and defaulted) against the config schema first; what the
+        schema cannot know (stream names, their columns) is checked here.
+
         Raises
         ------
         IngestError
             Naming ``path`` and the offending config key.
         """
-        ros = (ingest or {}).get("ros") or {}
-
         def bad(msg: str) -> IngestError:
             return IngestError(path, f"invalid config ingest.ros.{msg}")
 
-        if not isinstance(ros, Mapping):
-            raise bad(f": must be a mapping, got {type(ros).__name__}")
+        try:
+            ros = validate_section("ingest.ros", (ingest or {}).get("ros"))
+        except ConfigError as exc:
+            raise IngestError(path, f"invalid config {exc}") from None
         topics: dict[str, Mapping[str, Any] | None] = {}
         for topic, v in (ros.get("topics") or {}).items():
             if v is None or v is False or v == "ignore":
@@ -227,10 +232,7 @@ class RosConfig:
         custom = {t: spec(f"custom[{t!r}]", v) for t, v in (ros.get("custom") or {}).items()}
         ctypes = {normalize_type(t): spec(f"custom_types[{t!r}]", v)
                   for t, v in {**DEFAULT_CUSTOM_TYPES, **(ros.get("custom_types") or {})}.items()}
-        wf = ros.get("world_frames", DEFAULT_WORLD_FRAMES)
-        if isinstance(wf, str) or not all(isinstance(x, str) for x in wf):
-            raise bad("world_frames: expected a list of frame ids")
-        return cls(topics=topics, custom=custom, custom_types=ctypes, world_frames=tuple(wf))
+        return build(cls, ros, topics=topics, custom=custom, custom_types=ctypes)
 
 
 # --- planning: which topics to decode, into what -------------------------------------------

@@ -1,4 +1,7 @@
-"""Configuration and errors of the maneuver models (``models:`` section of the dataset config).
+"""Configuration and errors of the maneuver models (``hmm:`` section of the dataset config).
+
+Defaults and types are the config schema's (``rules/schemas/config.schema.yaml``, ``hmm``);
+:class:`ModelsConfig` reads them from there (:func:`pipeline.config.cfield`).
 
 Defaults follow seed 000 (Strong 2021) where it gives a value and §13 of the digest where it
 does not (every such choice is logged in the model's ``meta.json``).
@@ -6,16 +9,19 @@ does not (every such choice is logged in the model's ``meta.json``).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+import functools
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from ..config import ConfigError
+from ..config import ConfigError, build, cfield, validate_section
 
 
 class ModelError(ValueError):
     """Training or classification cannot proceed (bad input data, bad model file)."""
 
 
+_hmm = functools.partial(cfield, "hmm")
 _MODES = ("cumulative", "windowed", "reset")
 _DECISIONS = ("confidence", "oneclass", "both", "confidence_bg")
 
@@ -27,7 +33,7 @@ class ModelsConfig:
     Parameters
     ----------
     feature_set : str
-        ``state9`` (thesis), ``state9h`` (initial-heading frame), ``box`` or ``aero`` (see :mod:`pipeline.models.features`).
+        ``state9`` (thesis), ``state9h`` (initial-heading frame), ``box`` or ``aero`` (see :mod:`pipeline.hmm.features`).
     rate_hz : float
         Model sample rate (thesis: 5 Hz, dt = 0.2 s).
     n_states : int, "auto" or dict
@@ -52,7 +58,10 @@ class ModelsConfig:
     hmm_restarts : int
         Whole-model restarts from different random runs; the best training LL is kept.
     seed : int
-        Seed of every random choice in training (run pick, GMM, hmmlearn).
+        Seed of every random choice in training (run pick, GMM, hmmlearn, the background
+        model's ``[seed, crc32("background")]``). Not a key of the ``hmm`` section: the caller
+        passes the master ``seed`` (:meth:`from_section`, ``build(..., seed=config["seed"])``);
+        0 when constructed directly.
     threshold_percentile : float
         One-class threshold: this percentile of the training log-likelihoods at the same
         elapsed time (default 0.5th).
@@ -102,80 +111,80 @@ class ModelsConfig:
         for the single-sequence leave-one-phase-out threshold).
     """
 
-    feature_set: str = "state9"
-    rate_hz: float = 5.0
-    n_states: Any = field(default_factory=lambda: {"default": 6, "M1": 5})
-    n_states_range: tuple[int, int] = (3, 10)
-    n_mix: int = 1
-    n_iter: int = 100
-    tol: float = 1e-2
-    min_covar: float = 1e-4
-    self_prob: float = 0.9
-    gmm_restarts: int = 3
-    init_min_samples: int = 60
-    hmm_restarts: int = 1
-    seed: int = 0
-    threshold_percentile: float = 0.5
-    threshold_slack: Any = 0.0
-    mode: str = "cumulative"
-    window_s: Any = 1.6
-    restart_prob: float = 0.05
-    confirm_s: float = 1.0
-    confidence_threshold: float = -1.0
-    decision: str = "confidence"
-    background: int = 1
-    gate_mps2: float = 15.0
-    gmr_input: str = "pos_fd"
-    gmr_align: str = "sample"
-    phases: bool = True
+    feature_set: str = _hmm("feature_set")
+    rate_hz: float = _hmm("rate_hz")
+    n_states: Any = _hmm("n_states")
+    n_states_range: tuple[int, int] = _hmm("n_states_range")
+    n_mix: int = _hmm("n_mix")
+    n_iter: int = _hmm("n_iter")
+    tol: float = _hmm("tol")
+    min_covar: float = _hmm("min_covar")
+    self_prob: float = _hmm("self_prob")
+    gmm_restarts: int = _hmm("gmm_restarts")
+    init_min_samples: int = _hmm("init_min_samples")
+    hmm_restarts: int = _hmm("hmm_restarts")
+    seed: int = field(default=0, metadata={"config_key": None})
+    threshold_percentile: float = _hmm("threshold_percentile")
+    threshold_slack: Any = _hmm("threshold_slack")
+    mode: str = _hmm("mode")
+    window_s: Any = _hmm("window_s")
+    restart_prob: float = _hmm("restart_prob")
+    confirm_s: float = _hmm("confirm_s")
+    confidence_threshold: float = _hmm("confidence_threshold")
+    decision: str = _hmm("decision")
+    background: int = _hmm("background")
+    gate_mps2: float = _hmm("gate_mps2")
+    gmr_input: str = _hmm("gmr_input")
+    gmr_align: str = _hmm("gmr_align")
+    phases: bool = _hmm("phases")
 
     @classmethod
-    def from_section(cls, sec: dict | None, **overrides) -> "ModelsConfig":
-        """Build from the ``models:`` config section; unknown keys are an error."""
-        d = dict(sec or {})
-        d.update(overrides)
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(d) - known)
-        if bad:
-            raise ConfigError(f"models: unknown key(s) {bad}; known: {sorted(known)}")
-        if "n_states_range" in d:
-            d["n_states_range"] = tuple(int(x) for x in d["n_states_range"])
-        cfg = cls(**d)
+    def from_section(cls, sec: Mapping | None, *, seed: int = 0, **overrides) -> "ModelsConfig":
+        """Validate the ``hmm`` section (with a model set's ``hmm`` overrides) against the
+        config schema and build; ``seed`` is the master seed (top-level ``seed``), passed by
+        the caller: the ``hmm`` section holds no seed.
+
+        Raises
+        ------
+        ConfigError
+            One line naming the key (unknown keys, wrong types, values out of range).
+        """
+        cfg = build(cls, validate_section("hmm", {**dict(sec or {}), **overrides}), seed=int(seed))
         cfg.validate()
         return cfg
 
     def validate(self) -> None:
         if self.mode not in _MODES:
-            raise ConfigError(f"models.mode must be one of {_MODES}, got {self.mode!r}")
+            raise ConfigError(f"hmm.mode must be one of {_MODES}, got {self.mode!r}")
         if self.decision not in _DECISIONS:
-            raise ConfigError(f"models.decision must be one of {_DECISIONS}, got {self.decision!r}")
+            raise ConfigError(f"hmm.decision must be one of {_DECISIONS}, got {self.decision!r}")
         if self.gmr_input not in ("pos", "pos_vel", "pos_fd"):
-            raise ConfigError(f"models.gmr_input must be 'pos', 'pos_vel' or 'pos_fd', got {self.gmr_input!r}")
+            raise ConfigError(f"hmm.gmr_input must be 'pos', 'pos_vel' or 'pos_fd', got {self.gmr_input!r}")
         if self.gmr_align not in ("interval", "sample"):
-            raise ConfigError(f"models.gmr_align must be 'interval' or 'sample', got {self.gmr_align!r}")
+            raise ConfigError(f"hmm.gmr_align must be 'interval' or 'sample', got {self.gmr_align!r}")
         if not (isinstance(self.background, int) and self.background >= 0):
-            raise ConfigError(f"models.background must be an int >= 0, got {self.background!r}")
+            raise ConfigError(f"hmm.background must be an int >= 0, got {self.background!r}")
         if self.decision == "confidence_bg" and self.background == 0:
-            raise ConfigError("models.decision 'confidence_bg' needs models.background >= 1")
+            raise ConfigError("hmm.decision 'confidence_bg' needs hmm.background >= 1")
         if not 0.0 < self.self_prob < 1.0:
-            raise ConfigError("models.self_prob must lie in (0, 1)")
+            raise ConfigError("hmm.self_prob must lie in (0, 1)")
         if not 0.0 <= self.restart_prob < 1.0:
-            raise ConfigError("models.restart_prob must lie in [0, 1)")
+            raise ConfigError("hmm.restart_prob must lie in [0, 1)")
         if not 0.0 <= self.threshold_percentile <= 100.0:
-            raise ConfigError("models.threshold_percentile must lie in [0, 100]")
+            raise ConfigError("hmm.threshold_percentile must lie in [0, 100]")
         if self.rate_hz <= 0 or not (self.window_s == "auto" or (
                 isinstance(self.window_s, (int, float)) and self.window_s > 0)):
-            raise ConfigError("models.rate_hz must be positive and models.window_s positive or 'auto'")
+            raise ConfigError("hmm.rate_hz must be positive and hmm.window_s positive or 'auto'")
         if not (self.threshold_slack == "auto" or isinstance(self.threshold_slack, (int, float))):
-            raise ConfigError("models.threshold_slack must be a number or 'auto'")
+            raise ConfigError("hmm.threshold_slack must be a number or 'auto'")
         lo, hi = self.n_states_range
         if not 2 <= lo <= hi:
-            raise ConfigError("models.n_states_range must be [lo, hi] with 2 <= lo <= hi")
+            raise ConfigError("hmm.n_states_range must be [lo, hi] with 2 <= lo <= hi")
         ns = self.n_states
         vals = ns.values() if isinstance(ns, dict) else [ns]
         for v in vals:
             if not (v == "auto" or (isinstance(v, int) and v >= 1)):
-                raise ConfigError(f"models.n_states: {v!r} is neither a positive int nor 'auto'")
+                raise ConfigError(f"hmm.n_states: {v!r} is neither a positive int nor 'auto'")
 
     def states_for(self, label: str) -> int | str:
         """State count (or ``"auto"``) for one maneuver label."""
@@ -188,7 +197,7 @@ class ModelsConfig:
     def window(self) -> int:
         """Window length in samples."""
         if self.window_s == "auto":
-            raise ModelError("models.window_s 'auto' is resolved when the models are trained")
+            raise ModelError("hmm.window_s 'auto' is resolved when the models are trained")
         return max(1, int(round(self.window_s * self.rate_hz)))
 
     def to_dict(self) -> dict:

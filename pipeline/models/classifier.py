@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -215,13 +216,13 @@ class ManeuverModelSet:
     def _fit_background(self, X: F64) -> HMMParams | None:
         """The background model: a ``background``-component full-covariance GMM on the pooled
         normalised observations, as a one-state HMM (i.i.d. samples). At most 50,000 rows,
-        drawn with the training seed."""
+        drawn from ``default_rng([seed, crc32("background")])`` (the master seed)."""
         from sklearn.mixture import GaussianMixture
 
         cfg = self.config
         if cfg.background == 0:
             return None
-        rng = np.random.default_rng(cfg.seed + 104729)
+        rng = np.random.default_rng([cfg.seed, zlib.crc32(b"background")])
         if len(X) > 50_000:
             X = X[np.sort(rng.choice(len(X), 50_000, replace=False))]
         g = GaussianMixture(cfg.background, covariance_type="full", reg_covar=cfg.min_covar,
@@ -418,7 +419,8 @@ class ManeuverModelSet:
         if meta.get("format_version") != FORMAT_VERSION:
             raise ModelError(f"{d}: model format {meta.get('format_version')} != {FORMAT_VERSION}")
         cfg = dict(meta["config"])
-        self = cls(config=ModelsConfig.from_section(cfg))
+        seed = cfg.pop("seed", 0)   # persisted with the model; not a key of the hmm section
+        self = cls(config=ModelsConfig.from_section(cfg, seed=seed))
         self.labels_ = list(meta["labels"])
         self.training_ = meta.get("training", {})
         self.threshold_slack_ = float(meta.get("threshold_slack", 0.0))

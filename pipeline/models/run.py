@@ -93,7 +93,7 @@ def model_set_config(config: Mapping, model_set: str) -> dict:
 def hmm_config(config: Mapping, seed: int) -> ModelsConfig:
     """The model set's hyperparameters: ``config["hmm"]`` (the ``hmm`` section merged with the
     set's overrides) and the master seed."""
-    return ModelsConfig.from_section({**dict(config.get("hmm") or {}), "seed": int(seed)})
+    return ModelsConfig.from_section(dict(config.get("hmm") or {}), seed=int(seed))
 
 
 def _say(msg: str) -> None:

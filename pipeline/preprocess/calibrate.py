@@ -33,48 +33,43 @@ barometric altitude); no barometer -> method ``none`` and NaN.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from ..config import cfield
 from ..io.schema import CALIBRATION  # noqa: F401  (declared with every table in io.schema)
+
+_bpm = functools.partial(cfield, "preprocess.bpm")
 
 
 @dataclass(frozen=True, kw_only=True)
 class BPMConfig:
-    """Gating and fitting thresholds (``preprocess.bpm`` in the dataset config)."""
+    """Gating and fitting thresholds (``preprocess.bpm`` in the dataset config); defaults from
+    the config schema, built by ``pipeline.config.build`` (nested in ``PreprocessConfig``)."""
 
-    min_range_m: float = 0.17
-    max_range_m: float = 6.0
-    max_tilt_deg: float = 10.0
-    max_rate_mps: float = 2.0
-    spike_m: float = 0.3
-    spike_window: int = 5
-    outlier_k: float = 3.5
-    region_gap_s: float = 5.0
-    region_max_s: float | None = 10.0
-    step_m: float | None = 0.4
-    min_points: int = 5
-    min_region_points: int = 5
-    drift: bool = True
-    min_drift_span_s: float = 20.0
-    tilt_compensate: bool = True
-    down_orientations: tuple[int, ...] = (25,)
-    gps_min_fix: int = 3
-    gps_fallback: bool = True
-    p0_Pa: float = 101325.0
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "BPMConfig":
-        d = dict(d or {})
-        bad = set(d) - set(cls.__dataclass_fields__)
-        if bad:
-            raise ValueError(f"preprocess.bpm: unknown key(s) {sorted(bad)}")
-        if "down_orientations" in d:
-            d["down_orientations"] = tuple(int(v) for v in d["down_orientations"])
-        return cls(**d)
+    min_range_m: float = _bpm("min_range_m")
+    max_range_m: float = _bpm("max_range_m")
+    max_tilt_deg: float = _bpm("max_tilt_deg")
+    max_rate_mps: float = _bpm("max_rate_mps")
+    spike_m: float = _bpm("spike_m")
+    spike_window: int = _bpm("spike_window")
+    outlier_k: float = _bpm("outlier_k")
+    region_gap_s: float = _bpm("region_gap_s")
+    region_max_s: float | None = _bpm("region_max_s")
+    step_m: float | None = _bpm("step_m")
+    min_points: int = _bpm("min_points")
+    min_region_points: int = _bpm("min_region_points")
+    drift: bool = _bpm("drift")
+    min_drift_span_s: float = _bpm("min_drift_span_s")
+    tilt_compensate: bool = _bpm("tilt_compensate")
+    down_orientations: tuple[int, ...] = _bpm("down_orientations")
+    gps_min_fix: int = _bpm("gps_min_fix")
+    gps_fallback: bool = _bpm("gps_fallback")
+    p0_Pa: float = _bpm("p0_Pa")
 
 
 @dataclass

@@ -17,11 +17,15 @@ All methods work per gap-free segment; values in gaps are NaN.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
+
+from ..config import build, cfield, validate_section
 
 from ..frames.rotations import quat_conj, quat_continuity, quat_multiply
 from .filters import butter_sos, padlen
@@ -29,10 +33,13 @@ from .resample import valid_segments
 
 DIFF_METHODS = ("savgol", "butter", "gradient")
 
+_der = functools.partial(cfield, "preprocess.derivatives")
+
 
 @dataclass(frozen=True, kw_only=True)
 class Differentiator:
-    """Configured differentiator (``preprocess.derivatives`` in the dataset config).
+    """Configured differentiator (``preprocess.derivatives`` in the dataset config; defaults
+    from the config schema).
 
     Parameters
     ----------
@@ -45,24 +52,20 @@ class Differentiator:
         Butterworth pre-filter of the ``butter`` method.
     """
 
-    method: str = "savgol"
-    window_s: float = 1.0
-    polyorder: int = 3
-    cutoff_hz: float = 2.0
-    order: int = 3
+    method: str = _der("method")
+    window_s: float = _der("window_s")
+    polyorder: int = _der("polyorder")
+    cutoff_hz: float = _der("cutoff_hz")
+    order: int = _der("order")
 
     def __post_init__(self):
         if self.method not in DIFF_METHODS:
             raise ValueError(f"derivatives.method must be one of {DIFF_METHODS}, got {self.method!r}")
 
     @classmethod
-    def from_dict(cls, d: dict | None) -> "Differentiator":
-        d = dict(d or {})
-        known = {"method", "window_s", "polyorder", "cutoff_hz", "order"}
-        bad = set(d) - known
-        if bad:
-            raise ValueError(f"preprocess.derivatives: unknown key(s) {sorted(bad)}")
-        return cls(**d)
+    def from_dict(cls, d: Mapping | None) -> "Differentiator":
+        """Validate a ``preprocess.derivatives`` section against the schema and build."""
+        return build(cls, validate_section("preprocess.derivatives", d))
 
 
 def _gradient_n(x: NDArray, dt: float, deriv: int) -> NDArray:

@@ -37,7 +37,9 @@ diagnostics file. The stage entry point that reads and writes files is
 
 from __future__ import annotations
 
+import copy
 import fnmatch
+import functools
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -45,19 +47,19 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..config import ConfigError
+from ..config import ConfigError, build, cfield, validate_section
 from ..frames.geodesy import geodetic_to_ned
 from ..frames.rotations import quat_continuity, quat_to_euler
 from ..io import schema
 from ..io.base import FlightLog
 from ..io.parquet import write_json, write_table
 from .calibrate import CALIBRATION, BPMConfig, calibrate_baro, pressure_altitude
-from .controls import DEFAULT_CONTROLS, PHYSICAL, controls_from_pwm
+from .controls import PHYSICAL, controls_from_pwm
 from .derivatives import Differentiator, body_rates_from_quat, differentiate
 from .filters import butterworth
 from .mount import apply_mount, apply_mount_attitude, mount_dcm
-from .resample import (METHODS, make_grid, primary_instance, repair_timestamps, resample)
-from .segment import SOURCES, build_segments
+from .resample import make_grid, primary_instance, repair_timestamps, resample
+from .segment import build_segments
 
 _NED = ("n", "e", "d")
 POS = [f"pos_{a}_m" for a in _NED]
@@ -66,12 +68,14 @@ QUAT = ["q_w", "q_x", "q_y", "q_z"]
 GYR = ["gyr_x_radps", "gyr_y_radps", "gyr_z_radps"]
 POSITION_SOURCES = ("auto", "local_position", "gps", "truth")
 
-DEFAULT_BUTTERWORTH = {"baro.alt_rel_m": {"order": 3, "cutoff_hz": 1.0}}
+_pre = functools.partial(cfield, "preprocess")
+_veh = functools.partial(cfield, "preprocess.vehicles.*")
 
 
 @dataclass(frozen=True, kw_only=True)
 class PreprocessConfig:
-    """The ``preprocess`` config section, resolved for one flight/vehicle.
+    """The ``preprocess`` config section, resolved for one flight/vehicle (defaults from the
+    config schema; :func:`resolve_config` or :meth:`from_config`).
 
     Parameters
     ----------
@@ -100,118 +104,80 @@ class PreprocessConfig:
         Vehicle key used; its entry is in ``imu_mount``, ``mag_mount``, ``controls``, ``physical``.
     """
 
-    rate_hz: float = 25.0
-    gap_multiple: float = 3.0
-    clock_jump_s: float | None = 3600.0
-    methods: dict = field(default_factory=dict)
-    butterworth: dict = field(default_factory=lambda: dict(DEFAULT_BUTTERWORTH))
-    causal: bool = False
+    rate_hz: float = _pre("rate_hz")
+    gap_multiple: float = _pre("gap_multiple")
+    clock_jump_s: float | None = _pre("clock_jump_s")
+    methods: dict = _pre("methods")
+    butterworth: dict = _pre("butterworth")
+    causal: bool = _pre("causal")
     derivatives: Differentiator = field(default_factory=Differentiator)
-    velocity_source: str = "measured"
-    position_source: str = "auto"
-    ned_method: str = "wgs84"
+    velocity_source: str = _pre("velocity_source")
+    position_source: str = _pre("position_source")
+    ned_method: str = _pre("ned_method")
     bpm: BPMConfig = field(default_factory=BPMConfig)
-    segments: dict = field(default_factory=dict)
-    vehicle: str | None = None
-    imu_mount: dict | None = None
-    attitude_from_imu: bool = False
-    mag_mount: dict | None = None
-    controls: dict = field(default_factory=lambda: dict(DEFAULT_CONTROLS))
-    physical: dict = field(default_factory=dict)
-
-    KEYS = ("rate_hz", "gap_multiple", "clock_jump_s", "methods", "butterworth", "causal",
-            "derivatives", "velocity_source", "position_source", "ned_method", "bpm", "segments", "vehicles",
-            "flights")
+    segments: dict = _pre("segments")
+    # per vehicle (preprocess.vehicles.<name>), filled by resolve_config
+    vehicle: str | None = field(default=None, metadata={"config_key": None})
+    imu_mount: dict | None = _veh("imu_mount", metadata={"config_key": None})
+    attitude_from_imu: bool = _veh("attitude_from_imu", metadata={"config_key": None})
+    mag_mount: dict | None = field(default=None, metadata={"config_key": None})
+    controls: dict = _veh("controls", metadata={"config_key": None})
+    physical: dict = _veh("physical", metadata={"config_key": None})
 
     @classmethod
     def from_config(cls, cfg: Mapping | None, *, flight_id: str | None = None,
                     vehicle: str | None = None) -> "PreprocessConfig":
-        """Resolve the section (or a whole config with a ``preprocess`` key) for one flight.
-
-        The vehicle is ``vehicle`` if given, else ``flights.<pattern>.vehicle`` for the first
-        glob pattern matching ``flight_id``, else the ``default`` vehicle entry (if any).
-
-        Raises
-        ------
-        ConfigError
-            Unknown keys, bad values or an unknown vehicle name given explicitly.
-        """
+        """Validate the ``preprocess`` section (or a whole config with a ``preprocess`` key)
+        against the schema and resolve it for one flight (:func:`resolve_config`)."""
         sec = dict(cfg or {})
         if "preprocess" in sec and isinstance(sec["preprocess"], Mapping):
             sec = dict(sec["preprocess"] or {})
-        bad = set(sec) - set(cls.KEYS)
-        if bad:
-            raise ConfigError(f"preprocess: unknown key(s) {sorted(bad)}")
-        vehicles = sec.get("vehicles") or {}
-        flights = sec.get("flights") or {}
-        fl_entry: dict = {}
-        if flight_id:
-            for pat, entry in flights.items():
-                if fnmatch.fnmatchcase(flight_id, str(pat)):
-                    fl_entry = dict(entry or {})
-                    break
-        vname = vehicle or fl_entry.get("vehicle")
-        # the manifest also names vehicles without special settings: those get `default`
-        vname_used = vname if vname in vehicles else ("default" if "default" in vehicles else None)
-        ventry = dict(vehicles.get(vname_used) or {}) if vname_used else {}
-        vbad = set(ventry) - {"imu_mount", "mag_mount", "attitude_from_imu", "controls", "physical", "doc"}
-        if vbad:
-            raise ConfigError(f"preprocess.vehicles.{vname_used}: unknown key(s) {sorted(vbad)}")
-        try:
-            methods = dict(sec.get("methods") or {})
-            for k, m in methods.items():
-                if m not in METHODS:
-                    raise ValueError(f"methods.{k}: {m!r} not one of {METHODS}")
-            bw = dict(DEFAULT_BUTTERWORTH)
-            if "butterworth" in sec:
-                bw = dict(sec.get("butterworth") or {})
-            for k, v in bw.items():
-                if "." not in k or not isinstance(v, Mapping) or "cutoff_hz" not in v:
-                    raise ValueError(f"butterworth.{k}: need '<stream>.<column>': {{order, cutoff_hz}}")
-            segs = dict(sec.get("segments") or {})
-            if segs.get("source", "auto") not in SOURCES:
-                raise ValueError(f"segments.source must be one of {SOURCES}")
-            windows = dict(segs.get("windows") or {})
-            if fl_entry.get("windows"):
-                windows[flight_id] = fl_entry["windows"]
-            segs["windows"] = windows
-            ps = sec.get("position_source", "auto")
-            if ps not in POSITION_SOURCES:
-                raise ValueError(f"position_source must be one of {POSITION_SOURCES}")
-            ned_method = sec.get("ned_method", "wgs84")
-            if ned_method not in ("wgs84", "flat"):
-                raise ValueError("ned_method must be 'wgs84' or 'flat' (seed 004 eq. 5.1)")
-            vs = sec.get("velocity_source", "measured")
-            if vs not in ("measured", "differentiate"):
-                raise ValueError("velocity_source must be 'measured' or 'differentiate'")
-            rate = float(sec.get("rate_hz", 25.0))
-            if not rate > 0:
-                raise ValueError(f"rate_hz must be positive, got {rate}")
-            imu_mount = ventry.get("imu_mount")
-            mag_mount = ventry.get("mag_mount", imu_mount)
-            mount_dcm(imu_mount)
-            mount_dcm(mag_mount)
-            controls = ventry.get("controls", DEFAULT_CONTROLS)
-            physical = dict(ventry.get("physical") or {})
-            for k in physical:
-                if k not in PHYSICAL:
-                    raise ValueError(f"vehicles.{vname_used}.physical.{k}: not one of {PHYSICAL}")
-            cj = sec.get("clock_jump_s", 3600.0)
-            return cls(rate_hz=rate, gap_multiple=float(sec.get("gap_multiple", 3.0)),
-                       clock_jump_s=None if cj is None else float(cj), methods=methods,
-                       butterworth=bw, causal=bool(sec.get("causal", False)),
-                       derivatives=Differentiator.from_dict(sec.get("derivatives")),
-                       velocity_source=vs, position_source=ps, ned_method=ned_method,
-                       bpm=BPMConfig.from_dict(sec.get("bpm")), segments=segs, vehicle=vname_used,
-                       imu_mount=imu_mount, mag_mount=mag_mount,
-                       attitude_from_imu=bool(ventry.get("attitude_from_imu", False)), controls=dict(controls),
-                       physical=physical)
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"preprocess: {exc}") from None
+        return resolve_config(validate_section("preprocess", sec), flight_id=flight_id, vehicle=vehicle)
 
     def method(self, stream: str, column: str, default: str = "linear") -> str:
         return self.methods.get(f"{stream}.{column}", self.methods.get(stream, default))
 
+
+
+def resolve_config(sec: Mapping[str, Any], *, flight_id: str | None = None,
+                   vehicle: str | None = None) -> PreprocessConfig:
+    """The validated ``preprocess`` section resolved for one flight.
+
+    The vehicle is ``vehicle`` if given, else ``flights.<pattern>.vehicle`` for the first glob
+    pattern matching ``flight_id``, else the ``default`` vehicle entry (if any); the flight's
+    ``windows`` join ``segments.windows``.
+
+    Raises
+    ------
+    ConfigError
+        A mount that is not a rotation (what the schema cannot check).
+    """
+    vehicles = sec.get("vehicles") or {}
+    fl_entry: dict = {}
+    if flight_id:
+        for pat, entry in (sec.get("flights") or {}).items():
+            if fnmatch.fnmatchcase(flight_id, str(pat)):
+                fl_entry = dict(entry or {})
+                break
+    vname = vehicle or fl_entry.get("vehicle")
+    # the manifest also names vehicles without special settings: those get `default`
+    vname_used = vname if vname in vehicles else ("default" if "default" in vehicles else None)
+    ventry = dict(vehicles.get(vname_used) or {}) if vname_used else {}
+    segs = dict(sec.get("segments") or {})
+    windows = dict(segs.get("windows") or {})
+    if fl_entry.get("windows"):
+        windows[flight_id] = fl_entry["windows"]
+    segs["windows"] = windows
+    per_vehicle = {k: ventry[k] for k in ("imu_mount", "attitude_from_imu", "controls", "physical")
+                   if k in ventry}
+    per_vehicle["mag_mount"] = ventry.get("mag_mount", ventry.get("imu_mount"))
+    try:
+        mount_dcm(per_vehicle.get("imu_mount"))
+        mount_dcm(per_vehicle["mag_mount"])
+    except ValueError as exc:
+        raise ConfigError(f"preprocess.vehicles.{vname_used}: {exc}") from None
+    return build(PreprocessConfig, {**sec, "segments": segs}, vehicle=vname_used,
+                 **{k: copy.deepcopy(v) for k, v in per_vehicle.items()})
 
 # --- helpers ---------------------------------------------------------------------------------
 

@@ -34,7 +34,9 @@ does not depend on which other sets were generated; same seed -> byte-identical 
 
 from __future__ import annotations
 
+import functools
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -43,7 +45,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..config import ConfigError
+from ..config import ConfigError, build, cfield, default_at, validate_section
 from ..io import schema
 from ..io.parquet import write_json, write_table
 from . import maneuvers as mv
@@ -57,62 +59,56 @@ from .writers import write_flight_logs
 SET_COLUMNS: tuple[schema.Column, ...] = schema.SIM_SET
 SUMMARY_COLUMNS: tuple[schema.Column, ...] = schema.SIM_SUMMARY
 
-SIZES = {
-    "small": {"runs": 60, "mc_runs": 20, "switch_runs": 10, "log_flights": 1},
-    "thesis": {"runs": 2300, "mc_runs": 1000, "switch_runs": 243, "log_flights": 3},
-}
+_sim = functools.partial(cfield, "simulate")
+
+
+def size_row(sim_sec: Mapping[str, Any]) -> dict[str, int]:
+    """The run counts of ``simulate.datasets.size`` (a key of ``simulate.datasets.sizes``)."""
+    sec = dict(sim_sec.get("datasets") or {})
+    size = sec.get("size", default_at("simulate.datasets.size"))
+    sizes = sec.get("sizes") or default_at("simulate.datasets.sizes")
+    if size not in sizes:
+        raise ConfigError(f"simulate.datasets.size: {size!r} is not one of {', '.join(sizes)}")
+    return {k: int(v) for k, v in sizes[size].items()}
+
+
+def _count(name: str):
+    return _sim(lambda sec: size_row(sec)[name], default_path=f"simulate.datasets.sizes.small.{name}")
+
+
+def utc_ns(iso: str) -> int:
+    """ISO 8601 time (``Z`` or an offset; naive = UTC) -> Unix ns."""
+    try:
+        dt = datetime.fromisoformat(str(iso).replace("Z", "+00:00"))
+    except ValueError as exc:
+        raise ConfigError(f"simulate.start_time_utc: {exc}") from None
+    if dt.tzinfo is None:
+        dt = dt.replace(tzinfo=timezone.utc)
+    return int(round(dt.timestamp())) * 10 ** 9 + dt.microsecond * 1000
 
 
 @dataclass(frozen=True, kw_only=True)
 class DatasetSettings:
-    runs: int = 60
-    mc_runs: int = 20
-    switch_runs: int = 10
-    log_flights: int = 1
-    batch_runs: int = 100
-    train_fraction: float = 0.7
-    truth_rate_hz: float = 5.0
-    log_formats: tuple[str, ...] = ("bin", "tlog", "bag", "mcap")
-    start_time_utc_ns: int = 1767268800 * 10 ** 9  # 2026-01-01T12:00:00Z
-    maneuvers: tuple[str, ...] = mv.MANEUVERS
-    extra: dict = field(default_factory=dict)
+    """Sizes and formats of the simulated sets (``simulate.datasets`` and
+    ``simulate.start_time_utc``); built from the whole ``simulate`` section, defaults from the
+    config schema."""
+
+    runs: int = _count("runs")
+    mc_runs: int = _count("mc_runs")
+    switch_runs: int = _count("switch_runs")
+    log_flights: int = _count("log_flights")
+    batch_runs: int = _sim("datasets.batch_runs")
+    train_fraction: float = _sim("datasets.train_fraction")
+    truth_rate_hz: float = _sim("datasets.truth_rate_hz")
+    log_formats: tuple[str, ...] = _sim("datasets.log_formats")
+    start_time_utc_ns: int = _sim("start_time_utc", convert=utc_ns)
+    maneuvers: tuple[str, ...] = _sim("datasets.maneuvers")
+    extra: dict = field(default_factory=dict, metadata={"config_key": None})
 
     @classmethod
-    def from_config(cls, sim_sec: dict[str, Any] | None) -> "DatasetSettings":
-        sim_sec = dict(sim_sec or {})
-        sec = dict(sim_sec.get("datasets") or {})
-        size = sec.get("size", "small")
-        sizes = {**SIZES, **(sec.get("sizes") or {})}
-        if size not in sizes:
-            raise ConfigError(f"simulate.datasets.size: {size!r} is not one of {sorted(sizes)}")
-        kw: dict[str, Any] = {k: int(v) for k, v in {**SIZES.get(size, {}), **sizes[size]}.items()}
-        try:
-            if "batch_runs" in sec:
-                kw["batch_runs"] = int(sec["batch_runs"])
-            if "train_fraction" in sec:
-                kw["train_fraction"] = float(sec["train_fraction"])
-            if "truth_rate_hz" in sec:
-                kw["truth_rate_hz"] = float(sec["truth_rate_hz"])
-            if "log_formats" in sec:
-                kw["log_formats"] = tuple(str(f) for f in sec["log_formats"])
-            if "maneuvers" in sec:
-                kw["maneuvers"] = tuple(str(m) for m in sec["maneuvers"])
-            st = sim_sec.get("start_time_utc", "2026-01-01T12:00:00Z")
-            dt = datetime.fromisoformat(str(st).replace("Z", "+00:00"))
-            if dt.tzinfo is None:
-                dt = dt.replace(tzinfo=timezone.utc)
-            kw["start_time_utc_ns"] = int(round(dt.timestamp())) * 10 ** 9 + dt.microsecond * 1000
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"simulate.datasets: invalid value: {exc}") from None
-        bad = sorted(set(kw.get("log_formats", ())) - {"bin", "tlog", "bag", "mcap"})
-        if bad:
-            raise ConfigError(f"simulate.datasets.log_formats: unknown {bad}; known: bin, tlog, bag, mcap")
-        badm = sorted(set(kw.get("maneuvers", ())) - set(mv.MANEUVERS))
-        if badm:
-            raise ConfigError(f"simulate.datasets.maneuvers: unknown {badm}")
-        if not 0 < kw.get("train_fraction", 0.7) < 1:
-            raise ConfigError("simulate.datasets.train_fraction must be in (0, 1)")
-        return cls(**kw)
+    def from_config(cls, sim_sec: Mapping[str, Any] | None) -> "DatasetSettings":
+        """Validate a ``simulate`` section against the schema and build (ConfigError if bad)."""
+        return build(cls, validate_section("simulate", sim_sec))
 
 
 def state_table(truth: Truth, step: int, sensors: SensorSettings, run_offset: int = 0) -> pd.DataFrame:

@@ -43,49 +43,45 @@ references, so the defaults are Luukkonen's quadcopter — ``mass_kg`` 0.468,
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+import functools
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from ..config import ConfigError
+from ..config import ConfigError, cfield
 from ..frames.rotations import euler_to_quat
 
 F64 = NDArray[np.float64]
 
 
+_veh = functools.partial(cfield, "simulate.vehicle")
+
+
+def _triple(v: Any) -> tuple[float, float, float]:
+    """One number for all three axes, or three numbers."""
+    return tuple(float(x) for x in ([v] * 3 if np.isscalar(v) else v))  # type: ignore[return-value]
+
+
 @dataclass(frozen=True, kw_only=True)
 class QuadParams:
-    """Vehicle parameters (SI). See the module docstring for the defaults' source."""
+    """Vehicle parameters (SI), ``simulate.vehicle``; defaults from the config schema (see the
+    module docstring for their source). Build from a section with
+    ``pipeline.config.build(QuadParams, sec)``."""
 
-    mass_kg: float = 0.468
-    drag_kgps: tuple[float, float, float] = (0.25, 0.25, 0.25)
-    inertia_kgm2: tuple[float, float, float] = (4.856e-3, 4.856e-3, 8.801e-3)
-    arm_m: float = 0.225
-    yaw_coeff_m: float = 0.0383
-    max_motor_thrust_N: float | None = None
-    g_mps2: float = 9.80665
+    mass_kg: float = _veh("mass_kg")
+    drag_kgps: tuple[float, float, float] = _veh("drag_kgps", convert=_triple)
+    inertia_kgm2: tuple[float, float, float] = _veh("inertia_kgm2", convert=_triple)
+    arm_m: float = _veh("arm_m")
+    yaw_coeff_m: float = _veh("yaw_coeff_m")
+    max_motor_thrust_N: float | None = _veh("max_motor_thrust_N")
+    g_mps2: float = _veh("g_mps2")
 
-    @classmethod
-    def from_config(cls, sec: dict[str, Any] | None) -> "QuadParams":
-        sec = dict(sec or {})
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(sec) - known)
-        if bad:
-            raise ConfigError(f"simulate.vehicle: unknown key(s) {bad}; known: {sorted(known)}")
-        for k in ("drag_kgps", "inertia_kgm2"):
-            if k in sec:
-                v = sec[k]
-                v = [v] * 3 if np.isscalar(v) else list(v)
-                if len(v) != 3:
-                    raise ConfigError(f"simulate.vehicle.{k}: need 3 values, got {len(v)}")
-                sec[k] = tuple(float(x) for x in v)
-        p = cls(**sec)
-        if p.mass_kg <= 0 or min(p.drag_kgps) < 0:
+    def __post_init__(self):
+        if self.mass_kg <= 0 or min(self.drag_kgps) < 0:
             raise ConfigError("simulate.vehicle: mass_kg must be > 0 and drag_kgps >= 0")
-        return p
 
     @property
     def k(self) -> F64:

@@ -25,97 +25,72 @@ Parameters (``simulate`` section of ``datasets/config.yaml``; defaults in bracke
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import ConfigError, build, cfield, validate_section
 from . import maneuvers as mv
 from .quadcopter import QuadParams, Truth, gauss_markov, simulate
 
-DEFAULT_POST_S = {"M1": 25.0, "M2": 20.0, "M3": 20.0, "M4": 20.0, "M5": 25.0}
+_sim = functools.partial(cfield, "simulate")
+
+
+def post_s_by_maneuver(v: Any) -> dict[str, float]:
+    """``mc.post_s``: one number for every maneuver, or ``{M1: s, ...}`` (schema-defaulted)."""
+    if isinstance(v, dict):
+        return {str(k): float(x) for k, x in v.items()}
+    return {m: float(v) for m in mv.MANEUVERS}
+
+
+def _no_clip(v: Any) -> float | None:
+    return None if v in (None, 0) else float(v)
 
 
 @dataclass(frozen=True, kw_only=True)
 class SimSettings:
-    """Validated ``simulate`` config (dynamics and scenario parts)."""
+    """Validated ``simulate`` config (dynamics and scenario parts); defaults from the config
+    schema. ``pipeline.config.build(SimSettings, section)`` or :meth:`from_config`."""
 
-    rate_hz: float = 200.0
+    rate_hz: float = _sim("rate_hz")
     vehicle: QuadParams = field(default_factory=QuadParams)
-    dist_tau_s: float = 0.5
-    dist_sigma_mps2: float = 0.2
-    dist_clip_mps2: float | None = 0.8
-    dist_knot_s: float = 0.1
-    north_m: tuple[float, float] = (-800.0, 800.0)
-    east_m: tuple[float, float] = (-800.0, 800.0)
-    heading_deg: tuple[float, float] = (-180.0, 180.0)
-    low_pitch_deg: float = -5.0
-    mc_pre_s: float = 15.0
-    mc_post_s: dict = field(default_factory=lambda: dict(DEFAULT_POST_S))
-    mc_ramp_in: tuple[float, float] = (12.0, 14.8)
-    mc_ramp_out: tuple[float, float] = (40.0, 50.0)
-    mc_start_ne_m: tuple[float, float] = (500.0, -300.0)
-    mc_heading_deg: float = 30.0
-    switch_times_s: tuple[float, ...] = (3.0, 8.0, 13.0)
-    switch_blend_s: float = 2.0
-    switch_min_alt_m: float = 20.0
-    cal_hover_alts_m: tuple[float, ...] = (2.0, 4.5)
-    cal_hover_s: float = 8.0
-    cal_climb_alt_m: float = 25.0
+    dist_tau_s: float = _sim("disturbance.tau_s")
+    dist_sigma_mps2: float = _sim("disturbance.sigma_mps2")
+    dist_clip_mps2: float | None = _sim("disturbance.clip_mps2", convert=_no_clip)
+    dist_knot_s: float = _sim("disturbance.knot_s")
+    north_m: tuple[float, float] = _sim("start.north_m")
+    east_m: tuple[float, float] = _sim("start.east_m")
+    heading_deg: tuple[float, float] = _sim("start.heading_deg")
+    low_pitch_deg: float = _sim("low_dynamic_pitch_deg")
+    mc_pre_s: float = _sim("mc.pre_s")
+    mc_post_s: dict = _sim("mc.post_s", convert=post_s_by_maneuver)
+    mc_ramp_in: tuple[float, float] = _sim("mc.ramp_in_s")
+    mc_ramp_out: tuple[float, float] = _sim("mc.ramp_out_s")
+    mc_start_ne_m: tuple[float, float] = _sim("mc.start_ne_m")
+    mc_heading_deg: float = _sim("mc.heading_deg")
+    switch_times_s: tuple[float, ...] = _sim("switch.times_s")
+    switch_blend_s: float = _sim("switch.blend_s")
+    switch_min_alt_m: float = _sim("switch.min_alt_m")
+    cal_hover_alts_m: tuple[float, ...] = _sim("calibration.hover_alts_m")
+    cal_hover_s: float = _sim("calibration.hover_s")
+    cal_climb_alt_m: float = _sim("calibration.climb_alt_m")
+
+    def __post_init__(self):
+        # the schema checks the file; these guard direct construction as well
+        if self.rate_hz < 100:
+            raise ConfigError(f"simulate.rate_hz: must be >= 100 Hz (seed 000 §1), got {self.rate_hz}")
+        if self.dist_tau_s <= 0 or self.dist_sigma_mps2 < 0 or self.dist_knot_s <= 0:
+            raise ConfigError("simulate.disturbance: tau_s and knot_s must be > 0, sigma_mps2 >= 0")
+        if any(not 0 < h < 6 for h in self.cal_hover_alts_m) or len(self.cal_hover_alts_m) < 2:
+            raise ConfigError("simulate.calibration.hover_alts_m: need >= 2 heights in (0, 6) m")
 
     @classmethod
-    def from_config(cls, sec: dict[str, Any] | None) -> "SimSettings":
-        sec = dict(sec or {})
-        kw: dict[str, Any] = {}
-        try:
-            if "rate_hz" in sec:
-                kw["rate_hz"] = float(sec["rate_hz"])
-            kw["vehicle"] = QuadParams.from_config(sec.get("vehicle"))
-            d = sec.get("disturbance") or {}
-            kw["dist_tau_s"] = float(d.get("tau_s", 0.5))
-            kw["dist_sigma_mps2"] = float(d.get("sigma_mps2", 0.2))
-            clip = d.get("clip_mps2", 0.8)
-            kw["dist_clip_mps2"] = None if clip in (None, 0) else float(clip)
-            kw["dist_knot_s"] = float(d.get("knot_s", 0.1))
-            s = sec.get("start") or {}
-            for key in ("north_m", "east_m", "heading_deg"):
-                if key in s:
-                    lo, hi = (float(x) for x in s[key])
-                    kw[key] = (lo, hi)
-            if "low_dynamic_pitch_deg" in sec:
-                kw["low_pitch_deg"] = float(sec["low_dynamic_pitch_deg"])
-            mc = sec.get("mc") or {}
-            kw["mc_pre_s"] = float(mc.get("pre_s", 15.0))
-            post = dict(DEFAULT_POST_S)
-            pv = mc.get("post_s", None)
-            if isinstance(pv, dict):
-                post.update({k: float(v) for k, v in pv.items()})
-            elif pv is not None:
-                post = {k: float(pv) for k in post}
-            kw["mc_post_s"] = post
-            kw["mc_ramp_in"] = tuple(float(x) for x in mc.get("ramp_in_s", (12.0, 14.8)))
-            kw["mc_ramp_out"] = tuple(float(x) for x in mc.get("ramp_out_s", (40.0, 50.0)))
-            kw["mc_start_ne_m"] = tuple(float(x) for x in mc.get("start_ne_m", (500.0, -300.0)))
-            kw["mc_heading_deg"] = float(mc.get("heading_deg", 30.0))
-            sw = sec.get("switch") or {}
-            kw["switch_times_s"] = tuple(float(x) for x in sw.get("times_s", (3.0, 8.0, 13.0)))
-            kw["switch_blend_s"] = float(sw.get("blend_s", 2.0))
-            kw["switch_min_alt_m"] = float(sw.get("min_alt_m", 20.0))
-            cal = sec.get("calibration") or {}
-            kw["cal_hover_alts_m"] = tuple(float(x) for x in cal.get("hover_alts_m", (2.0, 4.5)))
-            kw["cal_hover_s"] = float(cal.get("hover_s", 8.0))
-            kw["cal_climb_alt_m"] = float(cal.get("climb_alt_m", 25.0))
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"simulate: invalid value: {exc}") from None
-        st = cls(**kw)
-        if st.rate_hz < 100:
-            raise ConfigError(f"simulate.rate_hz: must be >= 100 Hz (seed 000 §1), got {st.rate_hz}")
-        if st.dist_tau_s <= 0 or st.dist_sigma_mps2 < 0 or st.dist_knot_s <= 0:
-            raise ConfigError("simulate.disturbance: tau_s and knot_s must be > 0, sigma_mps2 >= 0")
-        if any(not 0 < h < 6 for h in st.cal_hover_alts_m) or len(st.cal_hover_alts_m) < 2:
-            raise ConfigError("simulate.calibration.hover_alts_m: need >= 2 heights in (0, 6) m")
-        return st
+    def from_config(cls, sec: Mapping[str, Any] | None) -> "SimSettings":
+        """Validate a ``simulate`` section against the schema and build (ConfigError if bad)."""
+        return build(cls, validate_section("simulate", sec))
 
     @property
     def dt(self) -> float:

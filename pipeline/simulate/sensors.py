@@ -32,72 +32,48 @@ Parameters (``simulate.sensors`` in ``datasets/config.yaml``; defaults in bracke
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from ..config import ConfigError
+from ..config import ConfigError, build, cfield, typed, validate_section
 from ..estimate.models import RadarModel
 from ..frames.geodesy import ned_to_geodetic
 from ..frames.rotations import quat_multiply, quat_normalize, quat_rotate_inverse
 from .quadcopter import QuadParams, Truth, motor_thrusts
 
 
-def _sub(sec: dict, key: str) -> dict:
-    v = sec.get(key) or {}
-    if not isinstance(v, dict):
-        raise ConfigError(f"simulate.sensors.{key} must be a mapping")
-    return v
+_sim = functools.partial(cfield, "simulate")
+
+
+def _sensor(name: str):
+    """A ``simulate.sensors.<name>`` dict field, numbers typed by the schema."""
+    return _sim(f"sensors.{name}", convert=functools.partial(typed, f"simulate.sensors.{name}"))
 
 
 @dataclass(frozen=True, kw_only=True)
 class SensorSettings:
-    """Validated ``simulate.sensors`` (+ ``simulate.origin``)."""
+    """Validated ``simulate.sensors`` (+ ``simulate.origin``); defaults from the config schema.
+    Built from the whole ``simulate`` section (:meth:`from_config`)."""
 
-    radar: RadarModel = field(default_factory=RadarModel)
-    gps: dict = field(default_factory=dict)
-    imu: dict = field(default_factory=dict)
-    baro: dict = field(default_factory=dict)
-    rangefinder: dict = field(default_factory=dict)
-    attitude: dict = field(default_factory=dict)
-    control: dict = field(default_factory=dict)
-    origin: tuple[float, float, float] = (32.5994, -85.4897, 200.0)
-    geoid_undulation_m: float = -29.0
-
-    DEFAULTS = {
-        "gps": {"rate_hz": 10.0, "sigma_h_m": 0.3, "sigma_v_m": 0.5, "sigma_vel_mps": 0.05, "n_sats": 14,
-                "dropout_count": 0, "dropout_s": 2.0},
-        "imu": {"rate_hz": 200.0, "gyro_sigma_radps": 0.002, "acc_sigma_mps2": 0.03,
-                "gyro_bias_radps": [0.001, -0.0005, 0.0008], "acc_bias_mps2": [0.02, -0.01, 0.03],
-                "temp_degC": 35.0},
-        "baro": {"rate_hz": 20.0, "sigma_m": 0.1, "offset_m": 1.5, "drift_mps": 0.005, "temp_degC": 30.0},
-        "rangefinder": {"rate_hz": 20.0, "min_m": 0.17, "max_m": 6.0, "sigma_m": 0.02},
-        "attitude": {"rate_hz": 25.0, "sigma_deg": 0.1},
-        "control": {"rate_hz": 10.0, "angle_max_deg": 50.0, "thr_max": 2.0, "yaw_rate_max_dps": 90.0},
-    }
+    radar: RadarModel = field(default_factory=RadarModel, metadata={"config_key": "sensors.radar"})
+    gps: dict = _sensor("gps")
+    imu: dict = _sensor("imu")
+    baro: dict = _sensor("baro")
+    rangefinder: dict = _sensor("rangefinder")
+    attitude: dict = _sensor("attitude")
+    control: dict = _sensor("control")
+    origin: tuple[float, float, float] = _sim(("origin.lat_deg", "origin.lon_deg", "origin.alt_wgs84_m"))
+    geoid_undulation_m: float = _sim("origin.geoid_undulation_m")
 
     @classmethod
-    def from_config(cls, sim_sec: dict[str, Any] | None) -> "SensorSettings":
-        sim_sec = dict(sim_sec or {})
-        sec = sim_sec.get("sensors") or {}
-        kw: dict[str, Any] = {}
-        try:
-            kw["radar"] = RadarModel.from_config(_sub(sec, "radar"))
-            for name, dflt in cls.DEFAULTS.items():
-                user = _sub(sec, name)
-                bad = sorted(set(user) - set(dflt))
-                if bad:
-                    raise ConfigError(f"simulate.sensors.{name}: unknown key(s) {bad}; known: {sorted(dflt)}")
-                kw[name] = {**dflt, **user}
-            o = sim_sec.get("origin") or {}
-            kw["origin"] = (float(o.get("lat_deg", 32.5994)), float(o.get("lon_deg", -85.4897)),
-                            float(o.get("alt_wgs84_m", 200.0)))
-            kw["geoid_undulation_m"] = float(o.get("geoid_undulation_m", -29.0))
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"simulate.sensors: invalid value: {exc}") from None
-        return cls(**kw)
+    def from_config(cls, sim_sec: Mapping[str, Any] | None) -> "SensorSettings":
+        """Validate a ``simulate`` section against the schema and build (ConfigError if bad)."""
+        return build(cls, validate_section("simulate", sim_sec))
 
 
 def _frame(t_ns: np.ndarray, src: str, cols: dict) -> pd.DataFrame:

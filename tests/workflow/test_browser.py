@@ -53,13 +53,13 @@ def report_tree(tmp_path_factory) -> Path:
                             template=ROOT / "reports" / "templates" / "flight.html.j2",
                             plotly_js="../assets/plotly.min.js", index_href="../../index.html")
     # a tiny model trained on tiny simulated sets, evaluated, and its report
-    import yaml
-
     from pipeline.models.run import evaluate_model, train_model
     from pipeline.report.model import build_model_report
     from pipeline.simulate.run import run_simulate_sets
 
-    cfg = yaml.safe_load((ROOT / "datasets" / "config.yaml").read_text())
+    from pipeline.config import load_config
+
+    cfg = load_config()   # validated: every default filled
     sim = cfg["simulate"]
     sim["datasets"] = {**sim["datasets"], "size": "tiny", "maneuvers": ["M1", "M2"],
                        "sizes": {"tiny": {"runs": 4, "mc_runs": 1, "switch_runs": 1, "log_flights": 0}}}
@@ -67,8 +67,8 @@ def report_tree(tmp_path_factory) -> Path:
     run_simulate_sets(res / "sim", sim, 7)
     spec = {"data": "simulated", "labels": ["M1", "M2"], "vehicles": ["sim-quad"]}
     sets = [res / "sim" / "sets" / f"{m}_train.parquet" for m in ("M1", "M2")]
-    train_model("sim", spec, res / "models" / "sim", {**cfg["models"], "n_iter": 5, "gmm_restarts": 1,
-                                                       "init_min_samples": 20}, sets=sets)
+    train_model("sim", spec, res / "models" / "sim", {**cfg["hmm"], "n_iter": 5, "gmm_restarts": 1,
+                                                       "init_min_samples": 20}, seed=cfg["seed"], sets=sets)
     evaluate_model("sim", spec, res / "models" / "sim", res / "models" / "sim" / "evaluation.parquet",
                    train_sets=sets, test_sets=[res / "sim" / "sets" / f"{m}_test.parquet" for m in ("M1", "M2")])
     build_model_report(res / "models" / "sim", res / "models" / "sim" / "evaluation.parquet",

@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def sim_cfg() -> dict:
-    sim = yaml.safe_load((ROOT / "datasets" / "config.yaml").read_text())["simulate"]
+    from pipeline.config import load_config
+
+    sim = load_config(ROOT / "datasets" / "config.yaml")["simulate"]
     sim["datasets"] = {**sim["datasets"], "size": "tiny", "maneuvers": ["M1", "M2"], "log_formats": ["bin"],
                        "sizes": {"tiny": {"runs": 4, "mc_runs": 1, "switch_runs": 1, "log_flights": 1}}}
     sim["switch"] = {**sim["switch"], "times_s": [3]}

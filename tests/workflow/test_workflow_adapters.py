@@ -12,7 +12,6 @@ import json
 from pathlib import Path
 
 import pytest
-import yaml
 
 from pipeline.io import schema
 from pipeline.io.parquet import read_table, read_table_meta
@@ -22,7 +21,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def sim_cfg() -> dict:
-    cfg = yaml.safe_load((ROOT / "datasets" / "config.yaml").read_text())
+    from pipeline.config import load_config
+
+    cfg = load_config()   # validated: every default filled
     sim = cfg["simulate"]
     sim["datasets"] = {**sim["datasets"], "size": "tiny", "maneuvers": ["M2"], "log_formats": ["bin", "mcap"],
                        "sizes": {"tiny": {"runs": 3, "mc_runs": 1, "switch_runs": 1, "log_flights": 1}}}

@@ -1,0 +1,277 @@
+"""The config schema: every section typed, every default once, one-line errors naming the key.
+
+Oracles: the pre-issue-12 ``datasets/config.yaml`` (kept verbatim beside this file) and the
+stage code's literal defaults of that time; Snakemake's own ``validate(set_default=True)``.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline import config as C
+from pipeline.config import ConfigError, load_config, validate_config, validate_section
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+BEFORE = HERE / "config_before_issue12.yaml"
+
+
+def _renamed(old: dict) -> dict:
+    """The issue-12 renames: models -> hmm (without seed), train -> model_sets, per-set models -> hmm."""
+    new = copy.deepcopy(old)
+    new["hmm"] = new.pop("models")
+    new["hmm"].pop("seed")
+    new["model_sets"] = new.pop("train")
+    for spec in new["model_sets"].values():
+        if "models" in spec:
+            spec["hmm"] = spec.pop("models")
+    return new
+
+
+def _leaves(d, path=()):
+    if isinstance(d, dict) and d:
+        for k, v in d.items():
+            yield from _leaves(v, path + (k,))
+    else:
+        yield path, d
+
+
+def _get(d, path):
+    for p in path:
+        d = d[p]
+    return d
+
+
+def _write(tmp_path, cfg) -> Path:
+    p = tmp_path / "cfg.yaml"
+    p.write_text(yaml.safe_dump(cfg))
+    return p
+
+
+# --- defaults ----------------------------------------------------------------------------------
+
+def test_the_shipped_file_resolves_to_the_values_it_had_before_for_every_key():
+    from pipeline.io.ros_common import DEFAULT_CUSTOM_TYPES, RosConfig
+
+    old = _renamed(yaml.safe_load(BEFORE.read_text()))
+    new = load_config()
+    # the simulator's radar message is a built-in of the ROS mapping (merged under any
+    # custom_types), no longer repeated in the file: the resolved RosConfig is the same
+    assert old["ingest"]["ros"].pop("custom_types") == DEFAULT_CUSTOM_TYPES
+    assert RosConfig.from_config(new["ingest"]) == RosConfig.from_config(yaml.safe_load(BEFORE.read_text())["ingest"])
+    for path, value in _leaves(old):
+        assert _get(new, path) == value, ".".join(map(str, path))
+    # the old models.seed was the master seed: training keeps its draws
+    assert yaml.safe_load(BEFORE.read_text())["models"]["seed"] == new["seed"]
+
+
+def test_keys_only_the_code_knew_default_to_the_codes_old_values():
+    d = load_config()
+    assert d["simulate"]["vehicle"]["max_motor_thrust_N"] is None
+    assert d["simulate"]["vehicle"]["g_mps2"] == 9.80665
+    assert d["simulate"]["datasets"]["maneuvers"] == ["M1", "M2", "M3", "M4", "M5"]
+    assert d["preprocess"]["bpm"]["p0_Pa"] == 101325.0
+    assert d["ingest"]["ulog"]["rangefinder_valid_m"] is None
+    assert d["preprocess"]["butterworth"] == {"baro.alt_rel_m": {"order": 3, "cutoff_hz": 1.0}}
+    assert d["studies"] == {"size": "small"}
+
+
+def test_the_old_file_with_the_renames_validates_to_the_same_dict_as_the_new_one():
+    old = _renamed(yaml.safe_load(BEFORE.read_text()))
+    old["ingest"]["ros"].pop("custom_types")   # built in (see above)
+    assert validate_config(old) == load_config()
+
+
+def test_defaults_equal_an_empty_file_and_snakemake_fills_the_same_defaults():
+    from snakemake.utils import validate
+
+    assert C.defaults() == validate_config({}) == validate_config(None)
+    raw = yaml.safe_load((ROOT / "datasets" / "config.yaml").read_text())
+    validate(raw, schema=str(C.SCHEMA_PATH), set_default=True)
+    assert raw == load_config()
+    wf = yaml.safe_load((ROOT / "tests" / "workflow" / "config.yaml").read_text())
+    ours = validate_config(wf)
+    validate(wf, schema=str(C.SCHEMA_PATH), set_default=True)
+    assert wf == ours
+
+
+def test_the_import_time_default_filler_agrees_with_the_validator():
+    inst: dict = {}
+    C._fill(C._schema(), inst, C._schema())
+    assert inst == C.defaults()
+
+
+def test_validation_does_not_alias_the_schema_defaults():
+    a = validate_config({})
+    a["preprocess"]["butterworth"]["x.y"] = {"cutoff_hz": 1.0}
+    a["simulate"]["sensors"]["imu"]["acc_bias_mps2"][0] = 99.0
+    assert validate_config({}) == C.defaults() and "x.y" not in C.defaults()["preprocess"]["butterworth"]
+
+
+def test_the_master_seed_is_the_only_seed_key_in_the_schema():
+    seen = []
+
+    def walk(node, path):
+        if isinstance(node, dict):
+            for k, v in (node.get("properties") or {}).items():
+                seen.append(path + (k,))
+                walk(v, path + (k,))
+            for k, v in node.items():
+                if k != "properties":
+                    walk(v, path + (k,) if k == "$defs" else path)
+        elif isinstance(node, list):
+            for v in node:
+                walk(v, path)
+
+    walk(C.schema(), ())
+    seeds = [p for p in seen if "seed" in p[-1].lower()]
+    assert seeds == [("seed",)]
+    with pytest.raises(ConfigError, match=r"hmm\.seed: unknown key"):
+        validate_config({"hmm": {"seed": 1}})
+
+
+# --- one-line errors for every section ----------------------------------------------------------
+
+BAD = [
+    # (section, bad nested key, expected path) ...
+    ("ingest", {"ingest": {"ros": {"topicz": {}}}}, "ingest.ros.topicz: unknown key"),
+    ("ingest", {"ingest": {"ros": {"world_frames": "map"}}}, "ingest.ros.world_frames: 'map' is not a list"),
+    ("ingest", {"ingest": {"ulog": {"imu": 3}}}, "ingest.ulog.imu: 3 is not"),
+    ("ingest", {"ingest": {"tabular": {"colmap": "x"}}}, "ingest.tabular.colmap: unknown key"),
+    ("ingest", {"ingest": {"ros": {"topics": {"/a": {"strem": "imu"}}}}}, r"ingest.ros.topics\['/a'\].strem: unknown key"),
+    ("simulate", {"simulate": {"mc": {"pre_z": 1}}}, "simulate.mc.pre_z: unknown key"),
+    ("simulate", {"simulate": {"rate_hz": "fast"}}, "simulate.rate_hz: 'fast' is not a number"),
+    ("simulate", {"simulate": {"sensors": {"gps": {"n_sats": 2.5}}}}, "simulate.sensors.gps.n_sats: 2.5 is not an integer"),
+    ("simulate", {"simulate": {"datasets": {"log_formats": ["csv"]}}}, r"simulate.datasets.log_formats\[0\]: 'csv' is not one of"),
+    ("simulate", {"simulate": {"vehicle": {"mass": 1.0}}}, "simulate.vehicle.mass: unknown key"),
+    ("preprocess", {"preprocess": {"rate_hx": 25}}, "preprocess.rate_hx: unknown key"),
+    ("preprocess", {"preprocess": {"rate_hz": "fast"}}, "preprocess.rate_hz: 'fast' is not a number"),
+    ("preprocess", {"preprocess": {"ned_method": "ecef"}}, "preprocess.ned_method: 'ecef' is not one of wgs84, flat"),
+    ("preprocess", {"preprocess": {"bpm": {"spike_window": "5"}}}, "preprocess.bpm.spike_window: '5' is not an integer"),
+    ("preprocess", {"preprocess": {"vehicles": {"v": {"controls": {"ail": {"chan": "x"}}}}}},
+     "preprocess.vehicles.v.controls.ail.chan: unknown key"),
+    ("hmm", {"hmm": {"n_state": 3}}, "hmm.n_state: unknown key"),
+    ("hmm", {"hmm": {"n_iter": "many"}}, "hmm.n_iter: 'many' is not an integer"),
+    ("hmm", {"hmm": {"window_s": "long"}}, "hmm.window_s: 'long' is not a number > 0 or 'auto'"),
+    ("hmm", {"hmm": {"n_states": {"M1": "x"}}}, "hmm.n_states.M1: 'x' is not"),
+    ("model_sets", {"model_sets": {"s": {"data": "simulated", "vehicle": ["q"]}}}, "model_sets.s.vehicle: unknown key"),
+    ("model_sets", {"model_sets": {"s": {"data": "simulated", "vehicles": ["q"], "reset_at_segments": "yes"}}},
+     "model_sets.s.reset_at_segments: 'yes' is not true/false"),
+    ("model_sets", {"model_sets": {"s": {"data": "simulated", "vehicles": ["q"], "hmm": {"n_stats": 3}}}},
+     "model_sets.s.hmm.n_stats: unknown key"),
+    ("studies", {"studies": {"sise": "tiny"}}, "studies.sise: unknown key"),
+    ("studies", {"studies": {"size": "huge"}}, "studies.size: 'huge' is not one of tiny, small, thesis"),
+    ("top", {"foo": {}}, "foo: unknown section"),
+    ("top", {"seed": "x"}, "seed: 'x' is not an integer"),
+    ("top", {"models": {"n_states": 3}}, "models: unknown section"),
+    ("top", {"train": {}}, "train: unknown section"),
+]
+
+
+@pytest.mark.parametrize("section, bad, match", BAD, ids=[m.split(":")[0] + "-" + m.split(": ")[1][:12] for _, _, m in BAD])
+def test_a_bad_key_or_value_is_one_line_naming_the_file_and_key_path(tmp_path, section, bad, match):
+    p = _write(tmp_path, bad)
+    with pytest.raises(ConfigError) as exc:
+        load_config(p)
+    msg = str(exc.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"{p}: ") or msg.startswith("cfg.yaml: ")
+    assert re.search(match, msg), msg
+    # the same message without the file for an in-memory config
+    with pytest.raises(ConfigError, match=match):
+        validate_config(bad)
+
+
+def test_every_section_of_the_schema_is_covered_by_the_bad_key_cases():
+    covered = {s for s, _, _ in BAD}
+    objects = {k for k, v in C.schema()["properties"].items() if v.get("type") == "object"}
+    assert objects <= covered
+
+
+def test_unknown_keys_are_reported_before_sibling_type_errors_deterministically():
+    bad = {"preprocess": {"rate_hz": "fast", "gap_multiple": "x", "rate_hx": 1}, "hmm": {"tol": "y"}}
+    msgs = {str(_raises(bad)) for _ in range(3)}
+    assert msgs == {"preprocess.rate_hx: unknown key (allowed: rate_hz, gap_multiple, clock_jump_s, "
+                    "position_source, ned_method, velocity_source, methods, causal, butterworth, "
+                    "derivatives, bpm, segments, vehicles, flights)"}
+    # no unknown key: the first error in key order
+    assert str(_raises({"preprocess": {"rate_hz": "fast", "gap_multiple": "x"}})) == \
+        "preprocess.gap_multiple: 'x' is not a number"
+
+
+def _raises(cfg) -> ConfigError:
+    with pytest.raises(ConfigError) as exc:
+        validate_config(cfg)
+    return exc.value
+
+
+def test_a_section_validated_alone_names_its_full_path_and_unknown_sections_fail():
+    with pytest.raises(ConfigError, match=r"^preprocess\.derivatives\.windw_s: unknown key"):
+        validate_section("preprocess.derivatives", {"windw_s": 1})
+    with pytest.raises(ConfigError, match="unknown section"):
+        C.section({}, "models")
+    assert C.section({}, "studies") == {"size": "small"}
+
+
+def test_unreadable_files_are_one_line_errors(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found"):
+        load_config(tmp_path / "nope.yaml")
+    p = tmp_path / "bad.yaml"
+    p.write_text("a: [1,\n")
+    with pytest.raises(ConfigError, match="invalid YAML") as exc:
+        load_config(p)
+    assert "\n" not in str(exc.value)
+    p.write_text("- 1\n")
+    with pytest.raises(ConfigError, match="top level must be a mapping"):
+        load_config(p)
+
+
+# --- the schema agrees with the code's vocabularies ----------------------------------------------
+
+def test_the_schema_enums_are_the_codes_vocabularies():
+    from pipeline.models.features import FEATURE_SETS
+    from pipeline.preprocess.controls import DEFAULT_CONTROLS, PHYSICAL, STICKS
+    from pipeline.preprocess.derivatives import DIFF_METHODS
+    from pipeline.preprocess.resample import METHODS
+    from pipeline.preprocess.segment import SOURCES
+    from pipeline.preprocess.state import POSITION_SOURCES
+    from pipeline.simulate.maneuvers import MANEUVERS
+
+    s = C._subschema
+    assert s("hmm.feature_set")["enum"] == list(FEATURE_SETS)
+    assert s("preprocess.methods")["additionalProperties"]["enum"] == list(METHODS)
+    assert s("preprocess.segments.source")["enum"] == list(SOURCES)
+    assert s("preprocess.derivatives.method")["enum"] == list(DIFF_METHODS)
+    assert s("preprocess.position_source")["enum"] == list(POSITION_SOURCES)
+    assert s("simulate.datasets.maneuvers")["items"]["enum"] == list(MANEUVERS)
+    assert set(s("preprocess.vehicles.*.controls")["properties"]) == set(STICKS)
+    assert set(s("preprocess.vehicles.*.physical")["properties"]) == set(PHYSICAL)
+    assert C.default_at("preprocess.vehicles.*.controls") == DEFAULT_CONTROLS
+
+
+def test_the_hmm_section_and_its_overrides_have_the_same_keys_and_overrides_no_defaults():
+    sch = C.schema()
+    over = sch["$defs"]["hmm_override"]["properties"]
+    assert list(sch["properties"]["hmm"]["properties"]) == list(over)
+    assert not any("default" in v for v in over.values())
+
+
+# --- documentation -----------------------------------------------------------------------------
+
+def test_every_schema_key_is_documented_in_datasets_readme():
+    text = (ROOT / "datasets" / "README.md").read_text()
+    missing = [p for p, _ in C.key_paths() if f"`{p}`" not in text]
+    assert not missing, missing
+    begin = text.index("-->\n", text.index("<!-- BEGIN key reference")) + 4
+    end = text.index("<!-- END key reference -->")
+    assert text[begin:end] == C.markdown_reference(), "regenerate: python -m pipeline.config"
+
+
+def test_the_shipped_file_points_users_to_the_schema_and_the_readme():
+    text = (ROOT / "datasets" / "config.yaml").read_text()
+    assert "rules/schemas/config.schema.yaml" in text and "datasets/README.md" in text

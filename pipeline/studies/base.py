@@ -37,6 +37,22 @@ from ..config import ConfigError
 SIZES = ("tiny", "small", "thesis")
 DEFAULT_SIZE = "small"
 
+#: the Parquet tables each study writes (``results/studies/<name>/<table>.parquet``); kept here,
+#: beside the output layout, so the rules need not import the studies themselves
+STUDY_TABLES: dict[str, tuple[str, ...]] = {
+    "seed000_classification": ("tables_3_1_3_4", "confusion", "switch_tables", "switch_shift",
+                               "gmr_error", "gmr_rmse"),
+    "flightcoach_classification": ("p23_segments", "p23_timeline", "f23_segments", "oneclass_slack_sweep"),
+}
+#: the FlightCoach study's flights: ``{input name: file under <realdata_dir>/<FLIGHTCOACH_DIR>}``
+FLIGHTCOACH_DIR = "flightcoach_f3a_json"
+FLIGHTCOACH_FILES = {
+    "train": "manual_F3A_P23_22_02_18_00000036.json",
+    "test_p23": "manual_F3A_P23_22_05_31_00000350.json",
+    "test_f23": "manual_F3A_F23_22_02_18_00000035.json",
+    "calib": "UK_England_Bristol_AMARC2002_F3A_P21_21_08_12_00000026.json",
+}
+
 
 class StudyError(ValueError):
     """A study cannot run (missing input data, bad setting); the message names the file or key."""
@@ -106,14 +122,19 @@ def study_settings(config: Mapping | None, name: str, defaults: Mapping[str, Any
     return size, {**dict(defaults), **own, **per_size}
 
 
-def study_outputs(name: str, tables: tuple[str, ...], *, results_dir: str | os.PathLike = "results",
+def study_outputs(name: str, *, results_dir: str | os.PathLike = "results",
                   models: bool = True) -> dict[str, str]:
     """The declared output paths of one study, ``{output name: path}``.
 
-    ``report``, ``results``, ``page``, one entry per Parquet table (``<table>.parquet``) and,
-    with ``models``, ``model_params``/``model_meta`` (the trained set under ``models/``).
-    The rule in ``rules/studies.smk`` and the tests both take their paths from here.
+    ``report``, ``results``, ``page``, one entry per Parquet table of :data:`STUDY_TABLES`
+    (``<table>.parquet``) and, with ``models``, ``model_params``/``model_meta`` (the trained
+    set under ``models/``). The rules in ``rules/studies.smk`` and the tests both take their
+    paths from here.
     """
+    try:
+        tables = STUDY_TABLES[name]
+    except KeyError:
+        raise StudyError(f"unknown study {name!r}; known: {', '.join(STUDY_TABLES)}") from None
     d = Path(results_dir) / "studies" / name
     out = {"report": str(d / "report.md"), "results": str(d / "results.txt"),
            "page": str(Path(results_dir) / "report" / "studies" / f"{name}.html")}
@@ -121,6 +142,18 @@ def study_outputs(name: str, tables: tuple[str, ...], *, results_dir: str | os.P
     if models:
         out.update(model_params=str(d / "models" / "params.npz"), model_meta=str(d / "models" / "meta.json"))
     return out
+
+
+def flightcoach_inputs(realdata_dir: str | os.PathLike) -> dict[str, str]:
+    """The FlightCoach study's four flights under ``realdata_dir``; a missing one is a
+    :class:`StudyError` naming it (one line: the study is not part of the main job)."""
+    d = Path(realdata_dir) / FLIGHTCOACH_DIR
+    files = {k: str(d / f) for k, f in FLIGHTCOACH_FILES.items()}
+    for k, p in files.items():
+        if not Path(p).is_file():
+            raise StudyError(f"{p}: FlightCoach file not found (input {k!r} of the flightcoach_classification "
+                             f"study; it needs the real logs of ../shared/realdata: set realdata_dir)")
+    return files
 
 
 def output_path(outputs: Mapping, key: str) -> Path:

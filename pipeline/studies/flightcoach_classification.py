@@ -61,23 +61,20 @@ from ..io.registry import read_log
 from ..models import ManeuverModelSet, ModelsConfig
 from ..preprocess.state import run_preprocess
 from ..report.study import build_study_page, layout
-from .base import (Progress, Results, StudyError, StudyResult, input_path, md_table, output_path, say,
+from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_FILES, STUDY_TABLES, Progress, Results, StudyError, StudyResult, input_path, md_table, output_path, say,
                    study_outputs, study_settings, write_text)
 
 NAME = "flightcoach_classification"
-SUBDIR = "flightcoach_f3a_json"
-TRAIN = "manual_F3A_P23_22_02_18_00000036.json"
-TEST_P23 = "manual_F3A_P23_22_05_31_00000350.json"
-TEST_F23 = "manual_F3A_F23_22_02_18_00000035.json"
-CALIB = "UK_England_Bristol_AMARC2002_F3A_P21_21_08_12_00000026.json"
+SUBDIR = FLIGHTCOACH_DIR
 #: the study's input files: ``{input name: file name under <realdata_dir>/flightcoach_f3a_json}``
-FLIGHTS = {"train": TRAIN, "test_p23": TEST_P23, "test_f23": TEST_F23, "calib": CALIB}
+FLIGHTS = FLIGHTCOACH_FILES
+TRAIN, TEST_P23, TEST_F23, CALIB = (FLIGHTS[k] for k in ("train", "test_p23", "test_f23", "calib"))
 SKIP = ("tkOf", "tkoff", "lnd")
 F23_NEW = ("keLoop", "stall", "8roll", "shark", "SqLC", "h8", "ke45", "rShark", "r2FT", "rThat",
            "spin", "hC8", "rCir", "Av")
 
 #: Parquet tables the study writes (``<name>.parquet``)
-OUTPUT_TABLES = ("p23_segments", "p23_timeline", "f23_segments", "oneclass_slack_sweep")
+OUTPUT_TABLES = STUDY_TABLES[NAME]
 
 #: settings of every size (``studies.flightcoach_classification``)
 DEFAULTS: dict[str, Any] = {
@@ -105,7 +102,7 @@ SIZES: dict[str, dict[str, Any]] = {
 
 def outputs_for(results_dir: str = "results") -> dict[str, str]:
     """The study's declared outputs under ``results_dir`` (see :func:`.base.study_outputs`)."""
-    return study_outputs(NAME, OUTPUT_TABLES, results_dir=results_dir)
+    return study_outputs(NAME, results_dir=results_dir)
 
 
 def default_inputs(realdata_dir: str | os.PathLike | None = None) -> dict[str, str]:

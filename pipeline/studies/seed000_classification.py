@@ -60,7 +60,7 @@ from ..report.study import build_study_page, layout
 from ..simulate.datasets import DatasetSettings, set_rng, simulate_set
 from ..simulate.scenarios import SimSettings
 from ..simulate.sensors import SensorSettings
-from .base import (Progress, Results, StudyResult, input_path, md_table, output_path, say,
+from .base import (STUDY_TABLES, Progress, Results, StudyResult, input_path, md_table, output_path, say,
                    study_outputs, study_settings, write_text)
 
 NAME = "seed000_classification"
@@ -68,7 +68,7 @@ KNOWN = ("M1", "M2", "M3", "M4")
 ALL = (*KNOWN, "M5")
 
 #: Parquet tables the study writes (``<name>.parquet``)
-OUTPUT_TABLES = ("tables_3_1_3_4", "confusion", "switch_tables", "switch_shift", "gmr_error", "gmr_rmse")
+OUTPUT_TABLES = STUDY_TABLES[NAME]
 
 #: settings of every size (``studies.seed000_classification``)
 DEFAULTS: dict[str, Any] = {
@@ -89,7 +89,7 @@ SIZES: dict[str, dict[str, Any]] = {
 
 def outputs_for(results_dir: str = "results") -> dict[str, str]:
     """The study's declared outputs under ``results_dir`` (see :func:`.base.study_outputs`)."""
-    return study_outputs(NAME, OUTPUT_TABLES, results_dir=results_dir)
+    return study_outputs(NAME, results_dir=results_dir)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

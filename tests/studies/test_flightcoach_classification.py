@@ -1,7 +1,7 @@
 """The FlightCoach F3A study through its entry point, on the real flights of ../shared/realdata.
 
-At ``tiny`` size (5 Baum-Welch iterations, slacks 1 and 1.5) its tables equal what
-``benchmarks/study_flightcoach_classification.py --n-iter 5 --slack-grid 1,1.5`` wrote before
+At ``tiny`` size (5 Baum-Welch iterations, slack grid 1.5) its tables equal what
+``benchmarks/study_flightcoach_classification.py --n-iter 5 --slack-grid 1.5`` wrote before
 the studies became a stage (goldens in ``tests/data/studies/``); at ``small`` size (the full
 study) it meets the acceptance figures the script's test asserted. Both skip when
 ../shared/realdata is absent (fail under UAVPIPE_REQUIRE_SHARED=1).

@@ -5,7 +5,7 @@ The goldens are what ``benchmarks/study_seed000_classification.py`` and
 became a stage), at the ``tiny`` study size and the config's seed 20261123::
 
     python benchmarks/study_seed000_classification.py --runs 40 --switch-runs 4 --out A
-    python benchmarks/study_flightcoach_classification.py --n-iter 5 --slack-grid 1,1.5 --out B
+    python benchmarks/study_flightcoach_classification.py --n-iter 5 --slack-grid 1.5 --out B
     python tests/data/studies/make_golden.py A B
 
 Every table is copied as is, except ``gmr_error`` (227 kB: one row per maneuver, quantity, axis

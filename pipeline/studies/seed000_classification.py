@@ -51,7 +51,7 @@ import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 
-from ..config import ROOT, load_config, section
+from ..config import ROOT, ConfigError, load_config, section
 from ..io.parquet import write_table
 from ..models import ManeuverModelSet, ModelsConfig
 from ..models.metrics import (SCENARIOS, SWITCH_TABLE, THESIS_SWITCH, confusion, is_correct,
@@ -461,7 +461,7 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
     skip = set(st["skip"] or ())
     bad = sorted(skip - {"switch", "gmr"})
     if bad:
-        raise ValueError(f"studies.{NAME}.skip: unknown part(s) {bad}; known: switch, gmr")
+        raise ConfigError(f"studies.{NAME}.skip: unknown part(s) {bad}; known: switch, gmr")
     if simulate is None or models is None:
         cfg_file = load_config()
         simulate = section(cfg_file, "simulate") if simulate is None else simulate

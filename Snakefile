@@ -17,6 +17,7 @@ include: "rules/preprocess.smk"
 include: "rules/models.smk"
 include: "rules/classify.smk"
 include: "rules/report.smk"
+include: "rules/studies.smk"
 
 
 rule all:

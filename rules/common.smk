@@ -11,6 +11,7 @@ from pipeline.config import ConfigError, validate_config
 from pipeline.io.schema import STREAM_NAMES
 from pipeline.models.run import model_set_config
 from pipeline.simulate.run import planned_logs, planned_sets
+from pipeline.studies.base import STUDY_TABLES
 
 PIPELINE_VERSION = pipeline.__version__
 
@@ -44,6 +45,7 @@ SIM_SETS = planned_sets(config["simulate"])
 SIM_LOGS = planned_logs(config["simulate"])
 SIM_MANEUVERS = sorted({n.rsplit("_", 1)[0] for n in SIM_SETS if n.endswith("_test")})
 MODEL_SETS = config["model_sets"]
+STUDY_NAMES = list(STUDY_TABLES)  # rules/studies.smk: one target each, not in `all`
 for _row in _manifest.itertuples():
     _p = _row.path.rstrip("/")
     if _p.startswith("results/sim/logs/") and _p.split("/")[-1] not in {

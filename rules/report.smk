@@ -101,7 +101,7 @@ rule report_index:
     params:
         code_version=PIPELINE_VERSION,
         config={},
-        job={"flights": FLIGHTS, "model_sets": list(MODEL_SETS)},
+        job={"flights": FLIGHTS, "model_sets": list(MODEL_SETS), "studies": list(STUDY_NAMES)},
     log:
         "results/logs/report_index/index.log",
     benchmark:

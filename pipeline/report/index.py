@@ -120,7 +120,8 @@ def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | N
 
 def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os.PathLike,
                 links: dict[str, str] | None = None, *, segments: dict | None = None,
-                classified: dict | None = None, models: dict[str, str] | None = None) -> pd.DataFrame:
+                classified: dict | None = None, models: dict[str, str] | None = None,
+                studies: dict[str, str] | None = None) -> pd.DataFrame:
     """Write the index page; returns the summary table (one row per flight).
 
     Parameters
@@ -137,6 +138,10 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         ``{flight_id: {model_set: path}}`` of the classification tables (maneuvers found).
     models : dict, optional
         ``{model_set: relative URL}`` of the per-model-set reports.
+    studies : dict, optional
+        ``{study: relative URL}`` of the study pages (``report/studies/<name>.html``); pages
+        that do not exist yet are listed with the target that builds them (studies are built by
+        their own targets, not by the main job).
     """
     rows = [flight_summary(f, m) for f, m in zip(flight_ids, meta_paths)]
     for r in rows:
@@ -163,6 +168,14 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     model_links = "".join(f'<li><a href="{html.escape(u)}">{html.escape(m)}</a></li>'
                           for m, u in (models or {}).items())
     models_html = f"<h2>Model sets</h2><ul>{model_links}</ul>" if model_links else ""
+    here = Path(out_html).parent
+    # studies are built by their own targets, not by the main job: list each, linked once built
+    study_links = "".join(
+        f'<li><a href="{html.escape(u)}">{html.escape(s)}</a></li>' if (here / u).exists() else
+        f'<li>{html.escape(s)} <span class="absent">(not built yet: <code>snakemake study_{html.escape(s)}'
+        f'</code>)</span></li>' for s, u in (studies or {}).items())
+    if study_links:
+        models_html += f"<h2>Studies</h2><ul>{study_links}</ul>"
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>uavpipe flights</title>
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>

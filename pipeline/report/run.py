@@ -69,12 +69,13 @@ def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: s
 
 
 def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[str],
-              model_sets: list[str]) -> None:
+              model_sets: list[str], studies: list[str] = ()) -> None:
     """The index page ``outputs.index``.
 
     ``inputs``: ``metas`` and ``pages`` (one per flight, in ``flights`` order), ``segments``
     (idem), ``classified`` (``results/classify/<model_set>/<flight>.parquet``), ``models``
-    (one page per model set, in ``model_sets`` order).
+    (one page per model set, in ``model_sets`` order). ``studies``: study names, linked to
+    ``report/studies/<name>.html`` beside the index's ``report/`` folder.
     """
     out = _get(outputs, "index")
     classified: dict[str, dict[str, str]] = {}
@@ -83,4 +84,5 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
     build_index(flights, _list(inputs, "metas"), out,
                 links={f: _rel(p, out) for f, p in zip(flights, _list(inputs, "pages"))},
                 segments=dict(zip(flights, _list(inputs, "segments"))), classified=classified,
-                models={m: _rel(p, out) for m, p in zip(model_sets, _list(inputs, "models"))})
+                models={m: _rel(p, out) for m, p in zip(model_sets, _list(inputs, "models"))},
+                studies={s: f"report/studies/{s}.html" for s in studies})

@@ -1,0 +1,244 @@
+"""Shared plumbing of the studies: sizes, output paths, ``results.txt``, markdown tables, the page.
+
+A study is a stage like the others (entry point ``run_<study>(inputs, outputs, config, *, seed,
+...)``), run by its own Snakemake target (``rules/studies.smk``), never by ``all``. Each one
+writes ``results/studies/<name>/`` (Parquet tables, ``report.md``, ``results.txt`` with its
+headline figures as ``RESULT <metric> <value>`` lines, also printed to stderr, the rule's log)
+and an offline page ``results/report/studies/<name>.html``.
+
+``config`` is the ``studies`` section of the dataset config::
+
+    studies:
+      size: small                    # tiny (tests, seconds) | small (minutes) | thesis
+      <study name>:
+        <setting>: <value>           # the study's own settings (every size)
+        sizes:                       # per-size settings, overriding the above
+          tiny: {...}
+          small: {...}
+          thesis: {...}
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..config import ConfigError
+
+#: the study sizes, smallest first
+SIZES = ("tiny", "small", "thesis")
+DEFAULT_SIZE = "small"
+
+#: the Parquet tables each study writes (``results/studies/<name>/<table>.parquet``); kept here,
+#: beside the output layout, so the rules need not import the studies themselves
+STUDY_TABLES: dict[str, tuple[str, ...]] = {
+    "seed000_classification": ("tables_3_1_3_4", "confusion", "switch_tables", "switch_shift",
+                               "gmr_error", "gmr_rmse"),
+    "flightcoach_classification": ("p23_segments", "p23_timeline", "f23_segments", "oneclass_slack_sweep"),
+}
+#: the FlightCoach study's flights: ``{input name: file under <realdata_dir>/<FLIGHTCOACH_DIR>}``
+FLIGHTCOACH_DIR = "flightcoach_f3a_json"
+FLIGHTCOACH_FILES = {
+    "train": "manual_F3A_P23_22_02_18_00000036.json",
+    "test_p23": "manual_F3A_P23_22_05_31_00000350.json",
+    "test_f23": "manual_F3A_F23_22_02_18_00000035.json",
+    "calib": "UK_England_Bristol_AMARC2002_F3A_P21_21_08_12_00000026.json",
+}
+
+
+class StudyError(ValueError):
+    """A study cannot run (missing input data, bad setting); the message names the file or key."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyResult:
+    """What a study returns: ``status`` (``ok``), its headline figures and diagnostics.
+
+    Attributes
+    ----------
+    name : str
+        Study name (``seed000_classification``, ...).
+    status : str
+        ``ok`` when every output was written.
+    results : dict
+        ``{metric: value}`` as written to ``results.txt`` (values are the printed strings).
+    diagnostics : dict
+        Size, seed, wall time and the settings used.
+    """
+
+    name: str
+    status: str
+    results: dict[str, str] = field(default_factory=dict)
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+def study_settings(config: Mapping | None, name: str, defaults: Mapping[str, Any],
+                   sizes: Mapping[str, Mapping[str, Any]]) -> tuple[str, dict[str, Any]]:
+    """The size and the merged settings of one study.
+
+    Parameters
+    ----------
+    config : mapping or None
+        The ``studies`` config section.
+    name : str
+        Study name: its settings are ``config[name]``.
+    defaults : mapping
+        The study's default settings (every size).
+    sizes : mapping
+        The study's default per-size settings, ``{size: {setting: value}}``.
+
+    Returns
+    -------
+    size : str
+        ``config['size']`` (default ``small``).
+    settings : dict
+        ``defaults``, overridden by ``config[name]``, overridden by the size's entry of
+        ``sizes`` and then of ``config[name]['sizes']``.
+    """
+    config = dict(config or {})
+    size = config.get("size", DEFAULT_SIZE)
+    if size not in SIZES:
+        raise ConfigError(f"studies.size: {size!r} is not one of {', '.join(SIZES)}")
+    own = dict(config.get(name) or {})
+    own_sizes = dict(own.pop("sizes", None) or {})
+    bad = sorted(set(own) - set(defaults))
+    if bad:
+        raise ConfigError(f"studies.{name}: unknown key(s) {bad}; known: {sorted(defaults)}, sizes")
+    bad = sorted(set(own_sizes) - set(SIZES))
+    if bad:
+        raise ConfigError(f"studies.{name}.sizes: unknown size(s) {bad}; known: {', '.join(SIZES)}")
+    per_size = {**dict(sizes.get(size) or {}), **dict(own_sizes.get(size) or {})}
+    bad = sorted(set(per_size) - set(defaults))
+    if bad:
+        raise ConfigError(f"studies.{name}.sizes.{size}: unknown key(s) {bad}; known: {sorted(defaults)}")
+    return size, {**dict(defaults), **own, **per_size}
+
+
+def study_outputs(name: str, *, results_dir: str | os.PathLike = "results",
+                  models: bool = True) -> dict[str, str]:
+    """The declared output paths of one study, ``{output name: path}``.
+
+    ``report``, ``results``, ``page``, one entry per Parquet table of :data:`STUDY_TABLES`
+    (``<table>.parquet``) and, with ``models``, ``model_params``/``model_meta`` (the trained
+    set under ``models/``). The rules in ``rules/studies.smk`` and the tests both take their
+    paths from here.
+    """
+    try:
+        tables = STUDY_TABLES[name]
+    except KeyError:
+        raise StudyError(f"unknown study {name!r}; known: {', '.join(STUDY_TABLES)}") from None
+    d = Path(results_dir) / "studies" / name
+    out = {"report": str(d / "report.md"), "results": str(d / "results.txt"),
+           "page": str(Path(results_dir) / "report" / "studies" / f"{name}.html")}
+    out.update({t: str(d / f"{t}.parquet") for t in tables})
+    if models:
+        out.update(model_params=str(d / "models" / "params.npz"), model_meta=str(d / "models" / "meta.json"))
+    return out
+
+
+def flightcoach_inputs(realdata_dir: str | os.PathLike) -> dict[str, str]:
+    """The FlightCoach study's four flights under ``realdata_dir``; a missing one is a
+    :class:`StudyError` naming it (one line: the study is not part of the main job)."""
+    d = Path(realdata_dir) / FLIGHTCOACH_DIR
+    files = {k: str(d / f) for k, f in FLIGHTCOACH_FILES.items()}
+    for k, p in files.items():
+        if not Path(p).is_file():
+            raise StudyError(f"{p}: FlightCoach file not found (input {k!r} of the flightcoach_classification "
+                             f"study; it needs the real logs of ../shared/realdata: set realdata_dir)")
+    return files
+
+
+def output_path(outputs: Mapping, key: str) -> Path:
+    """One declared output (Snakemake namedlist or dict), its folder created."""
+    try:
+        p = Path(outputs[key])
+    except (KeyError, AttributeError):
+        raise StudyError(f"study outputs: {key!r} is not declared (declared: {sorted(_keys(outputs))})") from None
+    p.parent.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _keys(m: Mapping) -> list[str]:
+    keys = getattr(m, "keys", None)
+    return list(keys()) if callable(keys) else []
+
+
+class Progress:
+    """Stage lines on stderr (the rule's log) with the seconds since the study started."""
+
+    def __init__(self) -> None:
+        self.t0 = time.perf_counter()
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def __call__(self, msg: str) -> None:
+        print(f"[{self.elapsed:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+
+def say(msg: str) -> None:
+    """One informational line (tables, training summary) on stderr, the rule's log."""
+    print(msg, file=sys.stderr, flush=True)
+
+
+class Results:
+    """The headline figures of a study, in order, each with a one-sentence definition."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, str] = {}
+        self.definitions: dict[str, str] = {}
+
+    def add(self, metric: str, value: Any, definition: str) -> None:
+        """Record ``RESULT <metric> <value>`` (``value`` already formatted as printed)."""
+        self.values[metric] = str(value)
+        self.definitions[metric] = definition
+
+    def lines(self) -> list[str]:
+        return [f"RESULT {k} {v}" for k, v in self.values.items()]
+
+    def write(self, path: str | os.PathLike) -> None:
+        """Write ``results.txt`` atomically and print the lines on stderr."""
+        text = "\n".join(self.lines()) + "\n"
+        write_text(path, text)
+        sys.stderr.write(text)
+        sys.stderr.flush()
+
+
+def write_text(path: str | os.PathLike, text: str) -> None:
+    """Atomic text write (temp file in the same folder, then rename)."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(f".{p.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, p)
+
+
+def md_table(df: pd.DataFrame, fmt: str = "{:.2f}") -> str:
+    """A GitHub-markdown table (no extra dependency); non-finite floats print as ``–``."""
+    def cell(v):
+        return fmt.format(v) if isinstance(v, (float, np.floating)) and np.isfinite(v) else (
+            "–" if isinstance(v, (float, np.floating)) else str(v))
+    head = "| " + " | ".join(map(str, df.columns)) + " |"
+    rule = "|" + "---|" * len(df.columns)
+    rows = ["| " + " | ".join(cell(v) for v in r) + " |" for r in df.itertuples(index=False)]
+    return "\n".join([head, rule, *rows])
+
+
+def input_path(inputs: Mapping | None, key: str, default: str | os.PathLike | None = None) -> Path | None:
+    """An optional declared input (Snakemake namedlist or dict), else ``default``."""
+    v = None
+    if inputs is not None:
+        get = getattr(inputs, "get", None)
+        v = get(key) if callable(get) else None
+    if v is None or (isinstance(v, (list, tuple)) and not v):
+        return Path(default) if default is not None else None
+    return Path(v[0] if isinstance(v, (list, tuple)) else v)

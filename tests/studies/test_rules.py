@@ -1,0 +1,41 @@
+"""The study targets of rules/studies.smk: each plans only itself (and plotly.js), none is in
+``all``, and the FlightCoach target without the real logs stops at start naming the file."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+SNAKEMAKE = str(Path(sys.executable).parent / "snakemake")
+
+
+def _dry(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([SNAKEMAKE, "--cores", "2", "-n", "--forceall", *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+
+
+def _jobs(p: subprocess.CompletedProcess) -> dict[str, int]:
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out[-3000:]
+    m = re.search(r"Job stats:\njob\s+count\n[- ]+\n(.*?)\ntotal", out, re.S)
+    assert m, out[-3000:]
+    return {r.split()[0]: int(r.split()[1]) for r in m.group(1).strip().splitlines()}
+
+
+def test_the_seed000_target_plans_only_the_study_and_plotly_js():
+    assert _jobs(_dry("study_seed000_classification")) == {"plotly_js": 1, "study_seed000_classification": 1}
+
+
+def test_no_study_is_part_of_the_main_job():
+    assert not [r for r in _jobs(_dry()) if r.startswith("study_")]
+
+
+def test_the_flightcoach_target_without_real_logs_stops_naming_the_file(tmp_path):
+    p = _dry("study_flightcoach_classification", "--config", f"realdata_dir={tmp_path}")
+    assert p.returncode != 0
+    line = [ln for ln in (p.stdout + p.stderr).splitlines() if "FlightCoach file not found" in ln]
+    assert len(line) == 1 and str(tmp_path / "flightcoach_f3a_json") in line[0], p.stderr[-2000:]

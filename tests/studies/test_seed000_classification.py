@@ -1,0 +1,98 @@
+"""The seed-000 classification study at ``tiny`` size, through its entry point.
+
+Its tables equal what ``benchmarks/study_seed000_classification.py --runs 40 --switch-runs 4``
+wrote before the studies became a stage (goldens in ``tests/data/studies/``, made by
+``tests/data/studies/make_golden.py``; ``gmr_error`` as a per-maneuver/quantity/axis
+summary), and its acceptance figures are those the smoke test of the script asserted.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pipeline.studies import STUDY_TABLES
+from pipeline.studies.base import StudyError, study_settings
+
+NAME = "seed000_classification"
+
+
+@pytest.fixture(scope="module")
+def tiny(ran, tmp_path_factory):
+    return ran(NAME, tmp_path_factory.mktemp("seed000"), {"size": "tiny"})
+
+
+def test_the_tiny_study_writes_results_report_and_page(tiny):
+    assert tiny.result.status == "ok" and tiny.result.diagnostics["size"] == "tiny"
+    text = Path(tiny.outputs["results"]).read_text().splitlines()
+    assert text and all(line.startswith("RESULT ") and len(line.split()) == 3 for line in text)
+    assert tiny.figures == tiny.result.results
+    assert tiny.figures["seed000_runs_per_maneuver"] == "40"
+    report = Path(tiny.outputs["report"]).read_text()
+    assert "Where our maneuvers differ from the thesis" in report and "M2/M4 confusion" in report
+    page = Path(tiny.outputs["page"]).read_text()
+    assert 'src="../assets/plotly.min.js"' in page and 'href="../../index.html"' in page
+    assert "<table" in page and "seed000_gmr_acc_rmse_mps2" in page and "Plotly.newPlot" in page
+
+
+def test_every_headline_figure_is_defined_in_one_sentence_on_the_page(tiny):
+    page = Path(tiny.outputs["page"]).read_text()
+    for metric in tiny.figures:
+        row = page[page.index(f"<code>{metric}</code>"):].split("</tr>")[0]
+        assert row.count("<td") == 2 and "<td>–</td>" not in row, metric
+
+
+@pytest.mark.parametrize("table", [t for t in STUDY_TABLES[NAME] if t != "gmr_error"])
+def test_each_table_equals_the_old_script_at_tiny_size(tiny, golden, table):
+    pd.testing.assert_frame_equal(tiny.table(table), pd.read_parquet(golden / f"{NAME}_tiny" / f"{table}.parquet"))
+
+
+def test_the_gmr_error_table_equals_the_old_script_summary_at_tiny_size(tiny, golden, gmr_error_summary):
+    got = gmr_error_summary(tiny.table("gmr_error"))
+    pd.testing.assert_frame_equal(got, pd.read_parquet(golden / f"{NAME}_tiny" / "gmr_error_summary.parquet"))
+
+
+def test_the_tiny_study_meets_the_acceptance_figures_of_the_script_smoke_test(tiny):
+    # the assertions of the former tests/models/test_models_studies.py::test_seed000_study_smoke
+    r = tiny.figures
+    assert float(r["seed000_cf_test_min_FA_pct"]) == 100.0
+    assert float(r["seed000_1c_M5_unknown_FA_pct"]) == 100.0          # M5 is the unknown maneuver
+    assert float(r["seed000_cf1c_M5_unknown_FA_pct"]) == 100.0
+    assert int(r["seed000_gmr_maneuvers_below_fd"]) == 4              # pos_fd GMR beats the FD
+    assert float(r["seed000_gmr_acc_rmse_mps2"]) < float(r["seed000_fd_acc_rmse_mps2"])
+    assert float(r["seed000_switch_windowed_min_final_MAoT_pct_where_thesis_below_50"]) > 50
+    tables = tiny.table("tables_3_1_3_4")
+    assert set(tables["table"]) == {"3.1", "3.2", "3.3", "3.4", "3.4+1c", "3.4+bg"}
+    assert float(r["seed000_cfbg_M5_unknown_FA_pct"]) == 100.0        # background rival: unknown
+    sw = tiny.table("switch_tables")
+    assert len(sw) == 3 * 4 * 3 and set(sw["mode"]) == {"cumulative", "windowed", "reset"}
+    gerr = tiny.table("gmr_error")
+    assert {"maneuver", "axis", "t_s", "mean_err", "err_var"} <= set(gerr.columns)
+
+
+def test_the_sizes_map_to_the_script_commands():
+    assert study_settings({"size": "thesis"}, NAME, *_defaults())[1]["runs"] == 2300
+    assert study_settings({"size": "thesis"}, NAME, *_defaults())[1]["switch_runs"] == 243
+    assert study_settings({}, NAME, *_defaults())[0] == "small"
+    got = study_settings({"size": "small", NAME: {"sizes": {"small": {"runs": 7}}}}, NAME, *_defaults())[1]
+    assert got["runs"] == 7 and got["switch_runs"] == 20
+
+
+def test_a_bad_size_or_key_fails_with_one_line_naming_it():
+    from pipeline.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"studies.size: 'huge'"):
+        study_settings({"size": "huge"}, NAME, *_defaults())
+    with pytest.raises(ConfigError, match=r"studies.seed000_classification: unknown key\(s\) \['runz'\]"):
+        study_settings({NAME: {"runz": 3}}, NAME, *_defaults())
+    with pytest.raises(StudyError, match="unknown study"):
+        from pipeline.studies import run_study
+        run_study("nope", None, {}, {}, seed=1)
+
+
+def _defaults():
+    from pipeline.studies.seed000_classification import DEFAULTS, SIZES
+
+    return DEFAULTS, SIZES

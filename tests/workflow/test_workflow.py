@@ -110,6 +110,67 @@ def test_bad_config_key_fails_at_start_naming_it(tmp_path):
     assert "not_a_key" in p.stdout + p.stderr
 
 
+#: (section, YAML merged over the config, the key path the one-line error must name) for every
+#: section: a bad nested key, a wrong type, an unknown section
+BAD_CONFIG = [
+    ("top level", "bogus_section: 1\n", "bogus_section"),
+    ("seed", "seed: -3\n", "seed"),
+    ("ingest", "ingest: {ros: {wrld_frames: [map]}}\n", "ingest.ros.wrld_frames"),
+    ("simulate", "simulate: {sensors: {radar: {sigma_rnage_m: 1}}}\n", "simulate.sensors.radar.sigma_rnage_m"),
+    ("simulate", "simulate: {rate_hz: fast}\n", "simulate.rate_hz"),
+    ("preprocess", "preprocess: {rate_hx: 25}\n", "preprocess.rate_hx"),
+    ("preprocess", "preprocess: {rate_hz: fast}\n", "preprocess.rate_hz"),
+    ("hmm", "hmm: {n_stats: 3}\n", "hmm.n_stats"),
+    ("model_sets", "model_sets: {sim: {colour: red}}\n", "model_sets.sim.colour"),
+    ("model_sets", "model_sets: {sim: {data: simulated, vehicles: [q], hmm: {decision: maybe}}}\n",
+     "model_sets.sim.hmm.decision"),
+    ("studies", "studies: {size: huge}\n", "studies.size"),
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("section,yaml_text,key", BAD_CONFIG, ids=[f"{b[0]}:{b[2]}" for b in BAD_CONFIG])
+def test_bad_key_or_value_in_every_section_stops_the_dry_run_in_seconds_with_one_line(tmp_path, section,
+                                                                                      yaml_text, key):
+    import resource
+
+    wd = _copy_workflow(tmp_path / "wf", [DEMO])
+    (wd / "datasets" / "bad.yaml").write_text(yaml_text)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    p = subprocess.run([SNAKEMAKE, "-n", "--configfile", "datasets/bad.yaml"], cwd=wd, capture_output=True,
+                       text=True, timeout=60)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    assert p.returncode != 0
+    # the CPU time of the run (robust on a loaded machine; ~2 s idle, wall time about the same)
+    cpu_s = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    assert cpu_s < 10, cpu_s
+    lines = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("uavpipe: ")]
+    assert len(lines) == 1 and f" {key}: " in lines[0], p.stdout + p.stderr
+    assert "Traceback" not in p.stdout + p.stderr
+
+
+CLI_COMMANDS = (["simulate", "OUT"], ["preprocess", "IN", "-o", "OUT"], ["ingest", "IN", "-o", "OUT"],
+                ["train", "IN", "-o", "OUT"])
+
+
+@pytest.mark.parametrize("section,yaml_text,key,command",
+                         [(*b, CLI_COMMANDS[i % len(CLI_COMMANDS)]) for i, b in enumerate(BAD_CONFIG)],
+                         ids=[f"{CLI_COMMANDS[i % len(CLI_COMMANDS)][0]}-{b[2]}" for i, b in enumerate(BAD_CONFIG)])
+def test_bad_key_or_value_in_every_section_stops_the_cli_with_one_line(tmp_path, capsys, section, yaml_text,
+                                                                       key, command):
+    """Every section, each command in turn: they all validate the whole file before any work."""
+    from pipeline.cli import main
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml_text)
+    (tmp_path / "IN").mkdir()
+    args = [str(tmp_path / a) if a in ("IN", "OUT") else a for a in command]
+    assert main([*args, "--config", str(bad)]) != 0
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and f" {key}: " in err[0] and str(bad) in err[0], err
+    assert not (tmp_path / "OUT").exists()  # nothing ran
+
+
 def test_bad_manifest_value_fails_at_start_naming_it(tmp_path):
     wd = _copy_workflow(tmp_path / "wf", [DEMO.replace("\ttest\t", "\tsometimes\t")])
     p = _smk(wd, "-n", check=False)

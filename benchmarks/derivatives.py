@@ -3,7 +3,7 @@
 Prints, per method (savgol = the configured default, butter, gradient), the acceleration and
 jerk RMS error relative to the RMS truth (50 Hz, noise-free), and the acceleration RMS error
 with sigma = 0.5 m position noise at 10 Hz. The truth is the closed-form path of
-tests/preprocess/test_pp_derivatives.py. Ends with ``RESULT <name> <value>`` lines.
+tests/preprocess/test_derivatives.py. Ends with ``RESULT <name> <value>`` lines.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
+from .lazy import pandas as pd  # imported on first use: the Arrow path below needs none
 import pyarrow as pa
 
 SCHEMA_VERSION = "1.0.0"
@@ -389,3 +389,363 @@ def new_diagnostics() -> dict:
         "warnings": [],
         "record_counts": {},
     }
+
+
+# --------------------------------------------------------------------------------------------
+# Arrow-native tables: the ingest path builds, conforms and writes pyarrow tables without pandas
+# --------------------------------------------------------------------------------------------
+#
+# A conformed Arrow table of a stream has exactly the columns of ``arrow_schema(stream)`` in
+# canonical order, rows sorted stably by (``instance``, ``t_ns``) (``labels``: ``t_start_ns``),
+# and is what ``pa.Table.from_pandas(conform(stream, df), schema=arrow_schema(stream))`` gives
+# for the same data: missing values (NaN, None, NA) are nulls, ``src`` is a dictionary with
+# sorted values. ``tests/io/test_arrow_conform.py`` checks the two paths against each other.
+
+import importlib.metadata as _im  # noqa: E402  (new section; keeps the pandas-free imports here)
+import json as _json  # noqa: E402
+
+
+# pyarrow's ``pa.array``, ``Array.to_numpy`` and ``Schema.empty_table`` import pandas when it is
+# installed; the helpers below build and read arrays through their buffers instead.
+
+def _bitmap(valid: np.ndarray) -> pa.Buffer:
+    return pa.py_buffer(np.packbits(valid, bitorder="little"))
+
+
+def np_to_arrow(a: np.ndarray, t: pa.DataType, mask: np.ndarray | None = None) -> pa.Array:
+    """Arrow array of type ``t`` over NumPy values ``a`` (``mask``: True = missing), without
+    pandas. Numeric types are zero-copy views of ``a`` (cast to ``t``'s width); ``bool`` is
+    bit-packed; ``string`` takes Python ``str`` values."""
+    n = len(a)
+    validity = None if mask is None or not mask.any() else _bitmap(~mask)
+    if pa.types.is_string(t):
+        enc = [b"" if (mask is not None and mask[i]) else x.encode() for i, x in enumerate(a.tolist())]
+        offsets = np.zeros(n + 1, np.int32)
+        np.cumsum([len(x) for x in enc], out=offsets[1:])
+        return pa.Array.from_buffers(t, n, [validity, pa.py_buffer(offsets), pa.py_buffer(b"".join(enc))])
+    if pa.types.is_boolean(t):
+        return pa.Array.from_buffers(t, n, [validity, _bitmap(a.astype(bool, copy=False))])
+    data = np.ascontiguousarray(a, dtype=_NP_OF[str(t)])
+    return pa.Array.from_buffers(t, n, [validity, pa.py_buffer(data)])
+
+
+_NP_OF = {"double": np.float64, "int64": np.int64, "uint8": np.uint8, "int32": np.int32, "int8": np.int8}
+
+
+def arrow_to_np(arr) -> np.ndarray:
+    """Values of a primitive Arrow array as NumPy (nulls hold whatever their slots hold; see
+    :func:`arrow_nulls`), without pandas. ``bool`` arrays come back unpacked."""
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    n, off = len(arr), arr.offset
+    buf = arr.buffers()[1]
+    if pa.types.is_boolean(arr.type):
+        if buf is None:
+            return np.zeros(n, bool)
+        bits = np.unpackbits(np.frombuffer(buf, np.uint8), bitorder="little")
+        return bits[off:off + n].astype(bool)
+    dt = _NP_OF[str(arr.type)]
+    if buf is None:
+        return np.zeros(n, dt)
+    return np.frombuffer(buf, dtype=dt, count=off + n)[off:]
+
+
+def arrow_nulls(arr) -> np.ndarray:
+    """Missing-value mask (True = null) of an Arrow array, without pandas."""
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    n = len(arr)
+    if not arr.null_count:
+        return np.zeros(n, bool)
+    if pa.types.is_null(arr.type):
+        return np.ones(n, bool)
+    bits = np.unpackbits(np.frombuffer(arr.buffers()[0], np.uint8), bitorder="little")
+    return ~bits[arr.offset:arr.offset + n].astype(bool)
+
+
+def empty_arrow(stream: str) -> pa.Table:
+    """An empty conformed Arrow table of ``stream``."""
+    sch = arrow_schema(stream)
+    return pa.Table.from_arrays([pa.nulls(0, f.type) for f in sch], schema=sch)
+
+
+def _part_len(part) -> int:
+    for v in part.values():
+        if not _is_scalar(v):
+            return len(v)
+    return 0
+
+
+def _is_scalar(v) -> bool:
+    return v is None or isinstance(v, (str, bytes, int, float, bool, np.generic))
+
+
+def _arrow_values(col: Column, v, n: int) -> pa.Array:
+    """One column of one part as an Arrow array of the column's type (text for ``category``:
+    see :func:`_categories`). Casts follow :func:`_cast` (NumPy ``astype`` semantics)."""
+    t = pa.string() if col.dtype == "category" else _PA[col.dtype]
+    if isinstance(v, pa.ChunkedArray):
+        v = v.combine_chunks()
+    if isinstance(v, pa.Array):
+        if pa.types.is_dictionary(v.type):
+            v = v.cast(pa.string()) if col.dtype in ("string", "category") else v.dictionary_decode()
+        if col.dtype in ("int64", "uint8", "bool") and v.null_count:
+            raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
+        return v if v.type == t else v.cast(t)
+    if _is_scalar(v):
+        if v is None:
+            if col.dtype in ("int64", "uint8", "bool") and n:
+                raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
+            return pa.nulls(n, t)
+        v = np.full(n, v, dtype=object if isinstance(v, str) else None)
+    mask = None
+    if isinstance(v, np.ma.MaskedArray):
+        mask = np.ma.getmaskarray(v)
+        v = np.ma.getdata(v)
+    a = np.asarray(v)
+    try:
+        if a.dtype == object:  # Python values; None/NaN/NA are missing
+            a, m2 = _from_objects(a, col)
+            mask = m2 if mask is None else (mask | m2)
+        if col.dtype == "float64":
+            a = a.astype(np.float64, copy=False)
+            nan = np.isnan(a)  # NaN is missing, as pa.Table.from_pandas makes it
+            if mask is not None:
+                nan |= mask
+            return np_to_arrow(a, t, nan)
+        if col.dtype in ("int64", "uint8", "bool"):
+            if mask is not None and mask.any() or a.dtype.kind == "f" and np.isnan(a).any():
+                raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
+            return np_to_arrow(a.astype(col.dtype, copy=False), t)
+        if col.dtype in ("Int64", "boolean"):
+            if a.dtype.kind == "f":
+                bad = np.isnan(a)
+                mask = bad if mask is None else (mask | bad)
+                a = np.where(bad, 0, a)
+            return np_to_arrow(a.astype(np.int64 if col.dtype == "Int64" else bool), t, mask)
+        # string / category: text
+        if a.dtype.kind in "US":
+            a = a.astype(str).astype(object)
+        return np_to_arrow(np.array([x if isinstance(x, str) else str(x) for x in a.tolist()], dtype=object),
+                           pa.string(), mask)
+    except (TypeError, ValueError, OverflowError, pa.ArrowInvalid, pa.ArrowTypeError) as exc:
+        if isinstance(exc, SchemaError):
+            raise
+        raise SchemaError(f"column {col.name!r} cannot be cast to {col.dtype}: {exc}") from None
+
+
+def _missing(x) -> bool:
+    """None, NaN or pandas' NA (recognised without importing pandas)."""
+    return x is None or (isinstance(x, float) and x != x) or type(x).__name__ in ("NAType", "NaTType")
+
+
+def _from_objects(a: np.ndarray, col: Column) -> tuple[np.ndarray, np.ndarray]:
+    """An object array as (values, missing mask); text columns keep the objects."""
+    items = a.tolist()
+    mask = np.fromiter((_missing(x) for x in items), dtype=bool, count=len(items))
+    if col.dtype in ("string", "category"):
+        return np.array(["" if m else x for x, m in zip(items, mask.tolist())], dtype=object), mask
+    fill = {"float64": np.nan, "boolean": False}.get(col.dtype, 0)
+    return np.array([fill if m else x for x, m in zip(items, mask.tolist())]), mask
+
+
+def _categories(parts: list, name: str, lens: list[int]) -> pa.DictionaryArray:
+    """A dictionary column over all parts with its values sorted (as ``astype('category')``):
+    a part may give one ``str`` for all its rows (cheap: no per-row string is built)."""
+    vals: list[str] = []
+    index: dict[str, int] = {}
+
+    def code(s: str) -> int:
+        if s not in index:
+            index[s] = len(vals)
+            vals.append(s)
+        return index[s]
+
+    chunks = []  # (codes into vals, missing mask or None)
+    for part, n in zip(parts, lens):
+        v = part.get(name)
+        if v is None:
+            chunks.append((np.zeros(n, np.int32), np.ones(n, bool)))
+            continue
+        if isinstance(v, str):
+            chunks.append((np.full(n, code(v), np.int32), None))
+            continue
+        arr = _arrow_values(Column(name, "category"), v, n)
+        enc = arr.dictionary_encode()
+        remap = np.array([code(x) for x in enc.dictionary.to_pylist()] or [0], np.int32)
+        idx = enc.indices
+        mask = arrow_nulls(idx) if idx.null_count else None
+        ix = arrow_to_np(idx).astype(np.int64)
+        chunks.append((remap[np.where(mask, 0, ix) if mask is not None else ix], mask))
+    order = sorted(range(len(vals)), key=lambda i: vals[i])
+    rank = np.empty(max(len(vals), 1), np.int32)
+    rank[order] = np.arange(len(vals), dtype=np.int32)
+    codes = rank[np.concatenate([c for c, _ in chunks])] if chunks else np.zeros(0, np.int32)
+    mask = None
+    if any(m is not None for _, m in chunks):
+        mask = np.concatenate([np.zeros(len(c), bool) if m is None else m for c, m in chunks])
+        codes = np.where(mask, 0, codes).astype(np.int32)
+    dictionary = np_to_arrow(np.array([vals[i] for i in order], dtype=object), pa.string())
+    return pa.DictionaryArray.from_arrays(np_to_arrow(codes.astype(np.int32), pa.int32(), mask), dictionary)
+
+
+def arrow_table(stream: str, data) -> pa.Table:
+    """``data`` as an Arrow table of ``stream``'s schema, rows in the order given (not sorted).
+
+    Parameters
+    ----------
+    stream : str
+        A canonical stream (``STREAM_NAMES``).
+    data : None, pyarrow.Table, pandas.DataFrame, mapping or list of mappings
+        Columns by name: NumPy arrays, Arrow arrays, masked arrays (masked = missing) or one
+        scalar for all rows (``src="IMU"``); a list of such mappings is concatenated in order
+        (absent columns of a part are missing values). A DataFrame goes through :func:`conform`
+        first (so its rows come back sorted).
+
+    Raises
+    ------
+    SchemaError
+        Unknown column, a missing required column, or a value that cannot be cast.
+    """
+    cols = columns(stream)
+    schema_ = arrow_schema(stream)
+    if data is None:
+        return empty_arrow(stream)
+    if isinstance(data, pa.Table):
+        data = [{n: data.column(n) for n in data.column_names}]
+    elif hasattr(data, "iloc") and hasattr(data, "columns"):  # a pandas DataFrame
+        df = conform(stream, data)
+        return pa.Table.from_pandas(df[[c.name for c in cols]], schema=schema_, preserve_index=False) \
+            .replace_schema_metadata(None)
+    elif isinstance(data, dict):
+        data = [data]
+    parts = [p for p in data if p is not None]
+    known = {c.name for c in cols}
+    for p in parts:
+        unknown = [k for k in p if k not in known]
+        if unknown:
+            raise SchemaError(f"stream {stream!r}: unknown column(s) {unknown}")
+    lens = [_part_len(p) for p in parts]
+    n = sum(lens)
+    if n == 0:
+        return empty_arrow(stream)
+    arrays = []
+    for c in cols:
+        if c.dtype == "category":
+            arrays.append(_categories(parts, c.name, lens))
+            continue
+        chunks = []
+        for p, m in zip(parts, lens):
+            v = p.get(c.name)
+            if v is None and c.name == "instance":
+                v = np.zeros(m, np.uint8)
+            if v is None and c.dtype in ("int64", "uint8", "bool") and m:
+                raise SchemaError(f"required column {c.name!r} missing")
+            chunks.append(_arrow_values(c, v, m))
+        arrays.append(pa.concat_arrays(chunks) if len(chunks) != 1 else chunks[0])
+    return pa.Table.from_arrays(arrays, schema=schema_)
+
+
+def sort_arrow(stream: str, table: pa.Table) -> pa.Table:
+    """Rows sorted stably by (``instance``, ``t_ns``) (``labels``: ``t_start_ns``), as :func:`conform`."""
+    n = table.num_rows
+    if n < 2:
+        return table
+    keys = ["t_start_ns"] if stream == "labels" else ["instance", "t_ns"]
+    arrs = [arrow_to_np(table.column(k)) for k in keys]
+    if len(arrs) == 1:
+        a = arrs[0]
+        if np.all(a[1:] >= a[:-1]):
+            return table
+        order = np.argsort(a, kind="stable")
+    else:
+        inst, t = arrs
+        same = inst[1:] == inst[:-1]
+        if np.all((inst[1:] > inst[:-1]) | (same & (t[1:] >= t[:-1]))):
+            return table
+        order = np.lexsort([t, inst])
+    return table.take(np_to_arrow(order.astype(np.int64), pa.int64()))
+
+
+def conform_arrow(stream: str, data) -> pa.Table:
+    """The conformed Arrow table of ``stream`` (see :func:`arrow_table`, then :func:`sort_arrow`).
+
+    Equals ``pa.Table.from_pandas(conform(stream, df), schema=arrow_schema(stream))`` for the
+    same data, without pandas for NumPy/Arrow input.
+    """
+    return sort_arrow(stream, arrow_table(stream, data))
+
+
+def timestamp_anomalies_arrow(table: pa.Table) -> dict[str, int]:
+    """:func:`timestamp_anomalies` of an (unsorted, arrival-order) Arrow stream table."""
+    n = table.num_rows
+    if n < 2 or "t_ns" not in table.column_names:
+        return {"backwards": 0, "duplicate": 0}
+    t = arrow_to_np(table.column("t_ns")).astype(np.int64, copy=False)
+    gid = np.zeros(n, np.int64)
+    if "instance" in table.column_names:
+        gid = arrow_to_np(table.column("instance")).astype(np.int64)
+    if "src" in table.column_names:
+        src = table.column("src").combine_chunks()
+        if pa.types.is_dictionary(src.type):
+            # null and "" are one group, as in timestamp_anomalies (fillna(""))
+            d = src.dictionary.to_pylist()
+            vals = sorted(set([""] + [x for x in d if x is not None]))
+            remap = np.array([vals.index(x or "") for x in d] or [0], np.int64)
+            codes = arrow_to_np(src.indices).astype(np.int64)
+            nulls = arrow_nulls(src.indices)
+            code = np.where(nulls, vals.index(""), remap[np.where(nulls, 0, codes)])
+            gid = gid * (len(vals) + 1) + code
+    order = np.argsort(gid, kind="stable")
+    ts = t[order]
+    same = gid[order][1:] == gid[order][:-1]
+    d = np.diff(ts)
+    return {"backwards": int(np.sum((d < 0) & same)), "duplicate": int(np.sum((d == 0) & same))}
+
+
+def frame_from_arrow(cols: tuple[Column, ...], table: pa.Table):
+    """pandas DataFrame of a table of declared columns, dtypes as :func:`conform` gives them.
+
+    Nullable integers are converted exactly (no float detour). Imports pandas (lazily: the
+    ingest path never calls this)."""
+    n = table.num_rows
+    out = {}
+    for c in cols:
+        if not n:
+            out[c.name] = _empty_series(c, 0)
+            continue
+        a = table.column(c.name).combine_chunks()
+        if c.dtype == "Int64":
+            mask = arrow_nulls(a)
+            vals = np.where(mask, 0, arrow_to_np(a)).astype(np.int64)
+            out[c.name] = pd.Series(pd.arrays.IntegerArray(vals, mask))
+        else:
+            out[c.name] = _cast(c, pd.Series(a.to_pandas()))
+    return pd.DataFrame(out)
+
+
+def pandas_metadata(cols: tuple[Column, ...], table: pa.Table) -> bytes:
+    """The ``pandas`` schema metadata ``pa.Table.from_pandas`` writes for a conformed frame.
+
+    Written with Arrow-native tables so that ``pd.read_parquet`` restores the same dtypes
+    (nullable ``Int64``, ``string``, ``boolean``) as for files written from pandas."""
+    entries = []
+    for c in cols:
+        meta = None
+        pt = {"float64": "float64", "int64": "int64", "Int64": "int64", "uint8": "uint8", "bool": "bool",
+              "boolean": "bool", "string": "unicode", "category": "categorical"}[c.dtype]
+        nt = {"boolean": "boolean", "string": "string"}.get(c.dtype, c.dtype)
+        if c.dtype == "category":
+            col = table.column(c.name)
+            k = len(col.chunk(0).dictionary) if col.num_chunks else 0
+            meta = {"num_categories": k, "ordered": False}
+            nt = "int8" if k < 2**7 else "int16" if k < 2**15 else "int32"
+        entries.append({"name": c.name, "field_name": c.name, "pandas_type": pt, "numpy_type": nt,
+                        "metadata": meta})
+    try:
+        pd_version = _im.version("pandas")
+    except _im.PackageNotFoundError:  # pragma: no cover - pandas is a core dependency
+        pd_version = ""
+    return _json.dumps({"index_columns": [], "column_indexes": [], "columns": entries, "attributes": {},
+                        "creator": {"library": "pyarrow", "version": pa.__version__},
+                        "pandas_version": pd_version}).encode()

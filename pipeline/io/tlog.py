@@ -124,7 +124,7 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+from .lazy import pandas as pd  # imported on first use (see lazy.py)
 
 from ..frames.rotations import euler_to_quat
 from . import schema

@@ -13,7 +13,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..io import schema
 from ..io.registry import flight_id_for
 from .progress import progress_bar
 
@@ -34,12 +33,11 @@ def add_parser(sub) -> None:
 
 def job_paths(log: Path, labels: Path | None, out_root: Path) -> tuple[dict, dict, str]:
     """``(inputs, outputs, flight_id)`` for one log, shaped like the workflow rule's."""
+    from ..io.ingest import outputs_for
+
     fid = flight_id_for(log)
-    dest = out_root / fid
     inputs = {"log": str(log), "labels": [str(labels)] if labels else []}
-    outputs = {"meta": str(dest / "meta.json"),
-               "streams": [str(dest / f"{s}.parquet") for s in schema.STREAM_NAMES]}
-    return inputs, outputs, fid
+    return inputs, outputs_for(out_root / fid), fid
 
 
 def run(args) -> int:

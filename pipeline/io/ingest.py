@@ -93,6 +93,13 @@ def stream_paths(outputs) -> dict[str, Path]:
     return {**by_name, "meta": Path(_get(outputs, "meta"))}
 
 
+def outputs_for(out_dir: str | os.PathLike) -> dict:
+    """The declared outputs of one flight's ingest in ``out_dir``: ``{"meta": <out_dir>/meta.json,
+    "streams": [<out_dir>/<stream>.parquet for each stream]}`` (the workflow's layout)."""
+    d = Path(out_dir)
+    return {"meta": str(d / "meta.json"), "streams": [str(d / f"{s}.parquet") for s in schema.STREAM_NAMES]}
+
+
 def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str | None = None,
                progress: Progress | None = None) -> IngestResult:
     """Decode ``inputs.log`` and write exactly the declared ``outputs``.

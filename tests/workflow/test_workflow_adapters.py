@@ -52,13 +52,13 @@ def test_planned_simulation_outputs_match_written_files(sim_cfg, tmp_path):
 
 
 def test_failed_flight_gets_placeholders_downstream(tmp_path):
-    from pipeline.io.ingest import run_ingest
+    from pipeline.io.ingest import outputs_for, run_ingest
     from pipeline.models.run import classify_flight, train_model
     from pipeline.preprocess.run import run_preprocess_flight
 
     bad = tmp_path / "bad.bin"
     bad.write_bytes(b"\x00\x01garbage" * 40)
-    run_ingest(bad, tmp_path / "ingest" / "bad", flight_id="bad")
+    run_ingest({"log": bad}, outputs_for(tmp_path / "ingest" / "bad"), None, flight_id="bad")
     reason = json.loads((tmp_path / "ingest" / "bad" / "meta.json").read_text())["error"]
     assert reason
     out = {k: tmp_path / f"{k}.parquet" for k in ("state", "segments", "calibration")}

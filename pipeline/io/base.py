@@ -160,12 +160,10 @@ class FlightLog:
                         anomalies[name] = a
                 out[name] = schema.arrow_table(name, data)  # conform() sorted it already
                 continue
-            table = schema.arrow_table(name, data)
-            if table.num_rows and name != "labels":
-                a = schema.timestamp_anomalies_arrow(table)
-                if a["backwards"] or a["duplicate"]:
-                    anomalies[name] = a
-            out[name] = schema.sort_arrow(name, table)
+            table, a = schema.conform_arrow_counted(name, data)
+            if a["backwards"] or a["duplicate"]:
+                anomalies[name] = a
+            out[name] = table
         diag["timestamp_anomalies"] = anomalies
         return cls(meta=meta, streams=out)
 
@@ -265,10 +263,21 @@ class LogReader(abc.ABC):
         """
 
 
-def read_file(path: Path) -> np.ndarray:
-    """The whole file as a read-only ``uint8`` array, read with one ``readinto`` (no copy)."""
+def read_file(path: str | os.PathLike) -> np.ndarray:
+    """The whole file as a read-only ``uint8`` array.
+
+    Memory-mapped with the pages populated at once (``MAP_POPULATE``, Linux): the bytes come
+    from the page cache without a copy or a page fault per 4 KiB, and the mapping goes away
+    with the last array viewing it. Elsewhere, or for an empty file, one ``readinto``.
+    """
+    import mmap
+
     with open(path, "rb", buffering=0) as fh:
         size = os.fstat(fh.fileno()).st_size
+        populate = getattr(mmap, "MAP_POPULATE", None)
+        if size and populate is not None and hasattr(mmap, "MAP_PRIVATE"):
+            m = mmap.mmap(fh.fileno(), size, flags=mmap.MAP_PRIVATE | populate, prot=mmap.PROT_READ)
+            return np.frombuffer(m, dtype=np.uint8)
         buf = np.empty(size, dtype=np.uint8)
         view = memoryview(buf)
         got = 0

@@ -480,23 +480,25 @@ def _is_scalar(v) -> bool:
     return v is None or isinstance(v, (str, bytes, int, float, bool, np.generic))
 
 
-def _arrow_values(col: Column, v, n: int) -> pa.Array:
-    """One column of one part as an Arrow array of the column's type (text for ``category``:
-    see :func:`_categories`). Casts follow :func:`_cast` (NumPy ``astype`` semantics)."""
-    t = pa.string() if col.dtype == "category" else _PA[col.dtype]
-    if isinstance(v, pa.ChunkedArray):
-        v = v.combine_chunks()
-    if isinstance(v, pa.Array):
-        if pa.types.is_dictionary(v.type):
-            v = v.cast(pa.string()) if col.dtype in ("string", "category") else v.dictionary_decode()
-        if col.dtype in ("int64", "uint8", "bool") and v.null_count:
-            raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
-        return v if v.type == t else v.cast(t)
+def _np_values(col: Column, v, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """One column of one part as (NumPy values, missing mask or ``None``), cast as
+    :func:`_cast` casts (NumPy ``astype`` semantics); text columns give object arrays of str."""
+    if isinstance(v, (pa.Array, pa.ChunkedArray)):
+        arr = v.combine_chunks() if isinstance(v, pa.ChunkedArray) else v
+        if pa.types.is_dictionary(arr.type):
+            arr = arr.cast(pa.string()) if col.dtype in ("string", "category") else arr.dictionary_decode()
+        if pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type) or pa.types.is_null(arr.type):
+            v = np.array(arr.to_pylist(), dtype=object)
+        else:
+            m = arrow_nulls(arr)
+            v = np.ma.masked_array(arrow_to_np(arr), mask=m) if m.any() else arrow_to_np(arr)
+    text = col.dtype in ("string", "category")
     if _is_scalar(v):
         if v is None:
             if col.dtype in ("int64", "uint8", "bool") and n:
                 raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
-            return pa.nulls(n, t)
+            fill = {"float64": np.nan, "boolean": False, "string": "", "category": ""}.get(col.dtype, 0)
+            return np.full(n, fill, dtype=object if text else None), np.ones(n, bool)
         v = np.full(n, v, dtype=object if isinstance(v, str) else None)
     mask = None
     if isinstance(v, np.ma.MaskedArray):
@@ -512,23 +514,24 @@ def _arrow_values(col: Column, v, n: int) -> pa.Array:
             nan = np.isnan(a)  # NaN is missing, as pa.Table.from_pandas makes it
             if mask is not None:
                 nan |= mask
-            return np_to_arrow(a, t, nan)
+            return a, nan if nan.any() else None
         if col.dtype in ("int64", "uint8", "bool"):
             if mask is not None and mask.any() or a.dtype.kind == "f" and np.isnan(a).any():
                 raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
-            return np_to_arrow(a.astype(col.dtype, copy=False), t)
+            return a.astype(col.dtype, copy=False), None
         if col.dtype in ("Int64", "boolean"):
             if a.dtype.kind == "f":
                 bad = np.isnan(a)
                 mask = bad if mask is None else (mask | bad)
                 a = np.where(bad, 0, a)
-            return np_to_arrow(a.astype(np.int64 if col.dtype == "Int64" else bool), t, mask)
+            return a.astype(np.int64 if col.dtype == "Int64" else bool, copy=False), mask
         # string / category: text
         if a.dtype.kind in "US":
             a = a.astype(str).astype(object)
-        return np_to_arrow(np.array([x if isinstance(x, str) else str(x) for x in a.tolist()], dtype=object),
-                           pa.string(), mask)
-    except (TypeError, ValueError, OverflowError, pa.ArrowInvalid, pa.ArrowTypeError) as exc:
+        elif not all(isinstance(x, str) for x in a.tolist()):
+            a = np.array([x if isinstance(x, str) else str(x) for x in a.tolist()], dtype=object)
+        return a, mask
+    except (TypeError, ValueError, OverflowError) as exc:
         if isinstance(exc, SchemaError):
             raise
         raise SchemaError(f"column {col.name!r} cannot be cast to {col.dtype}: {exc}") from None
@@ -549,44 +552,138 @@ def _from_objects(a: np.ndarray, col: Column) -> tuple[np.ndarray, np.ndarray]:
     return np.array([fill if m else x for x, m in zip(items, mask.tolist())]), mask
 
 
-def _categories(parts: list, name: str, lens: list[int]) -> pa.DictionaryArray:
-    """A dictionary column over all parts with its values sorted (as ``astype('category')``):
-    a part may give one ``str`` for all its rows (cheap: no per-row string is built)."""
+def _categories(col: Column, parts: list, lens: list[int]) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
+    """A dictionary column over all parts: (int32 codes, missing mask, sorted values), as
+    ``astype('category')`` orders them. A part may give one ``str`` for all its rows (no
+    per-row string is built)."""
     vals: list[str] = []
     index: dict[str, int] = {}
 
-    def code(s: str) -> int:
-        if s not in index:
-            index[s] = len(vals)
-            vals.append(s)
-        return index[s]
+    def code(x: str) -> int:
+        if x not in index:
+            index[x] = len(vals)
+            vals.append(x)
+        return index[x]
 
     chunks = []  # (codes into vals, missing mask or None)
     for part, n in zip(parts, lens):
-        v = part.get(name)
-        if v is None:
-            chunks.append((np.zeros(n, np.int32), np.ones(n, bool)))
-            continue
+        v = part.get(col.name)
         if isinstance(v, str):
             chunks.append((np.full(n, code(v), np.int32), None))
             continue
-        arr = _arrow_values(Column(name, "category"), v, n)
-        enc = arr.dictionary_encode()
-        remap = np.array([code(x) for x in enc.dictionary.to_pylist()] or [0], np.int32)
-        idx = enc.indices
-        mask = arrow_nulls(idx) if idx.null_count else None
-        ix = arrow_to_np(idx).astype(np.int64)
-        chunks.append((remap[np.where(mask, 0, ix) if mask is not None else ix], mask))
-    order = sorted(range(len(vals)), key=lambda i: vals[i])
-    rank = np.empty(max(len(vals), 1), np.int32)
-    rank[order] = np.arange(len(vals), dtype=np.int32)
-    codes = rank[np.concatenate([c for c, _ in chunks])] if chunks else np.zeros(0, np.int32)
-    mask = None
-    if any(m is not None for _, m in chunks):
+        a, mask = _np_values(col, v, n)
+        uniq, inv = np.unique(a, return_inverse=True) if n else (np.empty(0, object), np.zeros(0, np.int64))
+        remap = np.array([code(x) for x in uniq.tolist()] or [0], np.int32)
+        chunks.append((remap[inv.reshape(-1)], mask))
+    if mask_needed := any(m is not None for _, m in chunks):
         mask = np.concatenate([np.zeros(len(c), bool) if m is None else m for c, m in chunks])
-        codes = np.where(mask, 0, codes).astype(np.int32)
-    dictionary = np_to_arrow(np.array([vals[i] for i in order], dtype=object), pa.string())
-    return pa.DictionaryArray.from_arrays(np_to_arrow(codes.astype(np.int32), pa.int32(), mask), dictionary)
+    else:
+        mask = None
+    # values that occur only in missing rows (the "" placeholder) are not categories
+    used = np.zeros(max(len(vals), 1), bool)
+    for c, m in chunks:
+        used[np.unique(c if m is None else c[~m])] = True
+    keep = sorted((i for i in range(len(vals)) if used[i]), key=lambda i: vals[i])
+    rank = np.zeros(max(len(vals), 1), np.int32)
+    rank[keep] = np.arange(len(keep), dtype=np.int32)
+    codes = rank[np.concatenate([c for c, _ in chunks])] if chunks else np.zeros(0, np.int32)
+    if mask_needed:
+        codes[mask] = 0
+    return codes, mask, [vals[i] for i in keep]
+
+
+def _np_columns(stream: str, data) -> tuple[dict[str, tuple], int]:
+    """``data`` (see :func:`arrow_table`) as ``{column: (values, mask[, categories])}`` in
+    arrival order, and the row count."""
+    cols = columns(stream)
+    if isinstance(data, pa.Table):
+        data = [{n: data.column(n) for n in data.column_names}]
+    elif isinstance(data, dict):
+        data = [data]
+    parts = [p for p in data if p is not None]
+    known = {c.name for c in cols}
+    for p in parts:
+        unknown = [k for k in p if k not in known]
+        if unknown:
+            raise SchemaError(f"stream {stream!r}: unknown column(s) {unknown}")
+    lens = [_part_len(p) for p in parts]
+    n = sum(lens)
+    out: dict[str, tuple] = {}
+    if n == 0:
+        return out, 0
+    for c in cols:
+        if c.dtype == "category":
+            out[c.name] = _categories(c, parts, lens)
+            continue
+        vals, masks = [], []
+        for p, m in zip(parts, lens):
+            v = p.get(c.name)
+            if v is None and c.name == "instance":
+                v = np.zeros(m, np.uint8)
+            if v is None and c.dtype in ("int64", "uint8", "bool") and m:
+                raise SchemaError(f"required column {c.name!r} missing")
+            a, mask = _np_values(c, v, m)
+            vals.append(a)
+            masks.append(mask)
+        a = vals[0] if len(vals) == 1 else np.concatenate(vals)
+        if all(m is None for m in masks):
+            mask = None
+        else:
+            mask = masks[0] if len(masks) == 1 else np.concatenate(
+                [np.zeros(len(v), bool) if m is None else m for v, m in zip(vals, masks)])
+        out[c.name] = (a, mask)
+    return out, n
+
+
+def _to_arrow(stream: str, cols_np: dict[str, tuple], order: np.ndarray | None) -> pa.Table:
+    sch = arrow_schema(stream)
+    arrays = []
+    for c, f in zip(columns(stream), sch):
+        entry = cols_np[c.name]
+        vals, mask = entry[0], entry[1]
+        if order is not None:
+            vals = vals[order]
+            mask = None if mask is None else mask[order]
+        if c.dtype == "category":
+            dictionary = np_to_arrow(np.array(entry[2], dtype=object), pa.string())
+            arrays.append(pa.DictionaryArray.from_arrays(np_to_arrow(vals, pa.int32(), mask), dictionary))
+        else:
+            arrays.append(np_to_arrow(vals, f.type, mask))
+    return pa.Table.from_arrays(arrays, schema=sch)
+
+
+def _sort_order(stream: str, cols_np: dict[str, tuple]) -> np.ndarray | None:
+    """Stable (``instance``, ``t_ns``) order (``labels``: ``t_start_ns``); ``None`` if sorted."""
+    if stream == "labels":
+        a = cols_np["t_start_ns"][0]
+        return None if np.all(a[1:] >= a[:-1]) else np.argsort(a, kind="stable")
+    inst, t = cols_np["instance"][0], cols_np["t_ns"][0]
+    same = inst[1:] == inst[:-1]
+    if np.all((inst[1:] > inst[:-1]) | (same & (t[1:] >= t[:-1]))):
+        return None
+    return np.lexsort([t, inst])
+
+
+def _anomalies_np(cols_np: dict[str, tuple]) -> dict[str, int]:
+    """:func:`timestamp_anomalies` (arrival order, per instance and ``src``) on NumPy columns."""
+    t = cols_np["t_ns"][0]
+    if len(t) < 2:
+        return {"backwards": 0, "duplicate": 0}
+    gid = cols_np["instance"][0].astype(np.int64)
+    codes, mask, cats = cols_np["src"]
+    # missing and "" are one group, as in timestamp_anomalies (fillna(""))
+    k = len(cats) + 1
+    empty = cats.index("") if "" in cats else len(cats)
+    src = codes.astype(np.int64)
+    if mask is not None:
+        src = np.where(mask, empty, src)
+    gid = gid * k + src
+    order = np.argsort(gid, kind="stable")
+    ts = t[order]
+    g = gid[order]
+    same = g[1:] == g[:-1]
+    d = np.diff(ts)
+    return {"backwards": int(np.sum((d < 0) & same)), "duplicate": int(np.sum((d == 0) & same))}
 
 
 def arrow_table(stream: str, data) -> pa.Table:
@@ -607,100 +704,66 @@ def arrow_table(stream: str, data) -> pa.Table:
     SchemaError
         Unknown column, a missing required column, or a value that cannot be cast.
     """
-    cols = columns(stream)
-    schema_ = arrow_schema(stream)
     if data is None:
         return empty_arrow(stream)
-    if isinstance(data, pa.Table):
-        data = [{n: data.column(n) for n in data.column_names}]
-    elif hasattr(data, "iloc") and hasattr(data, "columns"):  # a pandas DataFrame
+    if hasattr(data, "iloc") and hasattr(data, "columns"):  # a pandas DataFrame
         df = conform(stream, data)
-        return pa.Table.from_pandas(df[[c.name for c in cols]], schema=schema_, preserve_index=False) \
-            .replace_schema_metadata(None)
-    elif isinstance(data, dict):
-        data = [data]
-    parts = [p for p in data if p is not None]
-    known = {c.name for c in cols}
-    for p in parts:
-        unknown = [k for k in p if k not in known]
-        if unknown:
-            raise SchemaError(f"stream {stream!r}: unknown column(s) {unknown}")
-    lens = [_part_len(p) for p in parts]
-    n = sum(lens)
-    if n == 0:
-        return empty_arrow(stream)
-    arrays = []
-    for c in cols:
-        if c.dtype == "category":
-            arrays.append(_categories(parts, c.name, lens))
-            continue
-        chunks = []
-        for p, m in zip(parts, lens):
-            v = p.get(c.name)
-            if v is None and c.name == "instance":
-                v = np.zeros(m, np.uint8)
-            if v is None and c.dtype in ("int64", "uint8", "bool") and m:
-                raise SchemaError(f"required column {c.name!r} missing")
-            chunks.append(_arrow_values(c, v, m))
-        arrays.append(pa.concat_arrays(chunks) if len(chunks) != 1 else chunks[0])
-    return pa.Table.from_arrays(arrays, schema=schema_)
+        return pa.Table.from_pandas(df[column_names(stream)], schema=arrow_schema(stream),
+                                    preserve_index=False).replace_schema_metadata(None)
+    cols_np, n = _np_columns(stream, data)
+    return _to_arrow(stream, cols_np, None) if n else empty_arrow(stream)
+
+
+def conform_arrow_counted(stream: str, data) -> tuple[pa.Table, dict[str, int]]:
+    """:func:`conform_arrow` and the stream's :func:`timestamp_anomalies` in arrival order
+    (zero for ``labels`` and for a DataFrame, which :func:`timestamp_anomalies` counts itself).
+
+    Rows are ordered in NumPy before the Arrow arrays are built (zero-copy views), so a
+    stream is gathered once."""
+    none = {"backwards": 0, "duplicate": 0}
+    if data is None or hasattr(data, "iloc") and hasattr(data, "columns"):
+        return sort_arrow(stream, arrow_table(stream, data)), none
+    cols_np, n = _np_columns(stream, data)
+    if not n:
+        return empty_arrow(stream), none
+    anomalies = none if stream == "labels" else _anomalies_np(cols_np)
+    return _to_arrow(stream, cols_np, _sort_order(stream, cols_np)), anomalies
 
 
 def sort_arrow(stream: str, table: pa.Table) -> pa.Table:
     """Rows sorted stably by (``instance``, ``t_ns``) (``labels``: ``t_start_ns``), as :func:`conform`."""
-    n = table.num_rows
-    if n < 2:
+    if table.num_rows < 2:
         return table
     keys = ["t_start_ns"] if stream == "labels" else ["instance", "t_ns"]
-    arrs = [arrow_to_np(table.column(k)) for k in keys]
-    if len(arrs) == 1:
-        a = arrs[0]
-        if np.all(a[1:] >= a[:-1]):
-            return table
-        order = np.argsort(a, kind="stable")
-    else:
-        inst, t = arrs
-        same = inst[1:] == inst[:-1]
-        if np.all((inst[1:] > inst[:-1]) | (same & (t[1:] >= t[:-1]))):
-            return table
-        order = np.lexsort([t, inst])
-    return table.take(np_to_arrow(order.astype(np.int64), pa.int64()))
+    order = _sort_order(stream, {k: (arrow_to_np(table.column(k)), None) for k in keys})
+    return table if order is None else table.take(np_to_arrow(order.astype(np.int64), pa.int64()))
 
 
 def conform_arrow(stream: str, data) -> pa.Table:
-    """The conformed Arrow table of ``stream`` (see :func:`arrow_table`, then :func:`sort_arrow`).
+    """The conformed Arrow table of ``stream``: canonical columns and types, missing columns
+    null, rows sorted stably by (``instance``, ``t_ns``).
 
     Equals ``pa.Table.from_pandas(conform(stream, df), schema=arrow_schema(stream))`` for the
-    same data, without pandas for NumPy/Arrow input.
+    same data, without pandas for NumPy/Arrow input (see :func:`arrow_table` for the forms).
     """
-    return sort_arrow(stream, arrow_table(stream, data))
+    return conform_arrow_counted(stream, data)[0]
 
 
 def timestamp_anomalies_arrow(table: pa.Table) -> dict[str, int]:
     """:func:`timestamp_anomalies` of an (unsorted, arrival-order) Arrow stream table."""
-    n = table.num_rows
-    if n < 2 or "t_ns" not in table.column_names:
+    if table.num_rows < 2 or "t_ns" not in table.column_names:
         return {"backwards": 0, "duplicate": 0}
-    t = arrow_to_np(table.column("t_ns")).astype(np.int64, copy=False)
-    gid = np.zeros(n, np.int64)
-    if "instance" in table.column_names:
-        gid = arrow_to_np(table.column("instance")).astype(np.int64)
-    if "src" in table.column_names:
-        src = table.column("src").combine_chunks()
-        if pa.types.is_dictionary(src.type):
-            # null and "" are one group, as in timestamp_anomalies (fillna(""))
-            d = src.dictionary.to_pylist()
-            vals = sorted(set([""] + [x for x in d if x is not None]))
-            remap = np.array([vals.index(x or "") for x in d] or [0], np.int64)
-            codes = arrow_to_np(src.indices).astype(np.int64)
-            nulls = arrow_nulls(src.indices)
-            code = np.where(nulls, vals.index(""), remap[np.where(nulls, 0, codes)])
-            gid = gid * (len(vals) + 1) + code
-    order = np.argsort(gid, kind="stable")
-    ts = t[order]
-    same = gid[order][1:] == gid[order][:-1]
-    d = np.diff(ts)
-    return {"backwards": int(np.sum((d < 0) & same)), "duplicate": int(np.sum((d == 0) & same))}
+    cols = {n: table.column(n) for n in ("t_ns", "instance", "src") if n in table.column_names}
+    return _anomalies_np(_np_columns_like(cols, table.num_rows))
+
+
+def _np_columns_like(cols: dict, n: int) -> dict[str, tuple]:
+    out = {"t_ns": (arrow_to_np(cols["t_ns"]).astype(np.int64), None),
+           "instance": (arrow_to_np(cols["instance"]) if "instance" in cols else np.zeros(n, np.uint8), None)}
+    src = cols.get("src")
+    out["src"] = _categories(Column("src", "category"), [{"src": src}], [n]) if src is not None else \
+        (np.zeros(n, np.int32), None, [])
+    return out
 
 
 def frame_from_arrow(cols: tuple[Column, ...], table: pa.Table):

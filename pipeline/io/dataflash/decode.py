@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..base import IngestError, Progress
+from ..base import IngestError, Progress, read_file
 
 HEAD1, HEAD2 = 0xA3, 0x95
 FMT_TYPE = 0x80
@@ -158,12 +158,26 @@ def _null_term(b: bytes) -> str:
 def _decode_strings(col: np.ndarray) -> np.ndarray:
     """Fixed-width byte strings -> object array of ``str`` by :func:`_null_term`'s rule.
 
-    ASCII values (all but a few in practice) are cut at their first NUL in the byte matrix and
-    converted as one fixed-width array; values with a byte >= 0x80 are decoded one distinct
-    value at a time (UTF-8, else ISO-8859-1), as pymavlink does."""
+    Up to a few thousand values (every real log's PARM/FMT/MSG) a plain loop is fastest: ASCII
+    is decoded directly, anything else by :func:`_null_term`. Longer columns (concatenated
+    logs) are cut at their first NUL in the byte matrix and converted as one fixed-width array,
+    the values with a byte >= 0x80 decoded one distinct value at a time."""
     n = len(col)
     if n == 0:
         return np.empty(0, dtype=object)
+    if n <= 8192:
+        out = []
+        for b in col.tolist():  # bytes, trailing NULs already stripped by NumPy
+            try:
+                s = b.decode("ascii")
+            except UnicodeDecodeError:
+                out.append(_null_term(b))
+                continue
+            i = s.find("\0")
+            out.append(s if i < 0 else s[:i])
+        res = np.empty(n, dtype=object)
+        res[:] = out
+        return res
     width = col.dtype.itemsize
     mat = np.ascontiguousarray(col).view(np.uint8).reshape(n, width)
     high = (mat >= 0x80).any(axis=1)
@@ -218,15 +232,19 @@ def _parse_fmt_records(buf: np.ndarray, pos: np.ndarray,
     bad = 0
     if not len(pos):
         return formats, bad
-    body = np.ascontiguousarray(_windows(buf, FMT_LEN - 3)[pos + 3])
-    # identical FMT records (a log written in pieces, or concatenated logs) are judged once and
-    # weighted by their count: a record's verdict depends only on its bytes and on the
-    # definitions before its first copy, which later copies cannot change
-    _, first, count = np.unique(body.view(np.dtype((np.void, FMT_LEN - 3))).reshape(-1),
-                                return_index=True, return_counts=True)
-    order = np.argsort(first, kind="stable")
-    recs = body[first[order]].view(_FMT_DTYPE).reshape(-1)
-    for r, cnt in zip(recs.tolist(), count[order].tolist()):
+    body = _gather(buf, pos + 3, _FMT_DTYPE)
+    if len(body) > 256:
+        # more FMT records than type ids: a log written in pieces or concatenated logs. Identical
+        # records are judged once and weighted by their count: a record's verdict depends only
+        # on its bytes and on the definitions before its first copy, which later copies cannot
+        # change.
+        _, first, count = np.unique(body.view(np.dtype((np.void, FMT_LEN - 3))),
+                                    return_index=True, return_counts=True)
+        order = np.argsort(first, kind="stable")
+        recs, counts = body[first[order]], count[order].tolist()
+    else:
+        recs, counts = body, [1] * len(body)
+    for r, cnt in zip(recs.tolist(), counts):
         tid, length, name_b, fmt_b, cols_b = r
         try:
             name = name_b.split(b"\0", 1)[0].decode("ascii")
@@ -253,15 +271,6 @@ def _parse_fmt_records(buf: np.ndarray, pos: np.ndarray,
             continue
         formats[tid] = MsgFormat(tid, name, length, fmt, cols.split(",") if cols else [])
     return formats, bad
-
-
-def _windows(buf: np.ndarray, width: int) -> np.ndarray:
-    """Read-only ``(len(buf) - width + 1, width)`` view: row ``i`` is ``buf[i:i + width]``.
-
-    Gathering its rows copies only the bytes wanted (an index matrix would cost 8 bytes per
-    byte gathered)."""
-    return np.lib.stride_tricks.as_strided(buf, shape=(max(len(buf) - width + 1, 0), width),
-                                           strides=(buf.strides[0], buf.strides[0]), writeable=False)
 
 
 def _gather(buf: np.ndarray, starts: np.ndarray, dtype: np.dtype) -> np.ndarray:
@@ -325,7 +334,7 @@ def _as_buffer(src) -> tuple[np.ndarray, str]:
         return np.frombuffer(src, dtype=np.uint8), "<bytes>"
     p = Path(src)
     try:
-        data = np.fromfile(p, dtype=np.uint8)
+        data = read_file(p)
     except OSError as exc:
         raise IngestError(p, f"cannot read: {exc.strerror or exc}") from None
     return data, str(p)
@@ -412,10 +421,12 @@ def decode(src, *, apply_mult: bool = False, types: set[str] | None = None,
     lengths = np.zeros(256, dtype=np.int64)
     for tid, f in formats_by_id.items():
         lengths[tid] = f.length
-    known = lengths[types_at] > 0
+    lens = lengths[types_at]
+    known = lens > 0
     cand = hdr[known]
     ctype = types_at[known]
-    ends = cand + lengths[ctype]
+    ends = cand + lens[known]
+    del lens
     on, truncated = _chain(cand, ends, n)
     pos = cand[on]
     ptype = ctype[on]

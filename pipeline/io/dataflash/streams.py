@@ -70,48 +70,59 @@ def _instance_of(name: str, base: str, cols: dict, n: int, field_names=("I", "In
 
 
 class _Clock:
-    """Boot time (µs, int64) of every record; untimed records take the preceding timed one's."""
+    """Boot time (µs, int64) of every record; untimed records take the preceding timed one's.
+
+    The file-order index of all timed records is built only when an untimed type asks (old
+    logs' MODE/EV/PARM); own times are computed once per type."""
 
     def __init__(self, res: DecodeResult):
         self.res = res
+        self._own: dict[str, np.ndarray | None] = {}
+        self._index: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _build_index(self) -> tuple[np.ndarray, np.ndarray]:
         offs, times = [], []
-        for name, f in res.formats.items():
+        for name in self.res.formats:
             t = self.own_time_us(name)
             if t is not None and len(t):
-                offs.append(res.offsets[name])
+                offs.append(self.res.offsets[name])
                 times.append(t)
-        if offs:
-            o = np.concatenate(offs)
-            t = np.concatenate(times)
-            k = np.argsort(o, kind="stable")
-            self._off, self._t = o[k], t[k]
-        else:
-            self._off = np.empty(0, np.int64)
-            self._t = np.empty(0, np.int64)
+        if not offs:
+            return np.empty(0, np.int64), np.empty(0, np.int64)
+        o = np.concatenate(offs)
+        t = np.concatenate(times)
+        k = np.argsort(o, kind="stable")
+        return o[k], t[k]
 
     def own_time_us(self, name: str) -> np.ndarray | None:
+        if name in self._own:
+            return self._own[name]
         f = self.res.formats[name]
         cols = self.res.tables.get(name)
-        if cols is None:
-            return None
-        tf = f.time_field
-        if tf == "TimeUS":
-            return cols["TimeUS"].astype(np.int64)
-        if tf == "TimeMS":
-            return cols["TimeMS"].astype(np.int64) * 1000
-        if f.name in ("GPS", "GPS2") and "T" in cols:  # old GPS: TimeMS is GPS time of week
-            return cols["T"].astype(np.int64) * 1000
-        return None
+        t = None
+        if cols is not None:
+            tf = f.time_field
+            if tf == "TimeUS":
+                t = cols["TimeUS"].astype(np.int64)
+            elif tf == "TimeMS":
+                t = cols["TimeMS"].astype(np.int64) * 1000
+            elif f.name in ("GPS", "GPS2") and "T" in cols:  # old GPS: TimeMS is GPS time of week
+                t = cols["T"].astype(np.int64) * 1000
+        self._own[name] = t
+        return t
 
     def time_us(self, name: str) -> np.ndarray:
         t = self.own_time_us(name)
         if t is not None:
             return t
+        if self._index is None:
+            self._index = self._build_index()
+        idx_off, idx_t = self._index
         off = self.res.offsets[name]
-        if not len(self._off):
+        if not len(idx_off):
             return np.zeros(len(off), dtype=np.int64)
-        k = np.searchsorted(self._off, off, side="right") - 1
-        return self._t[np.maximum(k, 0)]
+        k = np.searchsorted(idx_off, off, side="right") - 1
+        return idx_t[np.maximum(k, 0)]
 
 
 def _mode_names(res: DecodeResult) -> dict[int, str]:

@@ -18,6 +18,7 @@ import json
 import math
 import os
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -138,8 +139,7 @@ def write_flightlog(log: FlightLog, out_dir: str | os.PathLike | None = None, *,
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         paths = {**{name: out / f"{name}.parquet" for name in schema.STREAM_NAMES}, "meta": out / "meta.json"}
-    written = []
-    for name in schema.STREAM_NAMES:
+    def write_one(name: str) -> Path:
         cols = schema.columns(name)
         table = log.table(name)
         md = dict(table.schema.metadata or {})
@@ -150,7 +150,13 @@ def write_flightlog(log: FlightLog, out_dir: str | os.PathLike | None = None, *,
                 "columns": {c.name: {"unit": c.unit, "frame": c.frame} for c in cols},
                 "flight_id": log.meta.get("flight_id")}
         _write_arrow(table, p, meta)
-        written.append(p)
+        return p
+
+    for name in schema.STREAM_NAMES:
+        log.table(name)  # build any stream held as a DataFrame here, not in the threads
+    # Parquet encoding and ZSTD release the GIL: the streams are written in parallel
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        written = list(pool.map(write_one, schema.STREAM_NAMES))
     mp = Path(paths["meta"])
     write_json(log.meta, mp)
     written.append(mp)

@@ -315,15 +315,20 @@ def _chain(cand: np.ndarray, ends: np.ndarray, n_bytes: int) -> tuple[np.ndarray
     return on, truncated
 
 
+_HEADER_CHUNK = 1 << 23  # 8 MiB: the comparison temporary stays small and is reused
+
+
 def _find_headers(buf: np.ndarray) -> np.ndarray:
     """Sorted offsets ``i`` with ``buf[i:i+2] == A3 95`` and a type byte after them.
 
-    The ``A3`` bytes are found in one pass; the few thousand candidates are then checked for
-    the ``95`` after them (cheaper than comparing 16-bit words at even and odd offsets)."""
+    The ``A3`` bytes are found in one pass (in 8 MiB pieces, so the boolean temporary is not
+    the size of the file); the candidates are then checked for the ``95`` after them."""
     n = len(buf)
     if n < 3:
         return np.empty(0, dtype=np.int64)
-    a3 = np.flatnonzero(buf[: n - 2] == HEAD1)
+    pieces = [np.flatnonzero(buf[a:min(a + _HEADER_CHUNK, n - 2)] == HEAD1) + a
+              for a in range(0, n - 2, _HEADER_CHUNK)]
+    a3 = pieces[0] if len(pieces) == 1 else np.concatenate(pieces)
     return a3[buf[a3 + 1] == HEAD2]
 
 

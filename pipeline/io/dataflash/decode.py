@@ -39,8 +39,10 @@ types that have records, and ASCII char columns are decoded as one fixed-width a
 
 from __future__ import annotations
 
+from collections.abc import MutableMapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -117,6 +119,62 @@ class MsgFormat:
         return None
 
 
+class Columns(MutableMapping):
+    """One message type's columns, ``{field name: ndarray}`` in format order.
+
+    Char columns are decoded to ``str`` on first access (then cached): most of them (FMT
+    columns, STAK names, FILE data) are never read by the stream mapping, and decoding is the
+    one per-value Python step of the decoder. Everything else is an ordinary mapping.
+    """
+
+    __slots__ = ("_data", "_lazy", "_order")
+
+    def __init__(self):
+        self._data: dict[str, np.ndarray] = {}
+        self._lazy: dict[str, Callable[[], np.ndarray]] = {}
+        self._order: list[str] = []
+
+    def set_lazy(self, key: str, make: Callable[[], np.ndarray]) -> None:
+        """Set ``key`` to ``make()``, computed on first access."""
+        if key not in self:
+            self._order.append(key)
+        self._data.pop(key, None)
+        self._lazy[key] = make
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        try:
+            return self._data[key]
+        except KeyError:
+            make = self._lazy.pop(key)  # KeyError for an unknown column, as a dict
+            v = self._data[key] = make()
+            return v
+
+    def __setitem__(self, key: str, value: np.ndarray) -> None:
+        if key not in self:
+            self._order.append(key)
+        self._lazy.pop(key, None)
+        self._data[key] = value
+
+    def __delitem__(self, key: str) -> None:
+        if key not in self:
+            raise KeyError(key)
+        self._data.pop(key, None)
+        self._lazy.pop(key, None)
+        self._order.remove(key)
+
+    def __contains__(self, key) -> bool:
+        return key in self._data or key in self._lazy
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(list(self._order))
+
+    def __len__(self) -> int:
+        return len(self._order)
+
+    def __repr__(self) -> str:
+        return f"Columns({self._order})"
+
+
 @dataclass
 class DecodeResult:
     """Output of :func:`decode`.
@@ -124,10 +182,10 @@ class DecodeResult:
     Attributes
     ----------
     tables : dict
-        ``{message name: {column: ndarray}}``; unscaled numeric columns are read-only strided
-        views into one record matrix per type, scaled ones float64, char fields object arrays
-        of ``str`` (``bytes`` for ``FILE.Data``, as pymavlink), ``a`` fields
-        ``(n, 32)`` int16.
+        ``{message name: Columns}`` (a mapping ``{column: ndarray}``); unscaled numeric
+        columns are strided views into one record matrix per type, scaled ones float64, char
+        fields object arrays of ``str`` (``bytes`` for ``FILE.Data``, as pymavlink) decoded on
+        first access, ``a`` fields ``(n, 32)`` int16.
     offsets : dict
         ``{message name: int64 byte offset of each record}`` (file order).
     formats : dict
@@ -138,7 +196,7 @@ class DecodeResult:
         ``{type id: MsgFormat}`` for every valid FMT in the file, records or not.
     """
 
-    tables: dict[str, dict[str, np.ndarray]]
+    tables: dict[str, Columns]
     offsets: dict[str, np.ndarray]
     formats: dict[str, MsgFormat]
     diagnostics: dict = field(default_factory=dict)
@@ -196,6 +254,18 @@ def _decode_strings(col: np.ndarray) -> np.ndarray:
         dec = np.array([_null_term(bytes(u)) for u in uniq], dtype=object)
         res[k] = dec[inv.reshape(-1)]
     return res
+
+
+def _strings(col: np.ndarray) -> Callable[[], np.ndarray]:
+    return lambda: _decode_strings(col)
+
+
+def _file_bytes(col: np.ndarray) -> Callable[[], np.ndarray]:
+    """``FILE.Data``: raw bytes, NULs kept, as pymavlink returns them."""
+    def make() -> np.ndarray:
+        raw = np.ascontiguousarray(col).view(np.uint8).reshape(len(col), -1)
+        return np.array([bytes(r) for r in raw], dtype=object) if len(col) else np.empty(0, object)
+    return make
 
 
 def format_dtype(fmt: str, columns: list[str]) -> np.dtype:
@@ -464,7 +534,7 @@ def decode(src, *, apply_mult: bool = False, types: set[str] | None = None,
     bounds = np.flatnonzero(np.diff(sorted_types)) + 1
     starts = np.concatenate([[0], bounds])
     stops = np.concatenate([bounds, [len(pos_by_type)]])
-    tables: dict[str, dict[str, np.ndarray]] = {}
+    tables: dict[str, Columns] = {}
     offsets: dict[str, np.ndarray] = {}
     formats: dict[str, MsgFormat] = {}
     meta_names = {"FMT", "FMTU", "UNIT", "MULT"}
@@ -479,21 +549,18 @@ def decode(src, *, apply_mult: bool = False, types: set[str] | None = None,
         if types is not None and f.name not in types and f.name not in meta_names:
             continue
         rec = _gather(buf, p + 3, f.dtype)
-        cols: dict[str, np.ndarray] = {}
+        cols = Columns()
         for ch, cname in zip(f.fmt, f.dtype.names):
             v = rec[cname]
             div = FORMAT_CHARS[ch][1]
             if div is not None:
-                v = v / div
+                cols[cname] = v / div
             elif ch in _STRING_CHARS:
-                if f.name == "FILE" and ch == "Z":  # raw bytes, NULs kept, as pymavlink
-                    raw = np.ascontiguousarray(v).view(np.uint8).reshape(len(v), -1)
-                    v = np.array([bytes(r) for r in raw], dtype=object) if len(v) else np.empty(0, object)
-                else:
-                    v = _decode_strings(v)
-            # unscaled numeric fields stay strided views into the type's record matrix: no copy,
-            # and the tables hold each record's bytes once
-            cols[cname] = v
+                cols.set_lazy(cname, _file_bytes(v) if f.name == "FILE" and ch == "Z" else _strings(v))
+            else:
+                # unscaled numeric fields stay strided views into the type's record matrix: no
+                # copy, and the tables hold each record's bytes once
+                cols[cname] = v
         tables[name] = cols
         offsets[name] = p
         formats[name] = f
@@ -515,11 +582,11 @@ def decode(src, *, apply_mult: bool = False, types: set[str] | None = None,
     return DecodeResult(tables, offsets, formats, diag, formats_by_id)
 
 
-def decode_all(src, *, apply_mult: bool = False) -> tuple[dict[str, dict[str, np.ndarray]], dict]:
+def decode_all(src, *, apply_mult: bool = False) -> tuple[dict[str, Columns], dict]:
     """Raw message tables of a DataFlash log: ``({name: {column: ndarray}}, diagnostics)``.
 
     Every message type present is decoded (see :func:`decode`); values are those pymavlink's
-    ``recv_msg`` loop returns (format scaling applied, strings decoded).
+    ``recv_msg`` loop returns (format scaling applied, strings decoded on first access).
     """
     res = decode(src, apply_mult=apply_mult)
     return res.tables, res.diagnostics

@@ -18,7 +18,7 @@ from __future__ import annotations
 import abc
 import hashlib
 import os
-from collections.abc import MutableMapping
+from collections.abc import Mapping, MutableMapping
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -134,9 +134,10 @@ class FlightLog:
     def from_streams(cls, meta: dict, streams: dict) -> "FlightLog":
         """Conform reader output: canonical columns/dtypes, all streams, sorted, anomalies counted.
 
-        ``streams`` maps stream names to a pandas DataFrame, a mapping of columns (NumPy or
-        Arrow arrays, or one scalar for all rows), a list of such mappings (parts, in file
-        order), a pyarrow.Table, or ``None``. Each is conformed once
+        ``streams`` maps stream names (a mapping, or an iterable of ``(name, data)`` pairs,
+        consumed one at a time) to a pandas DataFrame, a mapping of columns (NumPy or Arrow
+        arrays, or one scalar for all rows), a list of such mappings (parts, in file order), a
+        pyarrow.Table, or ``None``. Each is conformed once
         (:func:`pipeline.io.schema.conform_arrow`). Timestamp anomalies (backwards jumps,
         duplicates) are counted per stream in the order the reader produced the rows (= file
         order) and stored in ``meta['diagnostics']['timestamp_anomalies']``; the samples are kept.
@@ -144,13 +145,12 @@ class FlightLog:
         meta = {**schema.new_meta(), **meta}
         diag = {**schema.new_diagnostics(), **(meta.get("diagnostics") or {})}
         meta["diagnostics"] = diag
-        unknown = [s for s in streams if s not in schema.STREAM_NAMES]
-        if unknown:
-            raise schema.SchemaError(f"unknown stream(s) {unknown}")
+        pairs = streams.items() if isinstance(streams, Mapping) else streams
         out: dict[str, pa.Table] = {}
         anomalies = dict(diag.get("timestamp_anomalies") or {})
-        for name in schema.STREAM_NAMES:
-            data = streams.get(name)
+        for name, data in pairs:
+            if name not in schema.STREAM_NAMES:
+                raise schema.SchemaError(f"unknown stream(s) {[name]}")
             if _is_frame(data):
                 if len(data) and name != "labels":
                     if "instance" not in data.columns:
@@ -161,9 +161,11 @@ class FlightLog:
                 out[name] = schema.arrow_table(name, data)  # conform() sorted it already
                 continue
             table, a = schema.conform_arrow_counted(name, data)
+            data = None  # drop the loose columns before the next stream
             if a["backwards"] or a["duplicate"]:
                 anomalies[name] = a
             out[name] = table
+        out = {name: out[name] if name in out else schema.empty_arrow(name) for name in schema.STREAM_NAMES}
         diag["timestamp_anomalies"] = anomalies
         return cls(meta=meta, streams=out)
 

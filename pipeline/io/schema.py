@@ -401,7 +401,7 @@ def new_diagnostics() -> dict:
 # for the same data: missing values (NaN, None, NA) are nulls, ``src`` is a dictionary with
 # sorted values. ``tests/io/test_arrow_conform.py`` checks the two paths against each other.
 
-import importlib.metadata as _im  # noqa: E402  (new section; keeps the pandas-free imports here)
+import functools as _functools  # noqa: E402  (new section: its imports stay with it)
 import json as _json  # noqa: E402
 
 
@@ -805,10 +805,17 @@ def pandas_metadata(cols: tuple[Column, ...], table: pa.Table) -> bytes:
             nt = "int8" if k < 2**7 else "int16" if k < 2**15 else "int32"
         entries.append({"name": c.name, "field_name": c.name, "pandas_type": pt, "numpy_type": nt,
                         "metadata": meta})
-    try:
-        pd_version = _im.version("pandas")
-    except _im.PackageNotFoundError:  # pragma: no cover - pandas is a core dependency
-        pd_version = ""
     return _json.dumps({"index_columns": [], "column_indexes": [], "columns": entries, "attributes": {},
                         "creator": {"library": "pyarrow", "version": pa.__version__},
-                        "pandas_version": pd_version}).encode()
+                        "pandas_version": _pandas_version()}).encode()
+
+
+@_functools.lru_cache(maxsize=1)
+def _pandas_version() -> str:
+    """The installed pandas' version, read from its distribution metadata (no import)."""
+    import importlib.metadata as im
+
+    try:
+        return im.version("pandas")
+    except im.PackageNotFoundError:  # pragma: no cover - pandas is a core dependency
+        return ""

@@ -37,7 +37,7 @@ comes from the first GPS record with a week number:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -453,32 +453,41 @@ for _stream, _msg, _ in STREAM_TABLE:
 del _stream, _msg
 
 
-def stream_parts(res: DecodeResult, clock: _Clock, t0_us: int, diag: dict) -> dict[str, list[Part] | None]:
-    """Run :data:`STREAM_TABLE`: ``{stream: [part, ...]}`` (``None`` for a stream with no data).
+def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,
+                      diag: dict) -> Iterator[tuple[str, list[Part] | None]]:
+    """Run :data:`STREAM_TABLE` one stream at a time: ``(stream, [part, ...] or None)``.
 
     A message lacking an expected field costs its stream (with a warning), not the whole log.
+    Streams come one by one so that a consumer can conform each and drop its parts before the
+    next is built (the peak holds one stream's loose columns, not all of them).
     """
     ctx = _Ctx(res, clock, t0_us, diag)
-    out: dict[str, list[Part] | None] = {}
-    failed: set[str] = set()
-    for stream, msg, builder in STREAM_TABLE:
-        if stream in failed:
-            continue
-        present = any(_has(res, m) for m in msg) if isinstance(msg, tuple) else _has(res, msg)
-        parts = out.setdefault(stream, [])
-        if not present:
-            continue
-        try:
-            got = builder(ctx, msg if isinstance(msg, str) else msg[0], parts)
-        except (KeyError, ValueError, TypeError, IndexError) as exc:
-            diag["warnings"].append(f"{stream}: not mapped ({type(exc).__name__}: {exc})")
-            failed.add(stream)
-            out[stream] = None
-            continue
-        for p in (got if isinstance(got, list) else [got]):
-            if p is not None and len(p["t_ns"]):
-                parts.append(p)
-    return {k: (v or None) for k, v in out.items()}
+    by_stream: dict[str, list] = {}
+    for row in STREAM_TABLE:
+        by_stream.setdefault(row[0], []).append(row)
+    for stream, table in by_stream.items():
+        parts: list[Part] | None = []
+        for _, msg, builder in table:
+            present = any(_has(res, m) for m in msg) if isinstance(msg, tuple) else _has(res, msg)
+            if not present:
+                continue
+            try:
+                got = builder(ctx, msg if isinstance(msg, str) else msg[0], parts)
+            except (KeyError, ValueError, TypeError, IndexError) as exc:
+                diag["warnings"].append(f"{stream}: not mapped ({type(exc).__name__}: {exc})")
+                parts = None
+                break
+            for p in (got if isinstance(got, list) else [got]):
+                if p is not None and len(p["t_ns"]):
+                    parts.append(p)
+        out, parts = parts or None, None
+        yield stream, out
+        del out
+
+
+def stream_parts(res: DecodeResult, clock: _Clock, t0_us: int, diag: dict) -> dict[str, list[Part] | None]:
+    """:func:`iter_stream_parts` as a dict ``{stream: [part, ...] or None}``."""
+    return dict(iter_stream_parts(res, clock, t0_us, diag))
 
 
 def _first_time_us(res: DecodeResult, clock: _Clock) -> int:
@@ -556,7 +565,6 @@ def to_flightlog(res: DecodeResult) -> FlightLog:
     diag["warnings"] = list(res.diagnostics["warnings"])
     clock = _Clock(res)
     t0_us = _first_time_us(res, clock)
-    streams = stream_parts(res, clock, t0_us, diag)
 
     params: dict[str, float] = {}
     parm = res.tables.get("PARM")
@@ -568,16 +576,19 @@ def to_flightlog(res: DecodeResult) -> FlightLog:
         t = _rows(clock, "MSG", t0_us)["t_ns"]
         diag["messages"] = [{"t_ns": int(a), "text": str(b)} for a, b in
                             zip(t[:1000].tolist(), msg["Message"][:1000].tolist())]
+    # meta is built before the streams (which are conformed one by one as they are built), but
+    # its warnings follow the streams' ones, as they always have
+    late: list[str] = []
     try:
         t0_utc, gps_fix = _utc(res, clock, t0_us)
     except (KeyError, ValueError, OverflowError) as exc:
         t0_utc, gps_fix = None, None
-        diag["warnings"].append(f"UTC not derived from GPS ({type(exc).__name__}: {exc})")
+        late.append(f"UTC not derived from GPS ({type(exc).__name__}: {exc})")
     try:
         origin = _origin(res)
     except (KeyError, ValueError) as exc:
         origin = None
-        diag["warnings"].append(f"NED origin not derived ({type(exc).__name__}: {exc})")
+        late.append(f"NED origin not derived ({type(exc).__name__}: {exc})")
     meta = schema.new_meta(
         source_format=SOURCE_FORMAT,
         reader=READER_NAME,
@@ -591,7 +602,7 @@ def to_flightlog(res: DecodeResult) -> FlightLog:
         diagnostics=diag,
     )
     if t0_utc is not None and t0_utc < _LEAP18_FROM_UTC_S * 1_000_000_000:
-        diag["warnings"].append(
+        late.append(
             "GPS->UTC uses 18 leap seconds (pymavlink's convention); the true offset before "
             "2017-01-01 was smaller (16 s in 2014), so t0_utc_ns may be up to 2 s late")
     if gps_fix:
@@ -602,4 +613,6 @@ def to_flightlog(res: DecodeResult) -> FlightLog:
         meta["radar"] = {"site_ned_m": [params.get("RADR_SN", 0.0), params.get("RADR_SE", 0.0),
                                         params.get("RADR_SD", 0.0)],
                          "tau_rd_s": params.get("RADR_TAU", 0.0)}
-    return FlightLog.from_streams(meta, streams)
+    log = FlightLog.from_streams(meta, iter_stream_parts(res, clock, t0_us, diag))
+    log.meta["diagnostics"]["warnings"].extend(late)
+    return log

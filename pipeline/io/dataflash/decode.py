@@ -85,6 +85,7 @@ _FMT_DTYPE = np.dtype([("Type", "u1"), ("Length", "u1"), ("Name", "S4"), ("Forma
                        ("Columns", "S64")])
 #: body size of each format character (validates a FMT's Length without building its dtype)
 _CHAR_SIZE: dict[str, int] = {c: np.dtype(d).itemsize for c, (d, _) in FORMAT_CHARS.items()}
+_FORMAT_SET = frozenset(FORMAT_CHARS)
 
 
 @dataclass
@@ -324,10 +325,10 @@ def _parse_fmt_records(buf: np.ndarray, pos: np.ndarray,
             bad += cnt
             continue
         if (not name or not name.isprintable() or not name.replace("_", "").isalnum()
-                or any(c not in FORMAT_CHARS for c in fmt)):
+                or not _FORMAT_SET.issuperset(fmt)):
             bad += cnt
             continue
-        size = sum(_CHAR_SIZE[c] for c in fmt)
+        size = sum(map(_CHAR_SIZE.__getitem__, fmt))
         if size + 3 != length:
             msg = (f"FMT {name} (type {tid}) declares {length} bytes but format {fmt!r} needs "
                    f"{size + 3}: type not decoded")

@@ -191,3 +191,24 @@ def test_ingest_reads_the_log_once(demo_log, tmp_path, monkeypatch):
     import hashlib
 
     assert meta["source_sha256"] == hashlib.sha256(demo_log.read_bytes()).hexdigest()
+
+
+def test_ingest_conforms_each_stream_once_and_never_through_pandas(demo_log, tmp_path, monkeypatch):
+    from pipeline.io import schema as sch
+
+    calls: list[str] = []
+    real = sch.conform_arrow_counted
+
+    def counted(stream, data):
+        calls.append(stream)
+        return real(stream, data)
+
+    def no_pandas_conform(*a, **k):
+        raise AssertionError("pandas conform on the DataFlash ingest path")
+
+    monkeypatch.setattr(sch, "conform_arrow_counted", counted)
+    monkeypatch.setattr(sch, "conform", no_pandas_conform)
+    res = run_ingest(*_job(demo_log, tmp_path / "o"), None, flight_id="demo")
+    assert res.status == "ok"
+    # every stream the decoder produced is conformed exactly once; written as conformed
+    assert sorted(calls) == sorted(set(calls)) and "imu" in calls

@@ -2,7 +2,12 @@
 
 :mod:`.decode` decodes every message type into column tables (:func:`decode_all` is the
 benchmarked entry point); :mod:`.streams` maps them to the canonical streams; the reader class
-registered here ties both to the ingest registry.
+registered here ties both to the ingest registry. The record layout constants
+(``HEAD1 HEAD2 FMT_TYPE FMT_LEN FORMAT_CHARS``, :func:`format_dtype`) are the ones
+:mod:`pipeline.io.dataflash_writer` writes with.
+
+Note: the package attribute ``decode`` is the function :func:`.decode.decode` (it shadows the
+submodule's name); the module itself is ``sys.modules["pipeline.io.dataflash.decode"]``.
 """
 
 from __future__ import annotations
@@ -13,12 +18,13 @@ import numpy as np
 
 from ..base import FlightLog, IngestError, LogReader, Progress
 from ..registry import register
-from .decode import (FMT_LEN, FMT_TYPE, FORMAT_CHARS, HEAD1, HEAD2, DecodeResult, MsgFormat,
-                     _format_dtype, decode, decode_all, format_dtype)
+from .decode import (FMT_LEN, FMT_TYPE, FORMAT_CHARS, HEAD1, HEAD2, Columns, DecodeResult, MsgFormat,
+                     decode, decode_all, format_dtype)
+from .decode import _format_dtype  # noqa: F401  (old name, still imported by a branch; goes at merge)
 from .streams import (GPS_EPOCH_UNIX_S, LEAP_SECONDS, READER_NAME, READER_VERSION, SOURCE_FORMAT,
                       STREAM_SOURCES, to_flightlog)
 
-__all__ = ["DataFlashReader", "DecodeResult", "FMT_LEN", "FMT_TYPE", "FORMAT_CHARS", "GPS_EPOCH_UNIX_S",
+__all__ = ["Columns", "DataFlashReader", "DecodeResult", "FMT_LEN", "FMT_TYPE", "FORMAT_CHARS", "GPS_EPOCH_UNIX_S",
            "HEAD1", "HEAD2", "LEAP_SECONDS", "MsgFormat", "STREAM_SOURCES", "decode", "decode_all",
            "format_dtype", "to_flightlog"]
 

@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 from pipeline.io import schema
 from pipeline.io.base import FlightLog
 from pipeline.io.dataflash import decode
-from pipeline.io.dataflash.streams import _Clock, _first_time_us, stream_parts
+from pipeline.io.dataflash.streams import stream_parts
 from pipeline.io.dataflash_writer import write_demo_flight
 
 
@@ -102,10 +102,7 @@ def demo(tmp_path_factory):
 
 
 def test_dataflash_streams_equal_the_pandas_path(demo):
-    res = decode(demo)
-    clock = _Clock(res)
-    t0 = _first_time_us(res, clock)
-    parts = stream_parts(res, clock, t0, schema.new_diagnostics())
+    parts = stream_parts(decode(demo))
     log = FlightLog.from_streams({}, parts)
     for stream, p in parts.items():
         if not p:

@@ -485,9 +485,11 @@ def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,
         del out
 
 
-def stream_parts(res: DecodeResult, clock: _Clock, t0_us: int, diag: dict) -> dict[str, list[Part] | None]:
-    """:func:`iter_stream_parts` as a dict ``{stream: [part, ...] or None}``."""
-    return dict(iter_stream_parts(res, clock, t0_us, diag))
+def stream_parts(res: DecodeResult, diag: dict | None = None) -> dict[str, list[Part] | None]:
+    """The loose stream parts of a decoded log, ``{stream: [part, ...] or None}``, with the
+    clock and ``t0`` :func:`to_flightlog` uses (what it conforms; tests compare it with pandas)."""
+    clock = _Clock(res)
+    return dict(iter_stream_parts(res, clock, _first_time_us(res, clock), diag or schema.new_diagnostics()))
 
 
 def _first_time_us(res: DecodeResult, clock: _Clock) -> int:

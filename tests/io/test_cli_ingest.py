@@ -109,12 +109,13 @@ def test_cli_ingest_equals_run_ingest_with_the_workflow_arguments(demo_log, tmp_
         log = tmp_path / "in" / "bad.bin"
         log.parent.mkdir()
         log.write_bytes(b"not a log at all\n" * 20)
-    cfg = tmp_path / "config.yaml"
-    cfg.write_text("ingest:\n  ros:\n    topics: {}\n")
-    rc = main(["ingest", str(log), "-o", str(tmp_path / "cli"), "--config", str(cfg)])
+    from pipeline.config import DEFAULT_CONFIG, load_config, section
+
+    rc = main(["ingest", str(log), "-o", str(tmp_path / "cli"), "--config", str(DEFAULT_CONFIG)])
     assert rc == (0 if which == "demo" else 1)
     fid = flight_id_for(log)
-    run_ingest(*_job(log, tmp_path / "wf" / fid), {"ros": {"topics": {}}}, flight_id=fid)
+    # the workflow's call: the rule's declared paths and the config's ingest section
+    run_ingest(*_job(log, tmp_path / "wf" / fid), section(load_config(DEFAULT_CONFIG), "ingest"), flight_id=fid)
     frames_cli, meta_cli = _read_all(tmp_path / "cli" / fid)
     frames_wf, meta_wf = _read_all(tmp_path / "wf" / fid)
     assert meta_cli == meta_wf  # source paths are the same input path; nothing ignored

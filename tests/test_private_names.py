@@ -13,10 +13,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PKG = ROOT / "pipeline"
 
-#: (importing module, imported module, name) still allowed. The DataFlash writer builds its
-#: record dtypes with the decoder's ``_format_dtype``; the lead removes this entry at merge, when
-#: ``pipeline/io/dataflash.py`` becomes the ``io/dataflash/`` package with a public helper.
-ALLOWED = {("pipeline.io.dataflash_writer", "pipeline.io.dataflash", "_format_dtype")}
+#: (importing module, imported module, name) still allowed: none
+ALLOWED: set[tuple[str, str, str]] = set()
 
 
 def _private(name: str) -> bool:

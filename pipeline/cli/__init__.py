@@ -16,18 +16,22 @@ from .. import __version__
 COMMANDS: tuple[str, ...] = ("info", "ingest", "simulate", "preprocess", "train", "classify")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(commands: tuple[str, ...] = COMMANDS) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="uavpipe", description="UAV flight-log analytics: ingest, preprocess, learn, estimate, report.")
     parser.add_argument("--version", action="version", version=f"uavpipe {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for mod in COMMANDS:
+    for mod in commands:
         importlib.import_module(f"{__name__}.{mod}").add_parser(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    # import only the chosen subcommand's module: `uavpipe ingest` must not pay for the
+    # models/pandas imports of `train` and `classify`
+    first = next((a for a in argv if not a.startswith("-")), None)
+    args = build_parser((first,) if first in COMMANDS else COMMANDS).parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -1,13 +1,19 @@
-"""``uavpipe ingest LOG... -o DIR``: write ``DIR/<flight_id>/<stream>.parquet`` + ``meta.json``."""
+"""``uavpipe ingest LOG... -o DIR``: write ``DIR/<flight_id>/<stream>.parquet`` + ``meta.json``.
+
+Each log goes through :func:`pipeline.io.ingest.run_ingest`, the function the workflow's
+ingest rule calls, so the CLI writes the same files: a log that cannot be decoded gets the
+failure placeholders (empty streams, ``meta.json`` with ``status: failed`` and the reason) and
+one line on stderr, and the command goes on with the next log (exit 1 if any failed).
+``--config FILE`` passes the file's ``ingest`` section, as the workflow does with its config;
+without it the readers use their defaults.
+"""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-from ..io import registry
-from ..io.base import IngestError
-from ..io.parquet import write_flightlog
+from ..io.registry import flight_id_for
 from .progress import progress_bar
 
 
@@ -17,28 +23,54 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--out", type=Path, required=True, metavar="DIR",
                    help="output root; each log goes to DIR/<flight_id>/")
     p.add_argument("--format", dest="fmt", default=None, help="force a reader instead of detecting")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="dataset config whose 'ingest' section is passed to the readers")
+    p.add_argument("--labels", type=Path, default=None, metavar="FILE",
+                   help="labels/truth side-car to attach (one LOG only; default: <log>.truth.parquet "
+                        "beside the log when present)")
     p.set_defaults(func=run)
 
 
+def job_paths(log: Path, labels: Path | None, out_root: Path) -> tuple[dict, dict, str]:
+    """``(inputs, outputs, flight_id)`` for one log, shaped like the workflow rule's."""
+    from ..io.ingest import outputs_for
+
+    fid = flight_id_for(log)
+    inputs = {"log": str(log), "labels": [str(labels)] if labels else []}
+    return inputs, outputs_for(out_root / fid), fid
+
+
 def run(args) -> int:
+    from ..io.ingest import run_ingest
+
+    config = None
+    if args.config is not None:
+        from ..config import ConfigError, load_config, section
+
+        try:
+            config = section(load_config(args.config), "ingest")
+        except ConfigError as exc:
+            print(f"uavpipe ingest: {exc}", file=sys.stderr)
+            return 2
+    if args.labels is not None and len(args.logs) > 1:
+        print("uavpipe ingest: --labels takes one LOG", file=sys.stderr)
+        return 2
     failed = []
     for path in args.logs:
+        inputs, outputs, fid = job_paths(path, args.labels, args.out)
         try:
             size = path.stat().st_size if path.is_file() else 0
+        except OSError:
+            size = 0
+        try:
             with progress_bar(path.name, size) as cb:
-                log = registry.read_log(path, fmt=args.fmt, progress=cb)
-            dest = args.out / log.meta["flight_id"]
-            write_flightlog(log, dest)
-        except IngestError as exc:
-            print(f"uavpipe ingest: {exc}", file=sys.stderr)
-            failed.append(str(path))
-            continue
+                res = run_ingest(inputs, outputs, config, flight_id=fid, fmt=args.fmt, progress=cb)
         except OSError as exc:
             print(f"uavpipe ingest: {path}: cannot write output: {exc}", file=sys.stderr)
             failed.append(str(path))
             continue
-        status = log.meta["status"]
-        print(f"{path} -> {dest} ({log.meta['source_format']}, {log.duration_s:.1f} s, {status})")
+        if res.status == "failed":
+            failed.append(str(path))
     if failed:
         print(f"uavpipe ingest: {len(failed)} of {len(args.logs)} log(s) failed", file=sys.stderr)
         return 1

@@ -1,10 +1,16 @@
 """The canonical :class:`FlightLog`, the :class:`LogReader` interface and :class:`IngestError`.
 
 A reader turns one source (file or bag directory) into a ``FlightLog``: ``meta`` (see
-:func:`pipeline.io.schema.new_meta`) plus one DataFrame per canonical stream. Readers build
-loose frames with whatever subset of columns their source has and hand them to
-:meth:`FlightLog.from_streams`, which conforms them to ``schema.py``, counts timestamp
-anomalies in arrival order and fills every absent stream with an empty, fully typed table.
+:func:`pipeline.io.schema.new_meta`) plus one table per canonical stream. Readers build loose
+tables with whatever subset of columns their source has -- pandas DataFrames, mappings of NumPy
+arrays (or lists of such parts), or Arrow tables -- and hand them to
+:meth:`FlightLog.from_streams`, which conforms each stream once to ``schema.py``, counts
+timestamp anomalies in arrival order and fills every absent stream with an empty, fully typed
+table.
+
+A FlightLog holds one conformed ``pyarrow.Table`` per stream (what the Parquet store writes, as
+it is); ``log.streams[name]`` and ``log[name]`` give pandas DataFrames, converted on first use
+and cached, so DataFlash and tlog ingest never import pandas.
 """
 
 from __future__ import annotations
@@ -12,11 +18,12 @@ from __future__ import annotations
 import abc
 import hashlib
 import os
-from dataclasses import dataclass, field
+from collections.abc import Mapping, MutableMapping
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
-import pandas as pd
+import numpy as np
+import pyarrow as pa
 
 from . import schema
 
@@ -33,81 +40,190 @@ class IngestError(Exception):
         super().__init__(f"{self.path}: {reason}" if self.path else reason)
 
 
-@dataclass
+def _is_frame(x) -> bool:
+    """A pandas DataFrame, recognised without importing pandas."""
+    return hasattr(x, "iloc") and hasattr(x, "columns")
+
+
+class StreamFrames(MutableMapping):
+    """``log.streams``: stream name -> pandas DataFrame, backed by the log's Arrow tables.
+
+    Reading converts the stream's conformed table once (cached); assigning a DataFrame (a
+    side-car's truth, a test's edit) replaces the stream, whose table is rebuilt from it when
+    next written.
+    """
+
+    def __init__(self, log: "FlightLog"):
+        self._log = log
+
+    def __getitem__(self, name: str):
+        log = self._log
+        if name in log._frames:
+            return log._frames[name]
+        if name not in log._tables:
+            raise KeyError(name)
+        df = schema.frame_from_arrow(schema.columns(name), log._tables[name])
+        log._frames[name] = df
+        return df
+
+    def __setitem__(self, name: str, df) -> None:
+        if name not in schema.STREAM_NAMES:
+            raise schema.SchemaError(f"unknown stream {name!r}")
+        self._log._frames[name] = df
+        self._log._tables[name] = None  # rebuilt from the frame when needed
+
+    def __delitem__(self, name: str) -> None:
+        self._log._tables.pop(name)
+        self._log._frames.pop(name, None)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(list(self._log._tables))
+
+    def __len__(self) -> int:
+        return len(self._log._tables)
+
+    def __contains__(self, name) -> bool:
+        return name in self._log._tables
+
+
 class FlightLog:
     """One flight in the canonical schema (style.md §3.2).
+
+    Parameters
+    ----------
+    meta : dict, optional
+        Flight metadata (``schema.new_meta`` keys); default ``schema.new_meta()``.
+    streams : dict, optional
+        Stream name -> *conformed* table (pyarrow.Table or pandas DataFrame), as
+        :func:`pipeline.io.parquet.read_flightlog` builds it. Readers use :meth:`from_streams`.
 
     Attributes
     ----------
     meta : dict
-        Flight metadata (``schema.new_meta`` keys).
-    streams : dict of str to pandas.DataFrame
-        Every stream of ``schema.STREAM_NAMES``, conformed; absent ones empty with full schema.
+    streams : StreamFrames
+        Every stream of ``schema.STREAM_NAMES`` as a pandas DataFrame (lazily converted).
     """
 
-    meta: dict[str, Any] = field(default_factory=schema.new_meta)
-    streams: dict[str, pd.DataFrame] = field(default_factory=dict)
+    def __init__(self, meta: dict[str, Any] | None = None, streams: dict | None = None):
+        self.meta = schema.new_meta() if meta is None else meta
+        self._tables: dict[str, pa.Table | None] = {}
+        self._frames: dict[str, Any] = {}
+        for name, t in (streams or {}).items():
+            if isinstance(t, pa.Table):
+                self._tables[name] = t
+            else:
+                self._tables[name] = None
+                self._frames[name] = t
+
+    @property
+    def streams(self) -> StreamFrames:
+        return StreamFrames(self)
+
+    def __repr__(self) -> str:
+        rows = {n: (t.num_rows if t is not None else len(self._frames[n])) for n, t in self._tables.items()}
+        return (f"FlightLog(flight_id={self.meta.get('flight_id')!r}, "
+                f"streams={ {n: r for n, r in rows.items() if r} })")
+
+    def table(self, name: str) -> pa.Table:
+        """The conformed Arrow table of stream ``name`` (empty with full schema when absent)."""
+        t = self._tables.get(name)
+        if t is None:
+            if name in self._frames:
+                t = schema.conform_arrow(name, self._frames[name])
+                self._tables[name] = t
+            else:
+                t = schema.empty_arrow(name)
+        return t
 
     @classmethod
-    def from_streams(cls, meta: dict, streams: dict[str, pd.DataFrame | None]) -> "FlightLog":
+    def from_streams(cls, meta: dict, streams: dict) -> "FlightLog":
         """Conform reader output: canonical columns/dtypes, all streams, sorted, anomalies counted.
 
-        Timestamp anomalies (backwards jumps, duplicates) are counted per stream in the order
-        the reader produced the rows (= file order) and stored in
-        ``meta['diagnostics']['timestamp_anomalies']``; the samples are kept.
+        ``streams`` maps stream names (a mapping, or an iterable of ``(name, data)`` pairs,
+        consumed one at a time) to a pandas DataFrame, a mapping of columns (NumPy or Arrow
+        arrays, or one scalar for all rows), a list of such mappings (parts, in file order), a
+        pyarrow.Table, or ``None``. Each is conformed once
+        (:func:`pipeline.io.schema.conform_arrow`). Timestamp anomalies (backwards jumps,
+        duplicates) are counted per stream in the order the reader produced the rows (= file
+        order) and stored in ``meta['diagnostics']['timestamp_anomalies']``; the samples are kept.
         """
         meta = {**schema.new_meta(), **meta}
         diag = {**schema.new_diagnostics(), **(meta.get("diagnostics") or {})}
         meta["diagnostics"] = diag
-        unknown = [s for s in streams if s not in schema.STREAM_NAMES]
-        if unknown:
-            raise schema.SchemaError(f"unknown stream(s) {unknown}")
-        out: dict[str, pd.DataFrame] = {}
+        pairs = streams.items() if isinstance(streams, Mapping) else streams
+        out: dict[str, pa.Table] = {}
         anomalies = dict(diag.get("timestamp_anomalies") or {})
-        for name in schema.STREAM_NAMES:
-            df = streams.get(name)
-            if df is not None and len(df) and name != "labels":
-                if "instance" not in df.columns:
-                    df = df.assign(instance=0)
-                a = schema.timestamp_anomalies(df)
-                if a["backwards"] or a["duplicate"]:
-                    anomalies[name] = a
-            out[name] = schema.conform(name, df)
+        for name, data in pairs:
+            if name not in schema.STREAM_NAMES:
+                raise schema.SchemaError(f"unknown stream(s) {[name]}")
+            if _is_frame(data):
+                if len(data) and name != "labels":
+                    if "instance" not in data.columns:
+                        data = data.assign(instance=0)
+                    a = schema.timestamp_anomalies(data)
+                    if a["backwards"] or a["duplicate"]:
+                        anomalies[name] = a
+                out[name] = schema.arrow_table(name, data)  # conform() sorted it already
+                continue
+            table, a = schema.conform_arrow_counted(name, data)
+            data = None  # drop the loose columns before the next stream
+            if a["backwards"] or a["duplicate"]:
+                anomalies[name] = a
+            out[name] = table
+        out = {name: out[name] if name in out else schema.empty_arrow(name) for name in schema.STREAM_NAMES}
         diag["timestamp_anomalies"] = anomalies
         return cls(meta=meta, streams=out)
 
-    def __getitem__(self, name: str) -> pd.DataFrame:
-        return self.streams[name] if name in self.streams else schema.empty(name)
+    def __getitem__(self, name: str):
+        return self.streams[name] if name in self._tables else schema.empty(name)
+
+    def _time_arrays(self) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
+        """(name, t_ns, instance) of every non-empty time-stamped stream, without pandas."""
+        for name in list(self._tables):
+            if name == "labels":
+                continue
+            t = self._tables[name]
+            if t is None:
+                df = self._frames[name]
+                if not len(df):
+                    continue
+                yield name, df["t_ns"].to_numpy(np.int64), df["instance"].to_numpy()
+            elif t.num_rows:
+                yield name, schema.arrow_to_np(t.column("t_ns")), schema.arrow_to_np(t.column("instance"))
 
     @property
     def duration_s(self) -> float:
         """Span of ``t_ns`` over all time-stamped streams, in seconds (0 when empty)."""
         lo, hi = None, None
-        for name, df in self.streams.items():
-            if name == "labels" or not len(df):
-                continue
-            t = df["t_ns"]
+        for _, t, _ in self._time_arrays():
             lo = t.min() if lo is None else min(lo, t.min())
             hi = t.max() if hi is None else max(hi, t.max())
         return 0.0 if lo is None else float(hi - lo) * 1e-9
 
     def summary(self) -> dict[str, dict[str, float]]:
-        """Per non-empty stream: rows, instances, mean rate (Hz, per instance)."""
+        """Per non-empty stream: rows, instances, mean rate (Hz, per instance; NaN-skipping mean)."""
         res = {}
-        for name, df in self.streams.items():
-            if not len(df):
-                continue
+        timed = {name: (t, inst) for name, t, inst in self._time_arrays()}
+        for name in list(self._tables):
             if name == "labels":
-                res[name] = {"rows": len(df), "instances": 0, "rate_hz": float("nan")}
+                t = self._tables[name]
+                rows = len(self._frames[name]) if t is None else t.num_rows
+                if rows:
+                    res[name] = {"rows": rows, "instances": 0, "rate_hz": float("nan")}
                 continue
+            if name not in timed:
+                continue
+            t, inst = timed[name]
             rates = []
-            for _, g in df.groupby("instance", observed=True):
-                span = (g["t_ns"].max() - g["t_ns"].min()) * 1e-9
+            for i in np.unique(inst):
+                g = t[inst == i]
+                span = (g.max() - g.min()) * 1e-9
                 rates.append((len(g) - 1) / span if span > 0 else float("nan"))
+            ok = [r for r in rates if r == r]
             res[name] = {
-                "rows": len(df),
-                "instances": int(df["instance"].nunique()),
-                "rate_hz": float(pd.Series(rates).mean()),
+                "rows": len(t),
+                "instances": int(len(np.unique(inst))),
+                "rate_hz": float(sum(ok) / len(ok)) if ok else float("nan"),
             }
         return res
 
@@ -125,12 +241,17 @@ class LogReader(abc.ABC):
         Reader version, bumped when decoded output changes (``meta['reader_version']``).
     priority : int
         Lower sniffs first (specific magic numbers before structural guesses).
+    reads_bytes : bool
+        The reader decodes the whole file from memory: :func:`~pipeline.io.registry.read_log`
+        reads the file once, hashes those bytes and passes them as ``read(..., data=buffer)``
+        (a read-only ``uint8`` NumPy array), so the file is read once per ingest.
     """
 
     name: str = ""
     source_format: str = ""
     version: str = "1"
     priority: int = 50
+    reads_bytes: bool = False
 
     @classmethod
     @abc.abstractmethod
@@ -147,6 +268,34 @@ class LogReader(abc.ABC):
         decoded; partial decodes return the valid records with drops counted in
         ``meta['diagnostics']``.
         """
+
+
+def read_file(path: str | os.PathLike) -> np.ndarray:
+    """The whole file as a read-only ``uint8`` array.
+
+    Memory-mapped with the pages populated at once (``MAP_POPULATE``, Linux): the bytes come
+    from the page cache without a copy or a page fault per 4 KiB, and the mapping goes away
+    with the last array viewing it. Elsewhere, or for an empty file, one ``readinto``.
+    """
+    import mmap
+
+    with open(path, "rb", buffering=0) as fh:
+        size = os.fstat(fh.fileno()).st_size
+        populate = getattr(mmap, "MAP_POPULATE", None)
+        if size and populate is not None and hasattr(mmap, "MAP_PRIVATE"):
+            m = mmap.mmap(fh.fileno(), size, flags=mmap.MAP_PRIVATE | populate, prot=mmap.PROT_READ)
+            return np.frombuffer(m, dtype=np.uint8)
+        buf = np.empty(size, dtype=np.uint8)
+        view = memoryview(buf)
+        got = 0
+        while got < size:
+            k = fh.readinto(view[got:])
+            if not k:
+                break
+            got += k
+    buf = buf[:got]
+    buf.flags.writeable = False
+    return buf
 
 
 def sha256_of(path: Path, chunk: int = 1 << 20) -> str:

@@ -44,7 +44,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+from .lazy import pandas as pd  # imported on first use (see lazy.py)
 
 from . import schema
 from .base import FlightLog, IngestError, LogReader, Progress

@@ -1,66 +1,151 @@
-"""Ingest one flight into the Parquet store — the function the workflow's ingest rule calls.
+"""Ingest one flight into the Parquet store: the stage's one entry point, :func:`run_ingest`.
 
-A log that cannot be decoded does not stop the workflow: :func:`run_ingest` writes every
-stream empty (full schema) and a ``meta.json`` with ``status: failed`` and the one-line
-``error``, so downstream rules write "failed" placeholders and the report index lists the
-flight with its reason.
+The workflow's rule and ``uavpipe ingest`` both call it, so both write the same files:
+``<stream>.parquet`` for every stream of :data:`pipeline.io.schema.STREAM_NAMES` and
+``meta.json``. A log that cannot be decoded does not stop the workflow: :func:`run_ingest`
+writes every stream empty (full schema) and a ``meta.json`` with ``status: failed`` and the
+one-line ``error``, says so in one line on stderr, so downstream rules write "failed"
+placeholders and the report index lists the flight with its reason.
+
+Rule adapter::
+
+    run_ingest(snakemake.input, snakemake.output, snakemake.params.config, **snakemake.params.job)
+
+with inputs ``log`` (path) and ``labels`` (list of 0 or 1 side-car paths), outputs ``meta``
+(``meta.json``) and ``streams`` (one ``<dir>/<stream>.parquet`` per stream), ``config`` the
+``ingest`` section and job values ``flight_id`` and ``fmt``.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Mapping
 
-from .base import FlightLog, IngestError
+from . import schema
+from .base import FlightLog, IngestError, Progress
 from .parquet import write_flightlog
 from .registry import read_log
 
 
-def _run_ingest_old(log_path: str | os.PathLike, out_dir: str | os.PathLike, *, flight_id: str,
-               fmt: str | None = None, labels: str | os.PathLike | None = None,
-               config: dict | None = None) -> FlightLog:
-    """Decode ``log_path`` and write ``out_dir/<stream>.parquet`` + ``out_dir/meta.json``.
+@dataclass(frozen=True)
+class IngestResult:
+    """What one ingest did.
+
+    Attributes
+    ----------
+    status : str
+        ``ok``, ``partial`` (records dropped or bytes skipped) or ``failed``.
+    diagnostics : dict
+        ``meta['diagnostics']`` as written (counts, warnings, timestamp anomalies).
+    duration_s : float
+        Flight duration (span of ``t_ns``), 0 when failed.
+    source_format : str or None
+        ``meta['source_format']``.
+    error : str or None
+        The one-line reason when failed.
+    paths : tuple of Path
+        The files written (streams, then ``meta.json``).
+    """
+
+    status: str
+    diagnostics: dict = field(default_factory=dict)
+    duration_s: float = 0.0
+    source_format: str | None = None
+    error: str | None = None
+    paths: tuple[Path, ...] = ()
+
+
+def _get(m, key: str, default=None):
+    """``m[key]`` for a dict or a Snakemake namedlist (attribute and key access)."""
+    if isinstance(m, Mapping):
+        return m.get(key, default)
+    try:
+        return m[key]
+    except (KeyError, IndexError, TypeError):
+        return getattr(m, key, default)
+
+
+def _one(v) -> str | None:
+    """A single path from a path or a list of 0 or 1 paths."""
+    if v is None or isinstance(v, (str, os.PathLike)):
+        return None if v in (None, "") else str(v)
+    v = list(v)
+    if len(v) > 1:
+        raise ValueError(f"expected at most one path, got {len(v)}: {v}")
+    return str(v[0]) if v else None
+
+
+def stream_paths(outputs) -> dict[str, Path]:
+    """``{stream: path, ..., "meta": path}`` from the declared outputs (``meta``, ``streams``).
+
+    Each stream path is matched by its file name ``<stream>.parquet``; every stream of
+    ``schema.STREAM_NAMES`` must be declared, and nothing else."""
+    streams = [Path(p) for p in _get(outputs, "streams")]
+    by_name = {p.name.removesuffix(".parquet"): p for p in streams}
+    missing = [s for s in schema.STREAM_NAMES if s not in by_name]
+    extra = [s for s in by_name if s not in schema.STREAM_NAMES]
+    if missing or extra or len(by_name) != len(streams):
+        raise ValueError(f"outputs.streams must name each of {', '.join(schema.STREAM_NAMES)}.parquet once"
+                         + (f"; missing {missing}" if missing else "") + (f"; unknown {extra}" if extra else ""))
+    return {**by_name, "meta": Path(_get(outputs, "meta"))}
+
+
+def outputs_for(out_dir: str | os.PathLike) -> dict:
+    """The declared outputs of one flight's ingest in ``out_dir``: ``{"meta": <out_dir>/meta.json,
+    "streams": [<out_dir>/<stream>.parquet for each stream]}`` (the workflow's layout)."""
+    d = Path(out_dir)
+    return {"meta": str(d / "meta.json"), "streams": [str(d / f"{s}.parquet") for s in schema.STREAM_NAMES]}
+
+
+def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str | None = None,
+               progress: Progress | None = None) -> IngestResult:
+    """Decode ``inputs.log`` and write exactly the declared ``outputs``.
 
     Parameters
     ----------
-    log_path : path-like
-        The flight log (file or ROS 2 bag directory).
-    out_dir : path-like
-        Output directory (``results/ingest/<flight>``).
+    inputs : mapping or namedlist
+        ``log``: the flight log (file or ROS 2 bag directory); ``labels``: a list of 0 or 1
+        labels/truth side-car paths (a single path is accepted too).
+    outputs : mapping or namedlist
+        ``meta``: the ``meta.json`` path; ``streams``: one ``<dir>/<stream>.parquet`` per
+        stream of ``schema.STREAM_NAMES``.
+    config : dict or None
+        The ``ingest`` config section (topic maps, column maps, ...).
     flight_id : str
         Manifest flight id.
     fmt : str, optional
         Forced reader name (manifest ``format`` column); detected from the bytes when empty.
-    labels : path-like, optional
-        A labels/truth side-car to attach (manifest ``labels`` column when it is a path).
-    config : dict, optional
-        The ``ingest`` config section.
+    progress : callable, optional
+        ``progress(done, total)`` while decoding (the CLI's progress bar).
 
     Returns
     -------
-    FlightLog
-        The decoded log, or an empty one with ``meta['status'] == 'failed'``.
+    IngestResult
+        ``status`` ``failed`` (with ``error``) when the log could not be decoded; the files
+        are written either way.
     """
-    kwargs = {"fmt": fmt or None, "flight_id": flight_id, "config": config}
+    log_path = _get(inputs, "log")
+    log_path = _one(log_path) if not isinstance(log_path, (str, os.PathLike)) else str(log_path)
+    labels = _one(_get(inputs, "labels"))
+    paths = stream_paths(outputs)
+    kwargs: dict[str, Any] = {"fmt": fmt or None, "flight_id": flight_id, "config": config or None,
+                              "progress": progress}
     if labels:
         kwargs["labels"] = labels
     try:
         log = read_log(log_path, **kwargs)
     except IngestError as exc:
-        print(f"uavpipe ingest: FAILED {exc}", file=sys.stderr)
+        print(f"uavpipe ingest: FAILED {exc}", file=sys.stderr)  # the one line; no traceback
         log = FlightLog.from_streams({"flight_id": flight_id, "source_path": str(log_path),
                                       "status": "failed", "error": exc.reason}, {})
-    else:
-        print(f"uavpipe ingest: {log_path} -> {out_dir} ({log.meta['source_format']}, "
-              f"{log.duration_s:.1f} s, {log.meta['status']})", file=sys.stderr)
-    write_flightlog(log, Path(out_dir))
-    return log
-
-
-def run_ingest(inputs, outputs, config=None, *, flight_id, fmt=None):  # TEMP shim until h-perf merge
-    labels = list(inputs.labels) if hasattr(inputs, "labels") else list(inputs.get("labels", []))
-    log = inputs.log if hasattr(inputs, "log") else inputs["log"]
-    meta = outputs.meta if hasattr(outputs, "meta") else outputs["meta"]
-    return _run_ingest_old(log, Path(meta).parent, flight_id=flight_id, fmt=fmt,
-                           labels=labels[0] if labels else None, config=config)
+    written = write_flightlog(log, paths=paths)
+    m = log.meta
+    duration = log.duration_s
+    if m["status"] != "failed":
+        print(f"uavpipe ingest: {log_path} -> {paths['meta'].parent} ({m['source_format']}, "
+              f"{duration:.1f} s, {m['status']})", file=sys.stderr)
+    return IngestResult(status=m["status"], diagnostics=m["diagnostics"], duration_s=duration,
+                        source_format=m.get("source_format"), error=m.get("error"), paths=tuple(written))

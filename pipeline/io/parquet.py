@@ -6,6 +6,10 @@ Layout (style.md §3.3): ``DIR/<stream>.parquet`` (ZSTD) for every canonical str
 has ``unit``/``frame`` field metadata. Writes are atomic (temp file + rename) so a killed job
 never leaves a half-written output that a cluster scheduler would take as done.
 :func:`read_flightlog` round-trips :func:`write_flightlog` exactly (values and dtypes).
+
+:func:`write_flightlog` writes the log's conformed Arrow tables as they are (no pandas, no
+second conform); files also carry the ``pandas`` schema metadata ``pa.Table.from_pandas``
+would write, so ``pd.read_parquet`` restores the same dtypes as for tables written from pandas.
 """
 
 from __future__ import annotations
@@ -14,16 +18,17 @@ import json
 import math
 import os
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from . import schema
 from .base import FlightLog
+from .lazy import pandas as pd  # imported on first use: the FlightLog path needs none
 
 META_KEY = b"uavpipe"
 
@@ -33,6 +38,20 @@ def _atomic_path(target: Path) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     os.close(fd)
     return Path(tmp)
+
+
+def _write_arrow(table: pa.Table, path: Path, meta: dict) -> None:
+    """Atomic ZSTD write of ``table`` with ``meta`` as the ``uavpipe`` schema metadata."""
+    md = dict(table.schema.metadata or {})
+    md[META_KEY] = json.dumps(meta, default=_json_default).encode()
+    table = table.replace_schema_metadata(md)
+    tmp = _atomic_path(path)
+    try:
+        pq.write_table(table, tmp, compression="zstd")
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
 
 
 def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Column, ...] | None = None,
@@ -62,16 +81,7 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Co
     meta = {"schema_version": schema.SCHEMA_VERSION, "table": name, "columns": colmeta}
     if extra:
         meta.update({k: v for k, v in extra.items() if k != "units"})
-    md = dict(table.schema.metadata or {})
-    md[META_KEY] = json.dumps(meta, default=_json_default).encode()
-    table = table.replace_schema_metadata(md)
-    tmp = _atomic_path(path)
-    try:
-        pq.write_table(table, tmp, compression="zstd")
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    _write_arrow(table, path, meta)
 
 
 def read_table_meta(path: str | os.PathLike) -> dict:
@@ -82,10 +92,10 @@ def read_table_meta(path: str | os.PathLike) -> dict:
 
 def read_table(path: str | os.PathLike, cols: tuple[schema.Column, ...] | None = None) -> pd.DataFrame:
     """Read a table written by :func:`write_table`, restoring declared pandas dtypes."""
-    df = pq.read_table(path).to_pandas()
+    table = pq.read_table(path)
     if cols is None:
-        return df
-    return pd.DataFrame({c.name: schema.cast(c, df[c.name]) for c in cols}) if len(df) else schema.empty(cols)
+        return table.to_pandas()
+    return schema.frame_from_arrow(tuple(cols), table)
 
 
 def _json_default(o: Any):
@@ -115,28 +125,53 @@ def write_json(obj: Any, path: str | os.PathLike) -> None:
             tmp.unlink()
 
 
-def write_flightlog(log: FlightLog, out_dir: str | os.PathLike) -> list[Path]:
-    """Write every canonical stream and ``meta.json`` into ``out_dir``; returns the paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = []
+def write_flightlog(log: FlightLog, out_dir: str | os.PathLike | None = None, *,
+                    paths: dict[str, str | os.PathLike] | None = None) -> list[Path]:
+    """Write every canonical stream and ``meta.json``; returns the paths written.
+
+    Either ``out_dir`` (``<out_dir>/<stream>.parquet`` and ``<out_dir>/meta.json``) or
+    ``paths``: ``{stream: path, ..., "meta": path}`` with every stream of
+    ``schema.STREAM_NAMES`` (the workflow's declared outputs). Each stream's conformed Arrow
+    table is written as it is (``FlightLog.table``), with the same units/frames/
+    ``schema_version`` metadata as :func:`write_table`.
+    """
+    if paths is None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {**{name: out / f"{name}.parquet" for name in schema.STREAM_NAMES}, "meta": out / "meta.json"}
+    def write_one(name: str) -> Path:
+        cols = schema.columns(name)
+        table = log.table(name)
+        md = dict(table.schema.metadata or {})
+        md[b"pandas"] = schema.pandas_metadata(cols, table)
+        table = table.replace_schema_metadata(md)
+        p = Path(paths[name])
+        meta = {"schema_version": schema.SCHEMA_VERSION, "table": name,
+                "columns": {c.name: {"unit": c.unit, "frame": c.frame} for c in cols},
+                "flight_id": log.meta.get("flight_id")}
+        _write_arrow(table, p, meta)
+        return p
+
     for name in schema.STREAM_NAMES:
-        df = schema.conform(name, log.streams.get(name))
-        p = out / f"{name}.parquet"
-        write_table(df, p, schema.columns(name), name=name, extra={"flight_id": log.meta.get("flight_id")})
-        paths.append(p)
-    mp = out / "meta.json"
+        log.table(name)  # build any stream held as a DataFrame here, not in the threads
+    # Parquet encoding and ZSTD release the GIL: the streams are written in parallel
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        written = list(pool.map(write_one, schema.STREAM_NAMES))
+    mp = Path(paths["meta"])
     write_json(log.meta, mp)
-    paths.append(mp)
-    return paths
+    written.append(mp)
+    return written
 
 
 def read_flightlog(in_dir: str | os.PathLike, streams: list[str] | None = None) -> FlightLog:
-    """Read a FlightLog written by :func:`write_flightlog` (all streams, or ``streams``)."""
+    """Read a FlightLog written by :func:`write_flightlog` (all streams, or ``streams``).
+
+    Streams are held as the Arrow tables read; ``log[name]`` converts one to pandas on first use."""
     d = Path(in_dir)
     meta = json.loads((d / "meta.json").read_text())
     out = {}
     for name in streams or schema.STREAM_NAMES:
         p = d / f"{name}.parquet"
-        out[name] = read_table(p, schema.columns(name)) if p.exists() else schema.empty(name)
+        out[name] = pq.read_table(p).replace_schema_metadata(None) if p.exists() \
+            else schema.empty_arrow(name)
     return FlightLog(meta=meta, streams=out)

@@ -5,10 +5,12 @@ subclass decorated with :func:`register`. :func:`detect` offers the first 64 KiB
 (or ``b""`` for a directory) to each reader's ``sniff`` in priority order; the first that
 claims it wins, and its one-line reason is recorded (``uavpipe info`` prints it).
 
-:func:`read_log` is the one entry point for ingest: detection, reading, ``meta`` bookkeeping
+:func:`read_log` is the one entry point for decoding: detection, reading, ``meta`` bookkeeping
 (sha256, size, reader, flight id) and the guarantee that failures surface as
 :class:`~pipeline.io.base.IngestError` naming the file and the reason, never as a library
-traceback.
+traceback. A file is read once: the sniffers see its first 64 KiB, and readers that decode
+from memory (``reads_bytes``) get the whole file, whose sha256 is computed from the same bytes
+(in a thread, while the reader decodes: hashlib releases the GIL).
 """
 
 from __future__ import annotations
@@ -19,7 +21,10 @@ import re
 import traceback
 from pathlib import Path
 
-from .base import FlightLog, IngestError, LogReader, Progress, sha256_of, source_size
+import hashlib
+import threading
+
+from .base import FlightLog, IngestError, LogReader, Progress, read_file, sha256_of, source_size
 
 #: Reader modules, imported on first use (each registers its reader class).
 READER_MODULES: tuple[str, ...] = ("dataflash", "tlog", "rosbag", "mcap_reader", "ulog", "flightcoach",
@@ -137,8 +142,20 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
             raise IngestError(p, "no such file or directory")
     else:
         reader_cls, reason = detect(p)
+    digest: dict[str, str] = {}
+    hasher = None
     try:
-        log = reader_cls().read(p, config=config, progress=progress)
+        if reader_cls.reads_bytes and p.is_file():
+            try:
+                data = read_file(p)
+            except OSError as exc:
+                raise IngestError(p, f"cannot read: {exc.strerror or exc}") from None
+            hasher = threading.Thread(target=lambda: digest.setdefault("sha256", hashlib.sha256(data).hexdigest()),
+                                      daemon=True)
+            hasher.start()
+            log = reader_cls().read(p, config=config, progress=progress, data=data)
+        else:
+            log = reader_cls().read(p, config=config, progress=progress)
     except IngestError:
         raise
     except MemoryError:
@@ -148,6 +165,9 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
         raise IngestError(
             p, f"{reader_cls.name} reader failed: {type(exc).__name__}: {exc} "
                f"(at {Path(where.filename).name}:{where.lineno})") from exc
+    finally:
+        if hasher is not None:
+            hasher.join()
     from .sidecar import attach_sidecar, find_sidecar
 
     side = Path(labels) if labels else find_sidecar(p)
@@ -160,7 +180,7 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
     m["reader"] = reader_cls.name
     m["reader_version"] = reader_cls.version
     m["detected_by"] = reason
-    m["source_sha256"] = sha256_of(p)
+    m["source_sha256"] = digest["sha256"] if hasher is not None else sha256_of(p)
     m["source_size_bytes"] = source_size(p)
     if m.get("status") == "ok" and (m["diagnostics"].get("bytes_skipped")
                                     or m["diagnostics"].get("records_dropped")):

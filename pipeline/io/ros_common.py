@@ -93,7 +93,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
-import pandas as pd
+from .lazy import pandas as pd  # imported on first use (see lazy.py)
 
 from ..config import ConfigError, build, cfield, default_at, validate_section
 from ..frames.rotations import enu_to_ned, flu_to_frd, quat_enu_flu_to_ned_frd, quat_normalize, quat_rotate

@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
+from .lazy import pandas as pd  # imported on first use: the Arrow path below needs none
 import pyarrow as pa
 
 SCHEMA_VERSION = "1.0.0"
@@ -521,3 +521,433 @@ def new_diagnostics() -> dict:
         "warnings": [],
         "record_counts": {},
     }
+
+
+# --------------------------------------------------------------------------------------------
+# Arrow-native tables: the ingest path builds, conforms and writes pyarrow tables without pandas
+# --------------------------------------------------------------------------------------------
+#
+# A conformed Arrow table of a stream has exactly the columns of ``arrow_schema(stream)`` in
+# canonical order, rows sorted stably by (``instance``, ``t_ns``) (``labels``: ``t_start_ns``),
+# and is what ``pa.Table.from_pandas(conform(stream, df), schema=arrow_schema(stream))`` gives
+# for the same data: missing values (NaN, None, NA) are nulls, ``src`` is a dictionary with
+# sorted values. ``tests/io/test_arrow_conform.py`` checks the two paths against each other.
+
+import functools as _functools  # noqa: E402  (new section: its imports stay with it)
+import json as _json  # noqa: E402
+
+
+# pyarrow's ``pa.array``, ``Array.to_numpy`` and ``Schema.empty_table`` import pandas when it is
+# installed; the helpers below build and read arrays through their buffers instead.
+
+def _bitmap(valid: np.ndarray) -> pa.Buffer:
+    return pa.py_buffer(np.packbits(valid, bitorder="little"))
+
+
+def np_to_arrow(a: np.ndarray, t: pa.DataType, mask: np.ndarray | None = None) -> pa.Array:
+    """Arrow array of type ``t`` over NumPy values ``a`` (``mask``: True = missing), without
+    pandas. Numeric types are zero-copy views of ``a`` (cast to ``t``'s width); ``bool`` is
+    bit-packed; ``string`` takes Python ``str`` values."""
+    n = len(a)
+    validity = None if mask is None or not mask.any() else _bitmap(~mask)
+    if pa.types.is_string(t):
+        enc = [b"" if (mask is not None and mask[i]) else x.encode() for i, x in enumerate(a.tolist())]
+        offsets = np.zeros(n + 1, np.int32)
+        np.cumsum([len(x) for x in enc], out=offsets[1:])
+        return pa.Array.from_buffers(t, n, [validity, pa.py_buffer(offsets), pa.py_buffer(b"".join(enc))])
+    if pa.types.is_boolean(t):
+        return pa.Array.from_buffers(t, n, [validity, _bitmap(a.astype(bool, copy=False))])
+    data = np.ascontiguousarray(a, dtype=_NP_OF[str(t)])
+    return pa.Array.from_buffers(t, n, [validity, pa.py_buffer(data)])
+
+
+_NP_OF = {"double": np.float64, "int64": np.int64, "uint8": np.uint8, "int32": np.int32, "int8": np.int8}
+
+
+def arrow_to_np(arr) -> np.ndarray:
+    """Values of a primitive Arrow array as NumPy (nulls hold whatever their slots hold; see
+    :func:`arrow_nulls`), without pandas. ``bool`` arrays come back unpacked."""
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    n, off = len(arr), arr.offset
+    buf = arr.buffers()[1]
+    if pa.types.is_boolean(arr.type):
+        if buf is None:
+            return np.zeros(n, bool)
+        bits = np.unpackbits(np.frombuffer(buf, np.uint8), bitorder="little")
+        return bits[off:off + n].astype(bool)
+    dt = _NP_OF[str(arr.type)]
+    if buf is None:
+        return np.zeros(n, dt)
+    return np.frombuffer(buf, dtype=dt, count=off + n)[off:]
+
+
+def arrow_nulls(arr) -> np.ndarray:
+    """Missing-value mask (True = null) of an Arrow array, without pandas."""
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    n = len(arr)
+    if not arr.null_count:
+        return np.zeros(n, bool)
+    if pa.types.is_null(arr.type):
+        return np.ones(n, bool)
+    bits = np.unpackbits(np.frombuffer(arr.buffers()[0], np.uint8), bitorder="little")
+    return ~bits[arr.offset:arr.offset + n].astype(bool)
+
+
+def empty_arrow(stream: str) -> pa.Table:
+    """An empty conformed Arrow table of ``stream``."""
+    sch = arrow_schema(stream)
+    return pa.Table.from_arrays([pa.nulls(0, f.type) for f in sch], schema=sch)
+
+
+def _part_len(part) -> int:
+    for v in part.values():
+        if not _is_scalar(v):
+            return len(v)
+    return 0
+
+
+def _is_scalar(v) -> bool:
+    return v is None or isinstance(v, (str, bytes, int, float, bool, np.generic))
+
+
+def _np_values(col: Column, v, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """One column of one part as (NumPy values, missing mask or ``None``), cast as
+    :func:`cast` casts (NumPy ``astype`` semantics); text columns give object arrays of str."""
+    if isinstance(v, (pa.Array, pa.ChunkedArray)):
+        arr = v.combine_chunks() if isinstance(v, pa.ChunkedArray) else v
+        if pa.types.is_dictionary(arr.type):
+            arr = arr.cast(pa.string()) if col.dtype in ("string", "category") else arr.dictionary_decode()
+        if pa.types.is_string(arr.type) or pa.types.is_large_string(arr.type) or pa.types.is_null(arr.type):
+            v = np.array(arr.to_pylist(), dtype=object)
+        else:
+            m = arrow_nulls(arr)
+            v = np.ma.masked_array(arrow_to_np(arr), mask=m) if m.any() else arrow_to_np(arr)
+    text = col.dtype in ("string", "category")
+    if _is_scalar(v):
+        if v is None:
+            if col.dtype in ("int64", "uint8", "bool") and n:
+                raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
+            fill = {"float64": np.nan, "boolean": False, "string": "", "category": ""}.get(col.dtype, 0)
+            return np.full(n, fill, dtype=object if text else None), np.ones(n, bool)
+        v = np.full(n, v, dtype=object if isinstance(v, str) else None)
+    mask = None
+    if isinstance(v, np.ma.MaskedArray):
+        mask = np.ma.getmaskarray(v)
+        v = np.ma.getdata(v)
+    a = np.asarray(v)
+    try:
+        if a.dtype == object:  # Python values; None/NaN/NA are missing
+            a, m2 = _from_objects(a, col)
+            mask = m2 if mask is None else (mask | m2)
+        if col.dtype == "float64":
+            a = a.astype(np.float64, copy=False)
+            nan = np.isnan(a)  # NaN is missing, as pa.Table.from_pandas makes it
+            if mask is not None:
+                nan |= mask
+            return a, nan if nan.any() else None
+        if col.dtype in ("int64", "uint8", "bool"):
+            if mask is not None and mask.any() or a.dtype.kind == "f" and np.isnan(a).any():
+                raise SchemaError(f"column {col.name!r} ({col.dtype}) contains missing values")
+            return a.astype(col.dtype, copy=False), None
+        if col.dtype in ("Int64", "boolean"):
+            if a.dtype.kind == "f":
+                bad = np.isnan(a)
+                mask = bad if mask is None else (mask | bad)
+                a = np.where(bad, 0, a)
+            return a.astype(np.int64 if col.dtype == "Int64" else bool, copy=False), mask
+        # string / category: text
+        if a.dtype.kind in "US":
+            a = a.astype(str).astype(object)
+        elif not all(isinstance(x, str) for x in a.tolist()):
+            a = np.array([x if isinstance(x, str) else str(x) for x in a.tolist()], dtype=object)
+        return a, mask
+    except (TypeError, ValueError, OverflowError) as exc:
+        if isinstance(exc, SchemaError):
+            raise
+        raise SchemaError(f"column {col.name!r} cannot be cast to {col.dtype}: {exc}") from None
+
+
+def _missing(x) -> bool:
+    """None, NaN or pandas' NA (recognised without importing pandas)."""
+    return x is None or (isinstance(x, float) and x != x) or type(x).__name__ in ("NAType", "NaTType")
+
+
+def _from_objects(a: np.ndarray, col: Column) -> tuple[np.ndarray, np.ndarray]:
+    """An object array as (values, missing mask); text columns keep the objects."""
+    items = a.tolist()
+    mask = np.fromiter((_missing(x) for x in items), dtype=bool, count=len(items))
+    if col.dtype in ("string", "category"):
+        return np.array(["" if m else x for x, m in zip(items, mask.tolist())], dtype=object), mask
+    fill = {"float64": np.nan, "boolean": False}.get(col.dtype, 0)
+    return np.array([fill if m else x for x, m in zip(items, mask.tolist())]), mask
+
+
+def _categories(col: Column, parts: list, lens: list[int]) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
+    """A dictionary column over all parts: (int32 codes, missing mask, sorted values), as
+    ``astype('category')`` orders them. A part may give one ``str`` for all its rows (no
+    per-row string is built)."""
+    vals: list[str] = []
+    index: dict[str, int] = {}
+
+    def code(x: str) -> int:
+        if x not in index:
+            index[x] = len(vals)
+            vals.append(x)
+        return index[x]
+
+    chunks = []  # (codes into vals, missing mask or None)
+    for part, n in zip(parts, lens):
+        v = part.get(col.name)
+        if isinstance(v, str):
+            chunks.append((np.full(n, code(v), np.int32), None))
+            continue
+        a, mask = _np_values(col, v, n)
+        uniq, inv = np.unique(a, return_inverse=True) if n else (np.empty(0, object), np.zeros(0, np.int64))
+        remap = np.array([code(x) for x in uniq.tolist()] or [0], np.int32)
+        chunks.append((remap[inv.reshape(-1)], mask))
+    if mask_needed := any(m is not None for _, m in chunks):
+        mask = np.concatenate([np.zeros(len(c), bool) if m is None else m for c, m in chunks])
+    else:
+        mask = None
+    # values that occur only in missing rows (the "" placeholder) are not categories
+    used = np.zeros(max(len(vals), 1), bool)
+    for c, m in chunks:
+        used[np.unique(c if m is None else c[~m])] = True
+    keep = sorted((i for i in range(len(vals)) if used[i]), key=lambda i: vals[i])
+    rank = np.zeros(max(len(vals), 1), np.int32)
+    rank[keep] = np.arange(len(keep), dtype=np.int32)
+    codes = rank[np.concatenate([c for c, _ in chunks])] if chunks else np.zeros(0, np.int32)
+    if mask_needed:
+        codes[mask] = 0
+    return codes, mask, [vals[i] for i in keep]
+
+
+def _np_columns(stream: str, data) -> tuple[dict[str, tuple], int]:
+    """``data`` (see :func:`arrow_table`) as ``{column: (values, mask[, categories])}`` in
+    arrival order, and the row count."""
+    cols = columns(stream)
+    if isinstance(data, pa.Table):
+        data = [{n: data.column(n) for n in data.column_names}]
+    elif isinstance(data, dict):
+        data = [data]
+    parts = [p for p in data if p is not None]
+    known = {c.name for c in cols}
+    for p in parts:
+        unknown = [k for k in p if k not in known]
+        if unknown:
+            raise SchemaError(f"stream {stream!r}: unknown column(s) {unknown}")
+    lens = [_part_len(p) for p in parts]
+    n = sum(lens)
+    out: dict[str, tuple] = {}
+    if n == 0:
+        return out, 0
+    for c in cols:
+        if c.dtype == "category":
+            out[c.name] = _categories(c, parts, lens)
+            continue
+        vals, masks = [], []
+        for p, m in zip(parts, lens):
+            v = p.get(c.name)
+            if v is None and c.name == "instance":
+                v = np.zeros(m, np.uint8)
+            if v is None and c.dtype in ("int64", "uint8", "bool") and m:
+                raise SchemaError(f"required column {c.name!r} missing")
+            a, mask = _np_values(c, v, m)
+            vals.append(a)
+            masks.append(mask)
+        a = vals[0] if len(vals) == 1 else np.concatenate(vals)
+        if all(m is None for m in masks):
+            mask = None
+        else:
+            mask = masks[0] if len(masks) == 1 else np.concatenate(
+                [np.zeros(len(v), bool) if m is None else m for v, m in zip(vals, masks)])
+        out[c.name] = (a, mask)
+    return out, n
+
+
+def _to_arrow(stream: str, cols_np: dict[str, tuple], order: np.ndarray | None) -> pa.Table:
+    sch = arrow_schema(stream)
+    arrays = []
+    for c, f in zip(columns(stream), sch):
+        entry = cols_np[c.name]
+        vals, mask = entry[0], entry[1]
+        if order is not None:
+            vals = vals[order]
+            mask = None if mask is None else mask[order]
+        if c.dtype == "category":
+            dictionary = np_to_arrow(np.array(entry[2], dtype=object), pa.string())
+            arrays.append(pa.DictionaryArray.from_arrays(np_to_arrow(vals, pa.int32(), mask), dictionary))
+        else:
+            arrays.append(np_to_arrow(vals, f.type, mask))
+    return pa.Table.from_arrays(arrays, schema=sch)
+
+
+def _sort_order(stream: str, cols_np: dict[str, tuple]) -> np.ndarray | None:
+    """Stable (``instance``, ``t_ns``) order (``labels``: ``t_start_ns``); ``None`` if sorted."""
+    if stream == "labels":
+        a = cols_np["t_start_ns"][0]
+        return None if np.all(a[1:] >= a[:-1]) else np.argsort(a, kind="stable")
+    inst, t = cols_np["instance"][0], cols_np["t_ns"][0]
+    same = inst[1:] == inst[:-1]
+    if np.all((inst[1:] > inst[:-1]) | (same & (t[1:] >= t[:-1]))):
+        return None
+    return np.lexsort([t, inst])
+
+
+def _anomalies_np(cols_np: dict[str, tuple]) -> dict[str, int]:
+    """:func:`timestamp_anomalies` (arrival order, per instance and ``src``) on NumPy columns."""
+    t = cols_np["t_ns"][0]
+    if len(t) < 2:
+        return {"backwards": 0, "duplicate": 0}
+    gid = cols_np["instance"][0].astype(np.int64)
+    codes, mask, cats = cols_np["src"]
+    # missing and "" are one group, as in timestamp_anomalies (fillna(""))
+    k = len(cats) + 1
+    empty = cats.index("") if "" in cats else len(cats)
+    src = codes.astype(np.int64)
+    if mask is not None:
+        src = np.where(mask, empty, src)
+    gid = gid * k + src
+    order = np.argsort(gid, kind="stable")
+    ts = t[order]
+    g = gid[order]
+    same = g[1:] == g[:-1]
+    d = np.diff(ts)
+    return {"backwards": int(np.sum((d < 0) & same)), "duplicate": int(np.sum((d == 0) & same))}
+
+
+def arrow_table(stream: str, data) -> pa.Table:
+    """``data`` as an Arrow table of ``stream``'s schema, rows in the order given (not sorted).
+
+    Parameters
+    ----------
+    stream : str
+        A canonical stream (``STREAM_NAMES``).
+    data : None, pyarrow.Table, pandas.DataFrame, mapping or list of mappings
+        Columns by name: NumPy arrays, Arrow arrays, masked arrays (masked = missing) or one
+        scalar for all rows (``src="IMU"``); a list of such mappings is concatenated in order
+        (absent columns of a part are missing values). A DataFrame goes through :func:`conform`
+        first (so its rows come back sorted).
+
+    Raises
+    ------
+    SchemaError
+        Unknown column, a missing required column, or a value that cannot be cast.
+    """
+    if data is None:
+        return empty_arrow(stream)
+    if hasattr(data, "iloc") and hasattr(data, "columns"):  # a pandas DataFrame
+        df = conform(stream, data)
+        return pa.Table.from_pandas(df[column_names(stream)], schema=arrow_schema(stream),
+                                    preserve_index=False).replace_schema_metadata(None)
+    cols_np, n = _np_columns(stream, data)
+    return _to_arrow(stream, cols_np, None) if n else empty_arrow(stream)
+
+
+def conform_arrow_counted(stream: str, data) -> tuple[pa.Table, dict[str, int]]:
+    """:func:`conform_arrow` and the stream's :func:`timestamp_anomalies` in arrival order
+    (zero for ``labels`` and for a DataFrame, which :func:`timestamp_anomalies` counts itself).
+
+    Rows are ordered in NumPy before the Arrow arrays are built (zero-copy views), so a
+    stream is gathered once."""
+    none = {"backwards": 0, "duplicate": 0}
+    if data is None or hasattr(data, "iloc") and hasattr(data, "columns"):
+        return sort_arrow(stream, arrow_table(stream, data)), none
+    cols_np, n = _np_columns(stream, data)
+    if not n:
+        return empty_arrow(stream), none
+    anomalies = none if stream == "labels" else _anomalies_np(cols_np)
+    return _to_arrow(stream, cols_np, _sort_order(stream, cols_np)), anomalies
+
+
+def sort_arrow(stream: str, table: pa.Table) -> pa.Table:
+    """Rows sorted stably by (``instance``, ``t_ns``) (``labels``: ``t_start_ns``), as :func:`conform`."""
+    if table.num_rows < 2:
+        return table
+    keys = ["t_start_ns"] if stream == "labels" else ["instance", "t_ns"]
+    order = _sort_order(stream, {k: (arrow_to_np(table.column(k)), None) for k in keys})
+    return table if order is None else table.take(np_to_arrow(order.astype(np.int64), pa.int64()))
+
+
+def conform_arrow(stream: str, data) -> pa.Table:
+    """The conformed Arrow table of ``stream``: canonical columns and types, missing columns
+    null, rows sorted stably by (``instance``, ``t_ns``).
+
+    Equals ``pa.Table.from_pandas(conform(stream, df), schema=arrow_schema(stream))`` for the
+    same data, without pandas for NumPy/Arrow input (see :func:`arrow_table` for the forms).
+    """
+    return conform_arrow_counted(stream, data)[0]
+
+
+def timestamp_anomalies_arrow(table: pa.Table) -> dict[str, int]:
+    """:func:`timestamp_anomalies` of an (unsorted, arrival-order) Arrow stream table."""
+    if table.num_rows < 2 or "t_ns" not in table.column_names:
+        return {"backwards": 0, "duplicate": 0}
+    cols = {n: table.column(n) for n in ("t_ns", "instance", "src") if n in table.column_names}
+    return _anomalies_np(_np_columns_like(cols, table.num_rows))
+
+
+def _np_columns_like(cols: dict, n: int) -> dict[str, tuple]:
+    out = {"t_ns": (arrow_to_np(cols["t_ns"]).astype(np.int64), None),
+           "instance": (arrow_to_np(cols["instance"]) if "instance" in cols else np.zeros(n, np.uint8), None)}
+    src = cols.get("src")
+    out["src"] = _categories(Column("src", "category"), [{"src": src}], [n]) if src is not None else \
+        (np.zeros(n, np.int32), None, [])
+    return out
+
+
+def frame_from_arrow(cols: tuple[Column, ...], table: pa.Table):
+    """pandas DataFrame of a table of declared columns, dtypes as :func:`conform` gives them.
+
+    Nullable integers are converted exactly (no float detour). Imports pandas (lazily: the
+    ingest path never calls this)."""
+    n = table.num_rows
+    out = {}
+    for c in cols:
+        if not n:
+            out[c.name] = _empty_series(c, 0)
+            continue
+        a = table.column(c.name).combine_chunks()
+        if c.dtype == "Int64":
+            mask = arrow_nulls(a)
+            vals = np.where(mask, 0, arrow_to_np(a)).astype(np.int64)
+            out[c.name] = pd.Series(pd.arrays.IntegerArray(vals, mask))
+        else:
+            out[c.name] = cast(c, pd.Series(a.to_pandas()))
+    return pd.DataFrame(out)
+
+
+def pandas_metadata(cols: tuple[Column, ...], table: pa.Table) -> bytes:
+    """The ``pandas`` schema metadata ``pa.Table.from_pandas`` writes for a conformed frame.
+
+    Written with Arrow-native tables so that ``pd.read_parquet`` restores the same dtypes
+    (nullable ``Int64``, ``string``, ``boolean``) as for files written from pandas."""
+    entries = []
+    for c in cols:
+        meta = None
+        pt = {"float64": "float64", "int64": "int64", "Int64": "int64", "uint8": "uint8", "bool": "bool",
+              "boolean": "bool", "string": "unicode", "category": "categorical"}[c.dtype]
+        nt = {"boolean": "boolean", "string": "string"}.get(c.dtype, c.dtype)
+        if c.dtype == "category":
+            col = table.column(c.name)
+            k = len(col.chunk(0).dictionary) if col.num_chunks else 0
+            meta = {"num_categories": k, "ordered": False}
+            nt = "int8" if k < 2**7 else "int16" if k < 2**15 else "int32"
+        entries.append({"name": c.name, "field_name": c.name, "pandas_type": pt, "numpy_type": nt,
+                        "metadata": meta})
+    return _json.dumps({"index_columns": [], "column_indexes": [], "columns": entries, "attributes": {},
+                        "creator": {"library": "pyarrow", "version": pa.__version__},
+                        "pandas_version": _pandas_version()}).encode()
+
+
+@_functools.lru_cache(maxsize=1)
+def _pandas_version() -> str:
+    """The installed pandas' version, read from its distribution metadata (no import)."""
+    import importlib.metadata as im
+
+    try:
+        return im.version("pandas")
+    except im.PackageNotFoundError:  # pragma: no cover - pandas is a core dependency
+        return ""

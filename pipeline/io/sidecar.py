@@ -20,7 +20,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
+from .lazy import pandas as pd  # imported on first use (see lazy.py)
 
 from . import schema
 from .base import FlightLog, IngestError

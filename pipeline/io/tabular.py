@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
+from .lazy import pandas as pd  # imported on first use (see lazy.py)
 import yaml
 
 from . import schema

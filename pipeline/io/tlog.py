@@ -124,7 +124,6 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from ..frames.rotations import euler_to_quat
 from . import schema
@@ -571,9 +570,9 @@ def _build(res: _Scan) -> FlightLog:
         v, scale = tab[field], _BOOT_SCALE[field]
         ok = (v >= 0) & (v <= np.iinfo(np.int64).max // scale)  # NaN compares False
         ns = np.where(ok, v, 0).astype(np.int64) * scale
-        return pd.arrays.IntegerArray(ns, ~ok)
+        return np.ma.masked_array(ns, mask=~ok)  # masked: no usable boot time (nullable Int64)
 
-    streams: dict[str, list[pd.DataFrame]] = defaultdict(list)
+    streams: dict[str, list[dict]] = defaultdict(list)  # stream -> parts (schema.arrow_table)
     autopilot = res.heartbeat_ids.get(vehicle, (None, None))[1] if vehicle else None
 
     # gps
@@ -586,7 +585,7 @@ def _build(res: _Scan) -> FlightLog:
         hacc = np.where(tab["h_acc"] > 0, tab["h_acc"] * 1e-3, _nan_int(tab["eph"], 0, 65535) * 0.01)
         vacc = np.where(tab["v_acc"] > 0, tab["v_acc"] * 1e-3, _nan_int(tab["epv"], 0, 65535) * 0.01)
         ell = np.where(tab["alt_ellipsoid"] != 0, tab["alt_ellipsoid"] * 1e-3, np.nan)
-        streams["gps"].append(pd.DataFrame({
+        streams["gps"].append(dict({
             "t_ns": t_ns(tab), "instance": inst, "src": mtype,
             "t_boot_ns": t_boot(tab, "time_usec"),
             "lat_deg": tab["lat"] * 1e-7, "lon_deg": tab["lon"] * 1e-7,
@@ -597,7 +596,7 @@ def _build(res: _Scan) -> FlightLog:
         }))
     tab = tabs.get("GLOBAL_POSITION_INT")
     if tab is not None and len(tab["ts"]):
-        streams["gps"].append(pd.DataFrame({
+        streams["gps"].append(dict({
             "t_ns": t_ns(tab), "instance": 1, "src": "GLOBAL_POSITION_INT",
             "t_boot_ns": t_boot(tab, "time_boot_ms"),
             "lat_deg": tab["lat"] * 1e-7, "lon_deg": tab["lon"] * 1e-7,
@@ -624,32 +623,32 @@ def _build(res: _Scan) -> FlightLog:
     for mtype, inst, tfield in imu_srcs:
         tab = tabs[mtype]
         base = {"t_ns": t_ns(tab), "instance": inst, "src": mtype, "t_boot_ns": t_boot(tab, tfield)}
-        streams["imu"].append(pd.DataFrame({
+        streams["imu"].append(dict({
             **base,
             **{f"gyr_{a}_radps": tab[f"{a}gyro"] * 1e-3 for a in "xyz"},
             **{f"acc_{a}_mps2": tab[f"{a}acc"] * (G0 * 1e-3) for a in "xyz"},
             "temp_degC": np.where(tab["temperature"] != 0, tab["temperature"] * 0.01, np.nan),
         }))
-        streams["mag"].append(pd.DataFrame({
+        streams["mag"].append(dict({
             **base, **{f"mag_{a}_T": tab[f"{a}mag"] * 1e-7 for a in "xyz"}}))
 
     # attitude
     tab = tabs.get("ATTITUDE")
     if tab is not None and len(tab["ts"]):
         q = euler_to_quat(tab["roll"], tab["pitch"], tab["yaw"])
-        streams["attitude"].append(pd.DataFrame({
+        streams["attitude"].append(dict({
             "t_ns": t_ns(tab), "instance": 0, "src": "ATTITUDE", "t_boot_ns": t_boot(tab, "time_boot_ms"),
             "q_w": q[:, 0], "q_x": q[:, 1], "q_y": q[:, 2], "q_z": q[:, 3]}))
     tab = tabs.get("ATTITUDE_QUATERNION")
     if tab is not None and len(tab["ts"]):
-        streams["attitude"].append(pd.DataFrame({
+        streams["attitude"].append(dict({
             "t_ns": t_ns(tab), "instance": 0, "src": "ATTITUDE_QUATERNION",
             "t_boot_ns": t_boot(tab, "time_boot_ms"),
             "q_w": tab["q1"], "q_x": tab["q2"], "q_y": tab["q3"], "q_z": tab["q4"]}))
 
     tab = tabs.get("LOCAL_POSITION_NED")
     if tab is not None and len(tab["ts"]):
-        streams["local_position"].append(pd.DataFrame({
+        streams["local_position"].append(dict({
             "t_ns": t_ns(tab), "instance": 0, "src": "LOCAL_POSITION_NED",
             "t_boot_ns": t_boot(tab, "time_boot_ms"),
             "pos_n_m": tab["x"], "pos_e_m": tab["y"], "pos_d_m": tab["z"],
@@ -659,13 +658,13 @@ def _build(res: _Scan) -> FlightLog:
         tab = tabs.get(mtype)
         if tab is None or not len(tab["ts"]):
             continue
-        streams["baro"].append(pd.DataFrame({
+        streams["baro"].append(dict({
             "t_ns": t_ns(tab), "instance": inst, "src": mtype, "t_boot_ns": t_boot(tab, "time_boot_ms"),
             "press_Pa": tab["press_abs"] * 100.0, "temp_degC": tab["temperature"] * 0.01}))
 
     tab = tabs.get("VFR_HUD")
     if tab is not None and len(tab["ts"]):
-        streams["airspeed"].append(pd.DataFrame({
+        streams["airspeed"].append(dict({
             "t_ns": t_ns(tab), "instance": 0, "src": "VFR_HUD", "airspeed_mps": tab["airspeed"]}))
 
     _control(tabs, streams, t_ns, t_boot)
@@ -674,7 +673,7 @@ def _build(res: _Scan) -> FlightLog:
     tab = tabs.get("DISTANCE_SENSOR")
     if tab is not None and len(tab["ts"]):
         cur = tab["current_distance"]
-        streams["rangefinder"].append(pd.DataFrame({
+        streams["rangefinder"].append(dict({
             "t_ns": t_ns(tab), "instance": tab["id"].astype(np.uint8), "src": "DISTANCE_SENSOR",
             "t_boot_ns": t_boot(tab, "time_boot_ms"), "dist_m": cur * 0.01,
             "valid": (cur >= tab["min_distance"]) & (cur <= tab["max_distance"]),
@@ -707,14 +706,13 @@ def _build(res: _Scan) -> FlightLog:
                  "autopilot": autopilot, "protocol_versions": sorted(res.protocols),
                  "bytes_decoded": int(res.bytes_kept)},
     )
-    out = {k: pd.concat(v, ignore_index=True) if len(v) > 1 else v[0] for k, v in streams.items()}
-    return FlightLog.from_streams(meta, out)
+    return FlightLog.from_streams(meta, dict(streams))
 
 
 def _control(tabs, streams, t_ns, t_boot) -> None:
     tab = tabs.get("RC_CHANNELS")
     if tab is not None and len(tab["ts"]):
-        streams["control"].append(pd.DataFrame({
+        streams["control"].append(dict({
             "t_ns": t_ns(tab), "instance": 0, "src": "RC_CHANNELS", "t_boot_ns": t_boot(tab, "time_boot_ms"),
             **{f"rc_{i}_us": _nan_int(tab[f"chan{i}_raw"], 0, 65535) for i in range(1, schema.N_RC + 1)}}))
     for mtype, prefix, n_in, out, n_out, tfield in (
@@ -731,7 +729,7 @@ def _control(tabs, streams, t_ns, t_boot) -> None:
             v = _nan_int(tab[f"{prefix}{i}_raw"], 0, 65535)
             ok = ch <= n_out
             cols[np.nonzero(ok)[0], ch[ok] - 1] = v[ok]
-        streams["control"].append(pd.DataFrame({
+        streams["control"].append(dict({
             "t_ns": t_ns(tab), "instance": 0, "src": mtype, "t_boot_ns": t_boot(tab, tfield),
             **{f"{out}_{j + 1}_us": cols[:, j] for j in range(n_out) if not np.isnan(cols[:, j]).all()}}))
 
@@ -744,9 +742,9 @@ def _mode(tabs, streams, t_ns) -> None:
     armed = (tab["base_mode"].astype(np.int64) & _ARMED) != 0
     change = np.ones(len(mode), dtype=bool)
     change[1:] = (mode[1:] != mode[:-1]) | (armed[1:] != armed[:-1])
-    streams["mode"].append(pd.DataFrame({
+    streams["mode"].append(dict({
         "t_ns": t_ns(tab)[change], "instance": 0, "src": "HEARTBEAT",
-        "mode": pd.array(mode[change].astype(str), dtype="string"), "armed": armed[change]}))
+        "mode": mode[change].astype(str).astype(object), "armed": armed[change]}))
 
 
 def _ned_origin(tabs, warnings: list[str]) -> dict | None:

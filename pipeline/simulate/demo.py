@@ -5,8 +5,8 @@ as a < 1 MB DataFlash log.
 :func:`write_demo_flight` turns it into physically consistent sensor records (IMU from the
 attitude's finite rotations, baro, magnetometer, GPS from the exact WGS-84 conversion about
 :data:`DEMO_ORIGIN`, RC, rangefinder, EKF) with seeded noise and writes them through
-:class:`pipeline.io.dataflash_writer.DataFlashWriter` in the catalogue's ``demo`` layout
-(:mod:`pipeline.io.dataflash_catalogue`). Same seed, same bytes.
+:class:`pipeline.io.dataflash.writer.DataFlashWriter` in the catalogue's ``demo`` layout
+(:mod:`pipeline.io.dataflash.catalogue`). Same seed, same bytes.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 
 from ..frames.geodesy import ned_to_geodetic
 from ..frames.rotations import dcm_to_euler, dcm_to_quat, quat_conj, quat_multiply
-from ..io.dataflash_writer import DataFlashWriter
+from ..io.dataflash.writer import DataFlashWriter
 
 G = 9.80665
 #: demo origin: a field near Austin, TX (where the real copter logs were flown)

@@ -5,7 +5,7 @@ This module only orchestrates: it simulates the sensor streams of one flight
 (:func:`pipeline.simulate.sensors.all_streams`) and hands them to the io writers, which take
 canonical streams and write files:
 
-* **DataFlash** :func:`pipeline.io.dataflash_writer.write_bin` (catalogue layout
+* **DataFlash** :func:`pipeline.io.dataflash.writer.write_bin` (catalogue layout
   ``ardupilot4``), with PARM ``RADR_SN/SE/SD`` (radar site, NED m), ``RADR_TAU`` (s) and the
   frame parameters, firmware banner ``ArduCopter V4.5.0 (uavpipe simulation)``;
 * **tlog** :func:`pipeline.io.tlog_writer.write_tlog_streams`;
@@ -25,7 +25,7 @@ from typing import Callable
 import pandas as pd
 
 from ..io import schema
-from ..io.dataflash_writer import write_bin
+from ..io.dataflash.writer import write_bin
 from ..io.ros_writer import write_ros1, write_ros2_mcap
 from ..io.sidecar import sidecar_path, write_sidecar
 from ..io.tlog_writer import write_tlog_streams

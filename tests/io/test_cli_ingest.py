@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -11,9 +12,13 @@ import pandas as pd
 import pytest
 
 from pipeline.cli import main
-from pipeline.io.ingest import run_ingest
+from pipeline.io import schema
+from pipeline.io.ingest import IngestResult, run_ingest
 from pipeline.io.parquet import read_flightlog
+from pipeline.io.registry import flight_id_for
 from pipeline.simulate.demo import write_demo_flight
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -58,12 +63,153 @@ def test_console_script_runs():
     assert p.returncode == 0 and "uavpipe" in p.stdout
 
 
-def test_run_ingest_records_failure_with_empty_streams(tmp_path):
+def _job(log, out_dir, labels=()):
+    """run_ingest arguments shaped as the workflow rule passes them."""
+    inputs = {"log": str(log), "labels": [str(x) for x in labels]}
+    outputs = {"meta": str(out_dir / "meta.json"),
+               "streams": [str(out_dir / f"{s}.parquet") for s in schema.STREAM_NAMES]}
+    return inputs, outputs
+
+
+def test_run_ingest_records_failure_with_empty_streams(tmp_path, capsys):
     bad = tmp_path / "x.bin"
     bad.write_bytes(b"")
-    log = run_ingest(bad, tmp_path / "o", flight_id="x")
-    assert log.meta["status"] == "failed" and "empty file" in log.meta["error"]
+    res = run_ingest(*_job(bad, tmp_path / "o"), None, flight_id="x")
+    assert isinstance(res, IngestResult)
+    assert res.status == "failed" and "empty file" in res.error
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "x.bin" in err and "FAILED" in err  # one line, no traceback
     back = read_flightlog(tmp_path / "o")
-    assert back.meta["status"] == "failed"
+    assert back.meta["status"] == "failed" and "empty file" in back.meta["error"]
     assert all(len(df) == 0 for df in back.streams.values())
     assert isinstance(back["imu"], pd.DataFrame) and "gyr_x_radps" in back["imu"].columns
+
+
+def test_run_ingest_writes_exactly_the_declared_outputs(demo_log, tmp_path):
+    inputs, outputs = _job(demo_log, tmp_path / "o")
+    res = run_ingest(inputs, outputs, {}, flight_id="demo-1")
+    assert res.status == "ok" and res.source_format == "ardupilot_dataflash" and res.duration_s > 0
+    assert res.diagnostics["record_counts"]["IMU"] > 0
+    written = sorted(str(p) for p in (tmp_path / "o").iterdir())
+    assert written == sorted([outputs["meta"], *outputs["streams"]])
+    assert sorted(str(p) for p in res.paths) == written
+    with pytest.raises(ValueError, match="outputs.streams"):
+        run_ingest(inputs, {**outputs, "streams": outputs["streams"][:-1]}, {}, flight_id="demo-1")
+
+
+def _read_all(d):
+    log = read_flightlog(d)
+    return {name: log[name] for name in schema.STREAM_NAMES}, json.loads((d / "meta.json").read_text())
+
+
+@pytest.mark.parametrize("which", ["demo", "bad"])
+def test_cli_ingest_equals_run_ingest_with_the_workflow_arguments(demo_log, tmp_path, which):
+    log = demo_log
+    if which == "bad":
+        log = tmp_path / "in" / "bad.bin"
+        log.parent.mkdir()
+        log.write_bytes(b"not a log at all\n" * 20)
+    from pipeline.config import DEFAULT_CONFIG, load_config, section
+
+    rc = main(["ingest", str(log), "-o", str(tmp_path / "cli"), "--config", str(DEFAULT_CONFIG)])
+    assert rc == (0 if which == "demo" else 1)
+    fid = flight_id_for(log)
+    # the workflow's call: the rule's declared paths and the config's ingest section
+    run_ingest(*_job(log, tmp_path / "wf" / fid), section(load_config(DEFAULT_CONFIG), "ingest"), flight_id=fid)
+    frames_cli, meta_cli = _read_all(tmp_path / "cli" / fid)
+    frames_wf, meta_wf = _read_all(tmp_path / "wf" / fid)
+    assert meta_cli == meta_wf  # source paths are the same input path; nothing ignored
+    for name in schema.STREAM_NAMES:
+        pd.testing.assert_frame_equal(frames_cli[name], frames_wf[name], check_exact=True)
+    if which == "bad":
+        assert meta_cli["status"] == "failed" and "unrecognised log format" in meta_cli["error"]
+
+
+def test_cli_ingest_bad_config_is_one_line(demo_log, tmp_path, capsys):
+    rc = main(["ingest", str(demo_log), "-o", str(tmp_path), "--config", str(tmp_path / "missing.yaml")])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("\n") == 1 and "missing.yaml" in err
+
+
+def _small_tlog(path: Path) -> Path:
+    """A short vehicle tlog: heartbeats, attitude and GPS (pymavlink-encoded)."""
+    from pymavlink.dialects.v20 import ardupilotmega as v2
+
+    from pipeline.io.tlog import write_tlog
+
+    m = v2.MAVLink(None)
+    t0 = 1_700_000_000_000_000
+    recs = []
+    for k in range(40):
+        t = t0 + k * 100_000
+        if k % 10 == 0:
+            recs.append((t, m.heartbeat_encode(2, 3, v2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 5, 4)))
+        recs.append((t + 1, m.attitude_encode(1000 + k * 100, 0.1, -0.2, 0.01 * k, 0.0, 0.0, 0.0)))
+        recs.append((t + 2, m.gps_raw_int_encode(1_000_000 + k * 100_000, 3, 473977420 + k, 85455940, 488000,
+                                                 121, 180, 250, 9000, 11, 536700, 850, 1300, 0, 0, 0)))
+    return write_tlog(path, recs)
+
+
+_NO_PANDAS = """
+import sys
+from pipeline.cli import main
+rc = main(sys.argv[1:])
+assert rc == 0, rc
+bad = sorted(m for m in sys.modules if m == "pandas" or m.startswith("pandas."))
+print("PANDAS" if bad else "NO-PANDAS")
+"""
+
+
+@pytest.mark.parametrize("kind", ["dataflash", "tlog"])
+@pytest.mark.parametrize("command", ["ingest", "info"])
+def test_ingest_and_info_do_not_import_pandas(demo_log, tmp_path, kind, command):
+    log = demo_log
+    if kind == "tlog":
+        log = _small_tlog(tmp_path / "flight.tlog")
+    args = ["ingest", str(log), "-o", str(tmp_path / "out")] if command == "ingest" else ["info", str(log)]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    p = subprocess.run([sys.executable, "-c", _NO_PANDAS, *args], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.strip().splitlines()[-1] == "NO-PANDAS"
+
+
+def test_ingest_reads_the_log_once(demo_log, tmp_path, monkeypatch):
+    import builtins
+
+    opened, real_open = [], builtins.open
+
+    def counting_open(file, *a, **k):
+        if str(file) == str(demo_log):
+            opened.append(file)
+        return real_open(file, *a, **k)
+
+    monkeypatch.setattr(builtins, "open", counting_open)
+    res = run_ingest(*_job(demo_log, tmp_path / "o"), None, flight_id="demo")
+    assert res.status == "ok"
+    assert len(opened) == 2  # the 64 KiB sniff head, then the whole file once (hashed from memory)
+    meta = json.loads((tmp_path / "o" / "meta.json").read_text())
+    import hashlib
+
+    assert meta["source_sha256"] == hashlib.sha256(demo_log.read_bytes()).hexdigest()
+
+
+def test_ingest_conforms_each_stream_once_and_never_through_pandas(demo_log, tmp_path, monkeypatch):
+    from pipeline.io import schema as sch
+
+    calls: list[str] = []
+    real = sch.conform_arrow_counted
+
+    def counted(stream, data):
+        calls.append(stream)
+        return real(stream, data)
+
+    def no_pandas_conform(*a, **k):
+        raise AssertionError("pandas conform on the DataFlash ingest path")
+
+    monkeypatch.setattr(sch, "conform_arrow_counted", counted)
+    monkeypatch.setattr(sch, "conform", no_pandas_conform)
+    res = run_ingest(*_job(demo_log, tmp_path / "o"), None, flight_id="demo")
+    assert res.status == "ok"
+    # every stream the decoder produced is conformed exactly once; written as conformed
+    assert sorted(calls) == sorted(set(calls)) and "imu" in calls

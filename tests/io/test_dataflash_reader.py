@@ -4,7 +4,7 @@ For every real ``.bin`` log the oracle is ``mavutil.mavlink_connection(path)`` +
 ``recv_msg()`` loop. We require the same record count for every message type, the same value
 for every field of every record (exact: pymavlink's own scaling is reproduced), and canonical
 GPS/IMU/attitude/baro/RC values equal to pymavlink's at the same samples after unit conversion.
-Synthetic logs from ``dataflash_writer`` cover the old TimeMS format, RADR and instances.
+Synthetic logs from ``pipeline.io.dataflash.writer`` cover the old TimeMS format, RADR and instances.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from helpers import realdata_file
 from pipeline.frames.rotations import quat_to_euler
 from pipeline.io import dataflash as df
 from pipeline.io.base import IngestError
-from pipeline.io.dataflash_writer import RADR, DataFlashWriter
+from pipeline.io.dataflash.writer import RADR, DataFlashWriter
 from pipeline.io.registry import detect, read_log
 from pipeline.simulate.demo import write_demo_flight
 

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from pipeline.io import dataflash as df
-from pipeline.io import dataflash_catalogue as cat
-from pipeline.io.dataflash_writer import DataFlashWriter
+from pipeline.io.dataflash import catalogue as cat
+from pipeline.io.dataflash.writer import DataFlashWriter
 from pipeline.simulate.demo import write_demo_flight
 
 

@@ -4,7 +4,7 @@ or in the valid records with the drops counted in ``meta['diagnostics']``.
 Cases (hypothesis, modest example counts): truncation at random offsets, random bytes, garbage
 spliced into (inserted into, or written over) a valid log, bit flips, an empty file, a tlog
 renamed ``.bin``, records of unknown types. Sources: real logs from ../shared/realdata (read,
-modified in memory, written to tmp_path only) and small logs written by dataflash_writer.
+modified in memory, written to tmp_path only) and small logs written by pipeline.io.dataflash.writer.
 For spliced garbage, >= 99 % of the oracle's records outside the splice are recovered among the
 types whose FMT survived; the others appear as ``format_lost:<type id>`` drops.
 """
@@ -23,7 +23,7 @@ from hypothesis import HealthCheck, Phase, given, settings, strategies as st
 from helpers import REALDATA, TEST_SEED
 from pipeline.io import dataflash as df
 from pipeline.io.base import FlightLog, IngestError
-from pipeline.io.dataflash_writer import DataFlashWriter
+from pipeline.io.dataflash.writer import DataFlashWriter
 from pipeline.io.registry import detect, read_log
 from pipeline.simulate.demo import write_demo_flight
 

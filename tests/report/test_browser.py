@@ -35,7 +35,7 @@ def _need_browser():
 def report_tree(tmp_path_factory) -> Path:
     """A results/ tree with the demo flight ingested, its report, plotly.js and the index."""
     from pipeline.simulate.demo import write_demo_flight
-    from pipeline.io.ingest import run_ingest
+    from pipeline.io.ingest import outputs_for, run_ingest
     from pipeline.report.flight import build_flight_report, write_plotly_js
     from pipeline.report.index import build_index
 
@@ -43,10 +43,10 @@ def report_tree(tmp_path_factory) -> Path:
     log = res / "sim" / "demo-quad.bin"
     log.parent.mkdir(parents=True)
     write_demo_flight(log, seed=1)
-    run_ingest(log, res / "ingest" / "demo-quad", flight_id="demo-quad")
+    run_ingest({"log": log}, outputs_for(res / "ingest" / "demo-quad"), None, flight_id="demo-quad")
     bad = res / "bad.bin"
     bad.write_bytes(b"garbage" * 50)
-    run_ingest(bad, res / "ingest" / "bad", flight_id="bad")
+    run_ingest({"log": bad}, outputs_for(res / "ingest" / "bad"), None, flight_id="bad")
     write_plotly_js(res / "report" / "assets" / "plotly.min.js")
     for f in ("demo-quad", "bad"):
         build_flight_report(res / "ingest" / f, res / "report" / "flights" / f"{f}.html",

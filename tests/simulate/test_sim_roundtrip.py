@@ -153,7 +153,7 @@ def test_bin_radar_params_and_pymavlink(written):
 def test_bin_declares_exactly_the_catalogue_ardupilot4_layout(written):
     from pymavlink import mavutil
 
-    from pipeline.io import dataflash_catalogue as cat
+    from pipeline.io.dataflash import catalogue as cat
 
     (paths, _), _, _ = written
     m = mavutil.mavlink_connection(str(paths["bin"]))

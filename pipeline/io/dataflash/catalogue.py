@@ -3,12 +3,12 @@
 A DataFlash log declares each message type in-band (``FMT``: type id, name, format characters,
 field labels; modern logs add ``FMTU`` with unit and multiplier ids resolved through ``UNIT``
 and ``MULT`` records). This module holds those declarations as data, so
-:class:`pipeline.io.dataflash_writer.DataFlashWriter` users name a *layout* instead of spelling
+:class:`pipeline.io.dataflash.writer.DataFlashWriter` users name a *layout* instead of spelling
 definitions out:
 
 ``ardupilot4``
     Modern ArduPilot (copied from ArduPlane 4.2 ``pilot_0004.BIN``, instance fields ``I``):
-    what the simulator's ``.bin`` files use (:func:`pipeline.io.dataflash_writer.write_bin`),
+    what the simulator's ``.bin`` files use (:func:`pipeline.io.dataflash.writer.write_bin`),
     plus the simulation radar :data:`RADR`.
 ``demo``
     The compact single-instance layout of the < 1 MB demo flight

@@ -12,7 +12,7 @@ bytes.
 Values are physical: scaled format characters are encoded as the reader decodes them
 (``c C e E`` store ``round(100·v)``, ``L`` stores ``round(10⁷·v)`` degrees), char fields take
 ``str`` and are NUL-padded. Message definitions come from the one catalogue
-(:mod:`pipeline.io.dataflash_catalogue`; :meth:`DataFlashWriter.define_layout`).
+(:mod:`pipeline.io.dataflash.catalogue`; :meth:`DataFlashWriter.define_layout`).
 
 :func:`write_bin` writes canonical streams (``imu``, ``gps``, ``attitude``, ``baro``,
 ``rangefinder``, ``control``, ``radar``) in the catalogue's ``ardupilot4`` layout: ``GPS`` +
@@ -31,9 +31,9 @@ from typing import TYPE_CHECKING, BinaryIO, Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..frames.rotations import quat_to_euler
-from . import dataflash_catalogue as cat
-from .dataflash import FMT_LEN, FMT_TYPE, FORMAT_CHARS, HEAD1, HEAD2, _format_dtype
+from ...frames.rotations import quat_to_euler
+from . import catalogue as cat
+from .decode import FMT_LEN, FMT_TYPE, FORMAT_CHARS, HEAD1, HEAD2, format_dtype
 
 if TYPE_CHECKING:  # annotations only: writing a log needs no pandas import
     import pandas as pd
@@ -140,7 +140,7 @@ class DataFlashWriter:
             raise ValueError(f"{name}: {len(cols)} labels for {len(fmt)} format characters")
         if name in self._types:
             raise ValueError(f"message {name} already defined")
-        dt = _format_dtype(fmt, cols)
+        dt = format_dtype(fmt, cols)
         if dt.itemsize + 3 > 255:
             raise ValueError(f"{name}: record of {dt.itemsize + 3} bytes exceeds 255")
         self._ensure_fmt_fmt()
@@ -171,7 +171,7 @@ class DataFlashWriter:
                 self.define_message(m)
 
     def define_message(self, m: cat.MessageDef) -> None:
-        """Declare one catalogue message (:class:`pipeline.io.dataflash_catalogue.MessageDef`)."""
+        """Declare one catalogue message (:class:`pipeline.io.dataflash.catalogue.MessageDef`)."""
         self.define(m.name, m.type_id, m.fmt, m.labels, units=m.units, mults=m.mults)
 
     def define_layout(self, name: str) -> None:

@@ -58,3 +58,11 @@ def pymavlink_messages(path) -> list:
         else:
             os.environ["MAVLINK20"] = saved[0]
         mavutil.mavlink, mavutil.current_dialect = saved[1], saved[2]
+
+
+def pymavlink_by_type(path) -> dict[str, list]:
+    """Every message of a log (DataFlash or tlog) through the pymavlink loop, grouped by type."""
+    out: dict[str, list] = {}
+    for msg in pymavlink_messages(path):
+        out.setdefault(msg.get_type(), []).append(msg)
+    return out

@@ -103,6 +103,16 @@ def _typestore(ros2: bool):
     return store
 
 
+def _write_messages(writer, msgs, t0_utc_ns: int, store, serialize) -> None:
+    """One connection per topic (in first-message order), then every message at its log time."""
+    conns = {}
+    for topic, mtype, _, _ in msgs:
+        if topic not in conns:
+            conns[topic] = writer.add_connection(topic, mtype, typestore=store)
+    for topic, mtype, tn, msg in msgs:
+        writer.write(conns[topic], t0_utc_ns + int(tn), serialize(msg, mtype))
+
+
 def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int) -> Path:
     """Write canonical streams as a ROS 1 bag (rosbags writer).
 
@@ -129,12 +139,7 @@ def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, 
     if path.exists():
         path.unlink()
     with Writer(path) as w:
-        conns = {}
-        for topic, mtype, _, _ in msgs:
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, mtype, typestore=store)
-        for topic, mtype, tn, msg in msgs:
-            w.write(conns[topic], t0_utc_ns + int(tn), store.serialize_ros1(msg, mtype))
+        _write_messages(w, msgs, t0_utc_ns, store, store.serialize_ros1)
     return path
 
 
@@ -163,10 +168,5 @@ def write_ros2_mcap(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame]
     if path.exists():
         shutil.rmtree(path)
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        conns = {}
-        for topic, mtype, _, _ in msgs:
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, mtype, typestore=store)
-        for topic, mtype, tn, msg in msgs:
-            w.write(conns[topic], t0_utc_ns + int(tn), store.serialize_cdr(msg, mtype))
+        _write_messages(w, msgs, t0_utc_ns, store, store.serialize_cdr)
     return path

@@ -5,27 +5,16 @@
 from __future__ import annotations
 
 import io
-from collections import defaultdict
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
+from helpers import pymavlink_by_type
 from pipeline.io import dataflash as df
 from pipeline.io.dataflash import catalogue as cat
 from pipeline.io.dataflash.writer import DataFlashWriter
 from pipeline.simulate.demo import write_demo_flight
-
-
-def pymavlink_messages(path) -> dict[str, list]:
-    from pymavlink import mavutil
-
-    m = mavutil.mavlink_connection(str(path))
-    out = defaultdict(list)
-    while (x := m.recv_msg()) is not None:
-        out[x.get_type()].append(x)
-    m.close()
-    return out
 
 
 ALL_CHARS = "bBhHiIfdnNZcCeELMqQ"
@@ -55,7 +44,7 @@ def test_every_format_char_roundtrips_through_both_readers(tmp_path):
         w.write_many("ALL1", {k: vals[k] for k in labels[:10]})
         w.write_many("ALL2", {k: vals[k] for k in labels[10:]})
     res = df.decode(p)
-    pm = pymavlink_messages(p)
+    pm = pymavlink_by_type(p)
     assert res.diagnostics["record_counts"] == {k: len(v) for k, v in pm.items()} == {
         "FMT": 3, "ALL1": n, "ALL2": n}
     for name in ("ALL1", "ALL2"):
@@ -143,7 +132,7 @@ def test_every_catalogue_layout_is_a_valid_set_of_definitions(layout, tmp_path):
         w.define_layout(layout)
     msgs = cat.layout(layout)
     assert len({m.type_id for m in msgs}) == len(msgs) and len({m.name for m in msgs}) == len(msgs)
-    fmts = {m.Name: (m.Type, m.Format, m.Columns) for m in pymavlink_messages(p)["FMT"]}
+    fmts = {m.Name: (m.Type, m.Format, m.Columns) for m in pymavlink_by_type(p)["FMT"]}
     for m in msgs:
         assert fmts[m.name] == (m.type_id, m.fmt, m.labels)
 
@@ -151,7 +140,7 @@ def test_every_catalogue_layout_is_a_valid_set_of_definitions(layout, tmp_path):
 def test_demo_flight_declares_exactly_the_catalogue_demo_layout(tmp_path):
     p = tmp_path / "d.bin"
     write_demo_flight(p, duration_s=2.0)
-    fmts = {m.Name: (m.Type, m.Format, m.Columns) for m in pymavlink_messages(p)["FMT"]}
+    fmts = {m.Name: (m.Type, m.Format, m.Columns) for m in pymavlink_by_type(p)["FMT"]}
     demo = {m.name: (m.type_id, m.fmt, m.labels) for m in cat.layout("demo")}
     unit_tables = {m.name: (m.type_id, m.fmt, m.labels) for m in (cat.UNIT, cat.MULT, cat.FMTU)}
     assert fmts == {"FMT": (128, "BBnNZ", "Type,Length,Name,Format,Columns"), **demo, **unit_tables}

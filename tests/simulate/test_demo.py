@@ -5,26 +5,15 @@ from __future__ import annotations
 
 import hashlib
 import io
-from collections import defaultdict
 
 import numpy as np
 import pytest
 
+from helpers import pymavlink_by_type
 from pipeline.frames.geodesy import geodetic_to_ned
 from pipeline.io import dataflash as df
 from pipeline.io.registry import read_log
 from pipeline.simulate.demo import demo_trajectory, write_demo_flight
-
-
-def pymavlink_messages(path) -> dict[str, list]:
-    from pymavlink import mavutil
-
-    m = mavutil.mavlink_connection(str(path))
-    out = defaultdict(list)
-    while (x := m.recv_msg()) is not None:
-        out[x.get_type()].append(x)
-    m.close()
-    return out
 
 
 def test_same_seed_same_bytes_and_seed_matters(tmp_path):
@@ -49,7 +38,7 @@ def demo(tmp_path_factory):
 def test_demo_flight_is_small_and_both_readers_agree(demo):
     p, info, log = demo
     assert p.stat().st_size < 1_000_000
-    pm = pymavlink_messages(p)
+    pm = pymavlink_by_type(p)
     counts = {k: len(v) for k, v in pm.items()}
     assert log.meta["diagnostics"]["record_counts"] == counts
     for k, n in info["records"].items():

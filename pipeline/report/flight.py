@@ -134,7 +134,11 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     if len(timelines) <= 1:
         figs.append(("Maneuver timeline", plots.timeline(seg, next(iter(timelines.values()), None))))
     else:
-        figs += [(f"Maneuver timeline ({m})", plots.timeline(seg, c)) for m, c in timelines.items()]
+        for m, c in timelines.items():
+            fig = plots.timeline(seg, c)
+            if fig is not None:
+                fig.update_layout(title=f"Maneuver timeline ({m})")
+            figs.append((f"Maneuver timeline ({m})", fig))
     divs = [(title, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
                                                       div_id=f"plot-{i}", config={"responsive": True}))
             for i, (title, f) in enumerate(figs)]

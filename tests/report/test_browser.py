@@ -53,9 +53,9 @@ def report_tree(tmp_path_factory) -> Path:
                             template=ROOT / "reports" / "templates" / "flight.html.j2",
                             plotly_js="../assets/plotly.min.js", index_href="../../index.html")
     # a tiny model trained on tiny simulated sets, evaluated, and its report
-    from pipeline.models.run import evaluate_model, train_model
+    from pipeline.models.run import run_evaluate, run_train
     from pipeline.report.model import build_model_report
-    from pipeline.simulate.run import run_simulate_sets
+    from pipeline.simulate.run import planned_sets, run_simulate_sets
 
     from pipeline.config import load_config
 
@@ -64,13 +64,17 @@ def report_tree(tmp_path_factory) -> Path:
     sim["datasets"] = {**sim["datasets"], "size": "tiny", "maneuvers": ["M1", "M2"],
                        "sizes": {"tiny": {"runs": 4, "mc_runs": 1, "switch_runs": 1, "log_flights": 0}}}
     sim["switch"] = {**sim["switch"], "times_s": [3]}
-    run_simulate_sets(res / "sim", sim, 7)
-    spec = {"data": "simulated", "labels": ["M1", "M2"], "vehicles": ["sim-quad"]}
+    run_simulate_sets({}, {"sets": [res / "sim" / "sets" / f"{n}.parquet" for n in planned_sets(sim)],
+                           "summary": res / "sim" / "summary.parquet", "index": res / "sim" / "index.json"},
+                      sim, seed=7)
+    spec = {"data": "simulated", "labels": ["M1", "M2"], "vehicles": ["sim-quad"],
+            "hmm": {**cfg["hmm"], "n_iter": 5, "gmm_restarts": 1, "init_min_samples": 20}}
     sets = [res / "sim" / "sets" / f"{m}_train.parquet" for m in ("M1", "M2")]
-    train_model("sim", spec, res / "models" / "sim", {**cfg["hmm"], "n_iter": 5, "gmm_restarts": 1,
-                                                       "init_min_samples": 20}, seed=cfg["seed"], sets=sets)
-    evaluate_model("sim", spec, res / "models" / "sim", res / "models" / "sim" / "evaluation.parquet",
-                   train_sets=sets, test_sets=[res / "sim" / "sets" / f"{m}_test.parquet" for m in ("M1", "M2")])
+    model = {"params": res / "models" / "sim" / "params.npz", "meta": res / "models" / "sim" / "meta.json"}
+    run_train({"sets": sets}, model, spec, model_set="sim", seed=cfg["seed"])
+    run_evaluate({**model, "train_sets": sets,
+                  "test_sets": [res / "sim" / "sets" / f"{m}_test.parquet" for m in ("M1", "M2")]},
+                 {"evaluation": res / "models" / "sim" / "evaluation.parquet"}, spec, model_set="sim")
     build_model_report(res / "models" / "sim", res / "models" / "sim" / "evaluation.parquet",
                        res / "report" / "models" / "sim.html", template=ROOT / "reports" / "templates" / "model.html.j2",
                        plotly_js="../assets/plotly.min.js")

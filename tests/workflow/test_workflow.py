@@ -285,7 +285,7 @@ def test_cli_ingest_equals_the_workflow(tiny_run, tmp_path):
     for p in sorted(ref.glob("*.parquet")):
         _frames_equal(p, out / p.name)
     a, b = (json.loads((d / "meta.json").read_text()) for d in (ref, out))
-    for k in ("flight_id", "source_path"):
+    for k in ("flight_id", "source_path", "labels_path"):  # where the files are, not what they hold
         a.pop(k, None), b.pop(k, None)
     assert a == b
 
@@ -328,7 +328,8 @@ def test_changing_only_the_seed_reruns_exactly_the_simulated_and_trained_outputs
     assert {"simulate_sets", "simulate_logs", "demo_log", "train_model"} <= set(jobs), jobs
     assert jobs["train_model"] == 3  # sim, sim2 and f3a
     # a hyperparameter change retrains and reclassifies, but simulates and ingests nothing
-    jobs = _planned_jobs(tiny_run, "--config", "hmm={n_iter: 4}")
+    (tiny_run / "datasets" / "hmm4.yaml").write_text("hmm: {n_iter: 4}\n")
+    jobs = _planned_jobs(tiny_run, "--configfile", "datasets/tiny.yaml", "datasets/hmm4.yaml")
     assert "train_model" in jobs and not {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight",
                                           "preprocess_flight"} & set(jobs), jobs
 
@@ -375,10 +376,10 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     assert "extra" in (res / "index.html").read_text()
 
     # one preprocessing parameter: preprocess + classify + reports of every flight, no ingest/simulate/train
-    cfg = wd / "datasets" / "config.yaml"
+    cfg = wd / "datasets" / "tiny.yaml"
     text = cfg.read_text()
-    assert "\n  rate_hz: 25 " in text
-    cfg.write_text(text.replace("\n  rate_hz: 25 ", "\n  rate_hz: 20 ", 1))
+    assert "preprocess:" not in text
+    cfg.write_text(text + "preprocess: {rate_hz: 20}\n")
     jobs = _planned_jobs(wd)
     assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "flight_report": 4, "report_index": 1,
                     "all": 1}, jobs

@@ -35,6 +35,7 @@ def tiny(ran, tmp_path_factory):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 def test_the_tiny_study_writes_results_report_and_page(tiny):
     assert tiny.result.status == "ok" and tiny.result.diagnostics["size"] == "tiny"
     text = Path(tiny.outputs["results"]).read_text().splitlines()
@@ -50,12 +51,14 @@ def test_the_tiny_study_writes_results_report_and_page(tiny):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 @pytest.mark.parametrize("table", STUDY_TABLES[NAME])
 def test_each_table_equals_the_old_script_at_tiny_size(tiny, golden, table):
     pd.testing.assert_frame_equal(tiny.table(table), pd.read_parquet(golden / f"{NAME}_tiny" / f"{table}.parquet"))
 
 
 @pytest.mark.realdata
+@pytest.mark.slow
 @pytest.mark.slow
 def test_the_full_study_meets_acceptance(ran, tmp_path):
     # the assertions of the former tests/models/test_models_studies.py, at the script's settings

@@ -24,6 +24,7 @@ def tiny(ran, tmp_path_factory):
     return ran(NAME, tmp_path_factory.mktemp("seed000"), {"size": "tiny"})
 
 
+@pytest.mark.slow
 def test_the_tiny_study_writes_results_report_and_page(tiny):
     assert tiny.result.status == "ok" and tiny.result.diagnostics["size"] == "tiny"
     text = Path(tiny.outputs["results"]).read_text().splitlines()
@@ -37,6 +38,7 @@ def test_the_tiny_study_writes_results_report_and_page(tiny):
     assert "<table" in page and "seed000_gmr_acc_rmse_mps2" in page and "Plotly.newPlot" in page
 
 
+@pytest.mark.slow
 def test_every_headline_figure_is_defined_in_one_sentence_on_the_page(tiny):
     page = Path(tiny.outputs["page"]).read_text()
     for metric in tiny.figures:
@@ -44,16 +46,19 @@ def test_every_headline_figure_is_defined_in_one_sentence_on_the_page(tiny):
         assert row.count("<td") == 2 and "<td>–</td>" not in row, metric
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("table", [t for t in STUDY_TABLES[NAME] if t != "gmr_error"])
 def test_each_table_equals_the_old_script_at_tiny_size(tiny, golden, table):
     pd.testing.assert_frame_equal(tiny.table(table), pd.read_parquet(golden / f"{NAME}_tiny" / f"{table}.parquet"))
 
 
+@pytest.mark.slow
 def test_the_gmr_error_table_equals_the_old_script_summary_at_tiny_size(tiny, golden, gmr_error_summary):
     got = gmr_error_summary(tiny.table("gmr_error"))
     pd.testing.assert_frame_equal(got, pd.read_parquet(golden / f"{NAME}_tiny" / "gmr_error_summary.parquet"))
 
 
+@pytest.mark.slow
 def test_the_tiny_study_meets_the_acceptance_figures_of_the_script_smoke_test(tiny):
     # the assertions of the former tests/models/test_models_studies.py::test_seed000_study_smoke
     r = tiny.figures

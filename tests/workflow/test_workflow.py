@@ -69,12 +69,14 @@ STAGES = ("demo_log", "simulate_sets", "simulate_logs", "ingest_flight", "prepro
           "evaluate_model", "classify_flight", "flight_report", "model_report", "report_index", "plotly_js", "all")
 
 
+@pytest.mark.slow
 def test_lint_is_clean():
     p = subprocess.run([SNAKEMAKE, "--lint"], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "Congratulations" in p.stdout + p.stderr
 
 
+@pytest.mark.slow
 def test_dry_run_default_config_plans_every_stage():
     """The real default: datasets/config.yaml + datasets/flights.tsv, in the checkout itself."""
     jobs = _planned_jobs(ROOT, "--forceall")
@@ -87,6 +89,7 @@ def test_dry_run_default_config_plans_every_stage():
     assert jobs["model_report"] == jobs["train_model"] >= 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target,rules", [
     ("simulate", {"simulate_sets", "simulate_logs", "simulate"}),
     ("ingest", {"demo_log", "simulate_logs", "ingest_flight", "ingest"}),
@@ -103,6 +106,7 @@ def test_named_stage_targets(tmp_path, target, rules):
     assert set(_planned_jobs(wd, target)) == rules
 
 
+@pytest.mark.slow
 def test_bad_config_key_fails_at_start_naming_it(tmp_path):
     wd = _copy_workflow(tmp_path / "wf", [DEMO], extra_config="\nnot_a_key: 1\n")
     p = _smk(wd, "-n", check=False)
@@ -171,6 +175,7 @@ def test_bad_key_or_value_in_every_section_stops_the_cli_with_one_line(tmp_path,
     assert not (tmp_path / "OUT").exists()  # nothing ran
 
 
+@pytest.mark.slow
 def test_bad_manifest_value_fails_at_start_naming_it(tmp_path):
     wd = _copy_workflow(tmp_path / "wf", [DEMO.replace("\ttest\t", "\tsometimes\t")])
     p = _smk(wd, "-n", check=False)
@@ -178,6 +183,7 @@ def test_bad_manifest_value_fails_at_start_naming_it(tmp_path):
     assert "sometimes" in p.stdout + p.stderr
 
 
+@pytest.mark.slow
 def test_manifest_row_for_unsimulated_log_fails_at_start(tmp_path):
     # the tiny config simulates M1 and M2 only
     wd = _copy_workflow(tmp_path / "wf", [SIM.replace("M1", "M3")])
@@ -186,6 +192,7 @@ def test_manifest_row_for_unsimulated_log_fails_at_start(tmp_path):
     assert "sim-M3-000-bin" in p.stdout + p.stderr and "not written by the simulate stage" in p.stdout + p.stderr
 
 
+@pytest.mark.slow
 def test_absent_real_log_is_skipped_with_notice(tmp_path):
     wd = _copy_workflow(tmp_path / "wf", [DEMO, "ghost\t/nonexistent/x.bin\tq\tnone\tnone\t\tgone"])
     p = _smk(wd, "-n")

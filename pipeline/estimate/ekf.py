@@ -177,7 +177,11 @@ class ExtendedKalmanFilter:
         H = _c(H)
         PHT = P @ _c(_T(H))
         S = H @ PHT + Rs
-        Si, Li = _spd_inverse(S)
+        try:
+            Si, Li = _spd_inverse(S)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"update at t_ns={pred.t_ns}: the innovation covariance H P Hᵀ + R is not "
+                             "positive definite (a non-finite or degenerate state/covariance)") from None
         K = PHT @ Si  # P Hᵀ S⁻¹, as filterpy
         Ly = np.matmul(Li, y[..., None])[..., 0]
         mean = x + np.matmul(K, y[..., None])[..., 0]

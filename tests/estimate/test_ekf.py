@@ -146,3 +146,27 @@ def test_tune_q_finds_the_true_q_on_a_synthetic_case():
     assert np.argmin(tuned.score) == 2
     with pytest.raises(ValueError, match="positive"):
         tune_q(truth, z, np.arange(n_steps) * DT_NS, meas, [0.0, 1.0])
+
+
+def test_a_radar_gap_in_one_run_is_a_predict_only_step_for_that_run_alone(rng):
+    radar = RadarModel(site_ned_m=(-200.0, 150.0, 0.0))
+    n_steps = 20
+    truth = simulate_white_jerk(2, n_steps, DT, 1.0, X0, rng=rng)
+    z = measure(radar, truth, rng)
+    z[5:8, 1] = np.nan  # run 1 loses three radar samples
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), radar)
+    prior = GaussianState(np.tile(X0, (2, 1)), np.broadcast_to(initial_cov(), (2, 9, 9)), 0)
+    t_ns = np.arange(n_steps) * DT_NS
+    track = run_filter(ekf, prior, t_ns, z)
+    assert track.n_predict_only.tolist() == [0, 3] and track.dof[1, 5:8].tolist() == [0, 0, 0]
+    # run 1 by itself: the gap steps are predictions only
+    one = GaussianState(X0, initial_cov(), 0)
+    for k in range(n_steps):
+        if k:
+            one = ekf.predict(one, int(t_ns[k]))
+        if not 5 <= k < 8:
+            one = ekf.update(one, z[k, 1])
+        np.testing.assert_allclose(track.mean[1, k], one.mean, rtol=1e-12)
+        np.testing.assert_allclose(track.cov[1, k], one.cov, rtol=1e-9, atol=1e-15)
+    np.testing.assert_array_equal(track.pred_cov[1, 6], track.cov[1, 6])  # nothing measured, nothing changed
+    assert np.trace(track.cov[1, 7]) > np.trace(track.cov[0, 7])

@@ -50,21 +50,38 @@ def _c(a: F64) -> F64:
 def _spd_inverse(S: F64) -> tuple[F64, F64]:
     """``(S⁻¹, L⁻¹)`` of stacked symmetric positive definite ``S`` (..., n, n), ``S = L Lᵀ``.
 
-    A batched Cholesky, then the triangular inverse by forward substitution on scalars
-    vectorised over the stack (``L⁻¹[i, j] = −Σ_{j≤k<i} L[i, k] L⁻¹[k, j] / L[i, i]``), then
-    ``S⁻¹ = L⁻ᵀ L⁻¹``: several times faster than ``np.linalg.solve``/``inv`` on many small
-    systems, which call LAPACK once per matrix. An SPD matrix needs no pivoting.
+    Cholesky–Banachiewicz and the triangular inverse by forward substitution, both on scalar
+    planes vectorised over the stack (``L⁻¹[i, j] = −Σ_{j≤k<i} L[i, k] L⁻¹[k, j] / L[i, i]``),
+    then ``S⁻¹ = L⁻ᵀ L⁻¹``: several times faster than LAPACK (``np.linalg.cholesky``/``solve``/
+    ``inv``), which is called once per matrix, on many small systems (n = 4 for the radar). An
+    SPD matrix needs no pivoting.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where a matrix is not positive definite.
     """
-    L = np.linalg.cholesky(S)
     n = S.shape[-1]
-    Lt = np.moveaxis(L, (-2, -1), (0, 1))  # (n, n, ...): scalar planes over the stack
-    Li = np.zeros_like(Lt)
+    St = np.ascontiguousarray(np.moveaxis(S, (-2, -1), (0, 1)))  # (n, n, ...) planes
+    L = np.zeros_like(St)
     for i in range(n):
-        Li[i, i] = 1.0 / Lt[i, i]
+        for j in range(i + 1):
+            acc = St[i, j].copy()
+            for k in range(j):
+                acc -= L[i, k] * L[j, k]
+            if i == j:
+                if not np.all(acc > 0):
+                    raise np.linalg.LinAlgError("Matrix is not positive definite")
+                L[i, i] = np.sqrt(acc)
+            else:
+                L[i, j] = acc / L[j, j]
+    Li = np.zeros_like(L)
+    for i in range(n):
+        Li[i, i] = 1.0 / L[i, i]
         for j in range(i):
-            acc = Lt[i, j] * Li[j, j]
+            acc = L[i, j] * Li[j, j]
             for k in range(j + 1, i):
-                acc = acc + Lt[i, k] * Li[k, j]
+                acc += L[i, k] * Li[k, j]
             Li[i, j] = -acc * Li[i, i]
     Li = np.ascontiguousarray(np.moveaxis(Li, (0, 1), (-2, -1)))
     return _c(_T(Li)) @ Li, Li
@@ -189,13 +206,13 @@ class ExtendedKalmanFilter:
             # the product form keeps P symmetric positive definite under round-off (an expanded
             # form loses it with the radar's 45 µrad against metres of position variance)
             IKH = K @ H
-            np.negative(IKH, out=IKH)
-            IKH[..., range(n_x), range(n_x)] += 1.0
+            np.subtract(np.eye(n_x), IKH, out=IKH)
             cov = IKH @ P @ _c(_T(IKH))
+            KT = _c(_T(K))
             if Rs.ndim == 2 and not np.any(Rs - np.diag(np.diagonal(Rs))):
-                cov += (K * np.diagonal(Rs)) @ _c(_T(K))  # diagonal R: K R = K·diag(R)
+                cov += (K * np.diagonal(Rs)) @ KT  # diagonal R: K R = K·diag(R)
             else:
-                cov += K @ Rs @ _c(_T(K))
+                cov += K @ Rs @ KT
         else:
             A = P - K @ _c(_T(PHT))  # (I − KH)P = P − K (HP)
             cov = 0.5 * (A + _T(A))

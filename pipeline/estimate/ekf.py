@@ -276,6 +276,13 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     Returns
     -------
     FilterTrack
+
+    Notes
+    -----
+    Each step is a dozen stacked 9×9 products over the runs (~650 KB temporaries at 1000
+    runs). Two process settings matter more than anything inside: single-threaded BLAS, and a
+    glibc heap that keeps freed blocks (``mallopt`` M_TRIM/M_MMAP_THRESHOLD; otherwise every
+    temporary is page-faulted in afresh, ~2× slower on a VM). ``benchmarks/ekf.py`` sets both.
     """
     if store not in ("all", "filtered", "mean"):
         raise ValueError(f"run_filter: store must be 'all', 'filtered' or 'mean', not {store!r}")

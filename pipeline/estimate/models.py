@@ -137,3 +137,102 @@ def ca_transition(dt: float, n_axes: int = 3) -> F64:
     """Constant-acceleration transition for state ``[r(3), v(3), a(3)]`` (seed 000 eq. 2.16)."""
     i = np.eye(n_axes)
     return np.block([[i, dt * i, 0.5 * dt * dt * i], [0 * i, i, dt * i], [0 * i, 0 * i, i]])
+
+
+#: index of each group in the CA state ``[r(3), v(3), a(3)]`` (NED)
+STATE_GROUPS: dict[str, slice] = {"pos": slice(0, 3), "vel": slice(3, 6), "acc": slice(6, 9)}
+
+#: the 9 CA state columns, in state order (the ``state`` table's names)
+STATE_COLUMNS: tuple[str, ...] = (
+    *(f"pos_{a}_m" for a in "ned"), *(f"vel_{a}_mps" for a in "ned"), *(f"acc_{a}_mps2" for a in "ned"))
+
+
+def white_jerk_q(dt: float, q: float, n_axes: int = 3) -> F64:
+    """Process noise of the CA model driven by continuous white jerk (seed 000 §3 eq. 2.16, §13.7).
+
+    The thesis leaves Q open (§3: "Bryson's trick", no values; §13.7 suggests a white-jerk
+    discrete Q tuned by Monte Carlo). Per axis, with jerk ``w(t)`` white of spectral density
+    ``q`` (m²/s⁵) and ``F = [[0,1,0],[0,0,1],[0,0,0]]``, the exact discretisation
+    ``Q = ∫₀^dt e^{Fτ} G q Gᵀ e^{Fᵀτ} dτ`` with ``G = [0, 0, 1]ᵀ`` is
+
+    .. math::
+
+        Q_1(dt, q) = q\\begin{bmatrix} dt^5/20 & dt^4/8 & dt^3/6 \\\\
+                                        dt^4/8 & dt^3/3 & dt^2/2 \\\\
+                                        dt^3/6 & dt^2/2 & dt \\end{bmatrix}
+
+    (Bar-Shalom, Li & Kirubarajan 2001, eq. 6.2.3-8). The axes are independent and the state
+    is ordered by group (``[r, v, a]``, as :func:`ca_transition`), so ``Q = Q_1 ⊗ I_3``.
+
+    Parameters
+    ----------
+    dt : float
+        Step (s).
+    q : float
+        Jerk power spectral density (m²/s⁵), the one tuned scalar.
+    n_axes : int
+        Number of axes (3: NED).
+
+    Returns
+    -------
+    ndarray, shape (3 n_axes, 3 n_axes)
+    """
+    q1 = q * np.array([[dt ** 5 / 20, dt ** 4 / 8, dt ** 3 / 6],
+                       [dt ** 4 / 8, dt ** 3 / 3, dt ** 2 / 2],
+                       [dt ** 3 / 6, dt ** 2 / 2, dt]])
+    return np.kron(q1, np.eye(n_axes))
+
+
+def hmm_transition(dt: float, n_axes: int = 3) -> F64:
+    """HMM-input transition ``A_H`` of the EKF+HMM (seed 000 §8, eq. 4.2).
+
+    Per axis
+
+    .. math::
+
+        A_H = \\begin{bmatrix} 1 & dt & 0 \\\\ 0 & 1 & 0 \\\\ 0 & 0 & 0 \\end{bmatrix},\\qquad
+        x_{k+1} = A_H x_k + B \\begin{bmatrix}\\hat a_{HMM} \\\\ \\hat\\jmath_{HMM}\\end{bmatrix}
+
+    so the predicted acceleration is the GMR input only (the state's own ``a`` is dropped); the
+    covariance is propagated as ``A_H C A_Hᵀ + Q₂`` (eq. 4.4 with the §13.2 fix). State ordered
+    ``[r(3), v(3), a(3)]``: ``A_H = A_{H,1} ⊗ I_3``.
+
+    Returns
+    -------
+    ndarray, shape (3 n_axes, 3 n_axes)
+    """
+    a1 = np.array([[1.0, dt, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])
+    return np.kron(a1, np.eye(n_axes))
+
+
+def hmm_input(dt: float, n_axes: int = 3) -> F64:
+    """Input matrix ``B`` of the EKF+HMM (seed 000 §8, eq. 4.3).
+
+    Per axis
+
+    .. math::
+
+        B = \\begin{bmatrix} dt^2/2 & dt^3/6 \\\\ dt & dt^2/2 \\\\ 1 & dt \\end{bmatrix}
+
+    acting on ``u = [â_HMM; ĵ_HMM]``, so ``a_{k+1} = â + dt ĵ``, ``v_{k+1} = v_k + dt â +
+    dt²/2 ĵ`` and ``r_{k+1} = r_k + dt v_k + dt²/2 â + dt³/6 ĵ`` (a constant-jerk step from
+    ``â``). With the state ``[r(3), v(3), a(3)]`` and ``u = [â(3), ĵ(3)]``: ``B = B_1 ⊗ I_3``.
+
+    Returns
+    -------
+    ndarray, shape (3 n_axes, 2 n_axes)
+    """
+    b1 = np.array([[dt ** 2 / 2, dt ** 3 / 6], [dt, dt ** 2 / 2], [1.0, dt]])
+    return np.kron(b1, np.eye(n_axes))
+
+
+#: seed-000 names of the EKF+HMM matrices (digest §8)
+A_H = hmm_transition
+B = hmm_input
+Q = white_jerk_q
+
+
+def initial_cov(sigma: tuple[float, float, float] = (1.0, 0.1, 0.01), n_axes: int = 3) -> F64:
+    """Initial covariance ``P₀ = diag(σ_r², σ_v², σ_a²)`` per axis group (seed 000 §3,
+    Ch. 2 MC initialisation ``[1·randn(3); 0.1·randn(3); 0.01·randn(3)]``)."""
+    return np.diag(np.repeat(np.square(np.asarray(sigma, dtype=np.float64)), n_axes))

@@ -270,6 +270,23 @@ MODEL_EVALUATION: tuple[Column, ...] = (
 )
 EVAL_COLUMNS: tuple[str, ...] = tuple(c.name for c in MODEL_EVALUATION)
 
+#: Columns of an estimator output table (estimate ``results/estimate/<estimator>/<flight>.parquet``):
+#: the 9-state CA estimate ``x_<state column>`` in the ``state`` table's names (NED), the upper
+#: triangle of its covariance ``P_<i>_<j>`` (i <= j, state order pos n/e/d, vel n/e/d, acc
+#: n/e/d; unit the product of the two states' units), the NIS and, where there is truth, the
+#: NEES (NaN otherwise).
+_EST_STATE = (*((f"pos_{a}_m", "m") for a in _NED), *((f"vel_{a}_mps", "m/s") for a in _NED),
+              *((f"acc_{a}_mps2", "m/s^2") for a in _NED))
+ESTIMATE: tuple[Column, ...] = (
+    Column("t_ns", "int64", "ns"),
+    *(_f(f"x_{n}", u, "NED", "estimate") for n, u in _EST_STATE),
+    *(_f(f"P_{i}_{j}", f"({_EST_STATE[i][1]})*({_EST_STATE[j][1]})", "NED",
+         f"covariance of x_{_EST_STATE[i][0]} and x_{_EST_STATE[j][0]}")
+      for i in range(9) for j in range(i, 9)),
+    _f("nis", "1", "", "normalised innovation squared (0 on predict-only steps)"),
+    _f("nees", "1", "", "normalised estimation error squared (NaN without truth)"),
+)
+
 #: Every table of every stage by name: the canonical streams (common columns first), ``labels``
 #: and the derived tables. :func:`columns`, :func:`empty` and :func:`conform` take these names.
 TABLES: dict[str, tuple[Column, ...]] = {
@@ -283,6 +300,7 @@ TABLES: dict[str, tuple[Column, ...]] = {
     "flights": FLIGHTS,
     "classification": CLASSIFICATION,
     "model_evaluation": MODEL_EVALUATION,
+    "estimate": ESTIMATE,
 }
 
 

@@ -1,0 +1,172 @@
+"""The vectorised EKF against filterpy's KalmanFilter, its consistency (NEES) on its own
+white-jerk model with the radar, stacked and missing measurements, and the q tuning."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from pipeline.estimate.base import (ConstantAcceleration, GaussianState, LinearMeasurement, LinearTransition,
+                                    position_measurement)
+from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
+from pipeline.estimate.metrics import chi2_band, fraction_in_band
+from pipeline.estimate.models import RadarModel, ca_transition, initial_cov, white_jerk_q
+from pipeline.estimate.montecarlo import measure, monte_carlo, simulate_white_jerk, tune_q
+
+kalman = pytest.importorskip("filterpy.kalman")
+
+DT = 0.2
+DT_NS = 200_000_000
+X0 = np.array([400.0, -300.0, -120.0, 8.0, 5.0, -1.0, 0.3, -0.2, 0.1])
+
+
+def _rel(a, b):
+    return np.linalg.norm(a - b) / np.linalg.norm(b)
+
+
+def _linear_case(rng, n_steps):
+    """A 9-state CA model with a general 4×9 linear measurement (correlated R)."""
+    q = 0.5
+    H = rng.standard_normal((4, 9))
+    A = rng.standard_normal((4, 4))
+    R = A @ A.T + 4 * np.eye(4)
+    truth = simulate_white_jerk(1, n_steps, DT, q, X0, rng=rng)[0]
+    z = truth @ H.T + rng.standard_normal((n_steps, 4)) @ np.linalg.cholesky(R).T
+    return q, H, R, truth, z
+
+
+@pytest.mark.parametrize("joseph, tol", [(True, 1e-12), (False, 1e-9)])
+def test_with_a_linear_measurement_the_ekf_equals_filterpys_kalman_filter(rng, joseph, tol):
+    n_steps = 300
+    q, H, R, _, z = _linear_case(rng, n_steps)
+    kf = kalman.KalmanFilter(dim_x=9, dim_z=4)
+    kf.x, kf.P = X0.copy(), initial_cov()
+    kf.F, kf.Q, kf.H, kf.R = ca_transition(DT), white_jerk_q(DT, q), H, R
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(q), LinearMeasurement(H, R), joseph=joseph)
+    state = GaussianState(X0, initial_cov(), 0)
+    for k in range(n_steps):
+        kf.predict()
+        state = ekf.predict(state, (k + 1) * DT_NS)
+        assert _rel(state.mean, kf.x) < tol and _rel(state.cov, kf.P) < tol
+        kf.update(z[k])
+        state = ekf.update(state, z[k])
+        assert _rel(state.mean, kf.x) < tol, k
+        assert _rel(state.cov, kf.P) < tol, k
+
+
+def test_the_batched_filter_over_runs_equals_filterpy_run_by_run(rng):
+    n_runs, n_steps, q = 5, 200, 0.5
+    meas = position_measurement(2.0)
+    truth = simulate_white_jerk(n_runs, n_steps, DT, q, X0, rng=rng)
+    z = measure(meas, truth, rng)
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(q), meas)
+    x0 = truth[:, 0] + rng.standard_normal((n_runs, 9))
+    track = run_filter(ekf, GaussianState(x0, np.broadcast_to(initial_cov(), (n_runs, 9, 9)), 0),
+                       np.arange(n_steps) * DT_NS, z)
+    for r in range(n_runs):
+        kf = kalman.KalmanFilter(dim_x=9, dim_z=3)
+        kf.x, kf.P, kf.F, kf.Q = x0[r].copy(), initial_cov(), ca_transition(DT), white_jerk_q(DT, q)
+        kf.H, kf.R = meas.H, meas.R
+        for k in range(n_steps):
+            if k:
+                kf.predict()
+            kf.update(z[k, r])
+            assert _rel(track.mean[r, k], kf.x) < 1e-12 and _rel(track.cov[r, k], kf.P) < 1e-12
+
+
+def test_an_update_with_no_measurement_is_a_predict_only_step(rng):
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), RadarModel(site_ned_m=(0.0, 0.0, 0.0)))
+    pred = GaussianState(np.tile(X0, (3, 1)), np.broadcast_to(initial_cov(), (3, 9, 9)), 5)
+    post, st = ekf.update_stats(pred, np.empty((3, 0, 4)))
+    assert post is pred and np.all(st.dof == 0) and np.all(st.nis == 0)
+
+
+def test_stacked_measurements_equal_sequential_updates_and_nan_rows_are_left_out(rng):
+    meas = position_measurement(1.5)
+    ekf = ExtendedKalmanFilter(LinearTransition(np.eye(9), np.zeros((9, 9))), meas)
+    prior = GaussianState(np.tile(X0, (2, 1)), np.broadcast_to(initial_cov(), (2, 9, 9)), 0)
+    z = X0[:3] + rng.standard_normal((2, 3, 3))
+    joint, st = ekf.update_stats(prior, z)
+    seq = prior
+    for m in range(3):
+        seq = ekf.update(seq, z[:, m])
+    np.testing.assert_allclose(joint.mean, seq.mean, rtol=1e-12)
+    np.testing.assert_allclose(joint.cov, seq.cov, rtol=1e-10, atol=1e-15)
+    assert np.all(st.dof == 9)
+    # run 0 misses its second measurement: equals an update with the other two only
+    zg = z.copy()
+    zg[0, 1] = np.nan
+    gap, stg = ekf.update_stats(prior, zg)
+    two = ekf.update(GaussianState(prior.mean[0], prior.cov[0], 0), z[0, [0, 2]])
+    np.testing.assert_allclose(gap.mean[0], two.mean, rtol=1e-12)
+    np.testing.assert_allclose(gap.cov[0], two.cov, rtol=1e-10, atol=1e-15)
+    np.testing.assert_allclose(gap.mean[1], joint.mean[1], rtol=1e-12)
+    assert stg.dof.tolist() == [6, 9]
+
+
+def test_a_measurement_of_the_wrong_shape_is_refused_in_one_line():
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), position_measurement(1.0))
+    prior = GaussianState(np.tile(X0, (2, 1)), np.broadcast_to(initial_cov(), (2, 9, 9)), 0)
+    with pytest.raises(ValueError, match=r"measurement shape \(2, 4\)"):
+        ekf.update(prior, np.zeros((2, 4)))
+
+
+def test_on_its_own_white_jerk_model_with_the_radar_the_ekf_nees_is_consistent():
+    rng = np.random.default_rng(14)
+    n_runs, n_steps, q = 1000, 100, 1.0
+    radar = RadarModel(site_ned_m=(-200.0, 150.0, 0.0))
+    t0 = time.perf_counter()
+    truth = simulate_white_jerk(n_runs, n_steps, DT, q, X0, rng=rng)
+    z = measure(radar, truth, rng)
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(q), radar)
+    mc = monte_carlo(ekf, truth, z, np.arange(n_steps) * DT_NS, GaussianState(X0, initial_cov(), 0))
+    elapsed = time.perf_counter() - t0
+    lo, hi = chi2_band(9, n_runs)
+    assert 8.2 < lo < 9 < hi < 9.9
+    assert fraction_in_band(mc.nees_avg, 9, n_runs) >= 0.90
+    assert abs(mc.nees_avg.mean() - 9) <= 0.3
+    assert fraction_in_band(mc.nis_avg, 4, n_runs) >= 0.90 and mc.nis_dof == 4
+    # the filter's variance matches the Monte Carlo error variance (consistency, per component)
+    ratio = mc.err_var[10:] / mc.filter_var[10:]
+    assert 0.8 < np.median(ratio) < 1.2
+    assert elapsed < 30
+
+
+def test_tune_q_finds_the_true_q_on_a_synthetic_case():
+    rng = np.random.default_rng(7)
+    q_true, n_runs, n_steps = 2.0, 200, 60
+    meas = position_measurement(1.0)
+    truth = simulate_white_jerk(n_runs, n_steps, DT, q_true, X0, rng=rng)
+    z = measure(meas, truth, rng)
+    grid = [0.02, 0.2, 2.0, 20.0, 200.0]
+    tuned = tune_q(truth, z, np.arange(n_steps) * DT_NS, meas, grid)
+    assert tuned.q == q_true and tuned.grid == tuple(grid) and tuned.rmse.shape == (5, 9)
+    assert np.argmin(tuned.score) == 2
+    with pytest.raises(ValueError, match="positive"):
+        tune_q(truth, z, np.arange(n_steps) * DT_NS, meas, [0.0, 1.0])
+
+
+def test_a_radar_gap_in_one_run_is_a_predict_only_step_for_that_run_alone(rng):
+    radar = RadarModel(site_ned_m=(-200.0, 150.0, 0.0))
+    n_steps = 20
+    truth = simulate_white_jerk(2, n_steps, DT, 1.0, X0, rng=rng)
+    z = measure(radar, truth, rng)
+    z[5:8, 1] = np.nan  # run 1 loses three radar samples
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), radar)
+    prior = GaussianState(np.tile(X0, (2, 1)), np.broadcast_to(initial_cov(), (2, 9, 9)), 0)
+    t_ns = np.arange(n_steps) * DT_NS
+    track = run_filter(ekf, prior, t_ns, z)
+    assert track.n_predict_only.tolist() == [0, 3] and track.dof[1, 5:8].tolist() == [0, 0, 0]
+    # run 1 by itself: the gap steps are predictions only
+    one = GaussianState(X0, initial_cov(), 0)
+    for k in range(n_steps):
+        if k:
+            one = ekf.predict(one, int(t_ns[k]))
+        if not 5 <= k < 8:
+            one = ekf.update(one, z[k, 1])
+        np.testing.assert_allclose(track.mean[1, k], one.mean, rtol=1e-12)
+        np.testing.assert_allclose(track.cov[1, k], one.cov, rtol=1e-9, atol=1e-15)
+    np.testing.assert_array_equal(track.pred_cov[1, 6], track.cov[1, 6])  # nothing measured, nothing changed
+    assert np.trace(track.cov[1, 7]) > np.trace(track.cov[0, 7])

@@ -1,0 +1,116 @@
+"""RTS smoother against filterpy's rts_smoother, Markov re-timing Π(Δt), the white-jerk Q
+against numerical integration of the continuous model, and the EKF+HMM's A_H and B."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import quad_vec
+from scipy.linalg import expm
+
+from pipeline.estimate.base import ConstantAcceleration, GaussianState, position_measurement
+from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
+from pipeline.estimate.markov import check_stochastic, retime
+from pipeline.estimate.models import (A_H, B, Q, ca_transition, hmm_input, hmm_transition, initial_cov,
+                                      white_jerk_q)
+from pipeline.estimate.montecarlo import measure, simulate_white_jerk
+from pipeline.estimate.smoother import rts_smooth
+
+kalman = pytest.importorskip("filterpy.kalman")
+
+DT = 0.2
+X0 = np.array([10.0, 20.0, -30.0, 1.0, -2.0, 0.5, 0.1, 0.0, -0.1])
+
+
+def test_the_rts_smoother_equals_filterpys_rts_smoother_on_a_linear_case(rng):
+    n_runs, n_steps, q = 3, 150, 0.8
+    meas = position_measurement(3.0)
+    truth = simulate_white_jerk(n_runs, n_steps, DT, q, X0, rng=rng)
+    z = measure(meas, truth, rng)
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(q), meas)
+    t_ns = np.arange(n_steps) * 200_000_000
+    track = run_filter(ekf, GaussianState(np.tile(X0, (n_runs, 1)), np.broadcast_to(initial_cov(), (n_runs, 9, 9)), 0),
+                       t_ns, z)
+    sm = rts_smooth(track)
+    F = ca_transition(DT)
+    for r in range(n_runs):
+        xs, Ps, _, _ = kalman.rts_smoother(track.mean[r], track.cov[r], np.tile(F, (n_steps, 1, 1)),
+                                           np.tile(white_jerk_q(DT, q), (n_steps, 1, 1)))
+        np.testing.assert_allclose(sm.mean[r], xs, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(sm.cov[r], Ps, rtol=1e-7, atol=1e-12)
+    # the last step is the filtered one; smoothing never raises the variance
+    np.testing.assert_array_equal(sm.mean[:, -1], track.mean[:, -1])
+    dvar = np.diagonal(sm.cov, axis1=-2, axis2=-1) - np.diagonal(track.cov, axis1=-2, axis2=-1)
+    assert np.all(dvar <= 1e-12)
+    # and on average it lowers the error
+    assert np.mean((sm.mean - truth) ** 2) < np.mean((track.mean - truth) ** 2)
+
+
+def test_the_smoother_refuses_a_track_without_predicted_covariances(rng):
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), position_measurement(1.0))
+    track = run_filter(ekf, GaussianState(X0, initial_cov(), 0), [0, 1, 2], np.zeros((3, 1, 3)), store="filtered")
+    with pytest.raises(ValueError, match="store='all'"):
+        rts_smooth(track)
+
+
+PI = np.array([[0.9, 0.07, 0.03], [0.05, 0.9, 0.05], [0.02, 0.08, 0.9]])
+
+
+def test_pi_at_the_reference_step_is_pi_and_two_half_steps_make_one_step():
+    np.testing.assert_allclose(retime(PI, 0.2, 0.2), PI, atol=1e-15)
+    np.testing.assert_allclose(retime(PI, 0.2 * (1 + 1e-12), 0.2), PI, atol=1e-10)
+    half = retime(PI, 0.1, 0.2)
+    np.testing.assert_allclose(half @ half, PI, atol=1e-12)
+    check_stochastic(half)
+    np.testing.assert_allclose(retime(PI, 0.4, 0.2), PI @ PI, atol=1e-12)
+    np.testing.assert_array_equal(retime(PI, 0.0, 0.2), np.eye(3))
+
+
+@pytest.mark.parametrize("Pi, match", [
+    ([[0.9, 0.2], [0.5, 0.5]], "row 0 sums to 1.1, not 1"),
+    ([[1.1, -0.1], [0.5, 0.5]], "row 0 has a negative entry"),
+    ([[0.5, 0.5], [np.nan, 0.5]], "row 1 has a non-finite entry"),
+    ([[0.5, 0.5, 0.0]], "square"),
+])
+def test_an_invalid_pi_raises_a_clear_error_naming_the_row(Pi, match):
+    with pytest.raises(ValueError, match=match):
+        retime(Pi, 0.1, 0.2, name="imm.Pi")
+
+
+def test_a_pi_without_a_real_logarithm_cannot_be_retimed():
+    with pytest.raises(ValueError, match="no real matrix logarithm"):
+        retime([[0.1, 0.9], [0.9, 0.1]], 0.1, 0.2)
+
+
+@pytest.mark.parametrize("dt, q", [(0.2, 1.0), (0.05, 3.0), (1.0, 0.1)])
+def test_white_jerk_q_equals_the_integral_of_the_continuous_model(dt, q):
+    Fc = np.kron(np.array([[0, 1, 0], [0, 0, 1], [0, 0, 0]], float), np.eye(3))
+    G = np.kron(np.array([[0], [0], [1.0]]), np.eye(3))
+    num, _ = quad_vec(lambda t: expm(Fc * t) @ G @ (q * np.eye(3)) @ G.T @ expm(Fc * t).T, 0, dt, epsabs=1e-14)
+    np.testing.assert_allclose(white_jerk_q(dt, q), num, rtol=1e-10, atol=1e-16)
+    assert Q is white_jerk_q
+    np.testing.assert_allclose(expm(Fc * dt), ca_transition(dt), atol=1e-14)
+    # the closed form, per axis (n axis)
+    np.testing.assert_allclose(white_jerk_q(dt, q)[0::3, 0::3],
+                               q * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6], [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+                                             [dt**3 / 6, dt**2 / 2, dt]]), rtol=1e-15)
+
+
+def test_a_h_and_b_have_the_seed_shapes_and_predict_a_constant_jerk_step():
+    dt = 0.2
+    assert A_H is hmm_transition and B is hmm_input
+    assert A_H(dt).shape == (9, 9) and B(dt).shape == (9, 6)
+    r, v, a = np.array([1.0, 2.0, 3.0]), np.array([0.5, -1.0, 2.0]), np.array([9.0, 9.0, 9.0])
+    a_hat, j_hat = np.array([1.0, -2.0, 0.5]), np.array([3.0, 0.0, -1.0])
+    x1 = A_H(dt) @ np.r_[r, v, a] + B(dt) @ np.r_[a_hat, j_hat]
+    # closed form: a constant-jerk step from (r, v, â, ĵ); the state's own a is not used
+    np.testing.assert_allclose(x1[:3], r + v * dt + a_hat * dt**2 / 2 + j_hat * dt**3 / 6, rtol=1e-14)
+    np.testing.assert_allclose(x1[3:6], v + a_hat * dt + j_hat * dt**2 / 2, rtol=1e-14)
+    np.testing.assert_allclose(x1[6:], a_hat + dt * j_hat, rtol=1e-14)
+    # A_H C A_Hᵀ has a zero acceleration block (digest §8: the a-variance is Q₂'s every step)
+    C = initial_cov()
+    assert np.all((A_H(dt) @ C @ A_H(dt).T)[6:, 6:] == 0)
+
+
+def test_p0_is_diag_of_1_01_001_squared_per_axis_group():
+    np.testing.assert_array_equal(np.diag(initial_cov()), [1.0] * 3 + [0.1**2] * 3 + [0.01**2] * 3)

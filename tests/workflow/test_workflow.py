@@ -310,7 +310,7 @@ def test_cli_preprocess_equals_the_workflow(tiny_run, tmp_path):
 
 
 @pytest.mark.slow
-def test_cli_train_and_classify_equal_the_workflow(tiny_run, tmp_path):
+def test_cli_train_equals_the_workflow(tiny_run, tmp_path):
     import numpy as np
 
     res = tiny_run / "results"
@@ -323,7 +323,12 @@ def test_cli_train_and_classify_equal_the_workflow(tiny_run, tmp_path):
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
     ma, mb = (json.loads((d / "meta.json").read_text()) for d in (res / "models" / "sim", tmp_path / "sim"))
     assert ma["training"] == mb["training"] and ma["config"] == mb["config"]
-    _cli("classify", str(tmp_path / "sim"), str(res / "state" / "sim-M1-000-bin.parquet"),
+
+
+@pytest.mark.slow
+def test_cli_classify_equals_the_workflow(tiny_run, tmp_path):
+    res = tiny_run / "results"
+    _cli("classify", str(res / "models" / "sim"), str(res / "state" / "sim-M1-000-bin.parquet"),
          "--segments", str(res / "segments" / "sim-M1-000-bin.parquet"), "--reset-at-segments",
          "-o", str(tmp_path / "cls.parquet"))
     _frames_equal(res / "classify" / "sim" / "sim-M1-000-bin.parquet", tmp_path / "cls.parquet")

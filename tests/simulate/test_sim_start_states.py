@@ -37,8 +37,9 @@ def sets():
 
 def _first_observations(df):
     """Row 0 of the differenced ``state9h`` features of every run: (n_runs, 9)."""
+    head = df[df["t_ns"] <= df.groupby("run_id")["t_ns"].transform("min") + 200_000_000]
     return np.stack([observations(raw_features(g, "state9h"), True)[0]
-                     for _, g in df.groupby("run_id", sort=True)])
+                     for _, g in head.groupby("run_id", sort=True)])
 
 
 def _best_threshold_accuracy(a, b):

@@ -19,21 +19,42 @@ The maneuvers (25 s each, heading frame x forward, y right, z down; figures of s
 
 * **M1** climbs from 10 m to about 55 m while roll (±22°) and pitch (±14°) flip every 1–2 s:
   oscillatory acceleration with fast reversals, the largest jerk of the five.
-* **M2** starts at 180 m, drops with low thrust for 10 s (mainly vertical dynamics), then
-  circles (bank 30°, yaw through 360°) while descending to about 55 m: the horizontal dynamics
-  sit in the last 15 s.
+* **M2** starts at 180 m from the low-dynamic command, eases its vertical thrust to a steady
+  descent (0.675 g from 0.5 to 3 s) and keeps it — for 10 s only the height changes fast —
+  then circles (bank 30°, yaw through 360°) while descending to about 55 m: the horizontal
+  dynamics sit in the last 15 s.
 * **M3** descends gently towards the target while weaving left–right (roll ±30°, pitch −4°):
   lateral acceleration dominates (≥ 2× forward and vertical).
-* **M4** the least dynamic: a thrust dip and recovery shaped like M2's first 8 s (so its
-  vertical acceleration correlates with M2's — the M2/M4 confusion of seed 000 §3), small
-  tilts afterwards.
+* **M4** the least dynamic, mostly vertical: its transition takes the low-dynamic thrust down
+  to M4's initial thrust, which is M2's descent thrust, so its z-acceleration for the first
+  seconds has M2's shape and size (the M2/M4 confusion of seed 000 §3.4.2); it then levels
+  off (thrust 1.06, 0.97, 1.0, 1.05, 0.97, 1.0) with small tilts (roll 4°, pitch −5 → −11°).
 * **M5** (the "unknown"): climbs for 10 s, then descends, with large changes on every axis.
 
-A run starts at the equilibrium velocity of its first command
-(:func:`pipeline.simulate.quadcopter.equilibrium_velocity`), and the first commands differ: M1
-is already climbing (vertical thrust 1.10), M2 descending (0.85), M3 in slow forward flight
-(pitch −4°, 0.96), M4 and M5 at hover. With a common hover start the maneuvers are identical
-for their first 1–1.5 s and an online classifier loses those samples whatever it does.
+Start state and transitions (:func:`hmm_command`, :func:`maneuver_scenario`). Seed 000 §2.4
+pads every Monte Carlo maneuver with low-dynamic flight, "created through a constant
+commanded thrust and pitch angle", and describes how each maneuver reaches its first command:
+
+* §2.4.1 (M1): "There is a transition period from 12 to 14.8 seconds from the low dynamic
+  maneuver to the initial maneuver thrust, which prevents an immediate rapid increase in UAV
+  acceleration when the maneuver starts."
+* §2.4.2 (M2): "Maneuver 2 does not require a transition period before the start of the
+  maneuver as the initial thrust matches the desired initial thrust of the maneuver."
+* §2.4.3 (M3): "Before the maneuver, thrust begins to move towards the initial thrust of the
+  maneuver."
+* §2.4.4 (M4): "Before and after the maneuver, there are small transition periods in order to
+  start at the correct initial thrust and transition back to small constant Euler angles and
+  the initial thrust."
+
+So every run of the HMM sets starts in that low-dynamic state — the :func:`low_dynamic`
+command (pitch −5°, thrust holding height), at its equilibrium velocity — whatever the
+maneuver, and all runs look alike at t = 0. M2's first command *is* the low-dynamic command,
+so an M2 run is the bare 25 s maneuver. M1, M3, M4 (and M5, which the thesis does not
+describe: it gets M1's transition) start ``lead_s`` = 3 s before their maneuver and blend
+all four command channels from low-dynamic to the first command over [0, ``ramp_s`` = 2.8 s]
+— the §2.4.1 window 12 → 14.8 s of the 15 s pad, i.e. the Monte Carlo ``ramp_in`` — so their
+runs last 28 s, all labelled with the maneuver (the classifier sees the run from its first
+sample, as it sees an M2 run). The change scenarios start the same way.
 
 Limits |φ|,|θ| ≤ 50°, |v| ≤ 40 m/s and |a| ≤ 10 m/s² (vector norms, disturbance included)
 are met by construction margins and asserted on 100-run samples in the tests.
@@ -55,6 +76,15 @@ DEG = np.pi / 180.0
 MANEUVERS: tuple[str, ...] = ("M1", "M2", "M3", "M4", "M5")
 #: maneuver length (s), seed 000 §2
 MANEUVER_S = 25.0
+#: pitch of the low-dynamic flight (deg; the ``simulate.low_dynamic_pitch_deg`` default)
+LOW_PITCH_DEG = -5.0
+#: M2's descent thrust, vertical component in g: the steady value that brings M2 from 180 m to
+#: 55 m (§2.2.2) with the descent held through the circle (0.6738 solves it; rounded)
+M2_DESCENT_THRUST = 0.675
+#: a maneuver's start in an HMM-set run (s) and its transition window [0, RAMP_S] (§2.4.1:
+#: 12 → 14.8 s before the 15 s maneuver start)
+LEAD_S = 3.0
+RAMP_S = 2.8
 
 
 def _smooth(s: F64) -> tuple[F64, F64]:
@@ -89,7 +119,8 @@ class Command:
 @dataclass(frozen=True)
 class KnotCommand(Command):
     """Four knot channels. ``thr``/``roll``/``pitch``/``yaw``: ``((t...), (value...))``; angles
-    in degrees, thrust in U1/(mg) (vertical component when ``vertical_thrust``)."""
+    in degrees, thrust in U1/(mg) (vertical component when ``vertical_thrust``).
+    ``transition_in``: whether a run blends into the first command from low-dynamic flight."""
 
     thr: tuple
     roll: tuple
@@ -98,6 +129,9 @@ class KnotCommand(Command):
     vertical_thrust: bool = False
     duration_s: float = MANEUVER_S
     start_alt_m: float = 10.0
+    #: reaches its first command through a transition from low-dynamic flight (seed 000 §2.4;
+    #: False for M2, whose first command is the low-dynamic one)
+    transition_in: bool = True
 
     def sample(self, t: F64) -> CommandSample:
         t = np.asarray(t, float)
@@ -199,13 +233,14 @@ def default_maneuvers() -> dict[str, KnotCommand]:
         yaw=_k((0, 0.0)),
         vertical_thrust=True, start_alt_m=10.0,
     )
+    # M2 (§2.2.2): the low-dynamic command first (§2.4.2: no transition), a steady descent for
+    # 10 s ("only the vertical position ... is rapidly changing"), the circle in the last 15 s
     m2 = KnotCommand(
-        thr=_k((0, 0.85), (0.5, 0.85), (3.0, 0.3), (6.5, 0.3), (9.0, 1.2), (10.5, 0.81),
-               (22.0, 0.81), (25, 1.0)),
+        thr=_k((0, 1.0), (0.5, 1.0), (3.0, M2_DESCENT_THRUST), (22.0, M2_DESCENT_THRUST), (25, 1.0)),
         roll=_k((0, 0.0), (10.0, 0.0), (12.0, 30.0), (22.0, 30.0), (24.5, 0.0)),
-        pitch=_k((0, 0.0), (10.0, 0.0), (12.0, -18.0), (22.0, -18.0), (24.5, 0.0)),
+        pitch=_k((0, LOW_PITCH_DEG), (10.0, LOW_PITCH_DEG), (12.0, -18.0), (22.0, -18.0), (24.5, 0.0)),
         yaw=_k((0, 0.0), (10.0, 0.0), (11.0, 8.0), (23.5, 352.0), (25.0, 360.0)),
-        vertical_thrust=True, start_alt_m=180.0,
+        vertical_thrust=True, start_alt_m=180.0, transition_in=False,
     )
     m3 = KnotCommand(
         thr=_k((0, 0.96), (23.0, 0.96), (25, 1.0)),
@@ -214,11 +249,15 @@ def default_maneuvers() -> dict[str, KnotCommand]:
         yaw=_k((0, 0.0)),
         vertical_thrust=True, start_alt_m=60.0,
     )
+    # M4 (§2.2.4): starts at M2's descent thrust (reached through its §2.4.4 transition, so the
+    # first seconds' z-acceleration is M2's), levels off, small tilts, back to the low-dynamic
+    # pitch and thrust at the end ("back to small constant Euler angles and the initial thrust")
     m4 = KnotCommand(
-        thr=_k((0, 1.0), (1.0, 1.0), (3.0, 0.8), (6.5, 0.8), (9.0, 1.06), (10.5, 0.97),
-               (14.0, 1.0), (16.0, 1.05), (19.0, 0.97), (22.0, 1.0)),
-        roll=_k((0, 0.0), (12.0, 0.0), (15.0, 4.0), (20.0, 4.0), (23.0, 0.0)),
-        pitch=_k((0, 0.0), (10.0, 0.0), (13.0, -6.0), (21.0, -6.0), (24.0, 0.0)),
+        thr=_k((0, M2_DESCENT_THRUST), (3.5, M2_DESCENT_THRUST), (6.0, 1.06), (7.5, 0.97), (11.0, 1.0),
+               (13.0, 1.05), (16.0, 0.97), (19.0, 1.0)),
+        roll=_k((0, 0.0), (9.0, 0.0), (12.0, 4.0), (17.0, 4.0), (20.0, 0.0)),
+        pitch=_k((0, LOW_PITCH_DEG), (7.0, LOW_PITCH_DEG), (10.0, LOW_PITCH_DEG - 6.0),
+                 (18.0, LOW_PITCH_DEG - 6.0), (21.0, LOW_PITCH_DEG)),
         yaw=_k((0, 0.0)),
         vertical_thrust=True, start_alt_m=70.0,
     )
@@ -264,9 +303,41 @@ class Scenario:
         return out
 
 
-def maneuver_scenario(name: str, man: KnotCommand) -> Scenario:
-    """One bare 25 s maneuver."""
-    return Scenario(name, man, man.duration_s, (Phase(0.0, man.duration_s, name),), man.start_alt_m)
+def hmm_command(man: KnotCommand, *, lead_s: float = LEAD_S, ramp_s: float = RAMP_S,
+                pitch_deg: float = LOW_PITCH_DEG) -> tuple[Command, float]:
+    """The command of one HMM-set run and the maneuver's start time in it.
+
+    Seed 000 §2.4: the run starts in low-dynamic flight (:func:`low_dynamic`) and, unless the
+    maneuver's first command already is that ("Maneuver 2 does not require a transition period
+    before the start of the maneuver as the initial thrust matches the desired initial thrust
+    of the maneuver", §2.4.2; ``man.transition_in`` False), blends all channels into the first
+    command over [0, ``ramp_s``] ("a transition period from 12 to 14.8 seconds from the low
+    dynamic maneuver to the initial maneuver thrust", §2.4.1) and starts the maneuver at
+    ``lead_s``.
+
+    Returns
+    -------
+    (Command, float)
+        The command (``duration_s`` = lead + maneuver) and the maneuver's start (s).
+    """
+    if not man.transition_in or lead_s <= 0:
+        return man, 0.0
+    cmd = Blend(low_dynamic(pitch_deg), Shifted(man, lead_s), 0.0, ramp_s,
+                duration_s=lead_s + man.duration_s)
+    return cmd, lead_s
+
+
+def maneuver_scenario(name: str, man: KnotCommand, *, lead_s: float = LEAD_S, ramp_s: float = RAMP_S,
+                      pitch_deg: float = LOW_PITCH_DEG) -> Scenario:
+    """One HMM-set run: low-dynamic start, the §2.4 transition (none for M2), the 25 s maneuver.
+
+    The whole run carries the maneuver's label; ``meta`` records ``maneuver_start_s`` and the
+    transition window ``transition_s`` (None without one).
+    """
+    cmd, t0 = hmm_command(man, lead_s=lead_s, ramp_s=ramp_s, pitch_deg=pitch_deg)
+    dur = t0 + man.duration_s
+    return Scenario(name, cmd, dur, (Phase(0.0, dur, name),), man.start_alt_m,
+                    {"maneuver_start_s": t0, "transition_s": (0.0, ramp_s) if t0 > 0 else None})
 
 
 def low_dynamic(pitch_deg: float = -5.0) -> ConstCommand:
@@ -298,21 +369,28 @@ def padded_scenario(name: str, man: KnotCommand, *, pre_s: float = 15.0, post_s:
 SWITCHES: dict[str, tuple[str, str]] = {"A": ("M1", "M2"), "B": ("M2", "M4"), "C": ("M3", "M1"), "D": ("M4", "M3")}
 
 
-def switch_scenario(key: str, t_switch: float, mans: dict[str, KnotCommand], blend_s: float = 2.0) -> Scenario:
-    """Change scenario ``key`` (A–D): the first maneuver until ``t_switch``, a ``blend_s`` command
-    blend into the second, which then runs its full 25 s from ``t_switch``.
+def switch_scenario(key: str, t_switch: float, mans: dict[str, KnotCommand], blend_s: float = 2.0, *,
+                    lead_s: float = LEAD_S, ramp_s: float = RAMP_S,
+                    pitch_deg: float = LOW_PITCH_DEG) -> Scenario:
+    """Change scenario ``key`` (A–D): the first maneuver's HMM-set run (:func:`hmm_command`:
+    low-dynamic start and its transition) until ``t_switch``, a ``blend_s`` command blend into
+    the second maneuver, which then runs its full 25 s from ``t_switch``.
 
-    The truth label changes at ``t_switch``; the blend is recorded in ``meta``. The start
-    altitude is the first maneuver's; :func:`pipeline.simulate.scenarios.simulate_scenario`
-    lifts a scenario whose nominal path would go below ``min_alt_m``.
+    ``t_switch`` counts from the start of the run, as the classifier sees it (for M1, M3, M4
+    the first ``lead_s`` are the transition). The truth label changes at ``t_switch``; the
+    blend is recorded in ``meta``. The start altitude is the first maneuver's;
+    :func:`pipeline.simulate.scenarios.simulate_scenario` lifts a scenario whose nominal path
+    would go below ``min_alt_m``.
     """
     a, b = SWITCHES[key]
     ma, mb = mans[a], mans[b]
-    cmd = Blend(ma, Shifted(mb, t_switch), t_switch, blend_s)
+    first, t0 = hmm_command(ma, lead_s=lead_s, ramp_s=ramp_s, pitch_deg=pitch_deg)
+    cmd = Blend(first, Shifted(mb, t_switch), t_switch, blend_s)
     dur = t_switch + mb.duration_s
     phases = (Phase(0.0, t_switch, a), Phase(t_switch, dur, b))
     return Scenario(f"switch_{key}_{t_switch:g}s", cmd, dur, phases, ma.start_alt_m,
-                    {"switch": key, "t_switch_s": t_switch, "blend_s": blend_s, "first": a, "second": b})
+                    {"switch": key, "t_switch_s": t_switch, "blend_s": blend_s, "first": a, "second": b,
+                     "first_maneuver_start_s": t0})
 
 
 def _smooth2(s: F64) -> F64:

@@ -113,15 +113,19 @@ def scenario_for(kind: str, settings: SimSettings, name: str | None = None,
     """``kind``: ``maneuver`` (name M1..M5), ``mc`` (name), ``switch`` (name A..D, t_switch),
     ``calibration``."""
     mans = maneuvers()
+    # HMM-set runs and the change scenarios start in the Monte Carlo's low-dynamic flight and
+    # reach the first command through its ramp-in window, shifted to the run start (seed 000 §2.4)
+    lead = {"lead_s": settings.mc_pre_s - settings.mc_ramp_in[0],
+            "ramp_s": settings.mc_ramp_in[1] - settings.mc_ramp_in[0], "pitch_deg": settings.low_pitch_deg}
     if kind == "maneuver":
-        return mv.maneuver_scenario(name, mans[name])
+        return mv.maneuver_scenario(name, mans[name], **lead)
     if kind == "mc":
         return mv.padded_scenario(name, mans[name], pre_s=settings.mc_pre_s,
                                   post_s=settings.mc_post_s.get(name, 25.0),
                                   ramp_in=settings.mc_ramp_in, ramp_out=settings.mc_ramp_out,
                                   pitch_deg=settings.low_pitch_deg)
     if kind == "switch":
-        return mv.switch_scenario(name, float(t_switch), mans, settings.switch_blend_s)
+        return mv.switch_scenario(name, float(t_switch), mans, settings.switch_blend_s, **lead)
     if kind == "calibration":
         return mv.calibration_scenario(hover_alts_m=settings.cal_hover_alts_m, hover_s=settings.cal_hover_s,
                                        climb_alt_m=settings.cal_climb_alt_m, params=settings.vehicle)

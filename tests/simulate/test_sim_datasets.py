@@ -43,9 +43,9 @@ def test_sets_written_in_state_schema(generated):
     assert df["run_id"].dtype == np.int64 and str(df["label"].dtype) == "string"
     meta = read_table_meta(base / "a" / "sets" / "M1_train.parquet")
     assert meta["schema_version"] == schema.SCHEMA_VERSION and meta["columns"]["pos_n_m"]["frame"] == "NED"
-    # 5 Hz truth, 25 s -> 126 samples per run
+    # 5 Hz truth, 3 s low-dynamic transition + 25 s (seed 000 §2.4.1) -> 141 samples per run
     per_run = df.groupby("run_id").size()
-    assert set(per_run) == {126}
+    assert set(per_run) == {141}
     assert np.all(np.diff(df[df.run_id == df.run_id.iloc[0]]["t_ns"]) == 200_000_000)
     assert set(df["label"]) == {"M1"} and not df["gap"].any()
     np.testing.assert_allclose(df["alt_cal_m"], -df["pos_d_m"])

@@ -51,8 +51,9 @@ def test_m2_descends_with_late_horizontal_dynamics(runs):
     # "most of the dynamics in the last 15 s": horizontal acceleration energy
     late = np.sum(h[:, i10:] ** 2, axis=1)
     assert np.all(late > 0.9 * np.sum(h ** 2, axis=1))
-    # before that mainly z changes
-    assert np.all(_rms(a[:, :i10, 2], axis=1) > 3 * _rms(h[:, :i10], axis=1))
+    # before that mainly z changes: the steady descent entry (seed 000 §2.4.2: from the
+    # low-dynamic thrust) against the disturbance floor of the horizontal axes
+    assert np.all(_rms(a[:, :i10, 2], axis=1) > 2.5 * _rms(h[:, :i10], axis=1))
 
 
 def test_m3_lateral_dominates(runs):
@@ -73,20 +74,21 @@ def test_m4_least_dynamic_mostly_vertical(runs):
     assert np.all(_rms(a[..., 2], axis=1) > _rms(a[..., 1], axis=1))
 
 
-def test_m4_m2_vertical_acceleration_correlate_early(runs):
-    t = runs["M2"].t_s
-    i8 = np.searchsorted(t, 8.0) + 1
-    a2 = runs["M2"].acc[:, :i8, 2]
-    a4 = runs["M4"].acc[:, :i8, 2]
-    r = [np.corrcoef(a2[k], a4[k])[0, 1] for k in range(N_RUNS)]
-    assert min(r) >= 0.7
+def test_m4_m2_vertical_acceleration_correlate_early(settings):
+    """Seed 000 §3.4.2 (Figs 2.7c, 2.11c, drawn "with no additional process noise"): over the
+    first 5 s of the runs, M4's z-acceleration has M2's shape (r ≥ 0.9) and size (RMS within 1.5×)."""
+    tr = {m: run_named("maneuver", settings, 1, 0, m, disturbance=False) for m in ("M2", "M4")}
+    i5 = np.searchsorted(tr["M2"].t_s, 5.0) + 1
+    a2, a4 = tr["M2"].acc[0, :i5, 2], tr["M4"].acc[0, :i5, 2]
+    assert np.corrcoef(a2, a4)[0, 1] >= 0.9
+    assert max(_rms(a2), _rms(a4)) <= 1.5 * min(_rms(a2), _rms(a4))
 
 
 def test_m5_climbs_ten_seconds_then_descends(runs):
     tr = runs["M5"]
     alt = _alt(tr)
     k_top = np.argmax(alt, axis=1)
-    t_top = tr.t_s[k_top]
+    t_top = tr.t_s[k_top] - tr.meta["maneuver_start_s"]      # maneuver time (after the transition)
     assert np.all((t_top > 8.0) & (t_top < 13.0))
     assert np.all(alt[np.arange(N_RUNS), k_top] > alt[:, 0] + 20)
     assert np.all(alt[:, -1] < alt[np.arange(N_RUNS), k_top] - 20)
@@ -142,14 +144,23 @@ def test_switch_scenarios(settings, key, t_switch):
     assert set(tr.label[t < t_switch]) == {a}
     assert set(tr.label[t >= t_switch]) == {b}
     mans = mv.default_maneuvers()
-    # command = first maneuver before the switch, second maneuver (shifted) after the 2 s blend
+    # command = the first maneuver's HMM-set run (low-dynamic start and its transition) before
+    # the switch, the second maneuver (shifted) after the 2 s blend, their smoothstep mix between
+    first, _ = mv.hmm_command(mans[a], lead_s=settings.mc_pre_s - settings.mc_ramp_in[0],
+                              ramp_s=settings.mc_ramp_in[1] - settings.mc_ramp_in[0],
+                              pitch_deg=settings.low_pitch_deg)
     before = t < t_switch
     after = t >= t_switch + 2.0
-    ca, cb = mans[a].sample(t[before]), mans[b].sample(t[after] - t_switch)
+    ca, cb = first.sample(t[before]), mans[b].sample(t[after] - t_switch)
     np.testing.assert_allclose(tr.cmd.thr[before], ca.thr, atol=1e-12)
     np.testing.assert_allclose(tr.cmd.euler[after], cb.euler, atol=1e-12)
     blend = (t > t_switch) & (t < t_switch + 2.0)
-    assert not np.allclose(tr.cmd.thr[blend], mans[a].sample(t[blend]).thr)
+    s = (t[blend] - t_switch) / 2.0
+    w = s ** 3 * (10 - 15 * s + 6 * s * s)
+    fa, fb = first.sample(t[blend]), mans[b].sample(t[blend] - t_switch)
+    np.testing.assert_allclose(tr.cmd.thr[blend], (1 - w) * fa.thr + w * fb.thr, atol=1e-12)
+    np.testing.assert_allclose(tr.cmd.euler[blend], (1 - w)[:, None] * fa.euler + w[:, None] * fb.euler,
+                               atol=1e-12)
     assert tr.meta["blend_s"] == 2.0
     assert np.all(np.linalg.norm(tr.acc, axis=-1) <= 10.0)
     assert np.all(-tr.pos[..., 2] > 0)  # lifted clear of the ground

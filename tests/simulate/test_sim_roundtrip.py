@@ -121,7 +121,7 @@ def test_ingest_recovers_streams(written, fmt):
     # the truth side-car came along by name, on the same time base
     assert find_sidecar(paths[fmt]) == sidecar_path(paths[fmt])
     tr = log["truth"]
-    assert len(tr) == 2501 and set(tr["label"].astype(str)) == {"M3"}
+    assert len(tr) == 2801 and set(tr["label"].astype(str)) == {"M3"}  # 3 s transition + 25 s at 100 Hz
     assert list(log["labels"]["label"]) == ["M3"]
     assert log.meta.get("labels_path") == str(sidecar_path(paths[fmt]))
     assert not any("shifted" in w for w in log.meta["diagnostics"]["warnings"])

@@ -8,6 +8,13 @@ became a stage), at the ``tiny`` study size and the config's seed 20261123::
     python benchmarks/study_flightcoach_classification.py --n-iter 5 --slack-grid 1.5 --out B
     python tests/data/studies/make_golden.py A B
 
+The seed-000 goldens were regenerated from the study itself (``run_study("seed000_classification",
+None, outputs, {"size": "tiny"}, seed=20261123)``, then ``make_golden.py <its folder>``) when the
+issue "Seed-000 maneuvers as the thesis describes them" changed the simulated maneuvers on purpose;
+before that change the study's six tables were shown equal to the script's (commit 28a850e; see
+the git history of this folder). The FlightCoach goldens (real flights, no simulation) are still the
+script's.
+
 Every table is copied as is, except ``gmr_error`` (227 kB: one row per maneuver, quantity, axis
 and time step), which is kept as a per-(maneuver, quantity, axis) summary (:func:`gmr_error_summary`).
 """

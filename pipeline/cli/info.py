@@ -16,6 +16,8 @@ def add_parser(sub) -> None:
     p.add_argument("logs", nargs="+", type=Path, metavar="LOG")
     p.add_argument("--format", dest="fmt", default=None, help="force a reader instead of detecting")
     p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="dataset config whose 'ingest' section the readers use (default datasets/config.yaml)")
     p.set_defaults(func=run)
 
 
@@ -58,13 +60,20 @@ def _print_text(d: dict) -> None:
 
 
 def run(args) -> int:
+    from ..config import ConfigError, load_config, section
+
+    try:  # the readers see what the workflow's ingest rule gives them (ROS topic maps, ...)
+        config = section(load_config(args.config), "ingest")
+    except ConfigError as exc:
+        print(f"uavpipe info: {exc}", file=sys.stderr)
+        return 2
     failed = 0
     out = []
     for path in args.logs:
         try:
             size = path.stat().st_size if path.is_file() else 0
             with progress_bar(path.name, size) as cb:
-                log = registry.read_log(path, fmt=args.fmt, progress=cb)
+                log = registry.read_log(path, fmt=args.fmt, progress=cb, config=config)
         except IngestError as exc:
             print(f"uavpipe info: {exc}", file=sys.stderr)
             failed += 1

@@ -24,7 +24,8 @@ def add_parser(sub) -> None:
                    help="output root; each log goes to DIR/<flight_id>/")
     p.add_argument("--format", dest="fmt", default=None, help="force a reader instead of detecting")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="dataset config whose 'ingest' section is passed to the readers")
+                   help="dataset config whose 'ingest' section is passed to the readers "
+                        "(default datasets/config.yaml, as the workflow)")
     p.add_argument("--labels", type=Path, default=None, metavar="FILE",
                    help="labels/truth side-car to attach (one LOG only; default: <log>.truth.parquet "
                         "beside the log when present)")
@@ -43,15 +44,13 @@ def job_paths(log: Path, labels: Path | None, out_root: Path) -> tuple[dict, dic
 def run(args) -> int:
     from ..io.ingest import run_ingest
 
-    config = None
-    if args.config is not None:
-        from ..config import ConfigError, load_config, section
+    from ..config import ConfigError, load_config, section
 
-        try:
-            config = section(load_config(args.config), "ingest")
-        except ConfigError as exc:
-            print(f"uavpipe ingest: {exc}", file=sys.stderr)
-            return 2
+    try:  # the same validated section the workflow's ingest rule passes
+        config = section(load_config(args.config), "ingest")
+    except ConfigError as exc:
+        print(f"uavpipe ingest: {exc}", file=sys.stderr)
+        return 2
     if args.labels is not None and len(args.logs) > 1:
         print("uavpipe ingest: --labels takes one LOG", file=sys.stderr)
         return 2

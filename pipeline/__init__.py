@@ -4,4 +4,4 @@ Import package ``pipeline`` of the ``uavpipe`` distribution. Subpackages follow 
 one-way import order ``frames -> io -> preprocess -> models/align/estimate -> report``.
 """
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"

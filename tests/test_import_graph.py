@@ -84,3 +84,14 @@ def test_the_graph_test_sees_relative_imports():
     mods = dict((m, line) for line, m in _imports(PKG / "preprocess" / "state.py"))
     assert "pipeline.io.schema" in {m for m in mods} or "pipeline.io" in mods
     assert any(m.startswith("pipeline.frames") for m in mods)
+
+
+@pytest.mark.parametrize("package,entry", [("io", "run_ingest"), ("simulate", "run_simulate_sets"),
+                                           ("preprocess", "run_preprocess"), ("models", "run_train"),
+                                           ("models", "run_classify"), ("report", "run_index")])
+def test_every_stage_entry_point_is_importable_from_its_package(package, entry):
+    import importlib
+
+    fn = getattr(importlib.import_module(f"pipeline.{package}"), entry)
+    assert callable(fn) and list(__import__("inspect").signature(fn).parameters)[:3] == ["inputs", "outputs",
+                                                                                          "config"]

@@ -8,8 +8,10 @@ from snakemake.utils import validate
 
 import pipeline
 from pipeline.config import ConfigError, validate_config
+from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest
 from pipeline.io.schema import STREAM_NAMES
 from pipeline.models.run import model_set_config
+from pipeline.report.summary import run_summary
 from pipeline.simulate.run import planned_logs, planned_sets
 from pipeline.studies.base import STUDY_TABLES
 
@@ -24,15 +26,15 @@ except ConfigError as _exc:
 config.clear()
 config.update(_validated)
 
-_manifest = pd.read_csv(
-    config["manifest"], sep="\t", dtype=str, keep_default_na=False, comment="#"
-)
-validate(_manifest, schema="schemas/flights.schema.yaml", set_default=True)
-if _manifest["flight_id"].duplicated().any():
-    raise ValueError(
-        f"{config['manifest']}: duplicate flight_id(s): "
-        f"{sorted(_manifest.flight_id[_manifest.flight_id.duplicated()])}"
+# the manifest: one line per bad row (file, line, flight id, reason) before any job is planned
+# (pipeline/io/manifest.py: vehicles, labels, duplicate ids, reader names); then its schema
+try:
+    _manifest = pd.DataFrame(
+        check_manifest(config["manifest"], config), columns=list(MANIFEST_COLUMNS), dtype=str
     )
+except ConfigError as _exc:
+    sys.exit(f"uavpipe: {_exc}")
+validate(_manifest, schema="schemas/flights.schema.yaml", set_default=True)
 
 
 def _expand_path(p):
@@ -57,11 +59,15 @@ for _row in _manifest.itertuples():
         )
 
 
+SKIPPED = {}  # manifest rows left out (flight id -> reason), for the end-of-run summary
+
+
 def _available(row):
     # files under results/ are produced by the workflow itself (simulated/demo flights)
     path = _expand_path(row.path)
     if path.startswith("results/") or Path(path).exists():
         return True
+    SKIPPED[row.flight_id] = f"{path} not found"
     print(
         f"uavpipe: skipping flight {row.flight_id}: {path} not found",
         file=sys.stderr,

@@ -18,7 +18,9 @@ COMMANDS: tuple[str, ...] = ("info", "ingest", "simulate", "preprocess", "train"
 
 def build_parser(commands: tuple[str, ...] = COMMANDS) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="uavpipe", description="UAV flight-log analytics: ingest, preprocess, learn, estimate, report.")
+        prog="uavpipe",
+        description="UAV flight-log analytics, one stage per command; the Snakemake workflow "
+                    "(`snakemake --cores 2`) runs them all over datasets/flights.tsv and writes the reports.")
     parser.add_argument("--version", action="version", version=f"uavpipe {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for mod in commands:

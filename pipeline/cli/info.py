@@ -8,13 +8,16 @@ from pathlib import Path
 
 from ..io import registry
 from ..io.base import IngestError
+from ..io.manifest import reader_names
 from .progress import progress_bar
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("info", help="describe a log: format, reader, streams with rates, diagnostics")
     p.add_argument("logs", nargs="+", type=Path, metavar="LOG")
-    p.add_argument("--format", dest="fmt", default=None, help="force a reader instead of detecting")
+    names = reader_names()
+    p.add_argument("--format", dest="fmt", default=None, choices=names, metavar="FORMAT",
+                   help=f"force a reader instead of detecting: {', '.join(names)}")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="dataset config whose 'ingest' section the readers use (default datasets/config.yaml)")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ..io.manifest import reader_names
 from ..io.registry import flight_id_for
 from .progress import progress_bar
 
@@ -22,7 +23,9 @@ def add_parser(sub) -> None:
     p.add_argument("logs", nargs="+", type=Path, metavar="LOG")
     p.add_argument("-o", "--out", type=Path, required=True, metavar="DIR",
                    help="output root; each log goes to DIR/<flight_id>/")
-    p.add_argument("--format", dest="fmt", default=None, help="force a reader instead of detecting")
+    names = reader_names()
+    p.add_argument("--format", dest="fmt", default=None, choices=names, metavar="FORMAT",
+                   help=f"force a reader instead of detecting: {', '.join(names)}")
     p.add_argument("--config", type=Path, default=None, metavar="FILE",
                    help="dataset config whose 'ingest' section is passed to the readers "
                         "(default datasets/config.yaml, as the workflow)")
@@ -68,6 +71,9 @@ def run(args) -> int:
             print(f"uavpipe ingest: {path}: cannot write output: {exc}", file=sys.stderr)
             failed.append(str(path))
             continue
+        # the reader's warnings, as `uavpipe info` prints them (the meta.json diagnostics)
+        for w in (res.diagnostics or {}).get("warnings", [])[:20]:
+            print(f"uavpipe ingest: {path}: warning: {w}", file=sys.stderr)
         if res.status == "failed":
             failed.append(str(path))
     if failed:

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
+from ..io.manifest import GENERIC_VEHICLE
 
 
 def add_parser(sub) -> None:
@@ -20,8 +21,16 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--out", type=Path, required=True, metavar="DIR",
                    help="output root; each flight goes to DIR/<flight_id>/")
     p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
-    p.add_argument("--vehicle", default=None, help="vehicle key in preprocess.vehicles")
+    p.add_argument("--vehicle", default=None,
+                   help="vehicle key in preprocess.vehicles, or 'generic' (the default entry); "
+                        "without it: preprocess.flights by flight id, else the default entry")
     p.set_defaults(func=run)
+
+
+def vehicle_profile(diag: dict) -> str:
+    """``vehicle profile <name>`` (the ``preprocess.vehicles`` entry used), or the built-in one."""
+    used = diag.get("vehicle")
+    return f"vehicle profile {used}" if used else "vehicle profile: built-in defaults (no entry)"
 
 
 def run(args) -> int:
@@ -32,6 +41,13 @@ def run(args) -> int:
         sec = section(load_config(args.config), "preprocess")
     except ConfigError as exc:
         print(f"uavpipe preprocess: {exc}", file=sys.stderr)
+        return 2
+    known = sec.get("vehicles") or {}
+    if args.vehicle and args.vehicle != GENERIC_VEHICLE and args.vehicle not in known:
+        # as the workflow's manifest check: an unknown vehicle is an error, never a silent default
+        print(f"uavpipe preprocess: unknown vehicle {args.vehicle!r}: add it to preprocess.vehicles "
+              f"or give {GENERIC_VEHICLE!r} (known: {', '.join([GENERIC_VEHICLE, *sorted(known)])})",
+              file=sys.stderr)
         return 2
     failed = []
     for d in args.ingest_dirs:
@@ -55,7 +71,7 @@ def run(args) -> int:
             print(f"uavpipe preprocess: {d}: {res.diagnostics.get('error')}", file=sys.stderr)
             failed.append(d)
             continue
-        print(f"{d} -> {out}: {summary_line(res.diagnostics)}")
+        print(f"{d} -> {out}: {summary_line(res.diagnostics)}, {vehicle_profile(res.diagnostics)}")
     if failed:
         print(f"uavpipe preprocess: {len(failed)} of {len(args.ingest_dirs)} flight(s) failed", file=sys.stderr)
         return 1

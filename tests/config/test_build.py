@@ -109,8 +109,12 @@ def test_the_shipped_config_builds_the_same_settings_as_the_old_explicit_file():
     assert yak.controls["thr"] == {"channel": "rc_3_us", "min_us": 1012, "max_us": 2100}
     husky = resolve_config(cfg["preprocess"], flight_id="husky-ros1")
     assert husky.vehicle == "husky" and husky.attitude_from_imu and husky.mag_mount == husky.imu_mount
-    other = resolve_config(cfg["preprocess"], flight_id="x", vehicle="sim-quad")
+    # `generic` (no entry of its own) gets the `default` entry; the manifest's sim-quad has an
+    # entry since issue 13 (an unknown vehicle stops the workflow), with the same settings
+    other = resolve_config(cfg["preprocess"], flight_id="x", vehicle="generic")
     assert other.vehicle == "default" and other.controls == default_at("preprocess.vehicles.*.controls")
+    sim = resolve_config(cfg["preprocess"], flight_id="x", vehicle="sim-quad")
+    assert sim.vehicle == "sim-quad" and dataclasses.replace(sim, vehicle="default") == other
 
 
 def test_the_stage_shims_validate_against_the_schema():

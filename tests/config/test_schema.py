@@ -84,7 +84,12 @@ def test_keys_only_the_code_knew_default_to_the_codes_old_values():
 def test_the_old_file_with_the_renames_validates_to_the_same_dict_as_the_new_one():
     old = _renamed(yaml.safe_load(BEFORE.read_text()))
     old["ingest"]["ros"].pop("custom_types")   # built in (see above)
-    assert validate_config(old) == load_config()
+    new = load_config()
+    # issue 13: every manifest vehicle has an entry, the `default` settings under its own name
+    vehicles = new["preprocess"]["vehicles"]
+    added = {k: vehicles.pop(k) for k in set(vehicles) - set(old["preprocess"]["vehicles"])}
+    assert added and all({**v, "doc": ""} == {**vehicles["default"], "doc": ""} for v in added.values())
+    assert validate_config(old) == new
 
 
 def test_defaults_equal_an_empty_file_and_snakemake_fills_the_same_defaults():

@@ -194,7 +194,7 @@ def test_manifest_row_for_unsimulated_log_fails_at_start(tmp_path):
 
 @pytest.mark.slow
 def test_absent_real_log_is_skipped_with_notice(tmp_path):
-    wd = _copy_workflow(tmp_path / "wf", [DEMO, "ghost\t/nonexistent/x.bin\tq\tnone\tnone\t\tgone"])
+    wd = _copy_workflow(tmp_path / "wf", [DEMO, "ghost\t/nonexistent/x.bin\tgeneric\tnone\tnone\t\tgone"])
     p = _smk(wd, "-n")
     assert "skipping flight ghost" in p.stderr
     assert "ghost" not in _planned_jobs(wd).keys()
@@ -209,7 +209,7 @@ def tiny_run(tmp_path_factory):
     """One tiny run of the whole workflow (demo, simulated M1 with truth, a corrupt log; model
     sets sim, sim2 for the same vehicle, and f3a without training flights)."""
     wd = _copy_workflow(tmp_path_factory.mktemp("tiny") / "wf",
-                        [DEMO, SIM, "broken\tlogs/broken.bin\tq\ttest\tnone\t\tcorrupt"], extra_tiny=SECOND_SET)
+                        [DEMO, SIM, "broken\tlogs/broken.bin\tgeneric\ttest\tnone\t\tcorrupt"], extra_tiny=SECOND_SET)
     (wd / "logs").mkdir()
     (wd / "logs" / "broken.bin").write_bytes(b"\xa3\x95" + bytes(range(256)) * 3)
     _smk(wd)

@@ -1,0 +1,141 @@
+"""The flight manifest (``datasets/flights.tsv``), checked before anything runs.
+
+The workflow (``rules/common.smk``) calls :func:`check_manifest` at start-up, so a mistake in the
+manifest stops the run in seconds with one line naming the manifest file, the 1-based line of
+the file and the flight id, e.g.::
+
+    datasets/flights.tsv:4: flight crash-0036: unknown vehicle 'coptr' (known: generic, copter, ...)
+
+Checked per row, in file order (the first failure is raised):
+
+- ``flight_id`` is unique (a duplicate names the line of the first one);
+- ``vehicle`` has an entry in the config's ``preprocess.vehicles`` or is ``generic`` (no
+  vehicle-specific settings: the ``default`` entry where the config has one, else the schema's
+  built-in defaults). A vehicle with no entry is an error, never a silent default;
+- ``format`` is blank (detect from the bytes) or a reader name of :mod:`pipeline.io.registry`;
+- ``labels`` is ``embedded``, ``none``, blank, or an existing file. Paths under ``results/`` are
+  written by the workflow and count as existing; ``{realdata}`` expands to ``realdata_dir``. The
+  labels of a row whose log is absent are not checked: that row is skipped with a notice anyway.
+
+What the JSON schema ``rules/schemas/flights.schema.yaml`` types (``role``, the id pattern) is
+left to the schema validation that follows.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from ..config import ConfigError
+
+#: the vehicle name that means "no vehicle-specific settings" (needs no config entry)
+GENERIC_VEHICLE = "generic"
+
+#: the manifest's columns, in order
+COLUMNS: tuple[str, ...] = ("flight_id", "path", "vehicle", "role", "labels", "format", "notes")
+
+#: ``labels`` values that are not paths
+LABEL_WORDS = ("embedded", "none", "")
+
+
+def expand_path(path: str, realdata_dir: str | None) -> str:
+    """A manifest path with ``{realdata}`` replaced by the config's ``realdata_dir``."""
+    return path.replace("{realdata}", str(realdata_dir or "").rstrip("/"))
+
+
+def _produced_or_exists(path: str, base: Path) -> bool:
+    # files under results/ are produced by the workflow itself (simulated/demo flights)
+    return path.startswith("results/") or (base / path).exists()
+
+
+def reader_names() -> list[str]:
+    """The reader names a manifest ``format`` may give (sorted)."""
+    from .registry import readers
+
+    return sorted(r.name for r in readers())
+
+
+def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
+                   base: str | os.PathLike | None = None) -> list[dict[str, str]]:
+    """Read and check a flight manifest; the rows as dicts of the columns, in file order.
+
+    Parameters
+    ----------
+    path : path-like
+        The tab-separated manifest (header line first; ``#`` lines and blank lines are skipped
+        but counted, so line numbers are those of the file).
+    config : mapping
+        The validated dataset config (``preprocess.vehicles``, ``realdata_dir``).
+    base : path-like, optional
+        The folder relative paths are resolved against (default: the working directory, as the
+        workflow's).
+
+    Returns
+    -------
+    list of dict
+        One dict per row, every column a string.
+
+    Raises
+    ------
+    ConfigError
+        One line ``<path>:<line>: flight <id>: <reason>`` for the first bad row, or
+        ``<path>: <reason>`` when the file or its header is unusable.
+    """
+    src = str(path)
+    root = Path(base) if base is not None else Path.cwd()
+    try:
+        text = Path(root / path if not Path(path).is_absolute() else path).read_text()
+    except OSError as exc:
+        raise ConfigError(f"{src}: cannot read the manifest: {exc.strerror or exc}") from None
+    vehicles = dict((config.get("preprocess") or {}).get("vehicles") or {})
+    realdata = config.get("realdata_dir")
+    known_vehicles = [GENERIC_VEHICLE, *sorted(v for v in vehicles if v != GENERIC_VEHICLE)]
+    formats: list[str] | None = None  # imported on first non-blank format only
+
+    header: list[str] | None = None
+    rows: list[dict[str, str]] = []
+    first_line: dict[str, int] = {}
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        if not raw.strip() or raw.lstrip().startswith("#"):
+            continue
+        cells = raw.split("\t")
+        if header is None:
+            header = [c.strip() for c in cells]
+            missing = [c for c in COLUMNS if c not in header]
+            if missing:
+                raise ConfigError(f"{src}:{lineno}: header lacks column(s) {', '.join(missing)} "
+                                  f"(expected: {', '.join(COLUMNS)})")
+            continue
+        if len(cells) > len(header):
+            raise ConfigError(f"{src}:{lineno}: {len(cells)} tab-separated fields, the header has "
+                              f"{len(header)}")
+        row = dict(zip(header, cells + [""] * (len(header) - len(cells))))
+        fid = row["flight_id"]
+        where = f"{src}:{lineno}: flight {fid or '(no id)'}"
+        if fid in first_line:
+            raise ConfigError(f"{where}: duplicate flight_id (first on line {first_line[fid]})")
+        first_line[fid] = lineno
+        veh = row["vehicle"]
+        if veh != GENERIC_VEHICLE and veh not in vehicles:
+            raise ConfigError(f"{where}: unknown vehicle {veh!r}: add it to preprocess.vehicles or "
+                              f"write {GENERIC_VEHICLE!r} (known: {', '.join(known_vehicles)})")
+        fmt = row["format"]
+        if fmt:
+            formats = formats if formats is not None else reader_names()
+            if fmt not in formats:
+                raise ConfigError(f"{where}: unknown format {fmt!r} (readers: {', '.join(formats)}; "
+                                  f"blank = detect from the file's bytes)")
+        lab = row["labels"]
+        log = expand_path(row["path"], realdata)
+        if lab not in LABEL_WORDS and _produced_or_exists(log, root):
+            lab_path = expand_path(lab, realdata)
+            if not _produced_or_exists(lab_path, root) or not (
+                    lab_path.startswith("results/") or (root / lab_path).is_file()):
+                raise ConfigError(f"{where}: labels {lab!r} is neither 'embedded', 'none' nor an "
+                                  f"existing file")
+        rows.append(row)
+    if header is None:
+        raise ConfigError(f"{src}: empty manifest (no header line)")
+    return rows

@@ -1,0 +1,128 @@
+"""End-of-run summary: what the workflow made of each flight and model set, in a few lines.
+
+The Snakefile's ``onsuccess``/``onerror`` handlers print :func:`run_summary`, so a corrupt log,
+which never stops the other flights, is still visible on the console at the end of the run::
+
+    uavpipe: 3 flight(s): 1 ok, 1 partial, 1 failed; 1 manifest row(s) skipped
+      failed   broken: ingest: not a DataFlash log (bad header)
+      partial  crash-0036: 120 bytes skipped
+      skipped  ghost: /nonexistent/x.bin not found
+      model sets: sim ok, f3a failed (no role=train flights)
+      report: results/index.html
+
+A flight is ``failed`` when its ingest or preprocess failed (the reason of the first stage that
+did), ``partial`` when the ingest decoded only part of the log (bytes skipped, records dropped),
+``ok`` otherwise, and ``not run`` when the run stopped before its ingest wrote ``meta.json``.
+An unreadable status file is reported as the flight's reason, never raised: the summary is
+printed after an error too.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+#: flight states, in the order the summary counts and lists them
+FLIGHT_STATES = ("ok", "partial", "failed", "not run")
+
+
+def _read_json(path: Path) -> tuple[dict[str, Any] | None, str]:
+    """``(content, "")``, ``(None, "")`` when absent, ``(None, reason)`` when unreadable."""
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        return None, ""
+    except OSError as exc:
+        return None, f"{path}: cannot read: {exc.strerror or exc}"
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        return None, f"{path}: not JSON ({exc.msg})"
+    if not isinstance(data, dict):
+        return None, f"{path}: not a JSON object"
+    return data, ""
+
+
+def _partial_reason(diag: Mapping[str, Any]) -> str:
+    parts = []
+    if diag.get("bytes_skipped"):
+        parts.append(f"{diag['bytes_skipped']} bytes skipped")
+    dropped = diag.get("records_dropped") or {}
+    if isinstance(dropped, dict) and dropped:  # {record type: count}
+        n = sum(v for v in dropped.values() if isinstance(v, (int, float)))
+        parts.append(f"{n} records dropped ({', '.join(sorted(map(str, dropped)))})")
+    return ", ".join(parts) or "partly decoded"
+
+
+def flight_status(flight: str, results_dir: str | os.PathLike = "results") -> tuple[str, str]:
+    """``(state, reason)`` of one flight from its ingest ``meta.json`` and preprocess ``.json``.
+
+    ``state`` is one of :data:`FLIGHT_STATES`; ``reason`` is empty for ``ok``.
+    """
+    res = Path(results_dir)
+    meta, bad = _read_json(res / "ingest" / flight / "meta.json")
+    if bad:
+        return "failed", bad
+    if meta is None:
+        return "not run", "no ingest output"
+    if meta.get("status") == "failed":
+        return "failed", f"ingest: {meta.get('error') or 'unknown reason'}"
+    pre, bad = _read_json(res / "state" / f"{flight}.json")
+    if bad:
+        return "failed", bad
+    if pre is not None and pre.get("status") == "failed":
+        return "failed", f"preprocess: {pre.get('error') or 'unknown reason'}"
+    if meta.get("status") == "partial":
+        return "partial", _partial_reason(meta.get("diagnostics") or {})
+    return "ok", ""
+
+
+def model_set_status(model_set: str, results_dir: str | os.PathLike = "results") -> tuple[str, str]:
+    """``(status, reason)`` of one model set from ``models/<set>/meta.json`` (``not run`` if absent)."""
+    meta, bad = _read_json(Path(results_dir) / "models" / model_set / "meta.json")
+    if bad:
+        return "failed", bad
+    if meta is None:
+        return "not run", ""
+    status = str(meta.get("status", "ok"))
+    return status, str(meta.get("error") or "") if status != "ok" else ""
+
+
+def run_summary(flights: Iterable[str], model_sets: Iterable[str],
+                results_dir: str | os.PathLike = "results", *,
+                skipped: Mapping[str, str] | None = None) -> str:
+    """The end-of-run summary (several lines, no trailing newline).
+
+    Parameters
+    ----------
+    flights : iterable of str
+        The planned flight ids (manifest rows whose log is available).
+    model_sets : iterable of str
+        The config's model set names.
+    results_dir : path-like
+        The workflow's ``results/`` folder.
+    skipped : mapping, optional
+        Manifest rows left out at start-up: flight id -> reason (e.g. ``"/x.bin not found"``).
+    """
+    res = Path(results_dir)
+    flights = list(flights)
+    skipped = dict(skipped or {})
+    states = {f: flight_status(f, res) for f in flights}
+    counts = {s: sum(st == s for st, _ in states.values()) for s in FLIGHT_STATES}
+    head = ", ".join(f"{counts[s]} {s}" for s in FLIGHT_STATES if counts[s] or s in ("ok", "failed"))
+    lines = [f"uavpipe: {len(flights)} flight(s): {head}; {len(skipped)} manifest row(s) skipped"]
+    for s in ("failed", "partial", "not run"):
+        lines += [f"  {s:8s} {f}: {why}" if why else f"  {s:8s} {f}"
+                  for f, (st, why) in states.items() if st == s]
+    lines += [f"  skipped  {f}: {why}" for f, why in skipped.items()]
+    sets = []
+    for m in model_sets:
+        st, why = model_set_status(m, res)
+        sets.append(f"{m} {st}" + (f" ({why})" if why else ""))
+    lines.append(f"  model sets: {', '.join(sets) if sets else 'none'}")
+    index = res / "index.html"
+    lines.append(f"  report: {index}" + ("" if index.exists() else " (not written)"))
+    return "\n".join(lines)

@@ -143,7 +143,13 @@ class ExtendedKalmanFilter:
         mean = prior.mean @ F.T if F.ndim == 2 else np.matmul(F, prior.mean[..., None])[..., 0]
         if bu is not None:
             mean = mean + bu
-        cov = F @ prior.cov @ _c(_T(F))
+        P = prior.cov
+        if F.ndim == 2:
+            # a shared F: P Fᵀ for every run is one (runs·n)×n by n×n product (a single BLAS
+            # call, where a stacked product calls BLAS once per run), then F (P Fᵀ)
+            cov = F @ (_c(P).reshape(-1, P.shape[-1]) @ F.T).reshape(P.shape)
+        else:
+            cov = F @ P @ _c(_T(F))
         cov += Q
         return GaussianState(mean, cov, t_ns)
 
@@ -176,8 +182,10 @@ class ExtendedKalmanFilter:
             return pred, UpdateStats(np.zeros(b), np.zeros(b, dtype=np.int64))
         x, P = pred.mean, pred.cov
         n_x = x.shape[-1]
-        hx = self.measurement.h(x)[..., None, :]
-        Hj = np.asarray(self.measurement.jacobian(x))[..., None, :, :]  # (..., 1, n_z, n_x)
+        hj = getattr(self.measurement, "h_and_jacobian", None)  # optional: both in one pass
+        hx, Hj = hj(x) if hj is not None else (self.measurement.h(x), self.measurement.jacobian(x))
+        hx = hx[..., None, :]
+        Hj = np.asarray(Hj)[..., None, :, :]  # (..., 1, n_z, n_x)
         valid = ~np.isnan(z).any(axis=-1)  # (..., M)
         full = bool(valid.all())
         if full and M == 1:
@@ -210,7 +218,10 @@ class ExtendedKalmanFilter:
             cov = IKH @ P @ _c(_T(IKH))
             KT = _c(_T(K))
             if Rs.ndim == 2 and not np.any(Rs - np.diag(np.diagonal(Rs))):
-                cov += (K * np.diagonal(Rs)) @ KT  # diagonal R: K R = K·diag(R)
+                # diagonal R: K R = K·diag(R), as one flat product (a (..., 4)-shaped broadcast
+                # runs numpy's inner loop over 4 elements at a time)
+                r = np.tile(np.diagonal(Rs), K.shape[-2])
+                cov += (K.reshape(K.shape[:-2] + r.shape) * r).reshape(K.shape) @ KT
             else:
                 cov += K @ Rs @ KT
         else:

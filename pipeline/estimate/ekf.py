@@ -157,7 +157,8 @@ class ExtendedKalmanFilter:
         """Update ``pred`` with the measurement(s) ``z``; see :meth:`update_stats`."""
         return self.update_stats(pred, z)[0]
 
-    def update_stats(self, pred: GaussianState, z: ArrayLike) -> tuple[GaussianState, UpdateStats]:
+    def update_stats(self, pred: GaussianState, z: ArrayLike,
+                     out: F64 | None = None) -> tuple[GaussianState, UpdateStats]:
         """Update ``pred`` with 0..M stacked measurements and return the innovation statistics.
 
         Parameters
@@ -167,6 +168,9 @@ class ExtendedKalmanFilter:
         z : array_like, shape ``b + (n_z,)`` or ``b + (M, n_z)``
             One measurement per run, or M stacked ones (independent, each with noise ``R``);
             M = 0 returns ``pred``. NaN rows are missing measurements for that run.
+        out : ndarray, shape ``b + (n_x, n_x)``, optional
+            Written with the posterior covariance, which is then a view of it (a caller that
+            keeps every step, like :func:`run_filter`, saves a copy of each).
         """
         R = np.asarray(self.measurement.R, dtype=np.float64)
         n_z = R.shape[0]
@@ -179,6 +183,9 @@ class ExtendedKalmanFilter:
                              f"with {n_z} components (expected {b + (n_z,)} or {b + ('M', n_z)})")
         M = z.shape[-2]
         if M == 0:
+            if out is not None:
+                np.copyto(out, pred.cov)
+                pred = GaussianState(pred.mean, out, pred.t_ns)
             return pred, UpdateStats(np.zeros(b), np.zeros(b, dtype=np.int64))
         x, P = pred.mean, pred.cov
         n_x = x.shape[-1]
@@ -215,7 +222,7 @@ class ExtendedKalmanFilter:
             # form loses it with the radar's 45 µrad against metres of position variance)
             IKH = K @ H
             np.subtract(np.eye(n_x), IKH, out=IKH)
-            cov = IKH @ P @ _c(_T(IKH))
+            cov = np.matmul(IKH @ P, _c(_T(IKH)), out=out)
             KT = _c(_T(K))
             if Rs.ndim == 2 and not np.any(Rs - np.diag(np.diagonal(Rs))):
                 # diagonal R: K R = K·diag(R), as one flat product (a (..., 4)-shaped broadcast
@@ -226,7 +233,8 @@ class ExtendedKalmanFilter:
                 cov += K @ Rs @ KT
         else:
             A = P - K @ _c(_T(PHT))  # (I − KH)P = P − K (HP)
-            cov = 0.5 * (A + _T(A))
+            cov = np.add(A, _T(A), out=out)
+            cov *= 0.5
         nis = np.einsum("...i,...i->...", Ly, Ly)  # yᵀS⁻¹y = |L⁻¹y|²
         dof = valid.sum(axis=-1) * n_z
         return GaussianState(mean, cov, pred.t_ns), UpdateStats(nis, dof)
@@ -327,10 +335,9 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
             F = eye
         if store == "all":
             pm[k], pc[k], Fs[k] = state.mean, state.cov, F
-        state, st = ekf.update_stats(state, z[k])
+        # the posterior covariance is written straight into its slot (no copy per step)
+        state, st = ekf.update_stats(state, z[k], out=None if cov is None else cov[k])
         mean[k] = state.mean
-        if cov is not None:
-            cov[k] = state.cov
         nis[k], dof[k] = st.nis, st.dof
 
     def rt(a):

@@ -47,12 +47,15 @@ def _c(a: F64) -> F64:
     return np.ascontiguousarray(a)
 
 
-def _spd_inverse(S: F64) -> tuple[F64, F64]:
-    """``(S⁻¹, L⁻¹)`` of stacked symmetric positive definite ``S`` (..., n, n), ``S = L Lᵀ``.
+def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64]:
+    """``(S⁻¹, yᵀS⁻¹y)`` of stacked symmetric positive definite ``S`` (..., n, n), ``S = L Lᵀ``,
+    and residuals ``y`` (..., n), with ``yᵀS⁻¹y = |L⁻¹y|²``.
 
     Cholesky–Banachiewicz and the triangular inverse by forward substitution, both on scalar
     planes vectorised over the stack (``L⁻¹[i, j] = −Σ_{j≤k<i} L[i, k] L⁻¹[k, j] / L[i, i]``),
-    then ``S⁻¹ = L⁻ᵀ L⁻¹``: several times faster than LAPACK (``np.linalg.cholesky``/``solve``/
+    then ``S⁻¹[i, j] = Σ_{k≥max(i,j)} L⁻¹[k, i] L⁻¹[k, j]`` (``L⁻ᵀ L⁻¹``, one triangle mirrored)
+    and ``L⁻¹y`` on the same planes (no stacked 4×4 products, no transposed copies): several
+    times faster than LAPACK (``np.linalg.cholesky``/``solve``/
     ``inv``), which is called once per matrix, on many small systems (n = 4 for the radar). An
     SPD matrix needs no pivoting.
 
@@ -83,8 +86,22 @@ def _spd_inverse(S: F64) -> tuple[F64, F64]:
             for k in range(j + 1, i):
                 acc += L[i, k] * Li[k, j]
             Li[i, j] = -acc * Li[i, i]
-    Li = np.ascontiguousarray(np.moveaxis(Li, (0, 1), (-2, -1)))
-    return _c(_T(Li)) @ Li, Li
+    Si = np.empty_like(L)
+    for i in range(n):
+        for j in range(i + 1):
+            acc = Li[i, i] * Li[i, j]  # the first term, k = max(i, j) = i
+            for k in range(i + 1, n):
+                acc += Li[k, i] * Li[k, j]
+            Si[i, j] = acc
+            Si[j, i] = acc
+    yt = np.moveaxis(y, -1, 0)
+    nis = np.zeros(y.shape[:-1])
+    for i in range(n):
+        ly = Li[i, 0] * yt[0]
+        for k in range(1, i + 1):
+            ly += Li[i, k] * yt[k]
+        nis += ly * ly
+    return np.ascontiguousarray(np.moveaxis(Si, (0, 1), (-2, -1))), nis
 
 
 @dataclass(frozen=True)
@@ -210,12 +227,11 @@ class ExtendedKalmanFilter:
         PHT = P @ _c(_T(H))
         S = H @ PHT + Rs
         try:
-            Si, Li = _spd_inverse(S)
+            Si, nis = _spd_inverse(S, y)  # nis = yᵀS⁻¹y = |L⁻¹y|²
         except np.linalg.LinAlgError:
             raise ValueError(f"update at t_ns={pred.t_ns}: the innovation covariance H P Hᵀ + R is not "
                              "positive definite (a non-finite or degenerate state/covariance)") from None
         K = PHT @ Si  # P Hᵀ S⁻¹, as filterpy
-        Ly = np.matmul(Li, y[..., None])[..., 0]
         mean = x + np.matmul(K, y[..., None])[..., 0]
         if self.joseph:
             # the product form keeps P symmetric positive definite under round-off (an expanded
@@ -235,7 +251,6 @@ class ExtendedKalmanFilter:
             A = P - K @ _c(_T(PHT))  # (I − KH)P = P − K (HP)
             cov = np.add(A, _T(A), out=out)
             cov *= 0.5
-        nis = np.einsum("...i,...i->...", Ly, Ly)  # yᵀS⁻¹y = |L⁻¹y|²
         dof = valid.sum(axis=-1) * n_z
         return GaussianState(mean, cov, pred.t_ns), UpdateStats(nis, dof)
 

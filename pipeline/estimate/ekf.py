@@ -210,8 +210,9 @@ class ExtendedKalmanFilter:
         hx, Hj = hj(x) if hj is not None else (self.measurement.h(x), self.measurement.jacobian(x))
         hx = hx[..., None, :]
         Hj = np.asarray(Hj)[..., None, :, :]  # (..., 1, n_z, n_x)
-        valid = ~np.isnan(z).any(axis=-1)  # (..., M)
-        full = bool(valid.all())
+        # one flat test for the common case (everything measured); per row only when needed
+        full = not np.isnan(z).any()
+        valid = None if full and M == 1 else ~np.isnan(z).any(axis=-1)  # (..., M)
         if full and M == 1:
             y, H = (z - hx)[..., 0, :], Hj[..., 0, :, :]
         else:
@@ -251,7 +252,7 @@ class ExtendedKalmanFilter:
             A = P - K @ _c(_T(PHT))  # (I − KH)P = P − K (HP)
             cov = np.add(A, _T(A), out=out)
             cov *= 0.5
-        dof = valid.sum(axis=-1) * n_z
+        dof = np.full(b, M * n_z, dtype=np.int64) if valid is None else valid.sum(axis=-1) * n_z
         return GaussianState(mean, cov, pred.t_ns), UpdateStats(nis, dof)
 
 

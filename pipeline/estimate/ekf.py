@@ -64,44 +64,49 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64]:
     numpy.linalg.LinAlgError
         Where a matrix is not positive definite.
     """
+    # planes are lists of (...)-shaped arrays (views of S and y, new arrays for the rest): no
+    # moved-axis copies, and no stores into a planes array (each would be one more copy)
     n = S.shape[-1]
-    St = np.ascontiguousarray(np.moveaxis(S, (-2, -1), (0, 1)))  # (n, n, ...) planes
-    L = np.zeros_like(St)
+    L: list[list] = [[None] * n for _ in range(n)]
     for i in range(n):
         for j in range(i + 1):
-            acc = St[i, j].copy()
-            for k in range(j):
-                acc -= L[i, k] * L[j, k]
+            acc = S[..., i, j]
+            if j:
+                acc = acc - L[i][0] * L[j][0]
+                for k in range(1, j):
+                    acc -= L[i][k] * L[j][k]
             if i == j:
-                if not np.all(acc > 0):
+                if not acc.min() > 0:  # NaN fails too
                     raise np.linalg.LinAlgError("Matrix is not positive definite")
-                L[i, i] = np.sqrt(acc)
+                L[i][i] = np.sqrt(acc)
             else:
-                L[i, j] = acc / L[j, j]
-    Li = np.zeros_like(L)
+                L[i][j] = acc / L[j][j]
+    Li: list[list] = [[None] * n for _ in range(n)]
     for i in range(n):
-        Li[i, i] = 1.0 / L[i, i]
+        Li[i][i] = 1.0 / L[i][i]
         for j in range(i):
-            acc = L[i, j] * Li[j, j]
+            acc = L[i][j] * Li[j][j]
             for k in range(j + 1, i):
-                acc += L[i, k] * Li[k, j]
-            Li[i, j] = -acc * Li[i, i]
-    Si = np.empty_like(L)
+                acc += L[i][k] * Li[k][j]
+            acc *= -Li[i][i]
+            Li[i][j] = acc
+    Si = np.empty(S.shape)
     for i in range(n):
         for j in range(i + 1):
-            acc = Li[i, i] * Li[i, j]  # the first term, k = max(i, j) = i
+            acc = Li[i][i] * Li[i][j]  # the first term, k = max(i, j) = i
             for k in range(i + 1, n):
-                acc += Li[k, i] * Li[k, j]
-            Si[i, j] = acc
-            Si[j, i] = acc
-    yt = np.moveaxis(y, -1, 0)
-    nis = np.zeros(y.shape[:-1])
+                acc += Li[k][i] * Li[k][j]
+            Si[..., i, j] = acc
+            if j != i:
+                Si[..., j, i] = acc
+    nis = None
     for i in range(n):
-        ly = Li[i, 0] * yt[0]
+        ly = Li[i][0] * y[..., 0]
         for k in range(1, i + 1):
-            ly += Li[i, k] * yt[k]
-        nis += ly * ly
-    return np.ascontiguousarray(np.moveaxis(Si, (0, 1), (-2, -1))), nis
+            ly += Li[i][k] * y[..., k]
+        ly *= ly
+        nis = ly if nis is None else nis + ly
+    return Si, nis
 
 
 @dataclass(frozen=True)

@@ -190,6 +190,9 @@ class ExtendedKalmanFilter:
         z : array_like, shape ``b + (n_z,)`` or ``b + (M, n_z)``
             One measurement per run, or M stacked ones (independent, each with noise ``R``);
             M = 0 returns ``pred``. NaN rows are missing measurements for that run.
+            ``h(x⁻)`` and ``H`` come from the measurement model's ``h_and_jacobian`` where it
+            has one (one pass, e.g. :meth:`~pipeline.estimate.models.RadarModel.h_and_jacobian`),
+            else from its ``h`` and ``jacobian``.
         out : ndarray, shape ``b + (n_x, n_x)``, optional
             Written with the posterior covariance, which is then a view of it (a caller that
             keeps every step, like :func:`run_filter`, saves a copy of each).

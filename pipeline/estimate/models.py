@@ -2,7 +2,8 @@
 
 The simulator draws its radar measurements through :class:`RadarModel` and the EKF linearises
 the very same :meth:`RadarModel.h` with :meth:`RadarModel.jacobian`, so the measurement model
-exists exactly once.
+exists exactly once (:meth:`RadarModel.h_and_jacobian`, the EKF's batched path, computes both
+in one pass and is tested equal to them).
 
 Radar (seed 000 §3, Strong 2021 eqs. 2.18–2.22, typos fixed per §13.2). A radar at the fixed
 NED site :math:`R_n` measures the 9-state ``x = [r, v, a]`` (NED, m, m/s, m/s²) as

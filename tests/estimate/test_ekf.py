@@ -170,3 +170,23 @@ def test_a_radar_gap_in_one_run_is_a_predict_only_step_for_that_run_alone(rng):
         np.testing.assert_allclose(track.cov[1, k], one.cov, rtol=1e-9, atol=1e-15)
     np.testing.assert_array_equal(track.pred_cov[1, 6], track.cov[1, 6])  # nothing measured, nothing changed
     assert np.trace(track.cov[1, 7]) > np.trace(track.cov[0, 7])
+
+
+@pytest.mark.parametrize("joseph", [True, False])
+def test_an_update_written_into_a_given_covariance_array_equals_the_plain_update(rng, joseph):
+    radar = RadarModel(site_ned_m=(-200.0, 150.0, 0.0))
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), radar, joseph=joseph)
+    x = X0 + rng.normal(0, 1, (4, 9))
+    pred = GaussianState(x, np.broadcast_to(initial_cov(), (4, 9, 9)), 0)
+    zf = radar.measure(x, rng)
+    z = zf.copy()
+    z[2, 1] = np.nan  # one run missing: the masked path
+    for zk in (zf, z, z[:, None], np.empty((4, 0, 4))):
+        post, st = ekf.update_stats(pred, zk)
+        out = np.full((4, 9, 9), np.nan)
+        post_o, st_o = ekf.update_stats(pred, zk, out=out)
+        assert np.shares_memory(post_o.cov, out)
+        np.testing.assert_array_equal(out, post.cov)
+        np.testing.assert_array_equal(post_o.mean, post.mean)
+        np.testing.assert_array_equal(st_o.nis, st.nis)
+        np.testing.assert_array_equal(st_o.dof, st.dof)

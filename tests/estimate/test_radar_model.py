@@ -95,3 +95,16 @@ def test_from_config_and_ca_transition():
     A = ca_transition(0.2)
     x = np.array([0, 0, 0, 1.0, 2.0, 3.0, 0.5, 0.5, -1.0])
     np.testing.assert_allclose((A @ x)[:3], x[3:6] * 0.2 + 0.5 * 0.04 * x[6:])
+
+
+@pytest.mark.parametrize("n_x, tau, include", [(9, 0.0, True), (9, 0.05, True), (9, 0.05, False), (6, 0.05, True)])
+def test_h_and_jacobian_at_once_equal_h_and_jacobian_on_a_batch(rng, n_x, tau, include):
+    model = RadarModel(site_ned_m=(-200.0, 150.0, 10.0), tau_rd_s=tau, include_tau_in_h=include)
+    x = np.concatenate([rng.uniform(-800, 800, (2, 7, 3)), rng.normal(0, 20, (2, 7, 3)),
+                        rng.normal(0, 2, (2, 7, n_x - 6))], axis=-1)
+    hx, H = model.h_and_jacobian(x)
+    assert hx.shape == (2, 7, 4) and H.shape == (2, 7, 4, n_x)
+    np.testing.assert_allclose(hx, model.h(x), rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(H, model.jacobian(x), rtol=1e-12, atol=1e-15)
+    hx1, H1 = model.h_and_jacobian(x[1, 3])
+    np.testing.assert_allclose(H1, model.jacobian(x[1, 3]), rtol=1e-12, atol=1e-15)

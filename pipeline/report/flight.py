@@ -142,9 +142,15 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     divs = [(title, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
                                                       div_id=f"plot-{i}", config={"responsive": True}))
             for i, (title, f) in enumerate(figs)]
-    facts = [("format", meta.get("source_format")), ("reader", f"{meta.get('reader')} v{meta.get('reader_version')}"),
-             ("detected by", meta.get("detected_by")), ("source", meta.get("source_path")),
-             ("sha256", meta.get("source_sha256")), ("status", meta.get("status")),
+    def known(v) -> str:  # a failed ingest has no reader or format: say so, never "None"
+        return "–" if v in (None, "") else str(v)
+
+    reader = (f"{meta['reader']} v{meta.get('reader_version') or '?'}" if meta.get("reader")
+              else "none took the file" if meta.get("status") == "failed" else "–")
+    facts = [("format", known(meta.get("source_format"))), ("reader", reader),
+             ("detected by", known(meta.get("detected_by"))), ("source", known(meta.get("source_path"))),
+             ("sha256", known(meta.get("source_sha256"))), ("status", known(meta.get("status"))),
+             *([("reason", meta.get("error") or "unknown")] if meta.get("status") == "failed" else []),
              ("duration", f"{log.duration_s:.1f} s"),
              ("streams", ", ".join(f"{k} ({v['rows']})" for k, v in log.summary().items()) or "none"),
              ("diagnostics", json.dumps({k: v for k, v in meta.get("diagnostics", {}).items()

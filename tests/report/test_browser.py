@@ -14,6 +14,9 @@ import pytest
 
 from helpers import REQUIRE_SHARED
 
+#: a headless browser per page: the full suite, not the fast lane
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 

@@ -95,3 +95,4 @@ def test_every_stage_entry_point_is_importable_from_its_package(package, entry):
     fn = getattr(importlib.import_module(f"pipeline.{package}"), entry)
     assert callable(fn) and list(__import__("inspect").signature(fn).parameters)[:3] == ["inputs", "outputs",
                                                                                           "config"]
+

@@ -22,11 +22,12 @@ import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from . import schema
 from .base import FlightLog, IngestError, Progress
 from .parquet import write_flightlog
+from .stage import declared
 from .registry import read_log
 
 
@@ -58,14 +59,6 @@ class IngestResult:
     paths: tuple[Path, ...] = ()
 
 
-def _get(m, key: str, default=None):
-    """``m[key]`` for a dict or a Snakemake namedlist (attribute and key access)."""
-    if isinstance(m, Mapping):
-        return m.get(key, default)
-    try:
-        return m[key]
-    except (KeyError, IndexError, TypeError):
-        return getattr(m, key, default)
 
 
 def _one(v) -> str | None:
@@ -83,14 +76,14 @@ def stream_paths(outputs) -> dict[str, Path]:
 
     Each stream path is matched by its file name ``<stream>.parquet``; every stream of
     ``schema.STREAM_NAMES`` must be declared, and nothing else."""
-    streams = [Path(p) for p in _get(outputs, "streams")]
+    streams = [Path(p) for p in declared(outputs, "streams")]
     by_name = {p.name.removesuffix(".parquet"): p for p in streams}
     missing = [s for s in schema.STREAM_NAMES if s not in by_name]
     extra = [s for s in by_name if s not in schema.STREAM_NAMES]
     if missing or extra or len(by_name) != len(streams):
         raise ValueError(f"outputs.streams must name each of {', '.join(schema.STREAM_NAMES)}.parquet once"
                          + (f"; missing {missing}" if missing else "") + (f"; unknown {extra}" if extra else ""))
-    return {**by_name, "meta": Path(_get(outputs, "meta"))}
+    return {**by_name, "meta": Path(declared(outputs, "meta"))}
 
 
 def outputs_for(out_dir: str | os.PathLike) -> dict:
@@ -127,9 +120,9 @@ def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str
         ``status`` ``failed`` (with ``error``) when the log could not be decoded; the files
         are written either way.
     """
-    log_path = _get(inputs, "log")
+    log_path = declared(inputs, "log")
     log_path = _one(log_path) if not isinstance(log_path, (str, os.PathLike)) else str(log_path)
-    labels = _one(_get(inputs, "labels"))
+    labels = _one(declared(inputs, "labels"))
     paths = stream_paths(outputs)
     kwargs: dict[str, Any] = {"fmt": fmt or None, "flight_id": flight_id, "config": config or None,
                               "progress": progress}

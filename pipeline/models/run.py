@@ -31,7 +31,7 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -40,6 +40,7 @@ from .. import __version__
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
+from ..io.stage import declared, declared_list
 from .base import ModelError, ModelsConfig
 from .metrics import THESIS_TRUTH, per_maneuver_table, thesis_side_by_side
 
@@ -59,18 +60,8 @@ class ModelStageResult:
     diagnostics: dict | None = None
 
 
-def _get(paths: Any, name: str, default: Any = None):
-    # snakemake namedlists and plain dicts alike
-    if isinstance(paths, Mapping):
-        return paths.get(name, default)
-    return getattr(paths, name, default)
 
 
-def _list(paths: Any, name: str) -> list:
-    v = _get(paths, name, None)
-    if v is None:
-        return []
-    return [v] if isinstance(v, (str, os.PathLike)) else list(v)
 
 
 def model_set_config(config: Mapping, model_set: str) -> dict:
@@ -175,13 +166,13 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
     """
     from .classifier import ManeuverModelSet
 
-    params, meta_path = Path(_get(outputs, "params")), Path(_get(outputs, "meta"))
+    params, meta_path = Path(declared(outputs, "params")), Path(declared(outputs, "meta"))
     out = params.parent
     if meta_path.parent != out or params.name != "params.npz" or meta_path.name != "meta.json":
         raise ModelError(f"model set {model_set}: outputs must be <dir>/params.npz and <dir>/meta.json, "
                          f"got {params} and {meta_path}")
     spec = {k: v for k, v in dict(config).items() if k != "hmm"}
-    sets, states, segments = _list(inputs, "sets"), _list(inputs, "states"), _list(inputs, "segments")
+    sets, states, segments = declared_list(inputs, "sets"), declared_list(inputs, "states"), declared_list(inputs, "segments")
     cfg = hmm_config(config, seed)  # a bad hyperparameter is a config error, not a placeholder
     try:
         df = _read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments)
@@ -243,9 +234,9 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
     """
     from .classifier import ManeuverModelSet
 
-    model_dir = Path(_get(inputs, "params")).parent
-    state_path, segments_path = _get(inputs, "state"), _get(inputs, "segments")
-    out_path = _get(outputs, "classification")
+    model_dir = Path(declared(inputs, "params")).parent
+    state_path, segments_path = declared(inputs, "state"), declared(inputs, "segments")
+    out_path = declared(outputs, "classification")
     st_meta = read_table_meta(state_path)
     extra = {"model_set": model_set, "model": model_set, "flight_id": st_meta.get("flight_id")}
     m_status, m_error = model_status(model_dir)
@@ -301,10 +292,10 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
     from .classifier import ManeuverModelSet
 
     spec, name = config, model_set
-    model_dir = Path(_get(inputs, "params")).parent
-    out_path = _get(outputs, "evaluation")
-    train_sets, test_sets = _list(inputs, "train_sets"), _list(inputs, "test_sets")
-    classified = _list(inputs, "classified")
+    model_dir = Path(declared(inputs, "params")).parent
+    out_path = declared(outputs, "evaluation")
+    train_sets, test_sets = declared_list(inputs, "train_sets"), declared_list(inputs, "test_sets")
+    classified = declared_list(inputs, "classified")
     status, error = model_status(model_dir)
     rows = []
     if status == "ok":

@@ -20,10 +20,11 @@ import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Mapping
 
 from ..io import schema
 from ..io.parquet import read_flightlog, write_json, write_table
+from ..io.stage import declared
 from .calibrate import CALIBRATION
 from .state import PreprocessResult, preprocess_log, summary_line, write_outputs
 
@@ -37,9 +38,6 @@ class PreprocessStageResult:
     diagnostics: dict
 
 
-def _get(paths: Any, name: str):
-    # snakemake namedlists and plain dicts alike
-    return paths[name] if isinstance(paths, Mapping) else getattr(paths, name)
 
 
 def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
@@ -61,10 +59,10 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
     -------
     PreprocessStageResult
     """
-    meta_path = Path(_get(inputs, "meta"))
+    meta_path = Path(declared(inputs, "meta"))
     meta = json.loads(meta_path.read_text())
     fid = meta.get("flight_id")
-    paths = {k: _get(outputs, k) for k in ("state", "segments", "calibration", "info")}
+    paths = {k: declared(outputs, k) for k in ("state", "segments", "calibration", "info")}
     if meta.get("status") == "failed":
         reason = f"ingest failed: {meta.get('error') or 'unknown reason'}"
         diag = {"flight_id": fid, "status": "failed", "error": reason}

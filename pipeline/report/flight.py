@@ -12,13 +12,13 @@ import os
 from pathlib import Path
 from typing import Mapping
 
-import jinja2
 import numpy as np
 import pandas as pd
 
 from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
+from .pages import figure_divs, render, write_page
 from . import plots
 
 
@@ -139,9 +139,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             if fig is not None:
                 fig.update_layout(title=f"Maneuver timeline ({m})")
             figs.append((f"Maneuver timeline ({m})", fig))
-    divs = [(title, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
-                                                      div_id=f"plot-{i}", config={"responsive": True}))
-            for i, (title, f) in enumerate(figs)]
+    divs = figure_divs(figs)
+
     def known(v) -> str:  # a failed ingest has no reader or format: say so, never "None"
         return "–" if v in (None, "") else str(v)
 
@@ -166,13 +165,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         cm = read_table_meta(p)
         facts.append(("classifier", f"model set {m}: {cm.get('status')}"
                                     + (f" ({cm.get('error')})" if cm.get("error") else "")))
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(Path(template).parent)),
-                             autoescape=jinja2.select_autoescape(["html", "j2"]))
-    page = env.get_template(Path(template).name).render(
+    page = render(template, 
         flight_id=meta.get("flight_id"), facts=facts, plots=divs, plotly_js=plotly_js,
         index_href=index_href, failed=meta.get("status") == "failed", error=meta.get("error"))
-    out = Path(out_html)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(page)
-    os.replace(tmp, out)
+    write_page(page, out_html)

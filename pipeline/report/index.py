@@ -17,6 +17,7 @@ import pandas as pd
 from ..frames.geodesy import geodetic_to_ned
 from ..io.parquet import read_table
 from ..io import schema
+from .pages import write_page
 
 
 def _track_stats(flight_dir: Path) -> tuple[float, float]:
@@ -183,9 +184,5 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
 <table><thead><tr><th>flight</th><th>status</th><th>format</th><th>duration [s]</th><th>distance [m]</th>
 <th>max speed [m/s]</th><th>maneuvers</th><th>ingest warnings</th></tr></thead>
 <tbody>{''.join(body)}</tbody></table>{models_html}</body></html>"""
-    out = Path(out_html)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(page)
-    os.replace(tmp, out)
+    write_page(page, out_html)
     return table

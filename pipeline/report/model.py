@@ -13,13 +13,13 @@ import json
 import os
 from pathlib import Path
 
-import jinja2
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from ..io.parquet import read_table, read_table_meta
+from .pages import figure_divs, render, write_page
 from .plots import layout
 
 
@@ -115,16 +115,8 @@ def build_model_report(model_dir: str | os.PathLike, evaluation: str | os.PathLi
     elif not failed:
         ev_meta = read_table_meta(evaluation) if Path(evaluation).exists() else {}
         tables.append(("Evaluation", f"<p class='absent'>no evaluation data {ev_meta.get('error') or ''}</p>"))
-    divs = [(title, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
-                                                      div_id=f"plot-{i}", config={"responsive": True}))
-            for i, (title, f) in enumerate(figs)]
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(Path(template).parent)),
-                             autoescape=jinja2.select_autoescape(["html", "j2"]))
-    page = env.get_template(Path(template).name).render(
+    divs = figure_divs(figs)
+    page = render(template, 
         model=name, facts=facts, plots=divs, tables=tables, plotly_js=plotly_js, index_href=index_href,
         failed=failed, error=meta.get("error"))
-    out = Path(out_html)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(page)
-    os.replace(tmp, out)
+    write_page(page, out_html)

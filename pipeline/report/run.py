@@ -9,24 +9,16 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Mapping
 
+from ..io.stage import declared, declared_list
 from .flight import build_flight_report, write_plotly_js
 from .index import build_index
 from .model import build_model_report
 
 
-def _get(paths: Any, name: str, default: Any = None):
-    if isinstance(paths, Mapping):
-        return paths.get(name, default)
-    return getattr(paths, name, default)
 
 
-def _list(paths: Any, name: str) -> list[str]:
-    v = _get(paths, name)
-    if v is None:
-        return []
-    return [str(v)] if isinstance(v, (str, os.PathLike)) else [str(x) for x in v]
 
 
 def _rel(target: str | os.PathLike, page: str | os.PathLike) -> str:
@@ -41,7 +33,7 @@ def _model_set_of(classification: str) -> str:
 
 def run_plotly_js(inputs, outputs, config: Mapping | None = None) -> None:
     """Copy plotly's bundled ``plotly.min.js`` to ``outputs.js`` (one local copy for every page)."""
-    write_plotly_js(_get(outputs, "js"))
+    write_plotly_js(declared(outputs, "js"))
 
 
 def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
@@ -52,19 +44,19 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
     model set that classifies the flight), ``template``, ``plotly``. ``index``: the path of the
     index page, for the back link.
     """
-    page = _get(outputs, "page")
-    build_flight_report(Path(_get(inputs, "meta")).parent, page, template=_get(inputs, "template"),
-                        plotly_js=_rel(_get(inputs, "plotly"), page), index_href=_rel(index, page),
-                        state=_get(inputs, "state"), segments=_get(inputs, "segments"),
-                        calibration=_get(inputs, "calibration"),
-                        classified={_model_set_of(p): p for p in _list(inputs, "classified")})
+    page = declared(outputs, "page")
+    build_flight_report(Path(declared(inputs, "meta")).parent, page, template=declared(inputs, "template"),
+                        plotly_js=_rel(declared(inputs, "plotly"), page), index_href=_rel(index, page),
+                        state=declared(inputs, "state"), segments=declared(inputs, "segments"),
+                        calibration=declared(inputs, "calibration"),
+                        classified={_model_set_of(p): p for p in declared_list(inputs, "classified")})
 
 
 def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
     """One model set's page ``outputs.page`` from ``inputs.params``/``meta``/``evaluation``."""
-    page = _get(outputs, "page")
-    build_model_report(Path(_get(inputs, "params")).parent, _get(inputs, "evaluation"), page,
-                       template=_get(inputs, "template"), plotly_js=_rel(_get(inputs, "plotly"), page),
+    page = declared(outputs, "page")
+    build_model_report(Path(declared(inputs, "params")).parent, declared(inputs, "evaluation"), page,
+                       template=declared(inputs, "template"), plotly_js=_rel(declared(inputs, "plotly"), page),
                        index_href=_rel(index, page))
 
 
@@ -77,12 +69,12 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
     (one page per model set, in ``model_sets`` order). ``studies``: study names, linked to
     ``report/studies/<name>.html`` beside the index's ``report/`` folder.
     """
-    out = _get(outputs, "index")
+    out = declared(outputs, "index")
     classified: dict[str, dict[str, str]] = {}
-    for p in _list(inputs, "classified"):
+    for p in declared_list(inputs, "classified"):
         classified.setdefault(Path(p).stem, {})[_model_set_of(p)] = p
-    build_index(flights, _list(inputs, "metas"), out,
-                links={f: _rel(p, out) for f, p in zip(flights, _list(inputs, "pages"))},
-                segments=dict(zip(flights, _list(inputs, "segments"))), classified=classified,
-                models={m: _rel(p, out) for m, p in zip(model_sets, _list(inputs, "models"))},
+    build_index(flights, declared_list(inputs, "metas"), out,
+                links={f: _rel(p, out) for f, p in zip(flights, declared_list(inputs, "pages"))},
+                segments=dict(zip(flights, declared_list(inputs, "segments"))), classified=classified,
+                models={m: _rel(p, out) for m, p in zip(model_sets, declared_list(inputs, "models"))},
                 studies={s: f"report/studies/{s}.html" for s in studies})

@@ -16,8 +16,9 @@ import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import jinja2
 import plotly.graph_objects as go
+
+from .pages import figure_divs, render, write_page
 
 
 def read_results(path: str | os.PathLike) -> dict[str, str]:
@@ -135,19 +136,10 @@ def build_study_page(name: str, out_html: str | os.PathLike, *, results: str | o
     res = read_results(results)
     rows = [(k, v, defs.get(k, "–")) for k, v in res.items()]
     md = Path(report_md).read_text() if Path(report_md).exists() else ""
-    divs = [(t, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
-                                                  div_id=f"plot-{i}", config={"responsive": True}))
-            for i, (t, f) in enumerate(figures)]
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(Path(template).parent)),
-                             autoescape=jinja2.select_autoescape(["html", "j2"]))
-    page = env.get_template(Path(template).name).render(
-        name=name, title=title or name, facts=list(facts), results=rows, report=markdown_to_html(md),
-        plots=divs, plotly_js=plotly_js, index_href=index_href)
-    out = Path(out_html)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_text(page)
-    os.replace(tmp, out)
+    page = render(template, name=name, title=title or name, facts=list(facts), results=rows,
+                  report=markdown_to_html(md), plots=figure_divs(figures), plotly_js=plotly_js,
+                  index_href=index_href)
+    write_page(page, out_html)
 
 
 def layout(fig: go.Figure, title: str, **kw) -> go.Figure:

@@ -13,9 +13,9 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
 
 from ..io.sidecar import sidecar_path
+from ..io.stage import declared, declared_list
 
 
 def _settings(sim_cfg: dict | None):
@@ -63,12 +63,8 @@ class SimulateResult:
     diagnostics: dict
 
 
-def _get(paths: Any, name: str):
-    return paths[name] if isinstance(paths, Mapping) else getattr(paths, name)
 
 
-def _as_list(v) -> list[str]:
-    return [str(v)] if isinstance(v, (str, os.PathLike)) else [str(x) for x in v]
 
 
 def _check_written(declared: list[str], written: list[str], what: str) -> None:
@@ -96,12 +92,12 @@ def run_simulate_sets(inputs, outputs, config: dict | None, *, seed: int) -> Sim
     """
     from .datasets import run_simulate
 
-    out_dir = Path(_get(outputs, "index")).parent
+    out_dir = Path(declared(outputs, "index")).parent
     sim = dict(config or {})
     sim["datasets"] = {**(sim.get("datasets") or {}), "log_formats": []}
     index = run_simulate(out_dir, sim, seed, progress=_say)
     written = [str(out_dir / v["path"]) for v in index["sets"].values()]
-    _check_written(_as_list(_get(outputs, "sets")), written, "sets")
+    _check_written(declared_list(outputs, "sets"), written, "sets")
     return SimulateResult(paths=tuple(written), diagnostics=index)
 
 
@@ -114,10 +110,10 @@ def run_simulate_logs(inputs, outputs, config: dict | None, *, seed: int) -> Sim
     from .sensors import SensorSettings
     from .writers import write_flight_logs
 
-    out_dir = Path(_get(outputs, "manifest")).parent
+    out_dir = Path(declared(outputs, "manifest")).parent
     settings, ds = _settings(config)
     rows = write_flight_logs(out_dir, settings, SensorSettings.from_config(config), ds, seed, say=_say)
-    _check_written(_as_list(_get(outputs, "logs")) + _as_list(_get(outputs, "sidecars")),
+    _check_written(declared_list(outputs, "logs") + declared_list(outputs, "sidecars"),
                    [r["path"] for r in rows] + [r["labels"] for r in rows], "logs")
     return SimulateResult(paths=tuple(r["path"] for r in rows), diagnostics={"flights": rows})
 
@@ -126,7 +122,7 @@ def run_demo_log(inputs, outputs, config: dict | None, *, seed: int) -> Simulate
     """The demo DataFlash flight (``outputs.log``): uavpipe's own writer, always available."""
     from .demo import write_demo_flight
 
-    path = _get(outputs, "log")
+    path = declared(outputs, "log")
     write_demo_flight(path, seed=seed)
     return SimulateResult(paths=(str(path),), diagnostics={})
 

@@ -30,6 +30,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # helpers_ulog when run as a script
 
+import helpers_tabular  # noqa: E402
 from helpers_ulog import ULogWriter  # noqa: E402
 
 from pipeline.io import schema  # noqa: E402
@@ -172,29 +173,8 @@ def flightcoach_json(tmp: Path) -> tuple[Path, dict]:
 
 def tabular_parquet(tmp: Path) -> tuple[Path, dict]:
     """A column-mapped Parquet table (units converted by the map)."""
-    rng = np.random.default_rng(11)
-    n = 30
-    df = pd.DataFrame({
-        "t_ms": 1000.0 + 100.0 * np.arange(n),
-        "lat": np.full(n, 515000000) + np.arange(n), "lon": np.full(n, -25000000) - np.arange(n),
-        "alt_ft": rng.uniform(0, 300, n), "roll_deg": rng.uniform(-180, 180, n),
-        "pitch_deg": rng.uniform(-89, 89, n), "yaw_deg": rng.uniform(0, 360, n),
-        "p_mbar": rng.uniform(990, 1020, n), "tempK": np.full(n, 293.15) + rng.normal(0, 1, n),
-        "gx": rng.normal(0, 30, n), "az": rng.normal(-1, 0.01, n),
-        "flightmode": [1] * 10 + [5] * 10 + [1] * 10})
-    cmap = {"name": "goldenmap", "time": {"column": "t_ms", "unit": "ms"}, "ned_origin": "first_fix",
-            "columns": {
-                "lat": {"stream": "gps", "column": "lat_deg", "unit": "deg*1e7"},
-                "lon": {"stream": "gps", "column": "lon_deg", "unit": "deg*1e7"},
-                "alt_ft": {"stream": "gps", "column": "alt_msl_m", "unit": "ft"},
-                "roll_deg": {"stream": "attitude", "column": "roll", "unit": "deg"},
-                "pitch_deg": {"stream": "attitude", "column": "pitch", "unit": "deg"},
-                "yaw_deg": {"stream": "attitude", "column": "yaw", "unit": "deg"},
-                "p_mbar": {"stream": "baro", "column": "press_Pa", "unit": "mbar"},
-                "tempK": {"stream": "baro", "column": "temp_degC", "unit": "K"},
-                "gx": {"stream": "imu", "column": "gyr_x_radps", "unit": "deg/s"},
-                "az": {"stream": "imu", "column": "acc_z_mps2", "unit": "g"},
-                "flightmode": {"stream": "mode", "column": "mode", "values": {1: "MANUAL", 5: "FBWA"}}}}
+    df = helpers_tabular.table(np.random.default_rng(11), 30)
+    cmap = helpers_tabular.column_map("goldenmap")
     p = tmp / "flight.parquet"
     df.to_parquet(p)
     return p, {"config": {"columnmaps": {"goldenmap": cmap}}}

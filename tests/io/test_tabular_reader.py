@@ -9,6 +9,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
+import helpers_tabular
 from helpers import realdata_file
 from pipeline.frames.geodesy import geodetic_to_ned
 from pipeline.io import registry
@@ -96,37 +97,16 @@ def test_frames_origin_and_sign(real):
 # --- config-given maps, Parquet, unit conversion ----------------------------------------------
 
 def _map(**over):
-    m = {"name": "testmap", "time": {"column": "t_ms", "unit": "ms"},
-         "constant_is_absent": True, "ned_origin": "first_fix",
-         "columns": {
-             "lat": {"stream": "gps", "column": "lat_deg", "unit": "deg*1e7"},
-             "lon": {"stream": "gps", "column": "lon_deg", "unit": "deg*1e7"},
-             "alt_ft": {"stream": "gps", "column": "alt_msl_m", "unit": "ft"},
-             "roll_deg": {"stream": "attitude", "column": "roll", "unit": "deg"},
-             "pitch_deg": {"stream": "attitude", "column": "pitch", "unit": "deg"},
-             "yaw_deg": {"stream": "attitude", "column": "yaw", "unit": "deg"},
-             "p_mbar": {"stream": "baro", "column": "press_Pa", "unit": "mbar"},
-             "tempK": {"stream": "baro", "column": "temp_degC", "unit": "K"},
-             "mx": {"stream": "mag", "column": "mag_x_T", "unit": "mG"},
-             "gx": {"stream": "imu", "column": "gyr_x_radps", "unit": "deg/s"},
-             "az": {"stream": "imu", "column": "acc_z_mps2", "unit": "g"},
-             "flightmode": {"stream": "mode", "column": "mode", "values": {1: "MANUAL", 5: "FBWA"}},
-             "spare": {"stream": "airspeed", "column": "airspeed_mps", "unit": "kn", "optional": True},
-         }}
-    m.update(over)
-    return m
+    extra = {"mx": {"stream": "mag", "column": "mag_x_T", "unit": "mG"},
+             "spare": {"stream": "airspeed", "column": "airspeed_mps", "unit": "kn", "optional": True}}
+    return helpers_tabular.column_map("testmap", extra, constant_is_absent=True, **over)
 
 
 def _table(rng, n=12):
-    return pd.DataFrame({
-        "t_ms": 1000.0 + 100.0 * np.arange(n),
-        "lat": np.full(n, 515000000) + np.arange(n), "lon": np.full(n, -25000000) - np.arange(n),
-        "alt_ft": rng.uniform(0, 300, n), "roll_deg": rng.uniform(-180, 180, n),
-        "pitch_deg": rng.uniform(-89, 89, n), "yaw_deg": rng.uniform(0, 360, n),
-        "p_mbar": rng.uniform(990, 1020, n), "tempK": np.full(n, 293.15) + rng.normal(0, 1, n),
-        "mx": rng.normal(200, 5, n), "gx": rng.normal(0, 30, n), "az": rng.normal(-1, 0.01, n),
-        "flightmode": [1] * 4 + [5] * 4 + [1] * 4, "ignored_col": np.zeros(n) + np.arange(n),
-    })
+    df = helpers_tabular.table(rng, n)
+    df["mx"] = rng.normal(200, 5, n)
+    df["ignored_col"] = np.zeros(n) + np.arange(n)
+    return df
 
 
 def test_parquet_with_config_map_and_units(tmp_path, rng):

@@ -3,30 +3,18 @@
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-SNAKEMAKE = str(Path(sys.executable).parent / "snakemake")
-HEADER = "flight_id\tpath\tvehicle\trole\tlabels\tformat\tnotes\n"
+from helpers_workflow import SNAKEMAKE, copy_workflow
+
 DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
 
 
 @pytest.mark.slow
 def test_an_unknown_vehicle_stops_the_dry_run_with_one_line_naming_file_line_and_flight(tmp_path):
-    wd = tmp_path / "wf"
-    wd.mkdir()
-    for name in ("Snakefile", "rules", "reports", "profiles"):
-        src = ROOT / name
-        (shutil.copytree if src.is_dir() else shutil.copy)(src, wd / name)
-    (wd / "datasets").mkdir()
-    shutil.copy(ROOT / "datasets" / "config.yaml", wd / "datasets" / "config.yaml")
-    (wd / "datasets" / "flights.tsv").write_text(
-        HEADER + DEMO + "\n" + "typo\tresults/sim/demo/demo-quad.bin\tsim-qaud\ttest\tnone\t\tx\n")
+    wd = copy_workflow(tmp_path / "wf", [DEMO, "typo\tresults/sim/demo/demo-quad.bin\tsim-qaud\ttest\tnone\t\tx"], tiny=False)
     p = subprocess.run([SNAKEMAKE, "-n", "--cores", "1"], cwd=wd, capture_output=True, text=True,
                        timeout=300, env={**os.environ, "PYTHONWARNINGS": "ignore"})
     assert p.returncode != 0
@@ -38,15 +26,7 @@ def test_an_unknown_vehicle_stops_the_dry_run_with_one_line_naming_file_line_and
 
 @pytest.mark.slow
 def test_a_finished_run_prints_the_summary_with_skipped_rows_and_the_report_path(tmp_path):
-    wd = tmp_path / "wf"
-    wd.mkdir()
-    for name in ("Snakefile", "rules", "reports", "profiles"):
-        src = ROOT / name
-        (shutil.copytree if src.is_dir() else shutil.copy)(src, wd / name)
-    (wd / "datasets").mkdir()
-    shutil.copy(ROOT / "datasets" / "config.yaml", wd / "datasets" / "config.yaml")
-    (wd / "datasets" / "flights.tsv").write_text(
-        HEADER + DEMO + "\n" + "ghost\t/nonexistent/x.bin\tgeneric\tnone\tnone\t\tgone\n")
+    wd = copy_workflow(tmp_path / "wf", [DEMO, "ghost\t/nonexistent/x.bin\tgeneric\tnone\tnone\t\tgone"], tiny=False)
     # one flight's ingest only (seconds): the handler still summarises the whole run
     p = subprocess.run([SNAKEMAKE, "--cores", "1", "results/ingest/demo-quad/meta.json"], cwd=wd,
                        capture_output=True, text=True, timeout=300,

@@ -13,32 +13,13 @@ import os
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from pipeline.io.parquet import read_table, read_table_meta
 
-ROOT = Path(__file__).resolve().parents[2]
-SNAKEMAKE = str(Path(sys.executable).parent / "snakemake")
-HEADER = "flight_id\tpath\tvehicle\trole\tlabels\tformat\tnotes\n"
-
-
-def _copy_workflow(dst: Path, rows: list[str], extra_config: str = "", tiny: bool = True,
-                   extra_tiny: str = "") -> Path:
-    dst.mkdir(parents=True, exist_ok=True)
-    for name in ("Snakefile", "rules", "reports", "profiles"):
-        src = ROOT / name
-        (shutil.copytree if src.is_dir() else shutil.copy)(src, dst / name)
-    (dst / "datasets").mkdir()
-    cfg = (ROOT / "datasets" / "config.yaml").read_text()
-    (dst / "datasets" / "config.yaml").write_text(cfg + extra_config)
-    (dst / "datasets" / "flights.tsv").write_text(HEADER + "".join(r + "\n" for r in rows))
-    # the tiny sizes of tests/workflow/config.yaml, merged over the default config by _smk
-    tiny_cfg = (ROOT / "tests" / "workflow" / "config.yaml").read_text() + extra_tiny
-    (dst / "datasets" / ("tiny.yaml" if tiny else "unused.yaml")).write_text(tiny_cfg)
-    return dst
+from helpers_workflow import ROOT, SNAKEMAKE, copy_workflow as _copy_workflow
 
 
 def _smk(wd: Path, *args: str, check: bool = True, timeout: int = 600) -> subprocess.CompletedProcess:

@@ -30,7 +30,7 @@ initialisation) is the reference at the first step, else it comes from the first
 own estimate with ``mode``, ``pred``, ``V_best``). Failures are placeholders, never crashes:
 no radar (or no state track to synthesise it from) gives three empty tables with ``status:
 failed`` and the reason; a model set without GMR (feature set other than
-:data:`GMR_FEATURE_SETS`, e.g. ``f3a``'s ``aero``), a failed model set or a failed Q₂ give an
+:data:`~pipeline.estimate.ekf_hmm.GMR_FEATURE_SETS`, e.g. ``f3a``'s ``aero``), a failed model set or a failed Q₂ give an
 empty ``ekf_hmm`` table with the reason beside complete EKF tables (``status: partial``).
 """
 
@@ -51,8 +51,8 @@ from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta, write_json, write_table
 from ..io.stage import declared, declared_list
 from .base import ConstantAcceleration, GaussianState
-from .ekf import ExtendedKalmanFilter, FilterTrack, run_filter
-from .metrics import nees as nees_of
+from .ekf import ExtendedKalmanFilter, run_filter
+from .ekf_hmm import GMR_FEATURE_SETS, q2_from_runs, run_ekf_hmm
 from .models import RADAR_FIELDS, STATE_COLUMNS, RadarModel, initial_cov
 from .smoother import rts_smooth
 from .table import estimate_frame
@@ -61,8 +61,6 @@ F64 = NDArray[np.float64]
 
 #: the estimators of one flight job, in output order (``results/estimate/<estimator>/``)
 ESTIMATORS: tuple[str, ...] = ("ekf", "ekf_rts", "ekf_hmm")
-#: feature sets whose model sets carry a GMR (the EKF+HMM's inputs â, ĵ)
-GMR_FEATURE_SETS: tuple[str, ...] = ("state9", "state9h", "state9box")
 
 
 @dataclass(frozen=True)
@@ -300,7 +298,9 @@ def _nees(ref: F64 | None, mean: F64, cov: F64) -> F64 | None:
     ok = np.isfinite(err).all(axis=1)
     out = np.full(len(err), np.nan)
     if ok.any():
-        out[ok] = nees_of(err[ok], cov[ok])
+        # eᵀP⁻¹e as metrics.nees (not imported: its scipy.stats import costs every job ~1 s)
+        e = err[ok]
+        out[ok] = np.einsum("ti,ti->t", e, np.linalg.solve(cov[ok], e[..., None])[..., 0])
     return out
 
 
@@ -412,8 +412,6 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     reason, ms, Q2 = _ekf_hmm_blocker(inputs, config)
     status = "ok"
     if not reason:
-        from .ekf_hmm import run_ekf_hmm
-
         seg_path = declared(inputs, "segments")
         resets = None
         if hmm_cfg["reset_at_segments"] and seg_path and Path(seg_path).exists():
@@ -509,8 +507,6 @@ def run_q2(inputs, outputs, config: Mapping, *, model_set: str) -> Q2Result:
             if not len(runs):
                 reason = "no training runs"
             else:
-                from .ekf_hmm import q2_from_runs
-
                 try:
                     Q2 = q2_from_runs(ms, runs, scale=scale)
                 except ValueError as exc:

@@ -129,6 +129,7 @@ BAD_CONFIG = [
     ("model_sets", "model_sets: {sim: {data: simulated, vehicles: [q], hmm: {decision: maybe}}}\n",
      "model_sets.sim.hmm.decision"),
     ("studies", "studies: {size: huge}\n", "studies.size"),
+    ("estimate", "estimate: {ekf: {qq: 1.0}}\n", "estimate.ekf.qq"),
 ]
 
 

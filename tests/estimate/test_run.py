@@ -11,19 +11,19 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from helpers_estimate import SITE, ingested_flight
 from helpers_maneuvers import synth_bulk, synth_run
 from pipeline.config import ConfigError, validate_config
 from pipeline.estimate.models import RADAR_FIELDS, STATE_COLUMNS, RadarModel
 from pipeline.estimate.run import (ESTIMATORS, job_config, radar_rng, radar_steps, run_estimate, run_q2,
                                    synthesise_radar)
 from pipeline.io import schema
-from pipeline.io.base import FlightLog
-from pipeline.io.parquet import read_table, read_table_meta, write_flightlog, write_table
+from pipeline.io.parquet import read_table, read_table_meta
 from pipeline.models.base import ModelsConfig
 from pipeline.models.classifier import ManeuverModelSet
+from pipeline.report.plots import mode_timeline
 
 FAST = dict(n_states=3, n_iter=10, tol=1e-1, gmm_restarts=1, seed=5)
-SITE = (2000.0, -1500.0, 300.0)
 
 
 @pytest.fixture(scope="module")
@@ -44,28 +44,6 @@ def models(tmp_path_factory):
     return root
 
 
-def _flight(tmp, *, radar=True, drop=(), truth=True, fid="f1"):
-    """An ingested flight: M1-like truth at 5 Hz, its radar (site SITE, seed-000 noise) with
-    rows ``drop`` removed, level attitude; and its preprocessed state (the truth)."""
-    run = synth_run("M1", np.random.default_rng(7), duration_s=30.0).drop(columns="label")
-    t = run["t_ns"].to_numpy()
-    model = RadarModel(site_ned_m=SITE)
-    z = model.measure(run[list(STATE_COLUMNS)].to_numpy(), np.random.default_rng(8))
-    keep = np.setdiff1d(np.arange(len(t)), np.asarray(drop, dtype=int))
-    streams = {"attitude": pd.DataFrame({"t_ns": t, "q_w": 1.0, "q_x": 0.0, "q_y": 0.0, "q_z": 0.0})}
-    if radar:
-        streams["radar"] = pd.DataFrame({"t_ns": t[keep], **dict(zip(RADAR_FIELDS, z[keep].T))})
-    if truth:
-        streams["truth"] = run[["t_ns", *STATE_COLUMNS]]
-    meta = {"flight_id": fid, "radar": {"site_ned_m": list(SITE), "tau_rd_s": 0.0}}
-    d = tmp / "ingest" / fid
-    write_flightlog(FlightLog.from_streams(meta, streams), d)
-    state = tmp / "state" / f"{fid}.parquet"
-    state.parent.mkdir(parents=True, exist_ok=True)
-    write_table(schema.conform("state", run), state, schema.STATE, name="state")
-    return {"meta": d / "meta.json", "state": state}
-
-
 def _run(tmp, inputs, models=None, model="sim", vehicle_cfg=None, seed=3, fid="f1"):
     section = validate_config({"estimate": vehicle_cfg or {}})["estimate"]
     cfg = job_config(section, "veh")
@@ -76,7 +54,7 @@ def _run(tmp, inputs, models=None, model="sim", vehicle_cfg=None, seed=3, fid="f
 
 
 def test_estimates_have_the_declared_columns_and_the_ekf_hmm_adds_mode_pred_and_confidence(tmp_path, models):
-    res, out = _run(tmp_path, _flight(tmp_path), models)
+    res, out = _run(tmp_path, ingested_flight(tmp_path), models)
     assert res.status == "ok", res.error
     ekf, hmm = read_table(out["ekf"]), read_table(out["ekf_hmm"])
     assert list(ekf.columns) == schema.column_names("estimate") == list(read_table(out["ekf_rts"]).columns)
@@ -86,6 +64,7 @@ def test_estimates_have_the_declared_columns_and_the_ekf_hmm_adds_mode_pred_and_
     assert len(ekf) == len(hmm) == 151 and ekf["nees"].notna().all() and hmm["nees"].notna().all()
     assert str(hmm["mode"].dtype) == "bool" and hmm["mode"].any()
     assert set(hmm["pred"]) <= {"unknown", "M1", "M2", "M3"}
+    assert mode_timeline(hmm) is not None  # the flight page's mode panel
     m = read_table_meta(out["ekf"])
     assert (m["status"], m["reference"], m["radar"], m["radar_site_ned_m"]) == ("ok", "truth", "stream", list(SITE))
     # the smoother uses the future: its position error is below the filter's
@@ -93,7 +72,7 @@ def test_estimates_have_the_declared_columns_and_the_ekf_hmm_adds_mode_pred_and_
 
 
 def test_a_flight_without_radar_gets_three_placeholders_with_the_reason(tmp_path, models):
-    res, out = _run(tmp_path, _flight(tmp_path, radar=False), models)
+    res, out = _run(tmp_path, ingested_flight(tmp_path, radar=False), models)
     assert res.status == "failed" and "no radar stream" in res.error
     for e in ESTIMATORS:
         m = read_table_meta(out[e])
@@ -103,7 +82,7 @@ def test_a_flight_without_radar_gets_three_placeholders_with_the_reason(tmp_path
 
 
 def test_a_model_without_gmr_gives_an_ekf_hmm_placeholder_beside_complete_ekf_tables(tmp_path, models):
-    res, out = _run(tmp_path, _flight(tmp_path), models, model="aero")
+    res, out = _run(tmp_path, ingested_flight(tmp_path), models, model="aero")
     assert res.status == "partial" and "no GMR (feature set aero" in res.error
     assert len(read_table(out["ekf"])) == len(read_table(out["ekf_rts"])) == 151
     assert len(read_table(out["ekf_hmm"])) == 0
@@ -114,7 +93,7 @@ def test_a_model_without_gmr_gives_an_ekf_hmm_placeholder_beside_complete_ekf_ta
 
 
 def test_radar_gaps_are_predict_only_steps_counted_in_the_metadata(tmp_path, models):
-    res, out = _run(tmp_path, _flight(tmp_path, drop=range(40, 52)), models)
+    res, out = _run(tmp_path, ingested_flight(tmp_path, drop=range(40, 52)), models)
     assert res.status == "ok" and res.diagnostics["n_predict_only"] == 12
     for e in ESTIMATORS:
         m = read_table_meta(out[e])
@@ -153,7 +132,7 @@ def test_synthetic_radar_is_deterministic_per_seed_and_flight_and_gaps_are_nan()
 
 
 def test_a_synthetic_radar_vehicle_uses_the_state_and_takes_it_as_the_reference(tmp_path):
-    inputs = _flight(tmp_path, radar=False, truth=False)
+    inputs = ingested_flight(tmp_path, radar=False, truth=False)
     cfg = {"synthetic_radar": {"veh": {"site_ned_m": list(SITE)}}}
     res, out = _run(tmp_path, inputs, vehicle_cfg=cfg, seed=11)
     assert res.status == "partial" and "no model set" in res.error  # no model given: EKF only

@@ -66,7 +66,8 @@ DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
 SIM = ("sim-M1-000-bin\tresults/sim/logs/sim-M1-000.bin\tsim-quad\ttest\t"
        "results/sim/logs/sim-M1-000.bin.truth.parquet\t\tsimulated M1 with truth side-car")
 STAGES = ("demo_log", "simulate_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
-          "evaluate_model", "classify_flight", "flight_report", "model_report", "report_index", "plotly_js", "all")
+          "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "flight_report", "model_report",
+          "report_index", "plotly_js", "all")
 
 
 @pytest.mark.slow
@@ -97,9 +98,11 @@ def test_dry_run_default_config_plans_every_stage():
     ("train", {"simulate_sets", "train_model", "evaluate_model", "train"}),
     ("classify", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "classify_flight", "classify"}),
+    ("estimate", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+                  "train_model", "estimate_q2", "estimate_flight", "estimate"}),
     ("report", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
-                "train_model", "evaluate_model", "classify_flight", "plotly_js", "flight_report",
-                "model_report", "report_index", "report"}),
+                "train_model", "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "plotly_js",
+                "flight_report", "model_report", "report_index", "report"}),
 ])
 def test_named_stage_targets(tmp_path, target, rules):
     wd = _copy_workflow(tmp_path / "wf", [DEMO, SIM])
@@ -375,6 +378,18 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     # a model without training flights is a readable placeholder, not a crashed job
     assert json.loads((res / "models" / "f3a" / "meta.json").read_text())["status"] == "failed"
     assert "classifier:" in index
+    # estimates: the simulated flight from its radar stream against its truth; the demo flight
+    # (no radar) placeholders with the reason; the broken flight's vehicle is not estimated
+    for e in ("ekf", "ekf_rts", "ekf_hmm"):
+        m = read_table_meta(res / "estimate" / e / "sim-M1-000-bin.parquet")
+        assert m["status"] == "ok" and m["reference"] == "truth" and m["n_predict_only"] == 0, (e, m)
+        assert len(read_table(res / "estimate" / e / "sim-M1-000-bin.parquet")) == m["n_steps"] > 100
+        m = read_table_meta(res / "estimate" / e / "demo-quad.parquet")
+        assert m["status"] == "failed" and "no radar stream" in m["error"]
+        assert not (res / "estimate" / e / "broken.parquet").exists()
+    assert json.loads((res / "estimate" / "q2" / "sim.json").read_text())["status"] == "ok"
+    page = (res / "report" / "flights" / "sim-M1-000-bin.html").read_text()
+    assert "Estimation error vs truth: acceleration" in page and "EKF+HMM mode (" in page
     assert _planned_jobs(wd) == {}
 
     # add one test flight: a second, identical demo log copied in as a plain file
@@ -383,8 +398,8 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
         fh.write("extra\tlogs/extra.bin\tsim-quad\ttest\tnone\t\tadded\n")
     jobs = _planned_jobs(wd)
     # classified by both model sets of its vehicle (sim, sim2)
-    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "flight_report": 1,
-                    "report_index": 1, "all": 1}, jobs
+    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "estimate_flight": 1,
+                    "flight_report": 1, "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
 
@@ -394,8 +409,9 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     assert "preprocess:" not in text
     cfg.write_text(text + "preprocess: {rate_hz: 20}\n")
     jobs = _planned_jobs(wd)
-    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "flight_report": 4, "report_index": 1,
-                    "all": 1}, jobs
+    # (estimated: the three sim-quad flights; the broken flight's vehicle is generic)
+    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "estimate_flight": 3, "flight_report": 4,
+                    "report_index": 1, "all": 1}, jobs
 
     # snakemake --report over the finished run
     cfg.write_text(text)

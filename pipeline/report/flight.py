@@ -92,7 +92,7 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
     says why (placeholder reason, no reference)."""
     estimates = {e: p for e, p in estimates.items() if p and Path(p).exists()}
     if not estimates:
-        return [("Estimates — none for this flight (its vehicle is not in estimate.vehicles)", None)], []
+        return [("Estimates (the flight's vehicle is not in estimate.vehicles)", None)], []
     tables, metas = {}, {}
     for e, p in estimates.items():
         metas[e] = read_table_meta(p)
@@ -112,9 +112,9 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
     figs = []
     if not ok:
         reason = next(iter(metas.values())).get("error") or "no estimates"
-        figs.append((f"Estimation error — no estimates ({reason})", None))
+        figs.append((f"Estimation error (no estimates: {reason})", None))
     elif src is None or not len(src):
-        figs.append(("Estimation error — no reference for this flight (no truth, real radar)", None))
+        figs.append(("Estimation error (no reference: no truth, and the radar is not synthesised from the state)", None))
     else:
         ref = src[list(_STATE9)].to_numpy(np.float64)
         errs = {e: _error_norms(t, src["t_ns"].to_numpy(np.int64), ref) for e, t in ok.items()}
@@ -123,7 +123,7 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
     if "ekf_hmm" in metas:
         h = tables["ekf_hmm"]
         why = metas["ekf_hmm"].get("error") if metas["ekf_hmm"].get("status") == "failed" else None
-        figs.append((f"EKF+HMM mode timeline — {why}" if why else "EKF+HMM mode timeline",
+        figs.append((f"EKF+HMM mode timeline ({why})" if why else "EKF+HMM mode timeline",
                      plots.mode_timeline(h) if len(h) else None))
     return figs, facts
 

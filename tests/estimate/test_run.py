@@ -159,3 +159,14 @@ def test_the_job_config_holds_only_the_flights_own_sub_sections():
     cfg = job_config(sec, "b")
     assert set(cfg) == {"synthetic_radar", "radar", "ekf", "ekf_hmm"}
     assert cfg["synthetic_radar"]["rate_hz"] == 2.0 and job_config(sec, "c")["synthetic_radar"] is None
+
+
+def test_without_truth_the_nees_is_nan_and_the_filter_starts_from_the_first_measurement(tmp_path):
+    res, out = _run(tmp_path, ingested_flight(tmp_path, truth=False))
+    m = read_table_meta(out["ekf"])
+    assert (m["reference"], m["init"]) == ("none", "radar")
+    ekf = read_table(out["ekf"])
+    assert ekf["nees"].isna().all() and ekf["nis"].notna().all()
+    # from the first measurement (the site is below the flight) the position starts within metres
+    run = read_table(tmp_path / "state" / "f1.parquet")
+    assert abs(ekf["x_pos_n_m"].iloc[0] - run["pos_n_m"].iloc[0]) < 10.0

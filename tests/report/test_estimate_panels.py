@@ -31,14 +31,14 @@ def test_error_panels_per_group_and_the_ekf_hmm_placeholder_reason(tmp_path):
         assert f"Estimation error vs truth: {g}" in text
     assert "EKF + RTS (RMSE" in text and "EKF+HMM (RMSE" not in text
     # the EKF+HMM has no model set here: its timeline says why, in one line
-    assert f"EKF+HMM mode timeline — {html.escape(res.error)}: no data in this flight" in text
+    assert f"EKF+HMM mode timeline ({html.escape(res.error)}): no data in this flight" in text
     assert "151 steps (0 predict-only), radar stream" in text
 
 
 def test_a_flight_without_radar_or_estimates_says_so_in_one_line(tmp_path):
     res, text = _page(tmp_path, ingested_flight(tmp_path, radar=False))
     assert res.status == "failed"
-    assert f"Estimation error — no estimates ({html.escape(res.error)}): no data in this flight" in text
+    assert f"Estimation error (no estimates: {html.escape(res.error)}): no data in this flight" in text
     _, text = _page(tmp_path / "b", ingested_flight(tmp_path / "b"), estimates=False)
-    assert "Estimates — none for this flight (its vehicle is not in estimate.vehicles)" in text
+    assert "Estimates (the flight&#39;s vehicle is not in estimate.vehicles): no data in this flight" in text
     assert "None" not in text

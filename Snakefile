@@ -16,6 +16,7 @@ include: "rules/simulate.smk"
 include: "rules/preprocess.smk"
 include: "rules/models.smk"
 include: "rules/classify.smk"
+include: "rules/estimate.smk"
 include: "rules/report.smk"
 include: "rules/studies.smk"
 

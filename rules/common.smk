@@ -8,6 +8,7 @@ from snakemake.utils import validate
 
 import pipeline
 from pipeline.config import ConfigError, validate_config
+from pipeline.estimate.run import job_config as estimate_job_config
 from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest
 from pipeline.io.schema import STREAM_NAMES
 from pipeline.models.run import model_set_config
@@ -208,9 +209,49 @@ def flight_classified(wildcards):
     ]
 
 
+# --- estimate ---------------------------------------------------------------------------------
+
+ESTIMATORS = ("ekf", "ekf_rts", "ekf_hmm")
+ESTIMATE_MODEL = config["estimate"]["ekf_hmm"]["model"]
+ESTIMATED = [f for f in FLIGHTS if flights.loc[f, "vehicle"] in config["estimate"]["vehicles"]]
+if ESTIMATED and ESTIMATE_MODEL not in MODEL_SETS:
+    sys.exit(
+        f"uavpipe: {' + '.join(map(str, workflow.configfiles)) or 'config'}: estimate.ekf_hmm.model: "
+        f"no model set {ESTIMATE_MODEL!r} (model_sets: {', '.join(MODEL_SETS) or 'none'})"
+    )
+
+
+def estimate_paths(flight=None):
+    return [
+        f"results/estimate/{e}/{f}.parquet"
+        for f in (ESTIMATED if flight is None else [flight])
+        for e in ESTIMATORS
+    ]
+
+
+def flight_estimates(wildcards):
+    return estimate_paths(wildcards.flight) if wildcards.flight in ESTIMATED else []
+
+
+def estimate_config(wildcards):
+    # the flight's own sub-sections only: its vehicle's synthetic_radar entry, radar, ekf, ekf_hmm
+    return estimate_job_config(
+        config["estimate"], flights.loc[wildcards.flight, "vehicle"]
+    )
+
+
+def estimate_job(wildcards):
+    return {
+        "flight_id": wildcards.flight,
+        "vehicle": flights.loc[wildcards.flight, "vehicle"],
+        "seed": config["seed"],
+    }
+
+
 def get_final_output():
     # the simulated sets and logs are always made (the seed-000 datasets), used by a flight or not
     return [
+        *estimate_paths(),
         "results/index.html",
         "results/sim/index.json",
         "results/sim/logs/flights.tsv",

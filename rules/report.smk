@@ -28,6 +28,7 @@ rule flight_report:
         segments="results/segments/{flight}.parquet",
         calibration="results/calibration/{flight}.parquet",
         classified=flight_classified,
+        estimates=flight_estimates,
         template="reports/templates/flight.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:

@@ -287,6 +287,17 @@ ESTIMATE: tuple[Column, ...] = (
     _f("nees", "1", "", "normalised estimation error squared (NaN without truth)"),
 )
 
+#: Columns of the EKF+HMM output (``results/estimate/ekf_hmm/<flight>.parquet``): the
+#: :data:`ESTIMATE` columns of the EKF+HMM's own estimate, then whether the step was predicted
+#: with the HMM inputs (A_H/B on at least one axis), the classifier's label and its confidence.
+#: A new table beside ``estimate`` (no existing table changes, so ``SCHEMA_VERSION`` stays).
+ESTIMATE_HMM: tuple[Column, ...] = (
+    *ESTIMATE,
+    Column("mode", "bool", "", "", "step predicted with the HMM inputs (A_H/B) on >= 1 axis"),
+    Column("pred", "string", "", "", "classifier label at the step ('unknown' before the first)"),
+    _f("V_best", "1", "", "online Viterbi confidence of the label"),
+)
+
 #: Every table of every stage by name: the canonical streams (common columns first), ``labels``
 #: and the derived tables. :func:`columns`, :func:`empty` and :func:`conform` take these names.
 TABLES: dict[str, tuple[Column, ...]] = {
@@ -301,6 +312,7 @@ TABLES: dict[str, tuple[Column, ...]] = {
     "classification": CLASSIFICATION,
     "model_evaluation": MODEL_EVALUATION,
     "estimate": ESTIMATE,
+    "estimate_hmm": ESTIMATE_HMM,
 }
 
 

@@ -21,6 +21,9 @@ from ..io.parquet import read_flightlog, read_table, read_table_meta
 from .pages import figure_divs, render, write_page
 from . import plots
 
+#: the 9 CA state columns (pos, vel, acc NED) of the state table and the truth stream
+_STATE9 = tuple(f"{q}_{a}_{u}" for q, u in (("pos", "m"), ("vel", "mps"), ("acc", "mps2")) for a in "ned")
+
 
 def write_plotly_js(path: str | os.PathLike) -> None:
     """Write plotly's bundled JavaScript (from the installed package, no network) to ``path``."""
@@ -62,12 +65,76 @@ def _ned_track(log, state: pd.DataFrame | None) -> pd.DataFrame | None:
     return None
 
 
+def _error_norms(est: pd.DataFrame, ref_t: np.ndarray, ref: np.ndarray) -> pd.DataFrame:
+    """Per-step error norms of position, velocity, acceleration of an ``estimate`` table against
+    a reference track (``ref`` (N, 9) at ``ref_t``, linearly interpolated; NaN outside it)."""
+    t = est["t_ns"].to_numpy(np.int64)
+    x = est[[f"x_{c}" for c in _STATE9]].to_numpy(np.float64)
+    r = np.full_like(x, np.nan)
+    inside = (t >= ref_t[0]) & (t <= ref_t[-1]) if len(ref_t) else np.zeros(len(t), bool)
+    for j in range(9):
+        ok = np.isfinite(ref[:, j])
+        if ok.sum() >= 2:
+            r[inside, j] = np.interp(t[inside], ref_t[ok], ref[ok, j])
+    e = x - r
+    return pd.DataFrame({"t_ns": t, **{g: np.linalg.norm(e[:, sl], axis=1)
+                                        for g, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6)), ("acc", slice(6, 9)))}})
+
+
+def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.DataFrame | None,
+                    state: pd.DataFrame | None) -> tuple[list, list]:
+    """The estimate panels of a flight page and their facts: ``([(title, figure or None)],
+    [(key, text)])``.
+
+    Error norms per group (position, velocity, acceleration) for every estimator, against the
+    reference its metadata names (``truth``: the ingest truth stream, ``state``: the
+    preprocessed state); the EKF+HMM mode timeline. A panel without data keeps a title that
+    says why (placeholder reason, no reference)."""
+    estimates = {e: p for e, p in estimates.items() if p and Path(p).exists()}
+    if not estimates:
+        return [("Estimates (the flight's vehicle is not in estimate.vehicles)", None)], []
+    tables, metas = {}, {}
+    for e, p in estimates.items():
+        metas[e] = read_table_meta(p)
+        tables[e] = read_table(p)
+    facts = []
+    for e, m in metas.items():
+        label = plots.ESTIMATOR_LABELS.get(e, e)
+        if m.get("status") == "failed":
+            facts.append((label, f"placeholder: {m.get('error')}"))
+        else:
+            facts.append((label, f"{m.get('n_steps')} steps ({m.get('n_predict_only')} predict-only), radar "
+                                 f"{m.get('radar')} (site {m.get('radar_site_ned_m')} from {m.get('radar_site_from')}), "
+                                 f"q {m.get('q')}, reference {m.get('reference')}"))
+    ok = {e: t for e, t in tables.items() if len(t)}
+    ref_name = next((metas[e].get("reference") for e in ok), None)
+    src = truth if ref_name == "truth" else state if ref_name == "state" else None
+    figs = []
+    if not ok:
+        reason = next(iter(metas.values())).get("error") or "no estimates"
+        figs.append((f"Estimation error (no estimates: {reason})", None))
+    elif src is None or not len(src):
+        figs.append(("Estimation error (no reference: no truth, and the radar is not synthesised from the state)", None))
+    else:
+        ref = src[list(_STATE9)].to_numpy(np.float64)
+        errs = {e: _error_norms(t, src["t_ns"].to_numpy(np.int64), ref) for e, t in ok.items()}
+        for g in ("pos", "vel", "acc"):
+            figs.append((f"Estimation error ({g})", plots.estimate_error(errs, g, ref_name)))
+    if "ekf_hmm" in metas:
+        h = tables["ekf_hmm"]
+        why = metas["ekf_hmm"].get("error") if metas["ekf_hmm"].get("status") == "failed" else None
+        figs.append((f"EKF+HMM mode timeline ({why})" if why else "EKF+HMM mode timeline",
+                     plots.mode_timeline(h) if len(h) else None))
+    return figs, facts
+
+
 def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLike, *,
                         template: str | os.PathLike, plotly_js: str, index_href: str = "../index.html",
                         state: str | os.PathLike | None = None,
                         calibration: str | os.PathLike | None = None,
                         segments: str | os.PathLike | None = None,
-                        classified: Mapping[str, str | os.PathLike] | None = None) -> None:
+                        classified: Mapping[str, str | os.PathLike] | None = None,
+                        estimates: Mapping[str, str | os.PathLike] | None = None) -> None:
     """Render one flight's report.
 
     Parameters
@@ -84,6 +151,10 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         Derived tables from preprocess when the workflow has them.
     classified : mapping, optional
         ``{model_set: path}`` of the flight's classification tables (one timeline each).
+    estimates : mapping, optional
+        ``{estimator: path}`` of the flight's estimate tables (``results/estimate/<estimator>/``):
+        error panels against the reference the estimates name (truth or the state) and the
+        EKF+HMM mode timeline; a placeholder's panel says why in one line.
     """
     log = read_flightlog(ingest_dir)
     meta = log.meta
@@ -139,6 +210,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             if fig is not None:
                 fig.update_layout(title=f"Maneuver timeline ({m})")
             figs.append((f"Maneuver timeline ({m})", fig))
+    est_figs, est_facts = estimate_panels(estimates or {}, truth=log["truth"], state=st)
+    figs.extend(est_figs)
     divs = figure_divs(figs)
 
     def known(v) -> str:  # a failed ingest has no reader or format: say so, never "None"
@@ -165,6 +238,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         cm = read_table_meta(p)
         facts.append(("classifier", f"model set {m}: {cm.get('status')}"
                                     + (f" ({cm.get('error')})" if cm.get("error") else "")))
+    facts.extend(est_facts)
     page = render(template, 
         flight_id=meta.get("flight_id"), facts=facts, plots=divs, plotly_js=plotly_js,
         index_href=index_href, failed=meta.get("status") == "failed", error=meta.get("error"))

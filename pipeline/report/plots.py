@@ -145,3 +145,51 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
         return None
     fig.update_xaxes(title="t [s]")
     return layout(fig, "Maneuver timeline", height=260)
+
+
+#: estimator name -> legend label of the estimate panels
+ESTIMATOR_LABELS = {"ekf": "EKF", "ekf_rts": "EKF + RTS", "ekf_hmm": "EKF+HMM"}
+_GROUP_UNITS = {"pos": ("position", "m"), "vel": ("velocity", "m/s"), "acc": ("acceleration", "m/s²")}
+
+
+def estimate_error(errors: dict[str, pd.DataFrame], group: str, reference: str = "truth") -> go.Figure | None:
+    """Norm of one state group's estimation error against time, one trace per estimator.
+
+    ``errors``: ``{estimator: DataFrame(t_ns, pos, vel, acc)}`` (error norms per step, NaN
+    where the reference has none); ``group``: ``pos``, ``vel`` or ``acc``."""
+    name, unit = _GROUP_UNITS[group]
+    fig = go.Figure()
+    for est, df in errors.items():
+        if df is None or not len(df) or not df[group].notna().any():
+            continue
+        d = decimate(df)
+        rms = float(np.sqrt(np.nanmean(df[group].to_numpy() ** 2)))
+        fig.add_trace(go.Scatter(x=_t(d), y=d[group], mode="lines",
+                                 name=f"{ESTIMATOR_LABELS.get(est, est)} (RMSE {rms:.3g} {unit})"))
+    if not fig.data:
+        return None
+    fig.update_xaxes(title="t [s]")
+    fig.update_yaxes(title=f"|error| [{unit}]")
+    return layout(fig, f"Estimation error vs {reference}: {name}", height=300)
+
+
+def mode_timeline(df: pd.DataFrame | None) -> go.Figure | None:
+    """EKF+HMM mode: steps predicted with the HMM inputs (A_H/B) vs CA, and the classifier's
+    label (``pred``) with its confidence ``V_best``."""
+    if df is None or not len(df):
+        return None
+    d = decimate(df)
+    fig = go.Figure()
+    mode = d["mode"].astype(bool).to_numpy()
+    fig.add_trace(go.Scatter(x=_t(d), y=np.where(mode, "HMM inputs", "CA"), mode="markers",
+                             marker=dict(size=5, color=np.where(mode, "#d62728", "#1f77b4")),
+                             name="prediction model", showlegend=False))
+    for lab, g in d.groupby(d["pred"].astype(str), sort=True):
+        fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers", marker=dict(size=6),
+                                 name=f"classifier: {lab}"))
+    if d["V_best"].notna().any():
+        fig.add_trace(go.Scatter(x=_t(d), y=d["V_best"], mode="lines", name="confidence V", yaxis="y2"))
+        fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="V [log10]"))
+    fig.update_xaxes(title="t [s]")
+    n = int(df["mode"].astype(bool).sum())
+    return layout(fig, f"EKF+HMM mode ({n} of {len(df)} steps with HMM inputs)", height=280)

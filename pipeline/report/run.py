@@ -41,7 +41,8 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
 
     ``inputs``: ``meta`` (ingest ``meta.json``, its streams beside it), ``state``, ``segments``,
     ``calibration``, ``classified`` (``results/classify/<model_set>/<flight>.parquet`` for each
-    model set that classifies the flight), ``template``, ``plotly``. ``index``: the path of the
+    model set that classifies the flight), ``estimates`` (``results/estimate/<estimator>/<flight>.parquet``,
+    none when the flight is not estimated), ``template``, ``plotly``. ``index``: the path of the
     index page, for the back link.
     """
     page = declared(outputs, "page")
@@ -49,7 +50,8 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
                         plotly_js=_rel(declared(inputs, "plotly"), page), index_href=_rel(index, page),
                         state=declared(inputs, "state"), segments=declared(inputs, "segments"),
                         calibration=declared(inputs, "calibration"),
-                        classified={_model_set_of(p): p for p in declared_list(inputs, "classified")})
+                        classified={_model_set_of(p): p for p in declared_list(inputs, "classified")},
+                        estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")})
 
 
 def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:

@@ -47,7 +47,8 @@ DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
 SIM = ("sim-M1-000-bin\tresults/sim/logs/sim-M1-000.bin\tsim-quad\ttest\t"
        "results/sim/logs/sim-M1-000.bin.truth.parquet\t\tsimulated M1 with truth side-car")
 STAGES = ("demo_log", "simulate_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
-          "evaluate_model", "classify_flight", "flight_report", "model_report", "report_index", "plotly_js", "all")
+          "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "flight_report", "model_report",
+          "report_index", "plotly_js", "all")
 
 
 @pytest.mark.slow
@@ -78,9 +79,11 @@ def test_dry_run_default_config_plans_every_stage():
     ("train", {"simulate_sets", "train_model", "evaluate_model", "train"}),
     ("classify", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "classify_flight", "classify"}),
+    ("estimate", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+                  "train_model", "estimate_q2", "estimate_flight", "estimate"}),
     ("report", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
-                "train_model", "evaluate_model", "classify_flight", "plotly_js", "flight_report",
-                "model_report", "report_index", "report"}),
+                "train_model", "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "plotly_js",
+                "flight_report", "model_report", "report_index", "report"}),
 ])
 def test_named_stage_targets(tmp_path, target, rules):
     wd = _copy_workflow(tmp_path / "wf", [DEMO, SIM])
@@ -110,6 +113,7 @@ BAD_CONFIG = [
     ("model_sets", "model_sets: {sim: {data: simulated, vehicles: [q], hmm: {decision: maybe}}}\n",
      "model_sets.sim.hmm.decision"),
     ("studies", "studies: {size: huge}\n", "studies.size"),
+    ("estimate", "estimate: {ekf: {qq: 1.0}}\n", "estimate.ekf.qq"),
 ]
 
 
@@ -132,6 +136,15 @@ def test_bad_key_or_value_in_every_section_stops_the_dry_run_in_seconds_with_one
     lines = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("uavpipe: ")]
     assert len(lines) == 1 and f" {key}: " in lines[0], p.stdout + p.stderr
     assert "Traceback" not in p.stdout + p.stderr
+
+
+@pytest.mark.slow
+def test_an_ekf_hmm_model_that_is_no_model_set_stops_the_dry_run_naming_it(tmp_path):
+    wd = _copy_workflow(tmp_path / "wf", [DEMO], extra_config="\nestimate: {ekf_hmm: {model: simm}}\n")
+    p = _smk(wd, "-n", check=False)
+    lines = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("uavpipe: ")]
+    assert p.returncode != 0 and len(lines) == 1, p.stdout + p.stderr
+    assert "estimate.ekf_hmm.model: no model set 'simm' (model_sets: sim, f3a)" in lines[0]
 
 
 CLI_COMMANDS = (["simulate", "OUT"], ["preprocess", "IN", "-o", "OUT"], ["ingest", "IN", "-o", "OUT"],
@@ -355,6 +368,18 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     # a model without training flights is a readable placeholder, not a crashed job
     assert json.loads((res / "models" / "f3a" / "meta.json").read_text())["status"] == "failed"
     assert "classifier:" in index
+    # estimates: the simulated flight from its radar stream against its truth; the demo flight
+    # (no radar) placeholders with the reason; the broken flight's vehicle is not estimated
+    for e in ("ekf", "ekf_rts", "ekf_hmm"):
+        m = read_table_meta(res / "estimate" / e / "sim-M1-000-bin.parquet")
+        assert m["status"] == "ok" and m["reference"] == "truth" and m["n_predict_only"] == 0, (e, m)
+        assert len(read_table(res / "estimate" / e / "sim-M1-000-bin.parquet")) == m["n_steps"] > 100
+        m = read_table_meta(res / "estimate" / e / "demo-quad.parquet")
+        assert m["status"] == "failed" and "no radar stream" in m["error"]
+        assert not (res / "estimate" / e / "broken.parquet").exists()
+    assert json.loads((res / "estimate" / "q2" / "sim.json").read_text())["status"] == "ok"
+    page = (res / "report" / "flights" / "sim-M1-000-bin.html").read_text()
+    assert "Estimation error vs truth: acceleration" in page and "EKF+HMM mode (" in page
     assert _planned_jobs(wd) == {}
 
     # add one test flight: a second, identical demo log copied in as a plain file
@@ -363,8 +388,8 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
         fh.write("extra\tlogs/extra.bin\tsim-quad\ttest\tnone\t\tadded\n")
     jobs = _planned_jobs(wd)
     # classified by both model sets of its vehicle (sim, sim2)
-    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "flight_report": 1,
-                    "report_index": 1, "all": 1}, jobs
+    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "estimate_flight": 1,
+                    "flight_report": 1, "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
 
@@ -374,8 +399,9 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     assert "preprocess:" not in text
     cfg.write_text(text + "preprocess: {rate_hz: 20}\n")
     jobs = _planned_jobs(wd)
-    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "flight_report": 4, "report_index": 1,
-                    "all": 1}, jobs
+    # (estimated: the three sim-quad flights; the broken flight's vehicle is generic)
+    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "estimate_flight": 3, "flight_report": 4,
+                    "report_index": 1, "all": 1}, jobs
 
     # snakemake --report over the finished run
     cfg.write_text(text)

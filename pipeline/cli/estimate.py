@@ -1,0 +1,93 @@
+"""``uavpipe estimate INGEST_DIR... --state STATE... -o DIR``: CA EKF, RTS smoother and EKF+HMM.
+
+The same entry point as the workflow's ``estimate_flight`` rule
+(:func:`pipeline.estimate.run.run_estimate`): each ``INGEST_DIR`` is one flight written by
+``uavpipe ingest`` (its ``radar``/``truth``/``attitude`` streams and ``meta.json``), each
+``STATE`` its preprocessed state (same order). Writes ``DIR/{ekf,ekf_rts,ekf_hmm}/<flight>.parquet``.
+
+``--vehicle V`` picks the ``estimate.synthetic_radar`` entry (radar synthesised from the state,
+noise from the config's master seed and the flight id). The EKF+HMM needs ``--model MODEL_DIR``
+(a trained model set with GMR) and its Q₂: ``--q2 FILE`` (the workflow's
+``results/estimate/q2/<model_set>.json``) or ``--train-sets SET...`` (computed into
+``DIR/q2/<model_set>.json`` first); without a model its table is a placeholder with the reason.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from ..config import ConfigError, load_config, section
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("estimate", help="EKF, RTS smoother and EKF+HMM over flights' radar")
+    p.add_argument("ingest_dirs", nargs="+", type=Path, metavar="INGEST_DIR")
+    p.add_argument("--state", nargs="+", type=Path, required=True, metavar="STATE",
+                   help="preprocessed state tables, one per INGEST_DIR (same order)")
+    p.add_argument("-o", "--out", type=Path, required=True, metavar="DIR",
+                   help="output root: DIR/<estimator>/<flight_id>.parquet")
+    p.add_argument("--segments", nargs="+", type=Path, default=None, metavar="SEGMENTS",
+                   help="segments tables (one per flight): classifier resets with estimate.ekf_hmm.reset_at_segments")
+    p.add_argument("--model", type=Path, default=None, metavar="MODEL_DIR", help="model set of the EKF+HMM")
+    p.add_argument("--q2", type=Path, default=None, metavar="Q2.json", help="the model set's Q2 (estimate_q2 output)")
+    p.add_argument("--train-sets", nargs="+", type=Path, default=None, metavar="SET",
+                   help="the model set's training sets: compute Q2 from them")
+    p.add_argument("--vehicle", default=None, help="manifest vehicle (its estimate.synthetic_radar entry, if any)")
+    p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..estimate.run import ESTIMATORS, job_config, run_estimate, run_q2
+
+    try:
+        cfg = load_config(args.config)
+        sec = section(cfg, "estimate")
+    except ConfigError as exc:
+        print(f"uavpipe estimate: {exc}", file=sys.stderr)
+        return 2
+    for opt, vals in (("--state", args.state), ("--segments", args.segments)):
+        if vals is not None and len(vals) != len(args.ingest_dirs):
+            print(f"uavpipe estimate: {opt}: {len(vals)} given for {len(args.ingest_dirs)} flights", file=sys.stderr)
+            return 2
+    if args.model is not None and not (args.model / "meta.json").is_file():
+        print(f"uavpipe estimate: {args.model}: not a model directory (no meta.json)", file=sys.stderr)
+        return 2
+    q2 = args.q2
+    if args.model is not None and q2 is None and args.train_sets:
+        q2 = args.out / "q2" / f"{args.model.name}.json"
+        res = run_q2({"params": args.model / "params.npz", "sets": args.train_sets}, {"q2": q2},
+                     sec["ekf_hmm"], model_set=args.model.name)
+        if res.status != "ok":
+            print(f"uavpipe estimate: Q2: {res.error}", file=sys.stderr)
+    config = job_config(sec, args.vehicle)
+    if args.model is not None:
+        config["ekf_hmm"]["model"] = args.model.name
+    failed = 0
+    for k, d in enumerate(args.ingest_dirs):
+        meta = d / "meta.json"
+        try:
+            fid = json.loads(meta.read_text()).get("flight_id") or d.name
+        except (OSError, ValueError) as exc:
+            print(f"uavpipe estimate: {d}: not an ingest folder ({meta}: {exc})", file=sys.stderr)
+            failed += 1
+            continue
+        inputs = {"meta": meta, "state": args.state[k], "segments": args.segments[k] if args.segments else None,
+                  "model_params": args.model / "params.npz" if args.model else None, "q2": q2}
+        outputs = {e: args.out / e / f"{fid}.parquet" for e in ESTIMATORS}
+        try:
+            res = run_estimate(inputs, outputs, config, flight_id=fid, vehicle=args.vehicle, seed=int(cfg["seed"]))
+        except (ValueError, OSError, KeyError) as exc:
+            print(f"uavpipe estimate: {d}: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        if res.status == "failed":  # run_estimate has said why, in one line naming the flight
+            failed += 1
+            continue
+        dg = res.diagnostics
+        print(f"{d} -> {args.out}/{{{','.join(ESTIMATORS)}}}/{fid}.parquet: {dg['n_steps']} steps "
+              f"({dg['n_predict_only']} predict-only), radar {dg['radar']}, reference {dg['reference']}"
+              + (f"; ekf_hmm placeholder: {res.error}" if res.status == "partial" else ""))
+    return 1 if failed else 0

@@ -1,0 +1,519 @@
+"""Entry points of the estimate stage: the CA EKF, its RTS smoother and the EKF+HMM over one
+flight (:func:`run_estimate`), and the EKF+HMM's Q₂ per model set (:func:`run_q2`).
+
+The workflow's rules (``rules/estimate.smk``) and ``uavpipe estimate`` call the same functions.
+
+**Radar.** A flight's radar is its ingest ``radar`` stream (the simulated ``.bin``/``.bag``/
+``.mcap`` flights carry one; MAVLink has no radar message, so the ``.tlog`` flights do not),
+with the site from the ingest ``meta.json`` ``radar`` entry (DataFlash ``RADR_*`` parameters),
+else ``estimate.radar.site_ned_m``. For a vehicle of ``estimate.synthetic_radar`` the radar is
+synthesised instead from the preprocessed ``state`` track (:func:`synthesise_radar`: the state
+sample nearest each step of a regular ``rate_hz`` grid, seed-000 noise drawn from
+``default_rng([seed, crc32("radar"), crc32(flight_id)])``), so the same seed gives the same
+measurements and another flight gets independent noise.
+
+**Steps and gaps.** The filters step on a regular grid at the radar's median period from the
+first valid measurement to the last; a step holds the radar sample nearest to it (its own
+time stamp) or, where the radar has no sample, the grid time and no measurement: a
+predict-only step, counted as ``n_predict_only`` in every output's metadata.
+
+**Reference (NEES).** A simulated flight carries its truth (the ingest ``truth`` stream from
+the ``<log>.truth.parquet`` side-car, 200 Hz, in the radar's NED frame): it is interpolated to
+the steps and is the NEES reference. A synthetic-radar flight's reference is the preprocessed
+state the radar was drawn from (its acceleration is itself a derivative estimate, so the NEES
+there measures consistency with the state track, not with the true motion). Other flights have
+no reference: ``nees`` is NaN. The initial state (``estimate.ekf.init: reference``, the thesis's
+initialisation) is the reference at the first step, else it comes from the first measurement.
+
+**Outputs** (``io.schema`` tables ``estimate``/``estimate_hmm``): ``results/estimate/ekf/``,
+``ekf_rts/`` (the smoothed EKF; its ``nis`` is the filter's) and ``ekf_hmm/`` (the EKF+HMM's
+own estimate with ``mode``, ``pred``, ``V_best``). Failures are placeholders, never crashes:
+no radar (or no state track to synthesise it from) gives three empty tables with ``status:
+failed`` and the reason; a model set without GMR (feature set other than
+:data:`~pipeline.estimate.ekf_hmm.GMR_FEATURE_SETS`, e.g. ``f3a``'s ``aero``), a failed model set or a failed Q₂ give an
+empty ``ekf_hmm`` table with the reason beside complete EKF tables (``status: partial``).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from ..io import schema
+from ..io.parquet import read_flightlog, read_table, read_table_meta, write_json, write_table
+from ..io.stage import declared, declared_list
+from .base import ConstantAcceleration, GaussianState
+from .ekf import ExtendedKalmanFilter, run_filter
+from .ekf_hmm import GMR_FEATURE_SETS, q2_from_runs, run_ekf_hmm
+from .models import RADAR_FIELDS, STATE_COLUMNS, RadarModel, initial_cov
+from .smoother import rts_smooth
+from .table import estimate_frame
+
+F64 = NDArray[np.float64]
+
+#: the estimators of one flight job, in output order (``results/estimate/<estimator>/``)
+ESTIMATORS: tuple[str, ...] = ("ekf", "ekf_rts", "ekf_hmm")
+
+
+@dataclass(frozen=True)
+class EstimateResult:
+    """What :func:`run_estimate` did.
+
+    Attributes
+    ----------
+    flight_id : str or None
+    status : str
+        ``ok`` (all three estimates), ``partial`` (EKF and RTS; ``ekf_hmm`` a placeholder) or
+        ``failed`` (three placeholders).
+    error : str
+        The reason when not ``ok`` (``ekf_hmm``'s when partial).
+    diagnostics : dict
+        Steps, predict-only steps, radar source and site, reference, RMSE per group.
+    """
+
+    flight_id: str | None
+    status: str
+    error: str = ""
+    diagnostics: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Q2Result:
+    """What :func:`run_q2` did: ``status`` ``ok``/``failed``, the reason and the diagnostics."""
+
+    model_set: str
+    status: str
+    error: str = ""
+    diagnostics: dict = field(default_factory=dict)
+
+
+def _say(msg: str) -> None:
+    print(f"uavpipe estimate: {msg}", file=sys.stderr, flush=True)
+
+
+def job_config(section: Mapping[str, Any], vehicle: str | None) -> dict:
+    """The config one flight job takes from the ``estimate`` section: ``synthetic_radar`` = the
+    vehicle's entry (``None`` when it flies with a radar stream), ``radar``, ``ekf``,
+    ``ekf_hmm`` (so another vehicle's entry or the vehicle list never reruns the job)."""
+    synth = dict(section.get("synthetic_radar") or {})
+    return {"synthetic_radar": synth.get(vehicle) if vehicle else None,
+            "radar": dict(section.get("radar") or {}), "ekf": dict(section.get("ekf") or {}),
+            "ekf_hmm": dict(section.get("ekf_hmm") or {})}
+
+
+# --- radar --------------------------------------------------------------------------------------
+
+def radar_rng(seed: int, flight_id: str) -> np.random.Generator:
+    """The synthetic radar's generator: ``default_rng([seed, crc32("radar"), crc32(flight_id)])``."""
+    return np.random.default_rng([int(seed), zlib.crc32(b"radar"), zlib.crc32(str(flight_id).encode())])
+
+
+def radar_model(site_ned_m: Sequence[float], *, tau_rd_s: float = 0.0, sigma_range_m: float = 1.5,
+                sigma_dcos: float = 4.5e-5, sigma_range_rate_mps: float = 0.2) -> RadarModel:
+    """The seed-000 radar at ``site_ned_m`` with the given noise (defaults: Table 2.1)."""
+    return RadarModel(site_ned_m=tuple(float(v) for v in site_ned_m), tau_rd_s=float(tau_rd_s),
+                      sigma=(float(sigma_range_m), float(sigma_dcos), float(sigma_dcos),
+                             float(sigma_range_rate_mps)))
+
+
+def _grid(t0: int, t1: int, period_ns: int) -> NDArray[np.int64]:
+    n = int(round((t1 - t0) / period_ns)) + 1
+    return t0 + period_ns * np.arange(max(n, 1), dtype=np.int64)
+
+
+def synthesise_radar(state: pd.DataFrame, model: RadarModel, rate_hz: float,
+                     rng: np.random.Generator) -> pd.DataFrame:
+    """Radar measurements of a state track (seed 000 §3 noise).
+
+    Parameters
+    ----------
+    state : DataFrame
+        ``t_ns`` and the ``state`` position/velocity columns (NED, the radar's frame).
+    model : RadarModel
+        Site, τ_RD and σ.
+    rate_hz : float
+        Measurement rate: one measurement per step of a regular grid from the first to the last
+        state sample, of the state sample nearest to the step (at its own time).
+    rng : numpy.random.Generator
+        Noise source (:func:`radar_rng`); one draw per grid step whether or not it is measured,
+        so a gap never shifts the noise of later steps.
+
+    Returns
+    -------
+    DataFrame
+        ``t_ns`` and :data:`~pipeline.estimate.models.RADAR_FIELDS`; NaN where the state has no
+        position/velocity or is flagged ``gap`` (a radar gap).
+    """
+    t = state["t_ns"].to_numpy(dtype=np.int64)
+    cols = list(STATE_COLUMNS[:6])
+    if not len(t):
+        return pd.DataFrame({"t_ns": np.zeros(0, np.int64), **{f: np.zeros(0) for f in RADAR_FIELDS}})
+    grid = _grid(int(t[0]), int(t[-1]), int(round(1e9 / rate_hz)))
+    idx = np.clip(np.searchsorted(t, grid), 0, len(t) - 1)
+    prev = np.clip(idx - 1, 0, len(t) - 1)
+    idx = np.where(np.abs(t[prev] - grid) <= np.abs(t[idx] - grid), prev, idx)
+    idx = np.unique(idx)
+    x = state[cols].to_numpy(dtype=np.float64)[idx]
+    bad = ~np.isfinite(x).all(axis=1)
+    if "gap" in state:
+        bad |= state["gap"].to_numpy(dtype=bool)[idx]
+    noise = rng.standard_normal((len(idx), 4)) * np.asarray(model.sigma)
+    z = np.full((len(idx), 4), np.nan)
+    if (~bad).any():
+        z[~bad] = model.h(x[~bad]) + noise[~bad]
+    return pd.DataFrame({"t_ns": t[idx], **dict(zip(RADAR_FIELDS, z.T))})
+
+
+def radar_steps(radar: pd.DataFrame) -> tuple[NDArray[np.int64], F64, int]:
+    """The filter's steps from radar samples: ``(t_ns (T,), z (T, 4), period_ns)``.
+
+    Steps are a regular grid at the median sample period from the first valid sample to the
+    last; each step takes the nearest sample (its own time stamp; the first of two sharing a
+    step), and a step without one keeps the grid time and a NaN measurement (predict only).
+    """
+    r = radar.dropna(subset=list(RADAR_FIELDS)).sort_values("t_ns", kind="stable")
+    t = r["t_ns"].to_numpy(dtype=np.int64)
+    if len(t) < 2:
+        return t, r[list(RADAR_FIELDS)].to_numpy(dtype=np.float64), 0
+    period = int(np.median(np.diff(t)))
+    if period <= 0:
+        raise ValueError("radar time stamps do not increase")
+    grid = _grid(int(t[0]), int(t[-1]), period)
+    k = np.rint((t - t[0]) / period).astype(np.int64)
+    first = np.r_[True, k[1:] != k[:-1]]
+    steps = grid.copy()
+    steps[k[first]] = t[first]
+    z = np.full((len(grid), 4), np.nan)
+    z[k[first]] = r[list(RADAR_FIELDS)].to_numpy(dtype=np.float64)[first]
+    return steps, z, period
+
+
+def radar_init(z: F64, model: RadarModel) -> F64:
+    """A 9-state mean from one measurement ``[ρ + τρ̇, u, v, ρ̇]``: position along the line of
+    sight (the target taken above the site, w = −√(1 − u² − v²)), velocity ρ̇ along it, no
+    acceleration."""
+    rr, u, v, rdot = (float(c) for c in z)
+    w = -np.sqrt(max(0.0, 1.0 - u * u - v * v))
+    los = np.array([u, v, w])
+    rho = rr - model.tau_rd_s * rdot
+    return np.r_[np.asarray(model.site_ned_m) + rho * los, rdot * los, np.zeros(3)]
+
+
+def _interp(t_src: NDArray[np.int64], values: F64, t: NDArray[np.int64]) -> F64:
+    """Columns of ``values`` linearly interpolated at ``t`` (NaN outside ``t_src``)."""
+    out = np.full((len(t), values.shape[1]), np.nan)
+    if len(t_src) < 2:
+        return out
+    inside = (t >= t_src[0]) & (t <= t_src[-1])
+    for j in range(values.shape[1]):
+        ok = np.isfinite(values[:, j])
+        if ok.sum() >= 2:
+            out[inside, j] = np.interp(t[inside], t_src[ok], values[ok, j])
+    return out
+
+
+def _yaw_at(log, state: pd.DataFrame | None, t: NDArray[np.int64]) -> F64 | None:
+    """Heading (rad) at the steps: the ``attitude`` stream (first instance), else the state's
+    ``yaw_rad``; unwrapped before interpolation."""
+    from ..frames.rotations import quat_to_euler
+
+    att = log["attitude"]
+    if len(att):
+        att = att[att["instance"] == att["instance"].min()].dropna(subset=["q_w", "q_x", "q_y", "q_z"])
+    if len(att) >= 2:
+        ts, yaw = att["t_ns"].to_numpy(np.int64), quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy())[2]
+    elif state is not None and len(state) and state["yaw_rad"].notna().sum() >= 2:
+        s = state.dropna(subset=["yaw_rad"])
+        ts, yaw = s["t_ns"].to_numpy(np.int64), s["yaw_rad"].to_numpy(np.float64)
+    else:
+        return None
+    y = _interp(ts, np.unwrap(yaw)[:, None], t)[:, 0]
+    # before the first / after the last attitude sample: hold the nearest heading
+    ok = np.isfinite(y)
+    if not ok.any():
+        return None
+    return np.interp(np.arange(len(y)), np.flatnonzero(ok), y[ok])
+
+
+# --- the stage ----------------------------------------------------------------------------------
+
+def _placeholder(path, table: str, extra: dict) -> None:
+    write_table(schema.empty(table), path, schema.columns(table), name=table, extra=extra)
+
+
+def _paths(outputs) -> dict[str, str]:
+    out = {e: declared(outputs, e) for e in ESTIMATORS}
+    missing = [e for e, p in out.items() if not p]
+    if missing:
+        raise ValueError(f"run_estimate: outputs must declare {', '.join(ESTIMATORS)} (missing {missing})")
+    return out
+
+
+def _ekf_hmm_blocker(inputs, config: Mapping) -> tuple[str, Any, F64 | None]:
+    """``(reason, model_set, Q2)``: why the EKF+HMM cannot run ('' when it can)."""
+    model = (config.get("ekf_hmm") or {}).get("model", "sim")
+    params, q2_path = declared(inputs, "model_params"), declared(inputs, "q2")
+    if not params or not Path(params).exists():
+        return f"no model set {model} given", None, None
+    mdir = Path(params).parent
+    meta = json.loads((mdir / "meta.json").read_text())
+    if meta.get("status") == "failed":
+        return f"model set {model} failed: {meta.get('error')}", None, None
+    from ..models.classifier import ManeuverModelSet
+
+    ms = ManeuverModelSet.load(mdir)
+    fs = ms.config.feature_set
+    if fs not in GMR_FEATURE_SETS:
+        return (f"model set {model} has no GMR (feature set {fs}; the EKF+HMM needs one of "
+                f"{', '.join(GMR_FEATURE_SETS)})"), None, None
+    if not q2_path or not Path(q2_path).exists():
+        return f"no Q2 for model set {model}", None, None
+    q2 = json.loads(Path(q2_path).read_text())
+    if q2.get("status") != "ok":
+        return f"Q2 of model set {model} failed: {q2.get('error')}", None, None
+    return "", ms, np.asarray(q2["Q2"], dtype=np.float64)
+
+
+def _rmse(err: F64) -> dict[str, float]:
+    out = {}
+    for g, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6)), ("acc", slice(6, 9))):
+        e = err[:, sl]
+        ok = np.isfinite(e).all(axis=1)
+        out[g] = float(np.sqrt(np.mean(np.sum(e[ok] ** 2, axis=1)))) if ok.any() else float("nan")
+    return out
+
+
+def _nees(ref: F64 | None, mean: F64, cov: F64) -> F64 | None:
+    if ref is None:
+        return None
+    err = mean - ref
+    ok = np.isfinite(err).all(axis=1)
+    out = np.full(len(err), np.nan)
+    if ok.any():
+        # eᵀP⁻¹e as metrics.nees (not imported: its scipy.stats import costs every job ~1 s)
+        e = err[ok]
+        out[ok] = np.einsum("ti,ti->t", e, np.linalg.solve(cov[ok], e[..., None])[..., 0])
+    return out
+
+
+def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = None,
+                 vehicle: str | None = None, seed: int = 0) -> EstimateResult:
+    """Estimate one flight: CA EKF, RTS smoother, EKF+HMM; write ``outputs.ekf``,
+    ``outputs.ekf_rts``, ``outputs.ekf_hmm`` (see the module docstring).
+
+    Parameters
+    ----------
+    inputs : mapping
+        ``meta``: the ingest ``meta.json`` (its streams beside it: ``radar``, ``truth``,
+        ``attitude``); ``state``: the preprocessed state; optional ``segments`` (classifier
+        resets), ``model_params`` (``results/models/<model>/params.npz``, its ``meta.json``
+        beside it) and ``q2`` (``results/estimate/q2/<model>.json``).
+    outputs : mapping
+        ``ekf``, ``ekf_rts``, ``ekf_hmm``: Parquet paths.
+    config : mapping
+        :func:`job_config` of the ``estimate`` section: ``synthetic_radar`` (the vehicle's
+        entry or None), ``radar``, ``ekf``, ``ekf_hmm``.
+    flight_id, vehicle : str, optional
+        Recorded in the metadata; ``flight_id`` also seeds the synthetic radar (default: the
+        ingest meta's).
+    seed : int
+        The master seed (synthetic radar noise).
+
+    Returns
+    -------
+    EstimateResult
+    """
+    paths = _paths(outputs)
+    meta_path = Path(declared(inputs, "meta"))
+    meta = json.loads(meta_path.read_text())
+    fid = flight_id or meta.get("flight_id")
+    ekf_cfg = {"q": 1.0, "p0_sigma": [1.0, 0.1, 0.01], "joseph": True, "init": "reference",
+               **dict(config.get("ekf") or {})}
+    hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, **dict(config.get("ekf_hmm") or {})}
+    synth = config.get("synthetic_radar")
+    state_path = declared(inputs, "state")
+    state = read_table(state_path) if state_path and Path(state_path).exists() else None
+    st_meta = read_table_meta(state_path) if state is not None else {}
+    base = {"flight_id": fid, "vehicle": vehicle, "q": float(ekf_cfg["q"]), "model_set": hmm_cfg["model"]}
+
+    def fail(reason: str) -> EstimateResult:
+        _say(f"{fid}: placeholder estimates ({reason})")
+        extra = {**base, "status": "failed", "error": reason, "n_steps": 0, "n_predict_only": 0}
+        for e in ESTIMATORS:
+            _placeholder(paths[e], "estimate_hmm" if e == "ekf_hmm" else "estimate", {**extra, "estimator": e})
+        return EstimateResult(fid, "failed", reason, {"n_steps": 0, "n_predict_only": 0})
+
+    if meta.get("status") == "failed":
+        return fail(f"ingest failed: {meta.get('error') or 'unknown reason'}")
+    log = read_flightlog(meta_path.parent, streams=["radar", "truth", "attitude"])
+    # --- the radar and its model
+    if synth is not None:
+        if state is None or not len(state) or not state["pos_n_m"].notna().any():
+            why = st_meta.get("error") or "no position track"
+            return fail(f"no state track to synthesise the radar from ({why})")
+        model = radar_model(synth.get("site_ned_m", (0.0, 0.0, 0.0)), tau_rd_s=synth.get("tau_rd_s", 0.0),
+                            sigma_range_m=synth.get("sigma_range_m", 1.5), sigma_dcos=synth.get("sigma_dcos", 4.5e-5),
+                            sigma_range_rate_mps=synth.get("sigma_range_rate_mps", 0.2))
+        radar = synthesise_radar(state, model, float(synth.get("rate_hz", 5.0)), radar_rng(seed, fid))
+        source, site_from = "synthetic", "estimate.synthetic_radar"
+    else:
+        radar = log["radar"]
+        if not len(radar):
+            return fail("no radar stream in the log (and the vehicle is not in estimate.synthetic_radar)")
+        radar = radar[radar["instance"] == radar["instance"].min()]
+        site_meta = (meta.get("radar") or {})
+        if site_meta.get("site_ned_m") is not None:
+            site, tau, site_from = site_meta["site_ned_m"], float(site_meta.get("tau_rd_s") or 0.0), "meta.json"
+        else:
+            site, tau = (config.get("radar") or {}).get("site_ned_m", (0.0, 0.0, 0.0)), 0.0
+            site_from = "estimate.radar.site_ned_m"
+        model = radar_model(site, tau_rd_s=tau)
+        source = "stream"
+    t, z, period = radar_steps(radar)
+    if len(t) < 2:
+        return fail(f"{len(t)} valid radar sample(s): nothing to filter")
+    # --- the reference (NEES) and the initial state
+    truth = log["truth"]
+    ref, ref_name = None, "none"
+    if len(truth) and truth["pos_n_m"].notna().any():
+        ref = _interp(truth["t_ns"].to_numpy(np.int64), truth[list(STATE_COLUMNS)].to_numpy(np.float64), t)
+        ref_name = "truth"
+    elif synth is not None:
+        ref = _interp(state["t_ns"].to_numpy(np.int64), state[list(STATE_COLUMNS)].to_numpy(np.float64), t)
+        ref_name = "state"
+    if ekf_cfg["init"] == "reference" and ref is not None and np.isfinite(ref[0]).all():
+        x0, init = ref[0].copy(), "reference"
+    else:
+        x0, init = radar_init(z[0], model), "radar"
+    prior = GaussianState(x0, initial_cov(tuple(ekf_cfg["p0_sigma"])), int(t[0]))
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(float(ekf_cfg["q"])), model, joseph=bool(ekf_cfg["joseph"]))
+    zz = z[:, None, :]
+    track = run_filter(ekf, prior, t, zz, store="all")
+    smooth = rts_smooth(track)
+    n_po = int(track.n_predict_only[0])
+    diag = {"n_steps": int(len(t)), "n_predict_only": n_po, "radar": source, "radar_site_ned_m": list(model.site_ned_m),
+            "radar_site_from": site_from, "radar_period_s": period * 1e-9, "reference": ref_name, "init": init}
+    extra = {**base, **diag, "status": "ok", "error": None}
+    err = {}
+    for name, mean, cov in (("ekf", track.mean[0], track.cov[0]), ("ekf_rts", smooth.mean[0], smooth.cov[0])):
+        df = estimate_frame(t, mean, cov, nis=track.nis[0], nees=_nees(ref, mean, cov))
+        write_table(df, paths[name], schema.ESTIMATE, name="estimate", extra={**extra, "estimator": name})
+        if ref is not None:
+            err[name] = _rmse(mean - ref)
+    # --- the EKF+HMM
+    reason, ms, Q2 = _ekf_hmm_blocker(inputs, config)
+    status = "ok"
+    if not reason:
+        seg_path = declared(inputs, "segments")
+        resets = None
+        if hmm_cfg["reset_at_segments"] and seg_path and Path(seg_path).exists():
+            seg = read_table(seg_path)
+            resets = seg["t_start_ns"].to_numpy(np.int64) if len(seg) else None
+        yaw = _yaw_at(log, state, t)
+        box = float((meta.get("params") or {}).get("box_rotation_rad") or st_meta.get("box_rotation_rad") or 0.0)
+        try:
+            ht = run_ekf_hmm(ekf, prior, t, zz, ms, Q2, yaw_rad=None if yaw is None else yaw[None],
+                             box_heading_rad=box, reset_t_ns=resets, store="filtered")
+        except ValueError as exc:  # ModelError and numerical failures of the classifier
+            reason = f"EKF+HMM failed: {type(exc).__name__}: {exc}"
+        else:
+            hm, hc = ht.hmm.mean[0], ht.hmm.cov[0]
+            df = estimate_frame(t, hm, hc, nis=ht.hmm.nis[0], nees=_nees(ref, hm, hc))
+            df["mode"] = np.asarray(ht.mode[0], dtype=bool)
+            df["pred"] = pd.array([str(p) for p in ht.pred[0]], dtype="string")
+            df["V_best"] = np.asarray(ht.V_best[0], dtype=np.float64)
+            df = schema.conform("estimate_hmm", df)
+            n_mode = int(df["mode"].sum())
+            write_table(df, paths["ekf_hmm"], schema.ESTIMATE_HMM, name="estimate_hmm",
+                        extra={**extra, "estimator": "ekf_hmm", "n_hmm_steps": n_mode,
+                               "n_predict_only": int(ht.hmm.n_predict_only[0])})
+            diag["n_hmm_steps"] = n_mode
+            if ref is not None:
+                err["ekf_hmm"] = _rmse(hm - ref)
+    if reason:
+        status = "partial"
+        _placeholder(paths["ekf_hmm"], "estimate_hmm",
+                     {**extra, "estimator": "ekf_hmm", "status": "failed", "error": reason})
+    diag["rmse"] = err
+    _say(f"{fid}: {len(t)} steps ({n_po} predict-only), radar {source}, reference {ref_name}"
+         + (f"; ekf_hmm placeholder ({reason})" if reason else f"; {diag.get('n_hmm_steps', 0)} HMM steps"))
+    return EstimateResult(fid, status, reason, diag)
+
+
+# --- Q₂ per model set -----------------------------------------------------------------------------
+
+def _training_runs(inputs) -> pd.DataFrame:
+    """The model set's training truth: simulated ``sets`` (run ids made unique per file) or the
+    labelled segments of the training flights (``states``/``segments``, one run each)."""
+    sets = declared_list(inputs, "sets")
+    if sets:
+        frames = []
+        for p in sets:
+            df = pd.read_parquet(p)
+            if "run_id" not in df.columns:
+                df["run_id"] = 0
+            df["run_id"] = [f"{Path(p).stem}:{r}" for r in df["run_id"]]
+            frames.append(df)
+        return pd.concat(frames, ignore_index=True)
+    from ..models.run import flight_runs
+
+    return flight_runs(declared_list(inputs, "states"), declared_list(inputs, "segments"))
+
+
+def run_q2(inputs, outputs, config: Mapping, *, model_set: str) -> Q2Result:
+    """Q₂ of the EKF+HMM for one model set: write ``outputs.q2`` (JSON).
+
+    ``Q₂ = q2_from_runs(model_set, training truth, scale=q2_scale)``: the covariance of the
+    A_H/B one-step errors of ``[r, v, a]`` on the set's training runs (digest §8, §13.7), once
+    per model set rather than per flight.
+
+    Parameters
+    ----------
+    inputs : mapping
+        ``params`` (its ``meta.json`` beside it) and the set's training data: ``sets``
+        (simulated bulk sets), or ``states`` and ``segments`` (training flights).
+    outputs : mapping
+        ``q2``: ``results/estimate/q2/<model_set>.json`` with ``status``, ``error``,
+        ``scale``, ``n_runs`` and ``Q2`` (9×9, state order pos/vel/acc NED).
+    config : mapping
+        ``estimate.ekf_hmm`` (``q2_scale``).
+    model_set : str
+        Its name.
+    """
+    out = declared(outputs, "q2")
+    scale = float((config or {}).get("q2_scale", 1.0))
+    mdir = Path(declared(inputs, "params")).parent
+    rec: dict[str, Any] = {"model_set": model_set, "scale": scale, "Q2": None, "n_runs": 0}
+    meta = json.loads((mdir / "meta.json").read_text())
+    reason = ""
+    if meta.get("status") == "failed":
+        reason = f"model set {model_set} failed: {meta.get('error')}"
+    else:
+        from ..models.classifier import ManeuverModelSet
+
+        ms = ManeuverModelSet.load(mdir)
+        if ms.config.feature_set not in GMR_FEATURE_SETS:
+            reason = f"model set {model_set} has no GMR (feature set {ms.config.feature_set})"
+        else:
+            runs = _training_runs(inputs)
+            if not len(runs):
+                reason = "no training runs"
+            else:
+                try:
+                    Q2 = q2_from_runs(ms, runs, scale=scale)
+                except ValueError as exc:
+                    reason = f"Q2 failed: {type(exc).__name__}: {exc}"
+                else:
+                    rec.update(Q2=np.asarray(Q2, dtype=np.float64).tolist(), n_runs=int(runs["run_id"].nunique()))
+    rec.update(status="failed" if reason else "ok", error=reason or None)
+    write_json(rec, out)
+    _say(f"Q2 of {model_set}: " + (reason or f"{rec['n_runs']} training runs, scale {scale:g}"))
+    return Q2Result(model_set, rec["status"], reason, {"n_runs": rec["n_runs"]})

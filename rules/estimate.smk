@@ -1,0 +1,62 @@
+# Estimate: per flight of estimate.vehicles, the CA EKF, its RTS smoother and the EKF+HMM from the
+# flight's radar (or radar synthesised from its state); Q2 of the EKF+HMM once per model set.
+
+
+rule estimate_q2:
+    input:
+        unpack(train_inputs),
+        params="results/models/{model_set}/params.npz",
+        meta="results/models/{model_set}/meta.json",
+    output:
+        q2="results/estimate/q2/{model_set}.json",
+    params:
+        code_version=PIPELINE_VERSION,
+        config={"q2_scale": config["estimate"]["ekf_hmm"]["q2_scale"]},
+        job=lambda wc: {"model_set": wc.model_set},
+    log:
+        "results/logs/estimate_q2/{model_set}.log",
+    benchmark:
+        "results/benchmarks/estimate_q2/{model_set}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/estimate_q2.py"
+
+
+rule estimate_flight:
+    input:
+        unpack(ingest_inputs),
+        state="results/state/{flight}.parquet",
+        segments="results/segments/{flight}.parquet",
+        model_params=f"results/models/{ESTIMATE_MODEL}/params.npz",
+        model_meta=f"results/models/{ESTIMATE_MODEL}/meta.json",
+        q2=f"results/estimate/q2/{ESTIMATE_MODEL}.json",
+    output:
+        ekf="results/estimate/ekf/{flight}.parquet",
+        ekf_rts="results/estimate/ekf_rts/{flight}.parquet",
+        ekf_hmm="results/estimate/ekf_hmm/{flight}.parquet",
+    params:
+        code_version=PIPELINE_VERSION,
+        config=estimate_config,
+        job=estimate_job,
+    log:
+        "results/logs/estimate_flight/{flight}.log",
+    benchmark:
+        "results/benchmarks/estimate_flight/{flight}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/estimate.py"
+
+
+rule estimate:
+    input:
+        estimate_paths(),

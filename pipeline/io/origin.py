@@ -16,7 +16,9 @@ with fix type 0 or 1. :func:`check_gps` runs on every ingested log
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
 
+from . import schema
 from .base import FlightLog
 
 _POS_COLUMNS = ("lat_deg", "lon_deg", "alt_msl_m", "alt_wgs84_m")
@@ -43,44 +45,54 @@ def no_fix_reason(lat: np.ndarray, lon: np.ndarray, fix: np.ndarray) -> str:
             f"{n - zero} without finite coordinates otherwise; NED origin left null")
 
 
+def _col(table, name: str) -> np.ndarray:
+    """A float column as NumPy with nulls as NaN (no pandas: ``info``/``ingest`` never load it)."""
+    arr = table.column(name)
+    v = schema.arrow_to_np(arr).astype(np.float64, copy=True)
+    v[schema.arrow_nulls(arr)] = np.nan
+    return v
+
+
 def check_gps(log: FlightLog) -> None:
     """Null Island guard and the reason of a null NED origin (see the module docstring)."""
     meta = log.meta
     diag = meta.setdefault("diagnostics", {})
     warnings = diag.setdefault("warnings", [])
-    gps = log["gps"]
-    n = len(gps)
+    table = log.table("gps")
+    n = table.num_rows
+    lat_raw = lon_raw = lat = lon = np.empty(0)
     if n:
-        lat = gps["lat_deg"].to_numpy(dtype=np.float64, na_value=np.nan)
-        lon = gps["lon_deg"].to_numpy(dtype=np.float64, na_value=np.nan)
-        lat_raw, lon_raw = lat, lon
-        zero = (lat == 0) & (lon == 0)
+        lat_raw, lon_raw = _col(table, "lat_deg"), _col(table, "lon_deg")
+        zero = (lat_raw == 0) & (lon_raw == 0)
+        lat, lon = np.where(zero, np.nan, lat_raw), np.where(zero, np.nan, lon_raw)
         if zero.any():
-            gps = gps.copy()
             for c in _POS_COLUMNS:
-                if c in gps.columns:
-                    gps[c] = gps[c].astype("float64").mask(zero)
-            log.streams["gps"] = gps
+                i = table.schema.get_field_index(c)
+                if i < 0:
+                    continue
+                arr = table.column(c)
+                vals = schema.arrow_to_np(arr).astype(np.float64, copy=True)
+                mask = schema.arrow_nulls(arr) | zero
+                vals[mask] = np.nan
+                table = table.set_column(i, table.schema.field(i), schema.np_to_arrow(vals, pa.float64(), mask))
+            log.set_table("gps", table)
             diag["gps_zero_positions"] = int(zero.sum())
             warnings.append(f"gps: {int(zero.sum())} of {n} record(s) at lat = lon = 0 (no fix); "
                             "their positions set missing, never used")
-            lat, lon = np.where(zero, np.nan, lat), np.where(zero, np.nan, lon)
     org = meta.get("ned_origin")
     if org and _is_zero(org.get("lat_deg"), org.get("lon_deg")):
         meta["ned_origin"] = org = None
         warnings.append("ned_origin at lat = lon = 0 (a receiver without a fix) withdrawn")
     if org:
-        meta.pop("ned_origin_reason", None)
+        meta["ned_origin_reason"] = None
         return
     if meta.get("ned_origin_reason"):
         return
     if not n:
         meta["ned_origin_reason"] = "no GPS records (and no origin record) in the log"
         return
-    fix = gps["fix_type"].to_numpy(dtype=np.float64, na_value=np.nan) if "fix_type" in gps.columns \
-        else np.full(n, np.nan)
-    good = np.isfinite(lat) & np.isfinite(lon)
-    if not good.any():
+    fix = _col(table, "fix_type")
+    if not (np.isfinite(lat) & np.isfinite(lon)).any():
         reason = no_fix_reason(lat_raw, lon_raw, fix)
         warnings.append(reason)
     else:

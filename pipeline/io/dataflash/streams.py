@@ -396,10 +396,10 @@ def _local_position_ntun(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None
 def _local_position_pos(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
     """Logs with neither EKF nor NTUN positions: ``POS`` (the AHRS position, lat/lon/MSL
     altitude) converted to NED about the origin; no velocity."""
-    from ...frames.geodesy import geodetic_to_ned
-
     if parts:
         return None
+    from ...frames.geodesy import geodetic_to_ned
+
     c = ctx.res.tables[name]
     org = _origin(ctx.res)
     if org is None or not all(k in c for k in ("Lat", "Lng", "Alt")):

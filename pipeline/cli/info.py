@@ -24,8 +24,31 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: streams of measurements (not pilot inputs, modes, labels or simulation truth): the span
+#: a reader of the log means by "how long was the flight logged"
+SENSOR_STREAMS = ("imu", "gps", "baro", "mag", "attitude", "local_position", "odometry",
+                  "rangefinder", "airspeed", "radar")
+
+
+def _sensor_span(log) -> dict | None:
+    """``{start_s, end_s, duration_s}`` of the sensor streams (t = 0 is the first record of any
+    stream), None when the log has no sensor rows."""
+    lo, hi = log.span_ns(SENSOR_STREAMS)
+    if lo is None:
+        return None
+    return {"start_s": round(lo * 1e-9, 3), "end_s": round(hi * 1e-9, 3),
+            "duration_s": round((hi - lo) * 1e-9, 3)}
+
+
+def _topics(m: dict) -> dict:
+    """ROS/MCAP: topic -> {type, stream, instance[, inferred]} as the reader mapped them."""
+    return {t: {k: v for k, v in info.items() if k in ("type", "stream", "instance", "inferred")}
+            for t, info in sorted(((m.get("frames") or {}).get("topics") or {}).items())}
+
+
 def describe(log) -> dict:
     m = log.meta
+    diag = m.get("diagnostics", {})
     return {
         "path": m.get("source_path"),
         "flight_id": m.get("flight_id"),
@@ -34,22 +57,43 @@ def describe(log) -> dict:
         "detected_by": m.get("detected_by"),
         "status": m.get("status"),
         "duration_s": round(log.duration_s, 3),
+        "sensor_span": _sensor_span(log),
         "t0_utc_ns": m.get("t0_utc_ns"),
+        "leap_seconds": m.get("leap_seconds"),
         "ned_origin": m.get("ned_origin"),
+        "ned_origin_reason": m.get("ned_origin_reason"),
+        "topics": _topics(m),
+        "inferred_mappings": diag.get("inferred_mappings") or {},
         "streams": log.summary(),
-        "diagnostics": {k: v for k, v in m.get("diagnostics", {}).items() if k != "messages"},
+        "diagnostics": {k: v for k, v in diag.items() if k != "messages"},
     }
 
 
 def _print_text(d: dict) -> None:
     print(f"{d['path']}")
     print(f"  format      {d['format']}  (reader {d['reader']}: {d['detected_by']})")
-    print(f"  status      {d['status']}   duration {d['duration_s']:.1f} s   flight_id {d['flight_id']}")
+    dur = f"duration {d['duration_s']:.1f} s"
+    sp = d.get("sensor_span")
+    if sp and (sp["start_s"] >= 0.05 or d["duration_s"] - sp["duration_s"] >= 0.05):
+        # a non-sensor record (mode, parameters, RC) starts earlier or ends later than the sensors
+        dur += f" (sensors {sp['duration_s']:.1f} s, t = {sp['start_s']:.1f}..{sp['end_s']:.1f} s)"
+    print(f"  status      {d['status']}   {dur}   flight_id {d['flight_id']}")
     if d["ned_origin"]:
         o = d["ned_origin"]
         h, datum = (o.get("alt_wgs84_m"), "WGS-84") if o.get("alt_wgs84_m") is not None else (o.get("alt_msl_m"), "MSL")
         hs = "unknown height" if h is None else f"{h:.2f} m {datum}"
         print(f"  NED origin  {o['lat_deg']:.7f}, {o['lon_deg']:.7f}, {hs}")
+    elif d.get("ned_origin_reason"):
+        print(f"  NED origin  none: {d['ned_origin_reason']}")
+    if d.get("topics"):
+        print("  topics:")
+        for topic, t in d["topics"].items():
+            how = f"  (inferred: {t['inferred']})" if t.get("inferred") else ""
+            print(f"    {topic:28s} -> {t['stream']}[{t['instance']}]  {t['type']}{how}")
+    for topic, inf in (d.get("inferred_mappings") or {}).items():
+        print(f"  inferred    {topic} ({inf['type']}): {inf['mapping']}")
+    if d["diagnostics"].get("local_position_from"):
+        print(f"  local_position from {d['diagnostics']['local_position_from']}")
     print("  streams:")
     for name, s in d["streams"].items():
         rate = "" if s["rate_hz"] != s["rate_hz"] else f"{s['rate_hz']:8.2f} Hz"

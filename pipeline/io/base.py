@@ -20,7 +20,7 @@ import hashlib
 import os
 from collections.abc import Mapping, MutableMapping
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 import pyarrow as pa
@@ -135,6 +135,13 @@ class FlightLog:
                 t = schema.empty_arrow(name)
         return t
 
+    def set_table(self, name: str, table: pa.Table) -> None:
+        """Replace stream ``name`` by a conformed Arrow table (its schema is checked)."""
+        if not table.schema.equals(schema.arrow_schema(name)):
+            raise schema.SchemaError(f"set_table({name!r}): schema differs from the canonical one")
+        self._tables[name] = table
+        self._frames.pop(name, None)
+
     @classmethod
     def from_streams(cls, meta: dict, streams: dict) -> "FlightLog":
         """Conform reader output: canonical columns/dtypes, all streams, sorted, anomalies counted.
@@ -194,11 +201,20 @@ class FlightLog:
     @property
     def duration_s(self) -> float:
         """Span of ``t_ns`` over all time-stamped streams, in seconds (0 when empty)."""
-        lo, hi = None, None
-        for _, t, _ in self._time_arrays():
-            lo = t.min() if lo is None else min(lo, t.min())
-            hi = t.max() if hi is None else max(hi, t.max())
+        lo, hi = self.span_ns()
         return 0.0 if lo is None else float(hi - lo) * 1e-9
+
+    def span_ns(self, streams: Iterable[str] | None = None) -> tuple[int | None, int | None]:
+        """First and last ``t_ns`` over the non-empty time-stamped ``streams`` (all when None);
+        ``(None, None)`` when they hold no rows."""
+        keep = None if streams is None else set(streams)
+        lo, hi = None, None
+        for name, t, _ in self._time_arrays():
+            if keep is not None and name not in keep:
+                continue
+            lo = int(t.min()) if lo is None else min(lo, int(t.min()))
+            hi = int(t.max()) if hi is None else max(hi, int(t.max()))
+        return lo, hi
 
     def summary(self) -> dict[str, dict[str, float]]:
         """Per non-empty stream: rows, instances, mean rate (Hz, per instance; NaN-skipping mean)."""

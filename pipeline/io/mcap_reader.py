@@ -41,11 +41,11 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 _ROS2 = ("ros2msg", "ros2idl")
 
 
-def _candidate(topic: str, msgtype: str, cfg: rc.RosConfig) -> bool:
-    """Could this channel be routed? (raw bytes are kept only for such channels)."""
-    if topic in cfg.topics:
-        return cfg.topics[topic] is not None
-    return topic in cfg.custom or msgtype in rc.BUILTIN_TYPES or msgtype in cfg.custom_types
+def _definition(sch: Any) -> tuple[str, str] | None:
+    """``(format, text)`` of a ROS schema record (for mapping inference), else None."""
+    if sch is None or not sch.data or sch.encoding not in (*_ROS2, "ros1msg"):
+        return None
+    return ("idl" if sch.encoding == "ros2idl" else "msg"), bytes(sch.data).decode("utf-8", errors="replace")
 
 
 @register
@@ -98,7 +98,7 @@ class McapReader(LogReader):
                 channels[rec.id] = rec
                 sch = schemas.get(rec.schema_id)
                 msgtype = rc.normalize_type(sch.name) if sch is not None and sch.name else ""
-                if _candidate(rec.topic, msgtype, cfg):
+                if rc.is_candidate(rec.topic, msgtype, cfg, _definition(sch)):
                     raw[rec.id] = []
 
         with open(path, "rb") as fh:
@@ -142,7 +142,9 @@ class McapReader(LogReader):
             return rc.normalize_type(sch.name) if sch is not None and sch.name else ""
 
         conns = [(ch.topic, msgtype_of(ch), counts.get(cid, 0)) for cid, ch in channels.items()]
-        routes, unmapped = rc.plan_topics(conns, cfg, path)
+        defs = [(msgtype_of(ch), *d) for ch in channels.values()
+                if (d := _definition(schemas.get(ch.schema_id))) is not None]
+        routes, unmapped = rc.plan_topics(conns, cfg, path, rc.defined_fields(defs))
 
         # type stores from the schemas of the routed channels
         used = [cid for cid, ch in channels.items() if ch.topic in routes]

@@ -168,11 +168,13 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
     finally:
         if hasher is not None:
             hasher.join()
+    from .origin import check_gps
     from .sidecar import attach_sidecar, find_sidecar
 
     side = Path(labels) if labels else find_sidecar(p)
     if side is not None:
         attach_sidecar(log, side)  # raises IngestError naming the side-car
+    check_gps(log)  # lat = lon = 0 never a position; why the NED origin is null
     m = log.meta
     m["flight_id"] = flight_id or m.get("flight_id") or flight_id_for(p)
     m["source_path"] = str(p)

@@ -33,8 +33,14 @@ which ones to decode, deserialise those messages and hand them, per topic, to
   ``t0`` is the earliest ``t_abs`` over all mapped streams, ``t_ns = t_abs − t0``;
   ROS time is Unix time, so ``meta['t0_utc_ns'] = t0`` with ``utc_source = "host"``.
   ``t_boot_ns`` stays NA (ROS has no boot clock).
-* **NED origin**: the first ``NavSatFix`` (of the lowest-instance GPS topic) with
-  ``status.status >= 0`` and finite latitude/longitude.
+* **NED origin** (:func:`first_fix_origin`): the earliest fix of any gps source — a
+  ``NavSatFix`` with ``status.status >= 0``, or a custom type mapped to ``gps`` — with finite
+  latitude/longitude not at lat = lon = 0.
+* **Custom types with no config** (:func:`infer_mapping`): a message that embeds standard
+  ones (``sensor_msgs/Imu``, ``NavSatFix``, ``MagneticField``, ``FluidPressure``, ``Range``)
+  maps through them (``src`` ``<topic>.<field>``); one whose float fields carry NavSatFix names
+  (``latitude``, ``longitude``, ``altitude``) maps to ``gps``. The inferred mapping is recorded
+  in ``meta['diagnostics']['inferred_mappings']`` and ``meta['frames']['topics']``.
 
 Configuration (``ingest: ros:`` in ``datasets/config.yaml``; every key optional, defaults in
 code so ``uavpipe ingest`` works without a config)::
@@ -248,16 +254,160 @@ class Route:
     instance: int
     orientation: float = math.nan
     custom: CustomSpec | None = None
+    #: a custom message embedding standard ones: one sub-route per embedded message, whose
+    #: ``topic`` is ``<topic>.<field path>`` (its ``src``) and ``path`` the field path
+    embedded: tuple["Route", ...] = ()
+    path: str = ""
+    #: how the mapping of a custom type was inferred (None: built-in or configured)
+    inferred: str | None = None
+
+
+# --- mappings inferred from a custom message's definition ----------------------------------
+
+#: standard messages a custom message may embed: they map through it as they would alone
+EMBEDDABLE_TYPES: tuple[str, ...] = (
+    "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix", "sensor_msgs/msg/MagneticField",
+    "sensor_msgs/msg/FluidPressure", "sensor_msgs/msg/Range",
+)
+
+#: NavSatFix field names (float) that make a custom message a GPS fix: column -> field
+NAVSAT_NAMES: dict[str, str] = {"lat_deg": "latitude", "lon_deg": "longitude", "alt_wgs84_m": "altitude"}
+
+_NOT_NESTED = ("std_msgs/msg/Header", "builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration")
+
+
+@dataclass(frozen=True)
+class Inferred:
+    """The mapping of a custom type found from its definition (:func:`infer_mapping`)."""
+
+    embedded: tuple[tuple[str, str], ...] = ()  # (field path, standard type)
+    custom: CustomSpec | None = None            # NavSatFix-named fields -> gps
+
+    def describe(self) -> str:
+        if self.embedded:
+            return "embeds " + ", ".join(f"{p}: {t} -> {BUILTIN_TYPES[t]}" for p, t in self.embedded)
+        assert self.custom is not None
+        return ("NavSatFix field names -> gps ("
+                + ", ".join(f"{f} -> {c}" for c, f in self.custom.fields.items()) + ")")
+
+
+def _fields(fielddefs: Mapping[str, Any], msgtype: str) -> list:
+    d = fielddefs.get(msgtype)
+    return list(d[1]) if d else []
+
+
+def infer_mapping(msgtype: str, fielddefs: Mapping[str, Any], *, max_depth: int = 3) -> Inferred | None:
+    """Map a custom message type through what its definition shows, with no config.
+
+    1. Fields (at any depth up to ``max_depth``, not inside arrays) whose type is one of
+       :data:`EMBEDDABLE_TYPES` map as that type would on its own topic (``sensor_msgs/Imu``
+       -> ``imu`` and ``attitude``, ``NavSatFix`` -> ``gps``, ``MagneticField`` -> ``mag``, ...).
+    2. Otherwise, top-level float fields named ``latitude`` and ``longitude`` (and
+       ``altitude``, WGS-84 as in NavSatFix) make the message a ``gps`` fix; its stamp is
+       ``header.stamp`` when it has a ``header``, else the record time.
+
+    Parameters
+    ----------
+    fielddefs : mapping
+        rosbags field definitions (``Typestore.fielddefs`` or ``get_types_from_msg`` output):
+        ``msgtype -> (constants, [(name, (Nodetype, detail)), ...])``.
+
+    Returns
+    -------
+    Inferred or None
+        None when nothing is recognised (the topic stays unmapped).
+    """
+    from rosbags.typesys.base import Nodetype
+
+    msgtype = normalize_type(msgtype)
+    if msgtype in BUILTIN_TYPES or msgtype not in fielddefs:
+        return None
+    found: list[tuple[str, str]] = []
+
+    def walk(t: str, prefix: str, depth: int) -> None:
+        for name, (nt, det) in _fields(fielddefs, t):
+            if nt != Nodetype.NAME:
+                continue
+            sub = normalize_type(det)
+            p = f"{prefix}{name}"
+            if sub in EMBEDDABLE_TYPES:
+                found.append((p, sub))
+            elif depth < max_depth and sub not in _NOT_NESTED and sub not in BUILTIN_TYPES:
+                walk(sub, p + ".", depth + 1)
+
+    walk(msgtype, "", 1)
+    if found:
+        return Inferred(embedded=tuple(found))
+    top = {name: (nt, det) for name, (nt, det) in _fields(fielddefs, msgtype)}
+
+    def is_float(name: str) -> bool:
+        nt, det = top.get(name, (None, None))
+        return nt == Nodetype.BASE and str(det[0]).startswith("float")
+
+    if is_float("latitude") and is_float("longitude"):
+        fields = {c: f for c, f in NAVSAT_NAMES.items() if is_float(f)}
+        has_header = top.get("header", (None, None))[0] == Nodetype.NAME
+        return Inferred(custom=CustomSpec(stream="gps", fields=fields,
+                                          stamp="header.stamp" if has_header else None))
+    return None
+
+
+@functools.lru_cache(maxsize=256)
+def parse_definition(msgtype: str, fmt: str, text: str) -> Mapping[str, Any]:
+    """Field definitions in one stored message definition (``fmt`` ``msg`` or ``idl``);
+    empty when it cannot be parsed (the reader reports that when it decodes)."""
+    from rosbags.typesys import get_types_from_idl, get_types_from_msg
+
+    try:
+        if fmt == "idl":
+            sep = "=" * 80 + "\n"
+            if not text.startswith(f"{sep}IDL: "):
+                return get_types_from_idl(text)
+            out: dict = {}
+            for part in text.split(sep)[1:]:
+                out.update(get_types_from_idl(part.split("\n", 1)[1]))
+            return out
+        return get_types_from_msg(text, normalize_type(msgtype))
+    except Exception:  # noqa: BLE001 - an unparsable definition: nothing to infer from
+        return {}
+
+
+def defined_fields(defs: Iterable[tuple[str, str, str]]) -> dict[str, Any]:
+    """Field definitions of the custom (non built-in) types among stored definitions
+    ``(msgtype, format, text)``, for :func:`plan_topics` to infer mappings from."""
+    out: dict[str, Any] = {}
+    for msgtype, fmt, text in defs:
+        if text and normalize_type(msgtype) not in BUILTIN_TYPES:
+            out.update(parse_definition(msgtype, fmt, text))
+    return out
+
+
+def is_candidate(topic: str, msgtype: str, cfg: RosConfig, definition: tuple[str, str] | None = None) -> bool:
+    """Could this topic be routed? Readers that keep raw bytes while scanning keep them only
+    for such topics. ``definition`` is the stored ``(format, text)`` of its type, from which a
+    custom type's mapping may be inferred (:func:`infer_mapping`)."""
+    msgtype = normalize_type(msgtype)
+    if topic in cfg.topics:
+        return cfg.topics[topic] is not None
+    if topic in cfg.custom or msgtype in BUILTIN_TYPES or msgtype in cfg.custom_types:
+        return True
+    if definition and definition[1]:
+        return infer_mapping(msgtype, parse_definition(msgtype, *definition)) is not None
+    return False
 
 
 def plan_topics(connections: Iterable[tuple[str, str, int]], cfg: RosConfig,
-                path: Path | str | None = None) -> tuple[dict[str, Route], dict[str, dict]]:
+                path: Path | str | None = None,
+                fielddefs: Mapping[str, Any] | None = None) -> tuple[dict[str, Route], dict[str, dict]]:
     """Choose a route for each topic.
 
     Parameters
     ----------
     connections : iterable of (topic, msgtype, message count)
         One entry per connection (a topic may appear several times, e.g. in split bags).
+    fielddefs : mapping, optional
+        Field definitions of the source's types: a type with neither a built-in nor a
+        configured mapping is mapped by :func:`infer_mapping` when its definition shows how.
 
     Returns
     -------
@@ -297,31 +447,52 @@ def plan_topics(connections: Iterable[tuple[str, str, int]], cfg: RosConfig,
                                         f"cannot go to stream {stream!r} (allowed: "
                                         f"{', '.join(ALLOWED_STREAMS[msgtype])})")
         else:
+            inf = infer_mapping(msgtype, fielddefs) if fielddefs is not None else None
+            if inf is not None and inf.custom is not None and over.get("stream") in (None, "gps"):
+                pending.append((topic, msgtype, "gps", over, inf.custom, inf))
+                continue
+            if inf is not None and inf.embedded and not over.get("stream"):
+                pending.append((topic, msgtype, "", over, None, inf))
+                continue
             reason = "no mapping for this message type"
             if over.get("stream"):
                 raise IngestError(path, f"config ingest.ros.topics[{topic!r}]: type {msgtype} has no "
                                         "built-in mapping; add an ingest.ros.custom field mapping")
             unmapped[topic] = {"type": msgtype, "count": counts[topic], "reason": reason}
             continue
-        pending.append((topic, msgtype, stream, over, custom))
+        pending.append((topic, msgtype, stream, over, custom, None))
     routes: dict[str, Route] = {}
     used: dict[str, set[int]] = {}
-    for topic, msgtype, stream, over, custom in pending:  # fixed instances first
-        if over.get("instance") is not None:
+    for topic, msgtype, stream, over, custom, inf in pending:  # fixed instances first
+        if over.get("instance") is not None and stream:
             used.setdefault(stream, set()).add(int(over["instance"]))
-    for topic, msgtype, stream, over, custom in pending:
+
+    def take(stream: str) -> int:
         taken = used.setdefault(stream, set())
+        inst = next(i for i in range(len(taken) + 1) if i not in taken)
+        taken.add(inst)
+        return inst
+
+    for topic, msgtype, stream, over, custom, inf in pending:
+        desc = inf.describe() if inf is not None else None
+        if inf is not None and inf.embedded:  # one sub-route per embedded standard message
+            subs = tuple(Route(topic=f"{topic}.{p}", msgtype=t, stream=BUILTIN_TYPES[t], instance=take(BUILTIN_TYPES[t]),
+                               orientation=math.nan if over.get("orientation") is None else float(over["orientation"]),
+                               path=p, inferred=f"embedded field {p!r} of {msgtype} ({topic})")
+                         for p, t in inf.embedded)
+            routes[topic] = Route(topic=topic, msgtype=msgtype, stream="+".join(r.stream for r in subs),
+                                  instance=subs[0].instance, embedded=subs, inferred=desc)
+            continue
         if over.get("instance") is not None:
             inst = int(over["instance"])
         else:
-            inst = next(i for i in range(len(taken) + 1) if i not in taken)
-            taken.add(inst)
+            inst = take(stream)
         if not 0 <= inst <= 255:
             raise IngestError(path, f"config ingest.ros.topics[{topic!r}]: instance {inst} not in 0..255")
         orient = over.get("orientation")
         routes[topic] = Route(topic=topic, msgtype=msgtype, stream=stream, instance=inst,
                               orientation=math.nan if orient is None else float(orient),
-                              custom=custom)
+                              custom=custom, inferred=desc)
     return routes, unmapped
 
 
@@ -585,6 +756,34 @@ def _conv_custom(msgs, t, route, frame, ctx) -> dict[str, Rows]:
 # --- assembly -------------------------------------------------------------------------------
 
 
+def first_fix_origin(gps_parts: Iterable[tuple[Route, Rows]]) -> dict | None:
+    """NED origin: the earliest fix of any gps source (NavSatFix or a custom mapping) with
+    finite latitude and longitude, not at lat = lon = 0 (no fix), and not flagged as no fix
+    (``status.status < 0`` for NavSatFix, ``fix_type <= 1`` where a custom mapping gives one);
+    ties go to the lower instance. ``alt_wgs84_m`` is None where the source has no altitude."""
+    best = None
+    for route, rows in gps_parts:
+        n = len(rows["t_abs"])
+        if not n or "lat_deg" not in rows or "lon_deg" not in rows:
+            continue
+        lat = np.asarray(rows["lat_deg"], dtype=np.float64)
+        lon = np.asarray(rows["lon_deg"], dtype=np.float64)
+        ok = np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+        if "_status" in rows:
+            ok &= np.asarray(rows["_status"]) >= 0
+        elif "fix_type" in rows:
+            ok &= ~(np.asarray(rows["fix_type"], dtype=np.float64) <= 1)
+        if not ok.any():
+            continue
+        i = int(np.flatnonzero(ok)[np.argmin(rows["t_abs"][ok])])
+        key = (int(rows["t_abs"][i]), route.instance)
+        if best is None or key < best[0]:
+            alt = float(rows["alt_wgs84_m"][i]) if "alt_wgs84_m" in rows else float("nan")
+            best = (key, {"lat_deg": float(lat[i]), "lon_deg": float(lon[i]),
+                          "alt_wgs84_m": alt if math.isfinite(alt) else None})
+    return None if best is None else best[1]
+
+
 def build_flightlog(buckets: Mapping[str, Bucket], unmapped: Mapping[str, dict], cfg: RosConfig,
                     *, path: Path | str, source_format: str, diag: dict | None = None,
                     extra_meta: Mapping[str, Any] | None = None) -> FlightLog:
@@ -613,30 +812,30 @@ def build_flightlog(buckets: Mapping[str, Bucket], unmapped: Mapping[str, dict],
     ctx = _Ctx(cfg=cfg, diag=diag, frames=frames, unmapped=unmapped)
     parts: dict[str, list[tuple[Route, Rows]]] = {}
     zero_stamps: dict[str, int] = {}
-    for topic in sorted(buckets):
-        b = buckets[topic]
-        route = b.route
-        diag["record_counts"][route.msgtype] = diag["record_counts"].get(route.msgtype, 0) + len(b.msgs)
-        if not b.msgs:
-            continue
-        rec = np.asarray(b.rec_ns, dtype=np.int64)
+    inferred: dict[str, dict] = {}
+
+    def convert(topic: str, route: Route, msgs: list, rec: np.ndarray, outer_t: np.ndarray | None) -> None:
+        """Stamps, frame and the converter of one (sub-)route; rows into ``parts``."""
         stamp_path = route.custom.stamp if route.custom is not None else "header.stamp"
         if stamp_path:
             try:
-                st = stamps_ns(b.msgs, stamp_path)
+                st = stamps_ns(msgs, stamp_path)
             except (AttributeError, KeyError, IndexError, TypeError, ValueError) as exc:
                 raise IngestError(path, f"topic {topic} ({route.msgtype}): stamp field {stamp_path!r} "
                                         f"unreadable ({type(exc).__name__}: {exc})") from None
             zero = st == 0
         else:
             st, zero = rec, np.zeros(len(rec), dtype=bool)
+        if outer_t is not None:  # an embedded message without its own stamp: the outer one's
+            st = np.where(zero, outer_t, st)
+            zero = st == 0
         if zero.any():
             zero_stamps[topic] = int(zero.sum())
         t_abs = np.where(zero, rec, st)
-        frame = _frame_id(b.msgs)
+        frame = _frame_id(msgs)
         conv = _conv_custom if route.custom is not None else _CONVERTERS[route.msgtype]
         try:
-            out = conv(b.msgs, t_abs, route, frame, ctx)
+            out = conv(msgs, t_abs, route, frame, ctx)
         except IngestError as exc:
             raise IngestError(path, exc.reason) from None
         except (AttributeError, KeyError, IndexError, TypeError, ValueError) as exc:
@@ -644,13 +843,46 @@ def build_flightlog(buckets: Mapping[str, Bucket], unmapped: Mapping[str, dict],
                                     f"({type(exc).__name__}: {exc})") from None
         info = {"type": route.msgtype, "stream": route.stream, "instance": route.instance,
                 "frame_id": frame}
+        if route.inferred:
+            info["inferred"] = route.inferred
         if route.msgtype == "nav_msgs/msg/Odometry":
-            info["child_frame_id"] = _frame_id(b.msgs, "child_frame_id")
+            info["child_frame_id"] = _frame_id(msgs, "child_frame_id")
         frames["topics"][topic] = info
         if route.stream not in frames and route.instance == 0 and route.stream != "odometry":
             frames[route.stream] = {"topic": topic, "frame_id": frame}
         for stream, rows in out.items():
             parts.setdefault(stream, []).append((route, rows))
+
+    for topic in sorted(buckets):
+        b = buckets[topic]
+        route = b.route
+        diag["record_counts"][route.msgtype] = diag["record_counts"].get(route.msgtype, 0) + len(b.msgs)
+        if route.inferred:
+            inferred[topic] = {"type": route.msgtype, "mapping": route.inferred,
+                               "streams": ({r.topic: {"type": r.msgtype, "stream": r.stream, "instance": r.instance}
+                                            for r in route.embedded} if route.embedded else
+                                           {topic: {"stream": route.stream, "instance": route.instance}})}
+        if not b.msgs:
+            continue
+        rec = np.asarray(b.rec_ns, dtype=np.int64)
+        if not route.embedded:
+            convert(topic, route, b.msgs, rec, None)
+            continue
+        try:  # the outer header's stamp (if any) stands in for unset embedded stamps
+            outer = stamps_ns(b.msgs, "header.stamp")
+        except (AttributeError, KeyError, IndexError, TypeError, ValueError):
+            outer = np.zeros(len(rec), dtype=np.int64)
+        for sub in route.embedded:
+            g = getter(sub.path)
+            try:
+                msgs = [g(m) for m in b.msgs]
+            except (AttributeError, KeyError, IndexError, TypeError) as exc:
+                raise IngestError(path, f"topic {topic} ({route.msgtype}): embedded field {sub.path!r} "
+                                        f"unreadable ({type(exc).__name__}: {exc})") from None
+            diag["record_counts"][sub.msgtype] = diag["record_counts"].get(sub.msgtype, 0) + len(msgs)
+            convert(sub.topic, sub, msgs, rec, outer)
+    if inferred:
+        diag["inferred_mappings"] = inferred
     if zero_stamps:
         diag["stamp_from_record_time"] = zero_stamps
         diag["warnings"].append(f"header.stamp zero on {sum(zero_stamps.values())} message(s) "
@@ -663,15 +895,7 @@ def build_flightlog(buckets: Mapping[str, Bucket], unmapped: Mapping[str, dict],
                                 f"{', '.join(sorted(buckets)) or 'none'}; unmapped: {found})")
     t0 = int(min(int(t.min()) for t in nonempty))
 
-    # NED origin: first valid fix of the lowest-instance GPS topic
-    ned_origin = None
-    for route, rows in sorted(parts.get("gps", []), key=lambda x: x[0].instance):
-        ok = (rows["_status"] >= 0) & np.isfinite(rows["lat_deg"]) & np.isfinite(rows["lon_deg"])
-        if ok.any():
-            i = int(np.flatnonzero(ok)[np.argmin(rows["t_abs"][ok])])
-            ned_origin = {"lat_deg": float(rows["lat_deg"][i]), "lon_deg": float(rows["lon_deg"][i]),
-                          "alt_wgs84_m": float(rows["alt_wgs84_m"][i])}
-            break
+    ned_origin = first_fix_origin(parts.get("gps", []))
 
     streams: dict[str, pd.DataFrame] = {}
     attitude_inst = 0

@@ -129,8 +129,8 @@ class Ros1BagReader(LogReader):
             conns = _connections(reader)
             if not conns or reader.message_count == 0:
                 raise IngestError(path, "ROS 1 bag holds no messages")
-            routes, unmapped = rc.plan_topics(conns, cfg, path)
             defs = [(c.msgtype, "msg", c.msgdef.data) for c in reader.connections]
+            routes, unmapped = rc.plan_topics(conns, cfg, path, rc.defined_fields(defs))
             store, errs = rc.make_typestore(defs, "ROS1_NOETIC", {r.msgtype for r in routes.values()})
             for t, e in errs.items():
                 diag["warnings"].append(f"message definition of {t} unparsable: {e}")
@@ -196,12 +196,12 @@ class Ros2BagReader(LogReader):
             conns = _connections(reader)
             if not conns or reader.message_count == 0:
                 raise IngestError(path, "ROS 2 bag holds no messages")
-            routes, unmapped = rc.plan_topics(conns, cfg, path)
             defs = []
             for c in reader.connections:
                 fmt = getattr(c.msgdef.format, "name", "NONE")
                 if fmt in ("MSG", "IDL"):
                     defs.append((c.msgtype, fmt.lower(), c.msgdef.data))
+            routes, unmapped = rc.plan_topics(conns, cfg, path, rc.defined_fields(defs))
             store, errs = rc.make_typestore(defs, "LATEST", {r.msgtype for r in routes.values()})
             for t, e in errs.items():
                 diag["warnings"].append(f"message definition of {t} unparsable: {e}")
@@ -313,13 +313,8 @@ def _scan_ros1(path: Path, why: str, cfg: rc.RosConfig, progress: Progress | Non
         topic = normalize(hdr.get_string("topic"))
         typ = normalize_msgtype(fields.get_string("type"))
         conns[cid] = (topic, typ, fields.get_string("message_definition"))
-        if ros1_candidate(topic, rc.normalize_type(typ)):
+        if rc.is_candidate(topic, typ, cfg, ("msg", conns[cid][2])):
             raw[cid] = []
-
-    def ros1_candidate(topic: str, msgtype: str) -> bool:
-        if topic in cfg.topics:
-            return cfg.topics[topic] is not None
-        return topic in cfg.custom or msgtype in rc.BUILTIN_TYPES or msgtype in cfg.custom_types
 
     def message(hdr: Header, data: bytes, seq: int) -> None:
         nonlocal n_msgs
@@ -381,7 +376,7 @@ def _scan_ros1(path: Path, why: str, cfg: rc.RosConfig, progress: Progress | Non
         raise IngestError(path, f"unreadable ROS 1 bag ({why}); no messages in it")
     warnings.insert(0, f"{why}; read sequentially without the index")
     routes, unmapped = rc.plan_topics([(t, typ, counts.get(c, 0)) for c, (t, typ, _d) in conns.items()],
-                                      cfg, path)
+                                      cfg, path, rc.defined_fields((typ, "msg", d) for t, typ, d in conns.values()))
     defs = [(typ, "msg", d) for c, (t, typ, d) in conns.items() if t in routes]
     store, errs = rc.make_typestore(defs, "ROS1_NOETIC", {r.msgtype for r in routes.values()})
     for t, e in errs.items():

@@ -505,7 +505,8 @@ def new_meta(**kw) -> dict:
     ``source_sha256``, ``source_size_bytes``, ``reader``, ``reader_version``, ``detected_by``,
     ``t0_boot_ns`` (source clock value at ``t_ns = 0``), ``t0_utc_ns`` (UTC of ``t_ns = 0``,
     nullable), ``utc_source`` (gps/host/none), ``leap_seconds``, ``ned_origin`` (``lat_deg``,
-    ``lon_deg``, ``alt_wgs84_m`` or ``None``), ``frames`` (world/body plus per-source frames),
+    ``lon_deg``, ``alt_wgs84_m`` or ``None``), ``ned_origin_reason`` (why it is ``None``),
+    ``frames`` (world/body plus per-source frames),
     ``diagnostics`` (see :func:`new_diagnostics`), ``params`` (autopilot parameters),
     ``status`` (``ok``/``partial``/``failed``) and ``error`` (reason when failed).
     """
@@ -524,6 +525,7 @@ def new_meta(**kw) -> dict:
         "utc_source": "none",
         "leap_seconds": None,
         "ned_origin": None,
+        "ned_origin_reason": None,
         "frames": {"world": "NED", "body": "FRD"},
         "diagnostics": new_diagnostics(),
         "params": {},

@@ -8,7 +8,8 @@ in this order, every constant from the ``preprocess`` config section (:class:`Pr
 2. **Time base**: one sensor instance per stream (the one with most samples); timestamps
    repaired and counted (:func:`.resample.repair_timestamps`); a uniform grid at ``rate_hz``
    over the span of the streams used; each column resampled with its declared method, never
-   across a gap longer than ``gap_multiple`` source periods (:mod:`.resample`).
+   across a gap longer than ``gap_multiple`` source periods, or grid periods for a source
+   faster than the grid (:func:`.resample.bridge_limit_ns`).
 3. **Filtering**: Butterworth per configured column (``"<stream>.<column>": {order, cutoff_hz}``;
    default ``baro.alt_rel_m``: 3rd order, 1 Hz, seed 004), per gap-free segment (:mod:`.filters`).
 4. **Position** source, in priority order: ``local_position`` (the autopilot EKF) if it has
@@ -82,7 +83,8 @@ class PreprocessConfig:
     rate_hz : float
         State grid rate.
     gap_multiple : float
-        Longest bridged source step, in median source periods.
+        Longest bridged source step, in periods of the source or, when it is faster, of the
+        grid (:func:`.resample.bridge_limit_ns`).
     clock_jump_s : float or None
         Steps longer than this are clock jumps and closed (None: never).
     methods : dict

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from helpers import realdata_file
+from helpers_time import gps_minus_utc
 from pipeline.frames.rotations import quat_to_euler
 from pipeline.io import dataflash as df
 from pipeline.io.base import IngestError
@@ -186,9 +187,14 @@ def test_gps_equals_pymavlink(real_log):
     if "I" in msgs[0]._fieldnames:
         rows = rows.sort_values("t_boot_ns", kind="stable")
     assert len(rows) == len(msgs)
-    assert np.array_equal(rows["lat_deg"], _values(msgs, "Lat"))
-    assert np.array_equal(rows["lon_deg"], _values(msgs, "Lng"))
-    assert np.array_equal(rows["alt_msl_m"], _values(msgs, "Alt"))
+    # a receiver without a fix logs lat = lon = 0: those rows stay, their position is missing
+    lat, lon, alt = (np.array(_values(msgs, k), dtype=np.float64) for k in ("Lat", "Lng", "Alt"))
+    zero = (lat == 0) & (lon == 0)
+    lat[zero] = lon[zero] = alt[zero] = np.nan
+    assert np.array_equal(rows["lat_deg"], lat, equal_nan=True)
+    assert np.array_equal(rows["lon_deg"], lon, equal_nan=True)
+    assert np.array_equal(rows["alt_msl_m"], alt, equal_nan=True)
+    assert log.meta["diagnostics"].get("gps_zero_positions", 0) == int(zero.sum())
     assert np.array_equal(rows["fix_type"], _values(msgs, "Status"))
     assert np.array_equal(rows["n_sats"], _values(msgs, "NSats"))
     spd = np.array(_values(msgs, "Spd"))
@@ -276,7 +282,8 @@ def test_params_modes_and_utc_match_pymavlink(real_log):
     ours = log["mode"]
     ours = ours[ours["src"].astype(str) == "MODE"].sort_values("t_boot_ns", kind="stable")
     assert ours["mode"].tolist() == orc["modes"]
-    # UTC of the first good GPS fix: pymavlink's clock (GPS week/ms with 18 leap seconds)
+    # UTC of the first good GPS fix: pymavlink's clock (GPS week/ms less a fixed 18 leap
+    # seconds) corrected to the leap seconds of the log's date from the IERS list (16 s in 2014)
     gps = [x for x in orc["msgs"]["GPS"] if x.Status >= 3]
     if not gps:
         assert log.meta["t0_utc_ns"] is None
@@ -288,7 +295,9 @@ def test_params_modes_and_utc_match_pymavlink(real_log):
     else:
         utc = 315964800 + 604800 * g.Week + g.TimeMS * 1e-3 - 18
         boot_ns = g.T * 1_000_000
-    assert log.meta["leap_seconds"] == 18 and log.meta["utc_source"] == "gps"
+    leap = gps_minus_utc(utc)
+    utc += 18 - leap
+    assert log.meta["leap_seconds"] == leap and log.meta["utc_source"] == "gps"
     t_utc = (log.meta["t0_utc_ns"] + boot_ns - log.meta["t0_boot_ns"]) * 1e-9
     assert abs(t_utc - utc) < 1e-6
     assert log.meta["ned_origin"]["lat_deg"] != 0

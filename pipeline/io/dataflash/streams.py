@@ -12,7 +12,9 @@ gps             GPS/GPS2 ``Lat/Lng`` deg, ``Alt`` MSL, ``Spd``/``GCrs``/``VZ`` -
 baro            BARO/BAR2/BAR3 ``Alt``, ``Press``, ``Temp``; old logs: CTUN ``BarAlt``
 mag             MAG/MAG2/MAG3 mGauss × 10⁻⁷ -> T
 attitude        ATT (instance 0) and AHR2 (instance 1) ZYX Euler deg -> quaternion
-local_position  XKF1/XKF6/NKF1/NKF6/EKF1 ``PN PE PD VN VE VD`` (core 0 -> instance 0)
+local_position  XKF1/XKF6/NKF1/NKF6/EKF1 ``PN PE PD VN VE VD`` (core 0 -> instance 0); with
+                no EKF message NTUN ``PosX/PosY`` (cm N/E of home) ``VelX/VelY`` (cm/s) with
+                down from CTUN ``-Alt``/``-CRt``, home moved onto the origin; else POS
 rangefinder     RFND ``Dist`` (m; unscaled integer fields are cm), else non-zero CTUN ``SAlt``
 airspeed        ARSP/ASP2
 control         RCIN/RCI2 ``C1..C16`` (old ``Chan1..8``) -> ``rc_i_us``; RCOU/RCO2/RCO3 -> servo
@@ -28,10 +30,12 @@ field ``T``) minus ``t0``, the first boot time stamp of a record mapped to a can
 Untimed records take the time of the preceding timed record in file order. UTC of ``t_ns = 0``
 comes from the first GPS record with a week number:
 
-.. math:: t_{UTC} = 315964800 + 604800\\,\\mathrm{week} + \\mathrm{tow}_{ms}/1000 - 18
+.. math:: t_{UTC} = 315964800 + 604800\\,\\mathrm{week} + \\mathrm{tow}_{ms}/1000 - n
 
-(the GPS epoch, 1980-01-06, in Unix seconds, and pymavlink's fixed 18 leap seconds,
-``DFReader.py::_gpsTimeToTime``), recorded in ``meta['leap_seconds']``.
+(the GPS epoch, 1980-01-06, in Unix seconds; ``n`` the GPS − UTC leap seconds of that date
+from the full table since 1980, :mod:`pipeline.io.gpstime`: 16 s in 2014, 18 s since 2017 —
+pymavlink's ``DFReader.py::_gpsTimeToTime`` subtracts a fixed 18), recorded in
+``meta['leap_seconds']``.
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ import numpy as np
 
 from .. import schema
 from ..base import FlightLog
+from ..gpstime import gps_to_utc_ns
 from .decode import DecodeResult
 
 SOURCE_FORMAT = "ardupilot_dataflash"
@@ -50,8 +55,9 @@ READER_NAME = "dataflash"
 READER_VERSION = "1"
 
 GPS_EPOCH_UNIX_S = 315964800
-LEAP_SECONDS = 18  # pymavlink's constant (DFReader._gpsTimeToTime); true since 2017-01-01
-_LEAP18_FROM_UTC_S = 1483228800  # 2017-01-01T00:00:00Z
+#: pymavlink's fixed GPS − UTC (DFReader._gpsTimeToTime), true since 2017-01-01; the reader
+#: uses :func:`pipeline.io.gpstime.gps_to_utc_ns` (the table by date) instead
+LEAP_SECONDS = 18
 
 
 
@@ -316,6 +322,100 @@ def _local_position(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:  # 
     return d
 
 
+def _home_offset_ned(res: DecodeResult) -> tuple[np.ndarray, str]:
+    """NED (m) of the vehicle's home about :func:`_origin` and how it was found.
+
+    Home is the first ``CMD`` with ``CNum`` 0 (copter logs before the EKF, where inertial
+    navigation works about home), its height the first 3D GPS fix's ``Alt - RelAlt`` (MSL);
+    without them, home is taken to be the origin."""
+    from ...frames.geodesy import geodetic_to_ned
+
+    org = _origin(res)
+    cmd = res.tables.get("CMD")
+    g = res.tables.get("GPS")
+    if org is None or cmd is None or "CNum" not in cmd or not np.any(cmd["CNum"] == 0):
+        return np.zeros(3), "home taken as the NED origin (no CMD 0 home record)"
+    k = int(np.flatnonzero(cmd["CNum"] == 0)[0])
+    lat, lon = float(cmd["Lat"][k]), float(cmd["Lng"][k])
+    if lat == 0 and lon == 0:
+        return np.zeros(3), "home taken as the NED origin (CMD 0 home at lat = lon = 0)"
+    h = org["alt_msl_m"]
+    how = "home from CMD 0"
+    if g is not None and "RelAlt" in g and "Alt" in g and len(g["Alt"]):
+        ok = np.flatnonzero((g["Status"] >= 3) & (g["Lat"] != 0)) if "Status" in g else np.arange(len(g["Alt"]))
+        if len(ok):
+            h = float(g["Alt"][ok[0]]) - float(g["RelAlt"][ok[0]])
+            how += ", its height from GPS Alt - RelAlt"
+    n, e, d = geodetic_to_ned(lat, lon, h, org["lat_deg"], org["lon_deg"], org["alt_msl_m"])
+    return np.array([float(n), float(e), float(d)]), how
+
+
+def _interp_at(t: np.ndarray, ts: np.ndarray, x: np.ndarray, max_gap_us: float) -> np.ndarray:
+    """``x(ts)`` linearly interpolated at ``t``; NaN outside ``ts`` and across longer steps."""
+    order = np.argsort(ts, kind="stable")
+    ts, x = ts[order].astype(np.float64), x[order].astype(np.float64)
+    y = np.interp(t, ts, x)
+    k = np.clip(np.searchsorted(ts, t, side="right"), 1, len(ts) - 1)
+    step = ts[k] - ts[k - 1]
+    bad = (t < ts[0]) | (t > ts[-1]) | ((step > max_gap_us) & (t != ts[k - 1]) & (t != ts[k]))
+    return np.where(bad, np.nan, y)
+
+
+def _local_position_ntun(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """Logs with no EKF message (ArduCopter before 3.3): inertial navigation ``NTUN``.
+
+    ``PosX``/``PosY`` are cm north/east of home, ``VelX``/``VelY`` cm/s; down is ``-CTUN.Alt``
+    (m above home) and its rate ``-CTUN.CRt`` (cm/s), interpolated at the NTUN times (missing
+    across CTUN steps over 1 s). Home is moved onto the NED origin (:func:`_home_offset_ned`)."""
+    if parts:
+        return None
+    c = ctx.res.tables[name]
+    if not all(k in c for k in ("PosX", "PosY")):
+        return None
+    d, _ = ctx.base(name, name, 0)
+    off, how = _home_offset_ned(ctx.res)
+    d["pos_n_m"] = c["PosX"].astype(np.float64) * 0.01 + off[0]
+    d["pos_e_m"] = c["PosY"].astype(np.float64) * 0.01 + off[1]
+    if "VelX" in c and "VelY" in c:
+        d["vel_n_mps"] = c["VelX"].astype(np.float64) * 0.01
+        d["vel_e_mps"] = c["VelY"].astype(np.float64) * 0.01
+    src = "NTUN PosX/PosY"
+    if _has(ctx.res, "CTUN") and "Alt" in ctx.res.tables["CTUN"]:
+        ct = ctx.res.tables["CTUN"]
+        t = ctx.clock.time_us(name).astype(np.float64)
+        tc = ctx.clock.time_us("CTUN")
+        d["pos_d_m"] = -_interp_at(t, tc, ct["Alt"], 1e6) + off[2]
+        src += ", -CTUN.Alt"
+        if "CRt" in ct:
+            d["vel_d_mps"] = -_interp_at(t, tc, ct["CRt"], 1e6) * 0.01
+            src += ", -CTUN.CRt"
+    ctx.diag["local_position_from"] = f"{src} (no EKF messages); {how}"
+    return d
+
+
+def _local_position_pos(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """Logs with neither EKF nor NTUN positions: ``POS`` (the AHRS position, lat/lon/MSL
+    altitude) converted to NED about the origin; no velocity."""
+    if parts:
+        return None
+    from ...frames.geodesy import geodetic_to_ned
+
+    c = ctx.res.tables[name]
+    org = _origin(ctx.res)
+    if org is None or not all(k in c for k in ("Lat", "Lng", "Alt")):
+        return None
+    lat, lon = c["Lat"].astype(np.float64), c["Lng"].astype(np.float64)
+    zero = (lat == 0) & (lon == 0)
+    d, _ = ctx.base(name, name, 0)
+    n, e, dd = geodetic_to_ned(lat, lon, c["Alt"].astype(np.float64), org["lat_deg"], org["lon_deg"],
+                               org["alt_msl_m"])
+    d["pos_n_m"] = np.where(zero, np.nan, n)
+    d["pos_e_m"] = np.where(zero, np.nan, e)
+    d["pos_d_m"] = np.where(zero, np.nan, dd)
+    ctx.diag["local_position_from"] = "POS Lat/Lng/Alt about the NED origin (no EKF or NTUN messages)"
+    return d
+
+
 def _rangefinder(ctx: _Ctx, name: str, parts: list[Part]) -> list[Part]:  # RFND: Dist, or Dist1/Dist2
     c = ctx.res.tables[name]
     fmt_of = dict(zip(ctx.res.formats[name].dtype.names, ctx.res.formats[name].fmt))
@@ -436,6 +536,7 @@ STREAM_TABLE: tuple[tuple[str, str | tuple[str, ...], Builder], ...] = (
     ("local_position", "XKF1", _local_position), ("local_position", "XKF6", _local_position),
     ("local_position", "NKF1", _local_position), ("local_position", "NKF6", _local_position),
     ("local_position", "EKF1", _local_position),
+    ("local_position", "NTUN", _local_position_ntun), ("local_position", "POS", _local_position_pos),
     ("rangefinder", "RFND", _rangefinder), ("rangefinder", "CTUN", _rangefinder_ctun),
     ("airspeed", "ARSP", _airspeed), ("airspeed", "ASP2", _airspeed),
     ("control", "RCIN", _control), ("control", "RCI2", _control), ("control", "RCOU", _control),
@@ -526,10 +627,10 @@ def _utc(res: DecodeResult, clock: _Clock, t0_us: int) -> tuple[int | None, dict
     if not len(ok):
         return None, None
     k = int(ok[0])
-    utc_ns = ((GPS_EPOCH_UNIX_S + 604800 * int(wk[k]) - LEAP_SECONDS) * 1_000_000_000
-              + int(tow[k]) * 1_000_000)
+    utc_ns, leap = gps_to_utc_ns(int(wk[k]), int(tow[k]))
     t0_utc = utc_ns - (int(boot[k]) - t0_us) * 1000
-    return t0_utc, {"gps_week": int(wk[k]), "gps_tow_ms": int(tow[k]), "boot_us": int(boot[k])}
+    return t0_utc, {"gps_week": int(wk[k]), "gps_tow_ms": int(tow[k]), "boot_us": int(boot[k]),
+                    "leap_seconds": leap}
 
 
 def _origin(res: DecodeResult) -> dict | None:
@@ -598,15 +699,11 @@ def to_flightlog(res: DecodeResult) -> FlightLog:
         t0_boot_ns=t0_us * 1000,
         t0_utc_ns=t0_utc,
         utc_source="gps" if t0_utc is not None else "none",
-        leap_seconds=LEAP_SECONDS if t0_utc is not None else None,
+        leap_seconds=gps_fix.pop("leap_seconds") if gps_fix else None,
         ned_origin=origin,
         params=params,
         diagnostics=diag,
     )
-    if t0_utc is not None and t0_utc < _LEAP18_FROM_UTC_S * 1_000_000_000:
-        late.append(
-            "GPS->UTC uses 18 leap seconds (pymavlink's convention); the true offset before "
-            "2017-01-01 was smaller (16 s in 2014), so t0_utc_ns may be up to 2 s late")
     if gps_fix:
         meta["utc_gps_fix"] = gps_fix
     meta["dataflash"] = {"old_format": not any(f.time_field == "TimeUS" for f in res.formats.values()),
@@ -617,4 +714,6 @@ def to_flightlog(res: DecodeResult) -> FlightLog:
                          "tau_rd_s": params.get("RADR_TAU", 0.0)}
     log = FlightLog.from_streams(meta, iter_stream_parts(res, clock, t0_us, diag))
     log.meta["diagnostics"]["warnings"].extend(late)
+    if "local_position_from" in diag:  # set while the streams were built (from_streams copied diag)
+        log.meta["diagnostics"]["local_position_from"] = diag["local_position_from"]
     return log

@@ -19,7 +19,7 @@ Values are physical: scaled format characters are encoded as the reader decodes 
 ``GPA``, ``IMU``, ``ATT``, ``BARO``, ``RFND``, ``RCIN``, ``RCOU``, ``MODE``, ``EV``, ``PARM``,
 ``MSG``, ``ORGN`` and the radar ``RADR`` (TimeUS:Q, I:B, Rng:f m (ρ + τ_RD ρ̇), U:f, V:f
 direction cosines, RR:f m/s). ``TimeUS`` = ``boot_us`` + stream time; GPS week/ms from the UTC
-start with 18 leap seconds. Quantisation: lat/lon 1e-7°, GPS alt and ATT angles 0.01 (m, °),
+start with the leap seconds of its date (:mod:`pipeline.io.gpstime`). Quantisation: lat/lon 1e-7°, GPS alt and ATT angles 0.01 (m, °),
 RFND 1 cm, BARO temperature 0.01 °C, float32 elsewhere.
 """
 
@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike
 from ...frames.rotations import quat_to_euler
 from . import catalogue as cat
 from .decode import FMT_LEN, FMT_TYPE, FORMAT_CHARS, HEAD1, HEAD2, format_dtype
+from ..gpstime import leap_seconds_at_utc
 
 if TYPE_CHECKING:  # annotations only: writing a log needs no pandas import
     import pandas as pd
@@ -46,7 +47,6 @@ FMTU_TYPE, UNIT_TYPE, MULT_TYPE, PARM_TYPE = cat.FMTU_TYPE, cat.UNIT_TYPE, cat.M
 RADR: dict = cat.RADR.as_kwargs()
 
 GPS_EPOCH_UNIX_S = 315964800  # 1980-01-06
-LEAP_S = 18
 
 _HEADER = np.dtype([("h1", "u1"), ("h2", "u1"), ("type", "u1")])
 
@@ -312,7 +312,9 @@ def write_bin(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t
         g = streams["gps"]
         if len(g):
             t_us = _us(g["t_ns"])
-            gps_us = t0_utc_ns // 1000 + t_us + (LEAP_S - GPS_EPOCH_UNIX_S) * 1_000_000
+            # GPS time runs ahead of UTC by the leap seconds of the flight's date
+            leap_us = leap_seconds_at_utc(t0_utc_ns * 1e-9) * 1_000_000
+            gps_us = t0_utc_ns // 1000 + t_us + leap_us - GPS_EPOCH_UNIX_S * 1_000_000
             wk = gps_us // (7 * 86400 * 1_000_000)
             gms = (gps_us - wk * 7 * 86400 * 1_000_000) // 1000
             vn, ve = g["vel_n_mps"].to_numpy(), g["vel_e_mps"].to_numpy()

@@ -102,6 +102,7 @@ DEFAULTS: dict[str, Any] = {
     "min_covar": 1.0e-4,            # the hmm section's default (normalised units)
     "n_iter": 50,
     "gmr_input": "pos_fd",          # pos_fd | pos | pos_vel (ModelsConfig.gmr_input)
+    "gmr_align": "sample",          # sample | interval (ModelsConfig.gmr_align)
     "q_grid": [1, 3, 10, 30, 100, 300, 1000],        # EKF jerk PSD (m²/s⁵), tuned on the training flight
     "q2_scale_grid": [0.25, 0.5, 1, 2, 4],           # Q₂ scale, tuned on the training flight
     "radar_site_ned_m": [0.0, 0.0, 0.0],             # the FlightCoach origin (module docstring)
@@ -234,7 +235,7 @@ def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, q
     site = ", ".join(f"{float(v):g}" for v in st["radar_site_ned_m"])
     L = [f"# FlightCoach F3A EKF vs EKF+HMM study (size {size}, seed {seed})", "",
          f"{len(ms.labels_)} maneuver HMMs (features `{st['features']}`, {st['n_states']} states, covariance floor "
-         f"{st['min_covar']:g}, ≤ {st['n_iter']} Baum-Welch iterations, GMR input `{st['gmr_input']}`) trained on "
+         f"{st['min_covar']:g}, ≤ {st['n_iter']} Baum-Welch iterations, GMR input `{st['gmr_input']}`, alignment `{st['gmr_align']}`) trained on "
          f"the {n_train} labelled segments of `{TRAIN}` (reference state, 5 Hz). Radar synthesised from each "
          f"flight's reference with the seed-000 noise at the NED site ({site}) m. Written by "
          f"`pipeline/studies/flightcoach_ekf_hmm.py` (`snakemake study_{NAME}`).", "",
@@ -311,7 +312,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     # the thesis classifier (confidence decision, V_c < −1, cumulative forward passes): the
     # EKF+HMM switches to HMM inputs exactly when it names a maneuver; no background model
     cfg = ModelsConfig(feature_set=opt["features"], n_states=ns, min_covar=float(opt["min_covar"]),
-                       n_iter=int(opt["n_iter"]), gmr_input=str(opt["gmr_input"]), mode="cumulative",
+                       n_iter=int(opt["n_iter"]), gmr_input=str(opt["gmr_input"]),
+                       gmr_align=str(opt["gmr_align"]), mode="cumulative",
                        decision="confidence", background=0, seed=int(seed))
     radar = RadarModel(site_ned_m=tuple(float(v) for v in opt["radar_site_ned_m"]))
 
@@ -409,7 +411,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
                      definitions=r.definitions, figures=figures(man, tl),
                      title="Study: FlightCoach F3A, EKF vs EKF+HMM (train P23 #36, test P23 #350)",
                      facts=[("size", size), ("seed", str(int(seed))), ("features", opt["features"]),
-                            ("GMR input", opt["gmr_input"]), ("Baum-Welch iterations ≤", str(opt["n_iter"])),
+                            ("GMR input", f"{opt['gmr_input']} ({opt['gmr_align']})"), ("Baum-Welch iterations ≤", str(opt["n_iter"])),
                             ("q grid", ", ".join(f"{float(v):g}" for v in opt["q_grid"])),
                             ("Q₂ scale grid", ", ".join(f"{float(v):g}" for v in opt["q2_scale_grid"])),
                             ("radar site (NED, m)", ", ".join(f"{float(v):g}" for v in opt["radar_site_ned_m"])),

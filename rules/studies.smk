@@ -1,6 +1,6 @@
 # Studies: one target per study, not part of `all`: `snakemake study_<name>` at config studies.size
 # (tiny | small | thesis) writes results/studies/<name>/ and results/report/studies/<name>.html.
-from pipeline.studies.base import flightcoach_inputs, study_outputs
+from pipeline.studies.base import FLIGHTCOACH_EKF_HMM_FILES, flightcoach_inputs, study_outputs
 
 
 rule study_seed000_classification:
@@ -47,6 +47,36 @@ rule study_flightcoach_classification:
         "results/logs/study_flightcoach_classification/study.log",
     benchmark:
         "results/benchmarks/study_flightcoach_classification/study.tsv"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/study.py"
+
+
+rule study_flightcoach_ekf_hmm:
+    input:
+        # the two real FlightCoach logs (train P23 #36, test P23 #350); when absent the rule stops
+        # with one line naming the file
+        unpack(lambda wc: flightcoach_inputs(config["realdata_dir"], FLIGHTCOACH_EKF_HMM_FILES,
+                                             study="flightcoach_ekf_hmm")),
+        template="reports/templates/study.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        **study_outputs("flightcoach_ekf_hmm"),
+    params:
+        code_version=PIPELINE_VERSION,
+        study="flightcoach_ekf_hmm",
+        config=config["studies"],
+        job={"seed": config["seed"]},
+        sections={},
+    log:
+        "results/logs/study_flightcoach_ekf_hmm/study.log",
+    benchmark:
+        "results/benchmarks/study_flightcoach_ekf_hmm/study.tsv"
     threads: 1
     resources:
         mem_mb=4000,

@@ -33,7 +33,8 @@ class ModelsConfig:
     Parameters
     ----------
     feature_set : str
-        ``state9`` (thesis), ``state9h`` (initial-heading frame), ``box`` or ``aero`` (see :mod:`pipeline.hmm.features`).
+        ``state9`` (thesis), ``state9h`` (initial-heading frame), ``state9box`` (box frame), ``box`` or
+        ``aero`` (see :mod:`pipeline.models.features`).
     rate_hz : float
         Model sample rate (thesis: 5 Hz, dt = 0.2 s).
     n_states : int, "auto" or dict

@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 from .. import __version__
 from ..io.parquet import write_json
 from .base import ModelError, ModelsConfig
-from .features import (MinMaxNormaliser, decimation_factor, get_feature_set, observations,
-                       raw_features, run_sequences)
+from .features import (GMR_FEATURE_SETS, MinMaxNormaliser, decimation_factor, get_feature_set,
+                       heading_rotation, observations, raw_features, run_sequences)
 from .gmr import fd_velocity_increments, gate, gmr_state9
 from .hmm import HMMParams, ManeuverHMM
 from .metrics import UNKNOWN
@@ -294,8 +294,11 @@ class ManeuverModelSet:
         reset_t_ns : sequence of int, optional
             Restart the forward passes at the first sample at or after each of these times
             (e.g. labelled segment starts); the classifier is otherwise never told of switches.
+        box_heading_rad : float
+            Box heading (rad from north) of the ``box``/``state9box`` features; ``state9box``
+            GMR outputs are rotated back to NED by it.
         gmr : bool
-            Add HMM acceleration/jerk estimates (``state9`` only).
+            Add HMM acceleration/jerk estimates (``state9``, ``state9h``, ``state9box``), in NED.
 
         Returns
         -------
@@ -356,7 +359,7 @@ class ManeuverModelSet:
             d["change"] = res["change"][r, :n]
             ca = res["change_at"][r, :n]
             d["change_t_ns"] = np.where(ca >= 0, tks[r][np.clip(ca, 0, n - 1)], -1)
-            if gmr and self.config.feature_set in ("state9", "state9h"):
+            if gmr and self.config.feature_set in GMR_FEATURE_SETS:
                 acc = np.full((n, 3), np.nan)
                 jerk = np.full((n, 3), np.nan)
                 Xg = X[r, :n]
@@ -370,11 +373,14 @@ class ManeuverModelSet:
                                           d["state"][rows], self.normaliser_, dt,
                                           inputs=self.config.gmr_input, align=self.config.gmr_align)
                         acc[rows], jerk[rows] = a, j
+                # the regression ran in the feature frame: rotate its outputs back to NED
+                back = None
                 if self.config.feature_set == "state9h":
-                    yaw0 = yaws[r]                              # heading frame -> NED
-                    c, s_ = np.cos(yaw0), np.sin(yaw0)
-                    rot = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
-                    acc, jerk = acc @ rot.T, jerk @ rot.T
+                    back = heading_rotation(yaws[r]).T          # initial-heading frame -> NED
+                elif self.config.feature_set == "state9box":
+                    back = heading_rotation(box_heading_rad).T  # box frame -> NED
+                if back is not None:
+                    acc, jerk = acc @ back.T, jerk @ back.T
                 gated, dropped = gate(acc, self.config.gate_mps2)
                 for i, ax in enumerate("ned"):
                     d[f"acc_hmm_{ax}_mps2"] = acc[:, i]

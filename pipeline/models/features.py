@@ -18,6 +18,13 @@ Feature sets (``FEATURE_SETS``):
     ``state9`` with the horizontal components rotated into the run's initial heading frame
     (``yaw_rad`` of its first sample, known online), so runs flown on different headings share
     one model; GMR outputs are rotated back to NED.
+``state9box``
+    ``state9`` with every NED triple rotated into the aerobatic box frame,
+    :math:`x_{box} = R_z(\psi_{box})\,x_{NED}` (:func:`heading_rotation`, ``box_heading_rad``:
+    the flight's box rotation, ``params.box_rotation_rad`` of a FlightCoach log, carried into the
+    ``state`` metadata by preprocessing), differenced like ``state9``. Flights flown in boxes of
+    different headings share one model; GMR outputs are rotated back to NED,
+    :math:`a_{NED} = R_z(\psi_{box})^T a_{box}`.
 ``box``
     Velocity and acceleration in the aerobatic box frame (NED rotated about down by the box
     heading ``box_heading_rad``), the gravity direction in the body frame (attitude without
@@ -78,6 +85,8 @@ FEATURE_SETS: dict[str, FeatureSet] = {
                          (*POS, *VEL, *ACC)),
     "state9h": FeatureSet("state9h", tuple(f"d_{c}_h" for c in (*POS, *VEL, *ACC)), True,
                           (*POS, *VEL, *ACC, "yaw_rad")),
+    "state9box": FeatureSet("state9box", tuple(f"d_{c}_box" for c in (*POS, *VEL, *ACC)), True,
+                            (*POS, *VEL, *ACC)),
     "box": FeatureSet(
         "box",
         ("vel_x_box_mps", "vel_y_box_mps", "vel_z_box_mps", "acc_x_box_mps2", "acc_y_box_mps2",
@@ -95,6 +104,32 @@ FEATURE_SETS: dict[str, FeatureSet] = {
 STATE9_POS = (0, 1, 2)
 STATE9_VEL = (3, 4, 5)
 STATE9_ACC = (6, 7, 8)
+
+
+#: differenced NED-triple sets whose GMR outputs are NED after a rotation about down
+#: (``state9h``: the run's initial heading; ``state9box``: the box heading)
+GMR_FEATURE_SETS = ("state9", "state9h", "state9box")
+
+
+def heading_rotation(psi_rad: float) -> F64:
+    """NED -> heading-frame rotation about down by ``psi_rad``.
+
+    .. math:: R_z(\psi) = \begin{pmatrix} \cos\psi & \sin\psi & 0 \\ -\sin\psi & \cos\psi & 0
+              \\ 0 & 0 & 1 \end{pmatrix}, \qquad x_{frame} = R_z(\psi)\,x_{NED}
+
+    so the frame's x axis points along heading ``psi`` from north; ``R_z(\psi)^T`` rotates back.
+    """
+    c, s = np.cos(float(psi_rad)), np.sin(float(psi_rad))
+    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotate_triples(x: F64, rot: F64) -> F64:
+    """Apply ``rot`` (3×3) to every consecutive NED triple of the columns of ``x`` (n, 3k)."""
+    x = np.asarray(x, dtype=np.float64)
+    n, m = x.shape
+    if m % 3:
+        raise ValueError(f"rotate_triples: {m} columns are not whole triples")
+    return (x.reshape(n, m // 3, 3) @ np.asarray(rot).T).reshape(n, m)
 
 
 def get_feature_set(name: str) -> FeatureSet:
@@ -115,7 +150,7 @@ def raw_features(state: pd.DataFrame, feature_set: str = "state9", *,
     feature_set : str
         Key of :data:`FEATURE_SETS`.
     box_heading_rad : float
-        Heading of the aerobatic box x axis from north (``box`` set only), rad.
+        Heading of the aerobatic box x axis from north (``box`` and ``state9box`` sets), rad.
 
     Returns
     -------
@@ -127,6 +162,9 @@ def raw_features(state: pd.DataFrame, feature_set: str = "state9", *,
         raise ValueError(f"feature set {feature_set!r} needs state column(s) {missing}")
     if fs.name == "state9":
         return state[list(fs.needs)].to_numpy(dtype=np.float64)
+    if fs.name == "state9box":
+        x = state[list(fs.needs)].to_numpy(dtype=np.float64)
+        return rotate_triples(x, heading_rotation(box_heading_rad))
     if fs.name == "state9h":
         x = state[list(fs.needs[:9])].to_numpy(dtype=np.float64).copy()
         yaw0 = float(state["yaw_rad"].iloc[0]) if len(state) else 0.0

@@ -32,7 +32,8 @@ has no sample within its gap limit. Streams that are absent give NaN columns; a 
 usable stream at all gives an empty ``state`` with the full schema. Diagnostics (timestamp
 repairs, sources, filter flags, calibration summary) are returned in
 :attr:`PreprocessResult.diagnostics` and written into the Parquet metadata and the JSON
-diagnostics file. The stage entry point that reads and writes files is
+diagnostics file; the ingest meta's aerobatic box heading ``params.box_rotation_rad`` (FlightCoach)
+is copied there too (:func:`box_rotation_rad`). The stage entry point that reads and writes files is
 :func:`pipeline.preprocess.run.run_preprocess`.
 """
 
@@ -307,6 +308,9 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     diag: dict[str, Any] = {"flight_id": fid, "vehicle": cfg.vehicle, "rate_hz": cfg.rate_hz,
                             "timestamp_repairs": {}, "filter_short_samples": {}, "sources": {},
                             "notes": []}
+    box = box_rotation_rad(log.meta)
+    if box is not None:
+        diag["box_rotation_rad"] = box
     if vehicle and vehicle != cfg.vehicle:
         diag["notes"].append(f"vehicle {vehicle!r} has no preprocess.vehicles entry: "
                              f"{cfg.vehicle or 'built-in'} defaults used")
@@ -462,16 +466,36 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     return PreprocessResult(state=state, segments=seg, calibration=cal.points, diagnostics=diag)
 
 
+def box_rotation_rad(meta: Mapping | None) -> float | None:
+    """The aerobatic box heading of a flight, ``meta['params']['box_rotation_rad']`` (rad).
+
+    Set by the FlightCoach reader (``parameters.rotation``); ``None`` when the ingest meta has
+    none or it is not a finite number. Preprocessing copies it into the diagnostics and the
+    ``state`` table's metadata (``box_rotation_rad``), where the box-frame features
+    (``state9box``, ``box``) and trajectory learning read it.
+    """
+    v = ((meta or {}).get("params") or {}).get("box_rotation_rad")
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return None
+    return v if np.isfinite(v) else None
+
+
 # --- files -------------------------------------------------------------------------------------
 
 def write_outputs(result: PreprocessResult, *, state_path, segments_path, calibration_path=None,
                   info_path=None) -> None:
     """Write one flight's outputs (ZSTD Parquet with units/frames; diagnostics as JSON).
 
-    The diagnostics ride in the ``state`` table's metadata (``preprocess``) and in ``info_path``.
+    The diagnostics ride in the ``state`` table's metadata (``preprocess``) and in ``info_path``;
+    a flight with a box rotation (:func:`box_rotation_rad`) also gets it as the top-level
+    ``box_rotation_rad`` key of the ``state`` metadata.
     """
     diag = result.diagnostics
     extra = {"flight_id": diag.get("flight_id"), "preprocess": diag}
+    if diag.get("box_rotation_rad") is not None:
+        extra["box_rotation_rad"] = float(diag["box_rotation_rad"])
     write_table(result.state, state_path, schema.STATE, name="state", extra=extra)
     write_table(result.segments, segments_path, schema.SEGMENTS, name="segments",
                 extra={"flight_id": diag.get("flight_id")})

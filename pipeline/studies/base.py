@@ -43,6 +43,7 @@ STUDY_TABLES: dict[str, tuple[str, ...]] = {
     "seed000_classification": ("tables_3_1_3_4", "confusion", "switch_tables", "switch_shift",
                                "gmr_error", "gmr_rmse"),
     "flightcoach_classification": ("p23_segments", "p23_timeline", "f23_segments", "oneclass_slack_sweep"),
+    "flightcoach_ekf_hmm": ("maneuvers", "train_maneuvers", "tuning", "timeline"),
 }
 #: the FlightCoach study's flights: ``{input name: file under <realdata_dir>/<FLIGHTCOACH_DIR>}``
 FLIGHTCOACH_DIR = "flightcoach_f3a_json"
@@ -52,6 +53,8 @@ FLIGHTCOACH_FILES = {
     "test_f23": "manual_F3A_F23_22_02_18_00000035.json",
     "calib": "UK_England_Bristol_AMARC2002_F3A_P21_21_08_12_00000026.json",
 }
+#: the FlightCoach EKF+HMM study's flights (train on P23 #36, test on P23 #350)
+FLIGHTCOACH_EKF_HMM_FILES = {"train": FLIGHTCOACH_FILES["train"], "test": FLIGHTCOACH_FILES["test_p23"]}
 
 
 class StudyError(ValueError):
@@ -144,14 +147,19 @@ def study_outputs(name: str, *, results_dir: str | os.PathLike = "results",
     return out
 
 
-def flightcoach_inputs(realdata_dir: str | os.PathLike) -> dict[str, str]:
-    """The FlightCoach study's four flights under ``realdata_dir``; a missing one is a
-    :class:`StudyError` naming it (one line: the study is not part of the main job)."""
+def flightcoach_inputs(realdata_dir: str | os.PathLike, files: Mapping[str, str] | None = None, *,
+                       study: str = "flightcoach_classification") -> dict[str, str]:
+    """A FlightCoach study's flights under ``realdata_dir``; a missing one is a
+    :class:`StudyError` naming it (one line: the study is not part of the main job).
+
+    ``files`` maps input names to file names under :data:`FLIGHTCOACH_DIR` (default
+    :data:`FLIGHTCOACH_FILES`, the classification study's four); ``study`` names the study in
+    the message."""
     d = Path(realdata_dir) / FLIGHTCOACH_DIR
-    files = {k: str(d / f) for k, f in FLIGHTCOACH_FILES.items()}
+    files = {k: str(d / f) for k, f in (FLIGHTCOACH_FILES if files is None else files).items()}
     for k, p in files.items():
         if not Path(p).is_file():
-            raise StudyError(f"{p}: FlightCoach file not found (input {k!r} of the flightcoach_classification "
+            raise StudyError(f"{p}: FlightCoach file not found (input {k!r} of the {study} "
                              f"study; it needs the real logs of ../shared/realdata: set realdata_dir)")
     return files
 

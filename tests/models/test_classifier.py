@@ -189,6 +189,46 @@ def test_state9h_is_heading_invariant_and_gmr_rotates_back(synth, rng):
     np.testing.assert_allclose(b["acc_hmm_e_mps2"], s * a["acc_hmm_n_mps2"] + c * a["acc_hmm_e_mps2"], atol=1e-9)
 
 
+def _turn(run: pd.DataFrame, R: np.ndarray) -> pd.DataFrame:
+    """``run`` with every NED triple (pos, vel, acc) multiplied by the 3×3 ``R``."""
+    out = run.copy()
+    for k, u in (("pos", "m"), ("vel", "mps"), ("acc", "mps2")):
+        cols = [f"{k}_{a}_{u}" for a in "ned"]
+        out[cols] = run[cols].to_numpy() @ R.T
+    return out
+
+
+def test_state9box_gmr_rotates_back_to_ned_as_state9_on_the_box_frame_copy(synth, rng):
+    from pipeline.models.features import heading_rotation
+
+    _, bulk = synth
+    psi = -0.59                                             # the P23 #36 box rotation
+    R = heading_rotation(psi)
+    data = bulk(("M1", "M2"), 3, rng)
+    cfg = {**FAST, "n_iter": 5}
+    box = ManeuverModelSet(config=ModelsConfig(**cfg, feature_set="state9box")).fit(data, box_heading_rad=psi)
+    # the thesis features of the flight already turned into the box frame: the same models
+    s9 = ManeuverModelSet(config=ModelsConfig(**cfg, feature_set="state9")).fit(_turn(data, R))
+    np.testing.assert_allclose(box.normaliser_.x_min, s9.normaliser_.x_min, atol=1e-9)
+    run = data[data.run_id == "M1-0"]
+    a = box.classify(run, box_heading_rad=psi)
+    b = s9.classify(_turn(run, R))
+    for col in ("ll_M1", "ll_M2", "V_best"):
+        np.testing.assert_allclose(a[col], b[col], rtol=1e-9, atol=1e-9)
+    assert (a["pred"] == b["pred"]).all() and (a["state"] == b["state"]).all()
+    for q, u in (("acc", "mps2"), ("jerk", "mps3")):
+        ned = a[[f"{q}_hmm_{x}_{u}" for x in "ned"]].to_numpy()
+        in_box = b[[f"{q}_hmm_{x}_{u}" for x in "ned"]].to_numpy()
+        assert np.isfinite(ned).mean() > 0.9
+        np.testing.assert_allclose(ned, in_box @ R, atol=1e-9)          # R^T applied to each row
+    # flown in a box turned by another 1.2 rad: the same likelihoods, the GMR turned with it
+    R2 = heading_rotation(-1.2)                             # NED -> NED turned by +1.2 rad
+    c = box.classify(_turn(run, R2), box_heading_rad=psi + 1.2)
+    np.testing.assert_allclose(c["ll_M1"], a["ll_M1"], rtol=1e-9, atol=1e-9)
+    acc = [f"acc_hmm_{x}_mps2" for x in "ned"]
+    np.testing.assert_allclose(c[acc].to_numpy(), a[acc].to_numpy() @ R2.T, atol=1e-9)
+
+
 def test_gmr_estimates_are_causal_and_follow_config(synth, rng, trained3):
     """The HMM acceleration at ``t_k`` uses samples up to ``t_k`` only: truncating the run (or
     changing its future) leaves earlier estimates bit-identical; ``gmr_align`` only adds the

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from pipeline.frames.rotations import euler_to_quat, quat_multiply
-from pipeline.models.features import (FEATURE_SETS, decimate, decimation_factor, observations,
-                                      raw_features)
+from pipeline.models.features import (FEATURE_SETS, decimate, decimation_factor, heading_rotation,
+                                      observations, raw_features, rotate_triples)
 
 
 def random_state(rng, n=40):
@@ -73,3 +73,36 @@ def test_decimation_phases(rng):
         decimation_factor(df["t_ns"], 50.0)
     with pytest.raises(ValueError, match="unknown feature set"):
         raw_features(df, "state12")
+
+
+@pytest.mark.parametrize("psi", [0.0, 0.7, -2.5, np.pi])
+def test_the_heading_rotation_round_trips_and_turns_north_onto_the_box_axis(rng, psi):
+    R = heading_rotation(psi)
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-15)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0)
+    # a unit vector along heading psi is the box frame's x axis; down stays down
+    np.testing.assert_allclose(R @ [np.cos(psi), np.sin(psi), 0.0], [1.0, 0.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(R @ [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], atol=1e-15)
+    x = rng.normal(size=(7, 9))
+    np.testing.assert_allclose(rotate_triples(rotate_triples(x, R), R.T), x, atol=1e-12)
+    with pytest.raises(ValueError, match="triples"):
+        rotate_triples(x[:, :8], R)
+
+
+@pytest.mark.parametrize("psi", [0.3, -2.0, np.pi])
+def test_state9box_is_invariant_to_the_box_heading_and_matches_the_box_set(rng, psi):
+    df = random_state(rng)
+    rot = rotate_world(df, psi)
+    np.testing.assert_allclose(raw_features(rot, "state9box", box_heading_rad=0.4 + psi),
+                               raw_features(df, "state9box", box_heading_rad=0.4), atol=1e-9)
+    # box heading 0: the thesis features themselves
+    np.testing.assert_array_equal(raw_features(df, "state9box"), raw_features(df, "state9"))
+    # the same box frame as the `box` set (velocity and acceleration columns)
+    x = raw_features(df, "state9box", box_heading_rad=0.4)
+    b = raw_features(df, "box", box_heading_rad=0.4)
+    np.testing.assert_allclose(x[:, 3:9], b[:, :6], atol=1e-12)
+    # every triple rotated; the down components untouched
+    np.testing.assert_array_equal(x[:, 2::3], raw_features(df, "state9")[:, 2::3])
+    fs = FEATURE_SETS["state9box"]
+    assert fs.differenced and len(fs.names) == 9 and "yaw_rad" not in fs.needs
+    assert observations(x, fs.differenced).shape == (len(df) - 1, 9)

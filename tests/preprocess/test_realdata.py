@@ -124,3 +124,19 @@ def test_husky_imu_mount(rel):
     o2, ok2 = resample(repair_timestamps(log["odometry"])[0], state["t_ns"].to_numpy(), {"yaw_rate_radps": "linear"})
     g2 = ok2 & state["r_radps"].notna().to_numpy()
     assert np.corrcoef(state["r_radps"][g2], -o2["yaw_rate_radps"][g2])[0, 1] >= 0.8
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("name", ["manual_F3A_P23_22_02_18_00000036.json", "manual_F3A_P23_22_05_31_00000350.json"])
+def test_a_flightcoach_box_rotation_reaches_the_state_metadata(tmp_path, name):
+    import json
+
+    from pipeline.io.parquet import read_table_meta
+    from pipeline.preprocess.state import write_outputs
+
+    rel = f"flightcoach_f3a_json/{name}"
+    log = _read(rel)
+    expected = json.loads(realdata_file(rel).read_text())["parameters"]["rotation"]
+    res = preprocess_log(log, CFG, vehicle="f3a-plane")
+    write_outputs(res, state_path=tmp_path / "state.parquet", segments_path=tmp_path / "seg.parquet")
+    assert read_table_meta(tmp_path / "state.parquet")["box_rotation_rad"] == pytest.approx(expected, abs=0)

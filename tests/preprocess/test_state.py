@@ -160,3 +160,28 @@ def test_stage_entry_point_writes_the_declared_outputs(tmp_path, rng):
     assert len(st) == diag["n_samples"]
     assert read_table_meta(out["state"])["preprocess"]["sources"]["position"] == "gps"
     assert json.loads(out["info"].read_text())["status"] == "ok"
+
+
+def test_the_box_rotation_of_the_ingest_meta_reaches_the_state_metadata(tmp_path, rng):
+    from pipeline.preprocess.run import run_preprocess
+    from pipeline.preprocess.state import box_rotation_rad
+
+    log, _ = synthetic_flight(rng, gap=False)
+    log = FlightLog.from_streams({**log.meta, "params": {"rotation": -0.59, "box_rotation_rad": -0.59}},
+                                 dict(log.streams))
+    write_flightlog(log, tmp_path / "in")
+    out = {k: tmp_path / k / "f.parquet" for k in ("state", "segments", "calibration")}
+    out["info"] = tmp_path / "state" / "f.json"
+    res = run_preprocess({"meta": tmp_path / "in" / "meta.json"}, out, {})
+    meta = read_table_meta(out["state"])
+    assert meta["box_rotation_rad"] == -0.59 == res.diagnostics["box_rotation_rad"]
+    assert meta["preprocess"]["box_rotation_rad"] == -0.59
+    assert json.loads(out["info"].read_text())["box_rotation_rad"] == -0.59
+    # a flight without one (every non-FlightCoach log) gets no key, never a made-up 0
+    plain, _ = synthetic_flight(rng, gap=False)
+    write_flightlog(plain, tmp_path / "in2")
+    run_preprocess({"meta": tmp_path / "in2" / "meta.json"}, out, {})
+    assert "box_rotation_rad" not in read_table_meta(out["state"])
+    assert [box_rotation_rad(m) for m in (None, {}, {"params": {"box_rotation_rad": None}},
+                                          {"params": {"box_rotation_rad": "x"}},
+                                          {"params": {"box_rotation_rad": 3}})] == [None, None, None, None, 3.0]

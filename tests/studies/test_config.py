@@ -8,12 +8,13 @@ import pytest
 import yaml
 
 from pipeline.studies import flightcoach_classification as fc
+from pipeline.studies import flightcoach_ekf_hmm as fe
 from pipeline.studies import seed000_classification as s0
 
 SCHEMA = Path(__file__).resolve().parents[2] / "rules" / "schemas" / "config.schema.yaml"
 
 
-@pytest.mark.parametrize("mod", [s0, fc], ids=["seed000", "flightcoach"])
+@pytest.mark.parametrize("mod", [s0, fc, fe], ids=["seed000", "flightcoach", "flightcoach_ekf_hmm"])
 def test_schema_defaults_equal_the_study_defaults(mod):
     sec = yaml.safe_load(SCHEMA.read_text())["properties"]["studies"]
     assert sec["properties"]["size"]["default"] == "small"

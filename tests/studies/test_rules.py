@@ -44,3 +44,21 @@ def test_the_flightcoach_target_without_real_logs_stops_naming_the_file(tmp_path
     assert p.returncode != 0
     line = [ln for ln in (p.stdout + p.stderr).splitlines() if "FlightCoach file not found" in ln]
     assert len(line) == 1 and str(tmp_path / "flightcoach_f3a_json") in line[0], p.stderr[-2000:]
+
+
+def test_the_flightcoach_ekf_hmm_target_without_real_logs_stops_naming_the_file(tmp_path):
+    p = _dry("study_flightcoach_ekf_hmm", "--config", f"realdata_dir={tmp_path}")
+    assert p.returncode != 0
+    line = [ln for ln in (p.stdout + p.stderr).splitlines() if "FlightCoach file not found" in ln]
+    assert len(line) == 1 and str(tmp_path / "flightcoach_f3a_json") in line[0], p.stderr[-2000:]
+    assert "flightcoach_ekf_hmm" in line[0]
+
+
+def test_the_flightcoach_ekf_hmm_target_plans_only_the_study_and_plotly_js():
+    from helpers import REALDATA, need_shared
+
+    need_shared("FlightCoach F3A flights")
+    if not (REALDATA / "flightcoach_f3a_json").is_dir():
+        pytest.skip("../shared/realdata/flightcoach_f3a_json absent")
+    assert _jobs(_dry("study_flightcoach_ekf_hmm", "--config", f"realdata_dir={REALDATA}")) == {
+        "plotly_js": 1, "study_flightcoach_ekf_hmm": 1}

@@ -1,0 +1,113 @@
+"""The FlightCoach EKF vs EKF+HMM study through its entry point, on the real flights of
+../shared/realdata, with the inputs the Snakemake rule declares (``flightcoach_inputs`` with the
+study's two files).
+
+At ``tiny`` size (3 Baum-Welch iterations, three q, one Q₂ scale) it writes every declared output
+with a well-formed headline; at ``small`` size (the full study, the size issue 14 means) the
+headline is asserted against the acceptance target (≥ 12 of 17; missed on the faithful data, a
+strict xfail). Both skip when ../shared/realdata is absent
+(fail under UAVPIPE_REQUIRE_SHARED=1).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from helpers import REALDATA, need_shared
+
+from pipeline.studies import STUDY_TABLES, flightcoach_inputs
+from pipeline.studies.base import FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, StudyError
+
+NAME = "flightcoach_ekf_hmm"
+
+
+def _inputs():
+    need_shared("FlightCoach F3A flights")
+    if not (REALDATA / FLIGHTCOACH_DIR).is_dir():
+        pytest.skip(f"{FLIGHTCOACH_DIR} missing")
+    return flightcoach_inputs(REALDATA, FLIGHTCOACH_EKF_HMM_FILES, study=NAME)
+
+
+@pytest.fixture(scope="module")
+def tiny(ran, tmp_path_factory):
+    inputs = _inputs()
+    return ran(NAME, tmp_path_factory.mktemp("fe_tiny"), {"size": "tiny"}, inputs)
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_the_tiny_study_writes_results_report_tables_and_page(tiny):
+    assert tiny.result.status == "ok" and tiny.result.diagnostics["size"] == "tiny"
+    text = Path(tiny.outputs["results"]).read_text().splitlines()
+    assert text and all(line.startswith("RESULT ") and len(line.split()) == 3 for line in text)
+    assert tiny.figures == tiny.result.results
+    n = int(tiny.figures["flightcoach_ekf_hmm_acc_better_maneuvers"])
+    assert 0 <= n <= 17 and tiny.figures["flightcoach_ekf_hmm_n_maneuvers"] == "17"
+    assert float(tiny.figures["flightcoach_ekf_hmm_q"]) in (10.0, 30.0, 100.0)
+    for t in STUDY_TABLES[NAME]:
+        assert len(tiny.table(t)), t
+    page = Path(tiny.outputs["page"]).read_text()
+    assert 'src="../assets/plotly.min.js"' in page and "flightcoach_ekf_hmm_acc_better_maneuvers" in page
+    assert Path(tiny.outputs["model_params"]).is_file() and Path(tiny.outputs["model_meta"]).is_file()
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_the_maneuver_table_follows_the_acceptance_rule(tiny):
+    man = tiny.table("maneuvers")
+    assert len(man) == 17 and not set(man["label"]) & {"tkOf", "tkoff", "lnd"}
+    # better = below 0.95 × the EKF's acceleration RMSE with HMM inputs on >= 20 % of the steps
+    rule = (man["ekf_hmm_acc_rmse"] < 0.95 * man["ekf_acc_rmse"]) & (man["hmm_share_pct"] >= 20.0)
+    assert (man["better"] == rule).all()
+    assert int(man["better"].sum()) == int(tiny.figures["flightcoach_ekf_hmm_acc_better_maneuvers"])
+    np.testing.assert_allclose(man["acc_ratio"], man["ekf_hmm_acc_rmse"] / man["ekf_acc_rmse"])
+    assert (man[["ekf_acc_rmse", "ekf_hmm_acc_rmse", "ekf_pos_rmse", "ekf_vel_rmse"]] > 0).all().all()
+    tuning = tiny.table("tuning")
+    assert tuning.groupby("parameter")["chosen"].sum().to_dict() == {"q": 1, "q2_scale": 1}
+    tl = tiny.table("timeline")
+    assert tl["mode"].dtype == bool and set(tl["pred"]) - {"unknown"} <= set(man["label"])
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+# Issue 14's real-data target, asserted as stated. On the faithful data it is missed (measured
+# 0/17: the EKF+HMM acceleration RMSE is 1.3–3.1× the EKF's on every maneuver, because the GMR
+# acceleration and jerk of HMMs trained on one flight are worse on the other than the EKF's own
+# acceleration; see the study's report.md). strict: the day it passes, this marker must go.
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="issue-14 real-data target missed on faithful data (0/17 better)")
+def test_the_full_study_meets_the_real_data_acceptance(ran, tmp_path):
+    r = ran(NAME, tmp_path, {"size": "small"}, _inputs()).figures
+    assert r["flightcoach_ekf_hmm_n_maneuvers"] == "17"
+    assert int(r["flightcoach_ekf_hmm_acc_better_maneuvers"]) >= 12
+
+
+def test_a_missing_flight_fails_with_one_line_naming_the_file_and_the_study(tmp_path):
+    with pytest.raises(StudyError) as e:
+        flightcoach_inputs(tmp_path, FLIGHTCOACH_EKF_HMM_FILES, study=NAME)
+    msg = str(e.value)
+    assert "\n" not in msg and str(tmp_path / FLIGHTCOACH_DIR) in msg and NAME in msg
+    assert set(FLIGHTCOACH_EKF_HMM_FILES) == {"train", "test"}
+
+
+def test_the_radar_is_synthesised_at_5_hz_from_the_reference_with_gaps_left_out(rng):
+    from pipeline.estimate.models import STATE_COLUMNS, RadarModel
+    from pipeline.studies.flightcoach_ekf_hmm import synthesise_radar
+
+    n = 51
+    st = pd.DataFrame({"t_ns": np.arange(n, dtype=np.int64) * 40_000_000})
+    for i, c in enumerate(STATE_COLUMNS):
+        st[c] = 100.0 + i + rng.normal(size=n)
+    st.loc[10, "pos_n_m"] = np.nan                      # step 2 of the 5 Hz grid
+    radar = RadarModel(site_ned_m=(0.0, 0.0, 0.0))
+    t, x, z = synthesise_radar(st, radar, np.random.default_rng(1))
+    assert z.shape == (11, 1, 4) and np.all(np.diff(t) == 200_000_000)
+    np.testing.assert_array_equal(x, st[list(STATE_COLUMNS)].to_numpy()[::5])
+    assert np.isnan(z[2]).all() and np.isfinite(np.delete(z, 2, axis=0)).all()
+    # the noise is the seed-000 radar's
+    np.testing.assert_allclose(radar.sigma, (1.5, 45e-6, 45e-6, 0.2))
+    ok = np.delete(np.arange(11), 2)
+    assert (np.abs(z[ok, 0] - radar.h(x[ok])) < 6 * np.asarray(radar.sigma)).all()

@@ -25,10 +25,13 @@ import pytest
 from helpers import REQUIRE_SHARED
 from helpers_workflow import ROOT, SNAKEMAKE, copy_workflow
 
-DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
-SIMS = [f"sim-{m}-000-bin\tresults/sim/logs/sim-{m}-000.bin\tsim-quad\ttest\t"
-        f"results/sim/logs/sim-{m}-000.bin.truth.parquet\t\tsimulated {m}" for m in ("M1", "M2")]
+#: the three flights: the demo flight and two simulated DataFlash logs of the tiny config (with
+#: truth side-cars), made once by the workflow's own simulation rules and then given to both runs
+#: as plain log files, so that the SLURM run is the ingest and preprocess jobs alone
 FLIGHTS = ("demo-quad", "sim-M1-000-bin", "sim-M2-000-bin")
+MADE = {"demo-quad": ("results/sim/demo/demo-quad.bin", None),
+        **{f"sim-{m}-000-bin": (f"results/sim/logs/sim-{m}-000.bin", f"results/sim/logs/sim-{m}-000.bin.truth.parquet")
+           for m in ("M1", "M2")}}
 #: the README's scale-out command starts with this
 README_PREFIX = ".venv/bin/snakemake --workflow-profile profiles/slurm"
 USABLE_NODE_STATES = {"idle", "mixed", "allocated", "completing"}
@@ -84,52 +87,72 @@ def test_the_slurm_profile_names_no_placeholder_partition_or_account():
     assert not {"slurm_partition", "slurm_account"} & set(prof["default-resources"])
 
 
+def _manifest_rows(made: dict[str, tuple[str, str | None]]) -> list[str]:
+    return [f"{f}\t{log}\tsim-quad\ttest\t{truth or 'none'}\t\t{f}" for f, (log, truth) in made.items()]
+
+
+def _smk(wd: Path, *args: str, timeout: int = 300) -> subprocess.CompletedProcess:
+    p = subprocess.run([SNAKEMAKE, *args, "--configfile", "datasets/tiny.yaml"], cwd=wd, capture_output=True,
+                       text=True, timeout=timeout, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    assert p.returncode == 0, f"snakemake {' '.join(args)}:\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
+    return p
+
+
+def _three_flight_logs(tmp_path: Path) -> dict[str, tuple[str, str | None]]:
+    """The three flights' logs, written by the workflow's simulation rules, under tmp_path/logs."""
+    gen = copy_workflow(tmp_path / "gen", _manifest_rows(MADE))
+    _smk(gen, "--cores", "2", *{log for log, _ in MADE.values()})
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    made = {}
+    for f, (log, truth) in MADE.items():
+        for src in filter(None, (log, truth)):
+            shutil.copy2(gen / src, logs / Path(src).name)
+        made[f] = (f"logs/{Path(log).name}", truth and f"logs/{Path(truth).name}")
+    return made
+
+
 @pytest.mark.slow
 def test_ingest_and_preprocess_of_three_flights_on_slurm_equal_the_local_run_as_frames(tmp_path):
     _need_slurm()
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    tiny = ["--configfile", "datasets/tiny.yaml"]
-    local = copy_workflow(tmp_path / "local", [DEMO, *SIMS])
-    cluster = copy_workflow(tmp_path / "slurm", [DEMO, *SIMS])
-    cmd = [SNAKEMAKE, *readme_slurm_command()[1:], *tiny]
+    made = _three_flight_logs(tmp_path)
+    local = copy_workflow(tmp_path / "local", _manifest_rows(made))
+    cluster = copy_workflow(tmp_path / "slurm", _manifest_rows(made))
+    for wd in (local, cluster):
+        shutil.copytree(tmp_path / "logs", wd / "logs")
+    _smk(local, "--cores", "2", "ingest", "preprocess")
+
     t0 = time.monotonic()
-    # the SLURM run waits on the scheduler most of the time: run the local reference meanwhile
-    with open(tmp_path / "slurm.log", "w") as log:
-        sp = subprocess.Popen(cmd, cwd=cluster, stdout=log, stderr=subprocess.STDOUT, text=True, env=env)
-        try:
-            lp = subprocess.run([SNAKEMAKE, "--cores", "2", "ingest", "preprocess", *tiny], cwd=local,
-                                capture_output=True, text=True, timeout=300, env=env)
-            rc = sp.wait(timeout=400)
-        finally:
-            if sp.poll() is None:
-                sp.kill()
-                subprocess.run(["scancel", "--name", "*"], capture_output=True)  # nothing is left queued
+    p = subprocess.run([SNAKEMAKE, *readme_slurm_command()[1:], "--configfile", "datasets/tiny.yaml"],
+                       cwd=cluster, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=400,
+                       env={**os.environ, "PYTHONWARNINGS": "ignore"})
     wall = time.monotonic() - t0
-    out = (tmp_path / "slurm.log").read_text()
-    assert lp.returncode == 0, lp.stdout[-2000:] + lp.stderr[-3000:]
-    assert rc == 0, out[-5000:]
-    # every ingest and preprocess job went through sbatch (the local rules are only the targets)
-    submitted = re.findall(r"Job \d+ has been submitted with SLURM jobid (\d+) \(log: .*?rule_(\w+?)/", out)
+    (tmp_path / "slurm.log").write_text(p.stdout)  # kept for a look after a failure
+    assert p.returncode == 0, p.stdout[-6000:]
+    # every ingest and preprocess job went through sbatch (only the two target rules ran locally)
+    submitted = re.findall(r"submitted with SLURM jobid (\d+) \(log: .*?/rule_(\w+?)/", p.stdout)
     rules = sorted(r for _, r in submitted)
-    assert rules.count("ingest_flight") == 3 and rules.count("preprocess_flight") == 3, rules
+    assert rules == ["ingest_flight"] * 3 + ["preprocess_flight"] * 3, rules
     for f in FLIGHTS:
         assert (cluster / "results" / "state" / f"{f}.parquet").exists()
-    p = subprocess.run([sys.executable, str(ROOT / "tests" / "workflow" / "compare_results.py"),
+
+    c = subprocess.run([sys.executable, str(ROOT / "tests" / "workflow" / "compare_results.py"),
                         str(local / "results"), str(cluster / "results")], capture_output=True, text=True,
                        timeout=120)
-    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-2000:]
-    res = dict(re.findall(r"^RESULT (\S+) (\d+)$", p.stdout, re.M))
-    assert res["compare_files_new"] == "0" and res["compare_files_missing"] == "0", p.stdout[-3000:]
-    # ingest streams + state/segments/calibration of each flight, the simulated truth side-cars
-    assert int(res["compare_files_equal"]) >= 3 * 4, p.stdout[-3000:]
+    assert c.returncode == 0, c.stdout[-3000:] + c.stderr[-2000:]
+    res = dict(re.findall(r"^RESULT (\S+) (\d+)$", c.stdout, re.M))
+    assert res["compare_files_new"] == "0" and res["compare_files_missing"] == "0", c.stdout[-3000:]
+    # per flight: the ingest streams plus state, segments and calibration
+    assert int(res["compare_files_equal"]) >= 3 * 4, c.stdout[-3000:]
     print(f"RESULT slurm_workflow_wall_s {wall:.1f}")
     print(f"RESULT slurm_jobs_submitted {len(submitted)}")
+    print(f"RESULT slurm_frames_equal {res['compare_files_equal']}")
 
 
 @pytest.mark.slow
 def test_the_generic_profile_creates_its_log_folder_before_submitting(tmp_path):
     """Its submit command, with a stand-in `qsub` that refuses a missing -o/-e folder (as schedulers do)."""
-    wd = copy_workflow(tmp_path / "wf", [DEMO])
+    wd = copy_workflow(tmp_path / "wf", _manifest_rows({"demo-quad": MADE["demo-quad"]}))
     bindir = tmp_path / "bin"
     bindir.mkdir()
     qsub = bindir / "qsub"

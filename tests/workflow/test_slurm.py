@@ -54,7 +54,9 @@ def _need_slurm() -> None:
         p = subprocess.run(["sinfo", "-h", "-N", "-o", "%T"], capture_output=True, text=True, timeout=20)
     except subprocess.TimeoutExpired:
         _unavailable("no SLURM controller answers: `sinfo` timed out (bash .ci/slurm-up)")
-    states = {s.strip().rstrip("*~#!%$@^-") for s in p.stdout.split()}
+    # a suffix marks a node that cannot take jobs now (idle* = not responding, idle~ = powered off),
+    # except "-" (planned by the backfill scheduler)
+    states = {s.strip().rstrip("-") for s in p.stdout.split()}
     if p.returncode != 0 or not states & USABLE_NODE_STATES:
         _unavailable(f"no usable SLURM node: `sinfo` says {(p.stdout + p.stderr).strip()[:200]!r} "
                      "(bash .ci/slurm-up)")

@@ -21,6 +21,7 @@ from .base import SIZES, STUDY_TABLES, StudyError, StudyResult, flightcoach_inpu
 STUDIES = {
     "seed000_classification": "pipeline.studies.seed000_classification:run_seed000_classification",
     "flightcoach_classification": "pipeline.studies.flightcoach_classification:run_flightcoach_classification",
+    "seed000_ekf": "pipeline.studies.seed000_ekf:run_seed000_ekf",
 }
 
 
@@ -62,5 +63,5 @@ def __getattr__(attr: str):
 
 
 __all__ = ["SIZES", "STUDIES", "STUDY_TABLES", "StudyError", "StudyResult", "entry_point", "flightcoach_inputs",
-           "run_flightcoach_classification", "run_seed000_classification", "run_study", "study_outputs",
+           "run_flightcoach_classification", "run_seed000_classification", "run_seed000_ekf", "run_study", "study_outputs",
            "study_settings"]

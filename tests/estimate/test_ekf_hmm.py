@@ -1,0 +1,171 @@
+"""EKF+HMM (seed 000 §8): step assembly, causality, fallbacks, Q₂ and bad input."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+from helpers_maneuvers import synth_bulk
+from pipeline.estimate.base import ConstantAcceleration, GaussianState
+from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
+from pipeline.estimate.ekf_hmm import (EkfHmmError, ekf_state_frame, hmm_step, q2_from_runs,
+                                       run_ekf_hmm)
+from pipeline.estimate.models import (STATE_COLUMNS, RadarModel, ca_transition, hmm_input,
+                                      hmm_transition, initial_cov, white_jerk_q)
+from pipeline.models.base import ModelsConfig
+from pipeline.models.classifier import ManeuverModelSet
+
+FAST = dict(n_states=3, n_iter=10, tol=1e-1, gmm_restarts=1, seed=5)
+DT = 0.2
+
+
+@pytest.fixture(scope="module")
+def trained():
+    data = synth_bulk(("M1", "M2", "M3"), 4, np.random.default_rng(20261201))
+    return ManeuverModelSet(config=ModelsConfig(**FAST)).fit(data), data
+
+
+def _with(ms, **cfg):
+    """A shallow copy of a trained model set with config fields replaced."""
+    out = copy.copy(ms)
+    out.config = dataclasses.replace(ms.config, **cfg)
+    return out
+
+
+def _radar_runs(data, labels, rng, n=2):
+    """Radar measurements of the first ``n`` runs of each label, site 2 km north-west, below."""
+    radar = RadarModel(site_ned_m=(2000.0, -1500.0, 300.0))
+    runs = [g for _, g in data.groupby("run_id", sort=True) if g["label"].iloc[0] in labels][:n]
+    truth = np.stack([g[list(STATE_COLUMNS)].to_numpy() for g in runs])      # (R, T, 9)
+    t_ns = runs[0]["t_ns"].to_numpy()
+    z = np.swapaxes(radar.measure(truth, rng), 0, 1)                          # (T, R, 4)
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(50.0), radar)
+    prior = GaussianState(truth[:, 0], np.broadcast_to(initial_cov(), (len(runs), 9, 9)).copy(), int(t_ns[0]))
+    return ekf, prior, t_ns, z, truth
+
+
+def test_hmm_step_takes_a_h_b_and_q2_on_hmm_axes_and_ca_elsewhere():
+    A, Q = ca_transition(DT), white_jerk_q(DT, 3.0)
+    AH, B = hmm_transition(DT), hmm_input(DT)
+    rng = np.random.default_rng(1)
+    L = rng.standard_normal((9, 9))
+    Q2 = L @ L.T
+    acc, jerk = rng.standard_normal((3, 3)), rng.standard_normal((3, 3))
+    axes = np.array([[True, True, True], [False, False, False], [True, False, True]])
+    F, Qk, bu = hmm_step(axes, A, Q, AH, B, Q2, acc, jerk)
+    np.testing.assert_array_equal(F[0], AH)
+    np.testing.assert_array_equal(Qk[0], Q2)
+    np.testing.assert_allclose(bu[0], B @ np.r_[acc[0], jerk[0]])
+    np.testing.assert_array_equal(F[1], A)
+    np.testing.assert_array_equal(Qk[1], Q)
+    np.testing.assert_array_equal(bu[1], 0.0)
+    # mixed: the east components (1, 4, 7) keep CA, north/down take the HMM step
+    e, nd = [1, 4, 7], [0, 2, 3, 5, 6, 8]
+    np.testing.assert_array_equal(F[2][e], A[e])
+    np.testing.assert_array_equal(F[2][nd], AH[nd])
+    np.testing.assert_array_equal(Qk[2][np.ix_(e, nd)], 0.0)
+    np.testing.assert_array_equal(Qk[2][np.ix_(nd, nd)], Q2[np.ix_(nd, nd)])
+    np.testing.assert_array_equal(Qk[2][np.ix_(e, e)], Q[np.ix_(e, e)])
+    np.testing.assert_array_equal(bu[2][e], 0.0)
+    assert np.linalg.eigvalsh(Qk[2]).min() > -1e-12      # still a covariance
+    # the predicted acceleration of an HMM axis is â + dt·ĵ (the state's own a is dropped)
+    x = rng.standard_normal(9)
+    xp = F[0] @ x + bu[0]
+    np.testing.assert_allclose(xp[6:], acc[0] + DT * jerk[0])
+
+
+def test_never_confident_classifier_leaves_the_ekf_hmm_equal_to_the_ekf(trained):
+    ms, data = trained
+    never = _with(ms, confidence_threshold=-1e9)
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M1", "M2"), np.random.default_rng(2))
+    out = run_ekf_hmm(ekf, prior, t_ns, z, never, np.eye(9))
+    assert not out.mode.any()
+    np.testing.assert_array_equal(out.hmm.mean, out.ekf.mean)
+    np.testing.assert_array_equal(out.hmm.cov, out.ekf.cov)
+    # and the baseline is exactly run_filter's
+    np.testing.assert_array_equal(out.ekf.mean, run_filter(ekf, prior, t_ns, z, store="filtered").mean)
+
+
+def test_ekf_hmm_uses_hmm_inputs_causally_and_tracks_the_truth(trained):
+    ms, data = trained
+    Q2 = q2_from_runs(ms, data[data["label"] == "M1"], scale=2.0)
+    ekf, prior, t_ns, z, truth = _radar_runs(data, ("M1",), np.random.default_rng(3))
+    out = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2)
+    assert out.mode.shape == (2, len(t_ns)) and out.mode.mean() > 0.3   # known maneuver: HMM steps
+    assert not out.mode[:, :2].any()                              # step 0, and no output before step 1
+    # mode at k follows the classifier's output at k − 1
+    known = out.pred != "unknown"
+    assert not (out.mode[:, 1:] & ~known[:, :-1]).any()
+    rmse = np.sqrt(np.mean((out.hmm.mean - truth) ** 2, axis=(0, 1)))
+    assert np.all(rmse[:3] < 5.0) and np.all(np.isfinite(out.hmm.cov))
+    # changing the radar after step k changes nothing at or before k (both filters, the mode)
+    k = len(t_ns) // 2
+    z2 = z.copy()
+    z2[k + 1:] += 5.0
+    out2 = run_ekf_hmm(ekf, prior, t_ns, z2, ms, Q2)
+    np.testing.assert_array_equal(out2.hmm.mean[:, :k + 1], out.hmm.mean[:, :k + 1])
+    np.testing.assert_array_equal(out2.mode[:, :k + 1], out.mode[:, :k + 1])
+
+
+def test_radar_gaps_are_predict_only_steps_of_both_filters(trained):
+    ms, data = trained
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M2",), np.random.default_rng(4))
+    z = z.copy()
+    z[10:15, 0] = np.nan
+    out = run_ekf_hmm(ekf, prior, t_ns, z, ms, np.eye(9) * 0.1)
+    assert out.ekf.n_predict_only[0] == 5 and out.hmm.n_predict_only[0] == 5
+    assert np.all(np.isfinite(out.hmm.mean))
+
+
+def test_gated_axes_fall_back_to_ca(trained):
+    ms, data = trained
+    tight = _with(ms, gate_mps2=1e-6)    # every change is a jump
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M1",), np.random.default_rng(5))
+    out = run_ekf_hmm(ekf, prior, t_ns, z, tight, np.eye(9))
+    # the gate compares with the previous estimate, so it keeps only the first GMR output
+    first = np.isfinite(out.acc_hmm[..., 0]).argmax(axis=1)
+    assert np.all(first >= 1)
+    for r, f in enumerate(first):
+        assert not out.gated[r, f].any() and out.gated[r, f + 1:].all()
+        # ... which feeds the one step after it; every later step falls back to CA on every axis
+        assert out.hmm_axes[r, f + 1].all() and not out.hmm_axes[r, f + 2:].any()
+
+
+def test_q2_is_a_symmetric_covariance_with_r_v_a_cross_terms_and_scales_linearly(trained):
+    ms, data = trained
+    q1 = q2_from_runs(ms, data)
+    q3 = q2_from_runs(ms, data, scale=3.0)
+    np.testing.assert_allclose(q3, 3.0 * q1)
+    np.testing.assert_allclose(q1, q1.T)
+    assert np.linalg.eigvalsh(q1).min() > -1e-12
+    assert np.abs(q1[3:6, 6:9]).max() > 0 and np.abs(q1[0:3, 6:9]).max() > 0
+
+
+def test_bad_inputs_raise_one_clear_error(trained):
+    ms, data = trained
+    aero = _with(ms, feature_set="aero")
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M1",), np.random.default_rng(6))
+    with pytest.raises(EkfHmmError, match="'aero' does not give"):
+        run_ekf_hmm(ekf, prior, t_ns, z, aero, np.eye(9))
+    with pytest.raises(EkfHmmError, match="aero"):
+        q2_from_runs(aero, data)
+    with pytest.raises(EkfHmmError, match="9×9"):
+        run_ekf_hmm(ekf, prior, t_ns, z, ms, np.eye(6))
+    with pytest.raises(EkfHmmError, match="scale"):
+        q2_from_runs(ms, data, scale=0.0)
+    with pytest.raises(EkfHmmError, match="lacks column"):
+        q2_from_runs(ms, data.drop(columns=["acc_n_mps2"]))
+
+
+def test_state_frame_lays_runs_end_to_end_with_their_heading():
+    mean = np.arange(2 * 3 * 9, dtype=float).reshape(2, 3, 9)
+    df = ekf_state_frame(mean, [0, 200_000_000, 400_000_000], yaw_rad=[0.1, 0.2])
+    assert list(df.columns[:2]) == ["run_id", "t_ns"] and list(df.columns[2:11]) == list(STATE_COLUMNS)
+    np.testing.assert_array_equal(df["run_id"], [0, 0, 0, 1, 1, 1])
+    np.testing.assert_array_equal(df["yaw_rad"], [0.1] * 3 + [0.2] * 3)
+    np.testing.assert_array_equal(df[list(STATE_COLUMNS)].to_numpy(), mean.reshape(6, 9))
+    with pytest.raises(EkfHmmError, match="2 times for 3 steps"):
+        ekf_state_frame(mean, [0, 1])

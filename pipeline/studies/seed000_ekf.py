@@ -21,9 +21,12 @@ Steps (seed 000 §2, §3, §8, §9, §11–§13; issue 14 item 5):
    consistency proof on the filter's own model is ``tests/estimate/test_ekf.py``).
 4. EKF+HMM (Ch. 4, digest §8): HMMs truth-trained as in ``study_seed000_classification``
    (:func:`~pipeline.studies.seed000_classification.train_models`; ``hmm`` section, default
-   ``state9h``); ``Q₂ = q2_from_runs(training truth) × s`` with the scale ``s`` grid-searched
-   (``q2_scale_grid``) on the same ``tune_runs`` training runs by the EKF+HMM's normalised RMSE,
-   frozen before the test runs. Over each maneuver's test runs (truth initialisation, one radar
+   ``state9h``). Searched on training runs only and then frozen (:func:`tune_ekf_hmm`): the GMR
+   conditioning block (``gmr_inputs``; the thesis' 3.28 is ``pos``), the outlier gate
+   (``gates``), what the GMR sees when ``Q₂ = q2_from_runs(...)`` is estimated on ``q2_runs``
+   training runs (``q2_inputs``: the truth, or the baseline EKF's posteriors — the inputs the
+   filter meets at run time; the one-step errors are always against the truth) and the ``Q₂``
+   scale (``q2_scale_grid``). Over each maneuver's test runs (truth initialisation, one radar
    realisation each) the run with the lowest summed absolute EKF+HMM error is Scenario 1 (best),
    the highest Scenario 2 (worst) (:func:`~pipeline.estimate.metrics.best_worst`); each is
    re-run ``noise_runs`` times with new radar noise from its true initial state. Reported: RMSE
@@ -34,8 +37,9 @@ Outputs (:data:`OUTPUT_TABLES` under ``results/studies/seed000_ekf/``): ``q_tuni
 ``mc_time``, ``mc_rmse``, ``q2_tuning``, ``scenarios``, ``hmm_rmse``, ``hmm_time``, plus
 ``report.md``, ``results.txt`` and the page ``results/report/studies/seed000_ekf.html``.
 
-Sizes (``studies.size``; ``runs`` per maneuver / ``mc_runs`` / ``noise_runs`` / ``tune_runs``):
-``tiny`` 20/10/10/4 (tests), ``small`` 300/100/100/30, ``thesis`` 2300/1000/1000/100.
+Sizes (``studies.size``; ``runs`` per maneuver / ``mc_runs`` / ``noise_runs`` / ``tune_runs`` /
+``q2_runs``): ``tiny`` 20/10/10/4/10 (tests), ``small`` 300/100/100/30/100, ``thesis``
+2300/1000/1000/100/400.
 
 Seed: the master ``seed`` draws the simulated sets (as ``uavpipe simulate``), the split, the
 training, and every radar realisation (``set_rng(seed, "seed000_ekf/<purpose>/<M>")``).
@@ -47,6 +51,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import copy
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
@@ -54,9 +61,11 @@ import plotly.graph_objects as go
 from ..config import ROOT, ConfigError, load_config, section
 from ..estimate.base import ConstantAcceleration, GaussianState
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
+from ..estimate.ekf_hmm import ekf_state_frame, hmm_filter, q2_from_runs, run_ekf_hmm
 from ..estimate.metrics import best_worst, chi2_band, fraction_in_band, nees, rmse, rmse_groups
 from ..estimate.models import STATE_COLUMNS, RadarModel, initial_cov
 from ..estimate.montecarlo import measure, normalised_rmse, tune_q
+from ..estimate.smoother import rts_smooth
 from ..io.parquet import write_table
 from ..models.metrics import is_correct
 from ..report.study import build_study_page, layout
@@ -78,7 +87,11 @@ DEFAULTS: dict[str, Any] = {
     "noise_runs": 100,       # noise realisations of each S1/S2 run (thesis 1000)
     "tune_runs": 30,         # training runs per known maneuver for the q and Q₂-scale searches
     "q_grid": [0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0],
-    "q2_scale_grid": [0.1, 0.3, 1.0, 3.0, 10.0],
+    "q2_runs": 100,          # training runs per known maneuver Q₂ is estimated on
+    "q2_scale_grid": [0.3, 1.0, 3.0, 10.0, 30.0, 100.0],
+    "gmr_inputs": ["pos", "pos_fd", "pos_vel"],   # GMR conditioning blocks searched (thesis 3.28: pos)
+    "gates": [15.0],         # GMR outlier gates searched (m/s² per step; thesis 15)
+    "q2_inputs": ["truth", "ekf"],  # what the GMR sees when Q₂ is estimated
     "mc_maneuvers": list(ALL),
     "features": None,        # override hmm.feature_set (state9, state9h)
     "chunk_runs": 250,       # Monte Carlo runs filtered at once (memory: ~1 MB per run with RTS)
@@ -86,9 +99,9 @@ DEFAULTS: dict[str, Any] = {
 }
 #: per-size settings
 SIZES: dict[str, dict[str, Any]] = {
-    "tiny": {"runs": 20, "mc_runs": 10, "noise_runs": 10, "tune_runs": 4},
-    "small": {"runs": 300, "mc_runs": 100, "noise_runs": 100, "tune_runs": 30},
-    "thesis": {"runs": 2300, "mc_runs": 1000, "noise_runs": 1000, "tune_runs": 100},
+    "tiny": {"runs": 20, "mc_runs": 10, "noise_runs": 10, "tune_runs": 4, "q2_runs": 10},
+    "small": {"runs": 300, "mc_runs": 100, "noise_runs": 100, "tune_runs": 30, "q2_runs": 100},
+    "thesis": {"runs": 2300, "mc_runs": 1000, "noise_runs": 1000, "tune_runs": 100, "q2_runs": 400},
 }
 
 #: seed 000 Chapter-4 table (digest §11): classifier MAoT (%) of the EKF+HMM Monte Carlo runs
@@ -222,8 +235,6 @@ def mc_maneuver(man: str, df: pd.DataFrame, ekf: ExtendedKalmanFilter, radar: Ra
     Returns the per-time table (filter, t_s, component, mean_err, err_var, filter_var, nees_avg)
     and the summary (RMSE per group, NEES time mean, fraction of steps in the χ² band).
     """
-    from ..estimate.smoother import rts_smooth
-
     _, t_ns, truth, _, _ = runs_array(df)
     R, T = truth.shape[:2]
     z = radar_z(radar, truth, seed, f"mc/{man}")
@@ -271,41 +282,95 @@ def mc_maneuver(man: str, df: pd.DataFrame, ekf: ExtendedKalmanFilter, radar: Ra
 
 def ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z):
     """One EKF+HMM run over ``truth`` (R, T, 9) from the true initial state: ``(track, e_ekf, e_hmm)``."""
-    from ..estimate.ekf_hmm import run_ekf_hmm
-
     tr = run_ekf_hmm(ekf, truth_prior(truth, int(t_ns[0])), t_ns, z, ms, Q2, yaw_rad=yaw, store="filtered")
     return tr, tr.ekf.mean - truth, tr.hmm.mean - truth
 
 
-def tune_q2_scale(ekf, ms, Q2_base, train, radar, st, seed):
-    """The frozen Q₂ scale from the ``tune_runs`` training runs of M1–M4 (EKF+HMM normalised RMSE)."""
+def model_variant(ms, **cfg):
+    """A shallow copy of a trained model set with config fields replaced (``gmr_input``,
+    ``gate_mps2``: what the GMR and the gate do at classification; the HMMs are unchanged)."""
+    out = copy.copy(ms)
+    out.config = dataclasses.replace(ms.config, **cfg)
+    return out
+
+
+def estimated_frames(ekf, train: dict, radar, seed: int, n: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Truth and baseline-EKF state tables of ``n`` training runs per known maneuver (same run ids
+    and times; truth initialisation, one radar realisation each): ``q2_from_runs``' inputs."""
+    tt, ee = [], []
+    for man in KNOWN:
+        ids, t_ns, truth, yaw, _ = runs_array(first_runs(train[man], n))
+        z = radar_z(radar, truth, seed, f"q2/{man}")
+        tr = run_filter(ekf, truth_prior(truth, int(t_ns[0])), t_ns, z, store="mean")
+        rid = np.array([f"{man}-{i}" for i in ids], dtype=object)
+        tt.append(ekf_state_frame(truth, t_ns, yaw_rad=yaw, run_ids=rid))
+        ee.append(ekf_state_frame(tr.mean, t_ns, yaw_rad=yaw, run_ids=rid))
+    return pd.concat(tt, ignore_index=True), pd.concat(ee, ignore_index=True)
+
+
+def tune_ekf_hmm(ekf, ms, train, radar, st, seed, progress):
+    """The EKF+HMM's settings, searched on training runs only and then frozen.
+
+    Grid: GMR input (``gmr_inputs``) × gate (``gates``, m/s² per step) × what the GMR sees when
+    ``Q₂`` is estimated (``q2_inputs``: ``truth``, or ``ekf``: the baseline EKF's posteriors of
+    the same training runs, the inputs the filter meets at run time) × the ``Q₂`` scale
+    (``q2_scale_grid``). Each candidate runs the EKF+HMM over ``tune_runs`` training runs per
+    known maneuver; score = mean over the 9 components of the pooled EKF+HMM RMSE divided by the
+    pooled EKF RMSE of the same runs (< 1: the EKF+HMM is better on average).
+
+    Returns
+    -------
+    (best, table)
+        ``best``: dict with ``gmr_input``, ``gate_mps2``, ``q2_input``, ``q2_scale``, ``Q2`` and
+        ``model_set`` (the variant); ``table``: one row per candidate.
+    """
+    grid = [float(x) for x in st["q2_scale_grid"]]
+    if not grid or min(grid) <= 0:
+        raise ConfigError(f"studies.{NAME}.q2_scale_grid: must hold positive values, got {grid}")
     data = {}
     for man in KNOWN:
         _, t_ns, truth, yaw, _ = runs_array(first_runs(train[man], int(st["tune_runs"])))
         data[man] = (t_ns, truth, yaw, radar_z(radar, truth, seed, f"tune_q2/{man}"))
-    grid = [float(s) for s in st["q2_scale_grid"]]
-    if not grid or min(grid) <= 0:
-        raise ConfigError(f"studies.{NAME}.q2_scale_grid: must hold positive values, got {grid}")
-    rm = {man: np.empty((len(grid), 9)) for man in KNOWN}
-    ekf_rm = {}
-    for i, s in enumerate(grid):
-        for man, (t_ns, truth, yaw, z) in data.items():
-            _, e_ekf, e_hmm = ekf_hmm_errors(ekf, ms, Q2_base * s, t_ns, truth, yaw, z)
-            rm[man][i] = rmse(e_hmm)
-            ekf_rm[man] = rmse(e_ekf)
-    pooled = pooled_rmse([(rm[m], data[m][1].shape[0] * data[m][1].shape[1]) for m in KNOWN])
-    ekf_pooled = pooled_rmse([(ekf_rm[m][None], data[m][1].shape[0] * data[m][1].shape[1]) for m in KNOWN])[0]
-    # scored on the EKF's RMSE scale, so the score reads as "EKF+HMM RMSE / EKF RMSE", averaged
-    score = normalised_rmse(pooled, ekf_pooled)
-    best = grid[int(np.argmin(score))]
-    recs = []
-    for i, s in enumerate(grid):
-        rec = {"q2_scale": s, "score": float(score[i]), "chosen": s == best}
-        for grp, idx in HMM_GROUPS.items():
-            rec[f"hmm_rmse_{grp}"] = float(np.sqrt(np.sum(pooled[i, list(idx)] ** 2)))
-            rec[f"ekf_rmse_{grp}"] = float(np.sqrt(np.sum(ekf_pooled[list(idx)] ** 2)))
-        recs.append(rec)
-    return best, pd.DataFrame(recs)
+    n_of = {m: d[1].shape[0] * d[1].shape[1] for m, d in data.items()}
+    truth_q2, ekf_q2 = estimated_frames(ekf, train, radar, seed, int(st["q2_runs"]))
+    recs, cands = [], []
+    ekf_pooled = None
+    for gi in st["gmr_inputs"]:
+        for gate in st["gates"]:
+            msv = model_variant(ms, gmr_input=gi, gate_mps2=float(gate))
+            bases = {src: q2_from_runs(msv, truth_q2, input_state=None if src == "truth" else ekf_q2)
+                     for src in st["q2_inputs"]}
+            first = next(iter(bases.values()))
+            rm = {(src, sc): {} for src in bases for sc in grid}
+            ekf_rm = {}
+            for man, (t_ns, truth, yaw, z) in data.items():
+                prior = truth_prior(truth, int(t_ns[0]))
+                tr = run_ekf_hmm(ekf, prior, t_ns, z, msv, first, yaw_rad=yaw, store="mean")
+                ekf_rm[man] = rmse(tr.ekf.mean - truth)
+                for src, Qb in bases.items():
+                    for sc in grid:
+                        h = hmm_filter(ekf, prior, t_ns, z, Qb * sc, tr.hmm_axes, tr.acc_hmm, tr.jerk_hmm,
+                                       store="mean")
+                        rm[(src, sc)][man] = rmse(h.mean - truth)
+            if ekf_pooled is None:
+                ekf_pooled = pooled_rmse([(ekf_rm[m][None], n_of[m]) for m in KNOWN])[0]
+            for (src, sc), per in rm.items():
+                pooled = pooled_rmse([(per[m][None], n_of[m]) for m in KNOWN])[0]
+                rec = {"gmr_input": gi, "gate_mps2": float(gate), "q2_input": src, "q2_scale": sc,
+                       "score": float(normalised_rmse(pooled[None], ekf_pooled)[0])}
+                for grp, idx in HMM_GROUPS.items():
+                    rec[f"hmm_rmse_{grp}"] = float(np.sqrt(np.sum(pooled[list(idx)] ** 2)))
+                    rec[f"ekf_rmse_{grp}"] = float(np.sqrt(np.sum(ekf_pooled[list(idx)] ** 2)))
+                recs.append(rec)
+                cands.append((msv, bases[src] * sc))
+            progress(f"  gmr_input {gi}, gate {gate:g}: best score "
+                     f"{min(r['score'] for r in recs if r['gmr_input'] == gi and r['gate_mps2'] == gate):.3f}")
+    table = pd.DataFrame(recs)
+    i = int(table["score"].idxmin())
+    table["chosen"] = table.index == i
+    best = {k: table.loc[i, k] for k in ("gmr_input", "gate_mps2", "q2_input", "q2_scale", "score")}
+    best.update(model_set=cands[i][0], Q2=cands[i][1])
+    return best, table
 
 
 def group_rmse(err: np.ndarray) -> dict[str, float]:
@@ -378,7 +443,7 @@ def acceptance(ch: pd.DataFrame) -> dict[str, Any]:
 # -- report ------------------------------------------------------------------------------------------
 
 def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=None, q2t=None, scen=None,
-                 hrm=None, ch=None, acc=None) -> None:
+                 hrm=None, ch=None, acc=None, best=None) -> None:
     """``report.md``: the q search, the Monte Carlo summary, the EKF+HMM tables and the checks."""
     L = [f"# Seed-000 estimation study (size {size}, seed {seed})", "",
          f"Radar: the seed-000 model (Table 2.1 σ = {radar.sigma}, τ_RD = {radar.tau_rd_s} s) at the fixed "
@@ -401,10 +466,16 @@ def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=Non
     if hrm is not None:
         L += ["## EKF+HMM (Ch. 4)", "",
               f"HMMs truth-trained as in `study_seed000_classification` (features `{cfg.feature_set}`, "
-              f"{st['runs']} runs per maneuver, 70/30). Q₂ = covariance of the A_H/B one-step errors on the "
-              f"training truth × **{q2_scale:g}** (scale grid-searched on {st['tune_runs']} training runs per "
-              "maneuver by the EKF+HMM's RMSE normalised by the EKF's, then frozen):", "",
-              md_table(q2t[["q2_scale", "score", *[f"hmm_rmse_{g}" for g in HMM_GROUPS]]], "{:.3f}"), "",
+              f"{st['runs']} runs per maneuver, 70/30). Searched on training runs only, then frozen: the GMR "
+              f"input, the gate, what the GMR sees when Q₂ is estimated (`truth`, or `ekf`: the baseline EKF's "
+              f"posteriors of {st['q2_runs']} training runs per maneuver; the one-step errors are always against "
+              f"the truth) and the Q₂ scale; score = mean over the 9 components of the EKF+HMM RMSE / the EKF RMSE "
+              f"on {st['tune_runs']} training runs per maneuver (< 1: better). **Chosen: GMR input "
+              f"`{best['gmr_input']}`, gate {best['gate_mps2']:g} m/s², Q₂ from `{best['q2_input']}` inputs × "
+              f"{q2_scale:g}.** Best of each GMR input / Q₂ source:", "",
+              md_table(q2t.loc[q2t.groupby(["gmr_input", "gate_mps2", "q2_input"])["score"].idxmin(),
+                               ["gmr_input", "gate_mps2", "q2_input", "q2_scale", "score",
+                                *[f"hmm_rmse_{g}" for g in HMM_GROUPS], "ekf_rmse_acc"]], "{:.3f}"), "",
               f"S1 (best) / S2 (worst): the test run with the lowest / highest summed absolute EKF+HMM error, "
               f"each re-run {st['noise_runs']}× with new radar noise from its true state. MAoT beside the "
               f"thesis' Chapter-4 table (digest §11); `hmm_mode_pct` = steps predicted with HMM inputs.", "",
@@ -493,6 +564,9 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
     skip = set(st["skip"] or ())
     if skip - {"hmm"}:
         raise ConfigError(f"studies.{NAME}.skip: unknown part(s) {sorted(skip - {'hmm'})}; known: hmm")
+    for key, known in (("gmr_inputs", ("pos", "pos_fd", "pos_vel")), ("q2_inputs", ("truth", "ekf"))):
+        if not st[key] or set(st[key]) - set(known):
+            raise ConfigError(f"studies.{NAME}.{key}: {st[key]!r} must be a non-empty list of {', '.join(known)}")
     bad = sorted(set(st["mc_maneuvers"]) - set(ALL))
     if bad:
         raise ConfigError(f"studies.{NAME}.mc_maneuvers: unknown maneuver(s) {bad}; known: {', '.join(ALL)}")
@@ -526,20 +600,20 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
     write_table(mc_sum, paths["mc_rmse"], name="seed000_ekf_mc_rmse", extra={"q": q})
     say(mc_sum.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
 
-    cfg = q2_scale = q2t = scen = hrm = hmm_time = ch = acc = None
+    cfg = q2_scale = q2t = scen = hrm = hmm_time = ch = acc = best = None
     if "hmm" not in skip:
-        from ..estimate.ekf_hmm import q2_from_runs
-
         progress("training one HMM per known maneuver (truth)")
         cfg, ms = train_models(train, hmm, seed, features=st["features"])
-        truth_train = pd.concat([train[m].assign(run_id=m + "-" + train[m]["run_id"].astype(str)) for m in KNOWN],
-                                ignore_index=True)
-        Q2_base = q2_from_runs(ms, truth_train)
-        progress(f"Q2 scale search over {st['q2_scale_grid']}")
-        q2_scale, q2t = tune_q2_scale(ekf, ms, Q2_base, train, radar, st, seed)
-        write_table(q2t, paths["q2_tuning"], name="seed000_ekf_q2_tuning", extra={"q2_scale": q2_scale})
-        say(q2t.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
-        Q2 = Q2_base * q2_scale  # frozen from here on
+        progress(f"EKF+HMM search on training runs: gmr_input {st['gmr_inputs']} × gate {st['gates']} × "
+                 f"Q2 input {st['q2_inputs']} × scale {st['q2_scale_grid']}")
+        best, q2t = tune_ekf_hmm(ekf, ms, train, radar, st, seed, progress)
+        q2_scale = best["q2_scale"]
+        write_table(q2t, paths["q2_tuning"], name="seed000_ekf_q2_tuning",
+                    extra={k: (float(v) if isinstance(v, (float, np.floating)) else str(v))
+                           for k, v in best.items() if k not in ("model_set", "Q2")})
+        with pd.option_context("display.width", 250, "display.max_columns", 30):
+            say(q2t.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
+        ms, Q2 = best["model_set"], best["Q2"]  # frozen from here on
 
         scen, rms, hts = [], [], []
         for man in KNOWN:
@@ -564,7 +638,7 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
             write_table(pd.DataFrame(), paths[k], name=f"seed000_ekf_{k}", extra={"skipped": True})
 
     write_report(paths["report"], size, st, seed, q, qt, mc_sum, radar, cfg=cfg, q2_scale=q2_scale, q2t=q2t,
-                 scen=scen, hrm=hrm, ch=ch, acc=acc)
+                 scen=scen, hrm=hrm, ch=ch, acc=acc, best=best)
 
     res = Results()
     res.add("seed000_ekf_q_tuned", f"{q:g}",
@@ -579,7 +653,7 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
         res.add(f"seed000_ekf_mc_{r.maneuver}_ekf_nees_in_band_pct", f"{r.ekf_nees_in_band_pct:.1f}",
                 f"Monte Carlo {r.maneuver}: share of steps whose run-averaged EKF NEES lies in the 95 % χ² band (%).")
     if hrm is not None:
-        hmm_results(res, q2_scale, scen, ch, acc)
+        hmm_results(res, best, scen, ch, acc)
     res.add("seed000_ekf_study_wall_s", f"{progress.elapsed:.0f}",
             "Wall time of the study (s), simulation to results, page excluded.")
     res.write(paths["results"])
@@ -587,7 +661,8 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
              ("Monte Carlo runs", str(st["mc_runs"])), ("noise realisations", str(st["noise_runs"])),
              ("q", f"{q:g}")]
     if hrm is not None:
-        facts += [("Q₂ scale", f"{q2_scale:g}"), ("features", cfg.feature_set)]
+        facts += [("features", cfg.feature_set), ("GMR input", str(best["gmr_input"])),
+                  ("gate", f"{best['gate_mps2']:g} m/s²"), ("Q₂", f"{best['q2_input']} inputs × {q2_scale:g}")]
     build_study_page(NAME, paths["page"], results=paths["results"], report_md=paths["report"], template=template,
                      definitions=res.definitions, figures=figures(qt, mc_time, hmm_time, hrm),
                      title=f"Study: seed-000 EKF, RTS and EKF+HMM ({size})",
@@ -597,10 +672,18 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
                                     "wall_s": round(progress.elapsed, 1)})
 
 
-def hmm_results(res: Results, q2_scale, scen, ch, acc) -> None:
-    """The EKF+HMM's RESULT lines: Q₂ scale, MAoT, RMSE change per group, the acceptance counts."""
-    res.add("seed000_ekf_hmm_q2_scale", f"{q2_scale:g}",
-            "The Q₂ scale grid-searched on training runs (EKF+HMM normalised RMSE), then frozen.")
+def hmm_results(res: Results, best, scen, ch, acc) -> None:
+    """The EKF+HMM's RESULT lines: the frozen settings, MAoT, RMSE change per group, the acceptance counts."""
+    res.add("seed000_ekf_hmm_q2_scale", f"{best['q2_scale']:g}",
+            "The Q₂ scale grid-searched on training runs (EKF+HMM RMSE / EKF RMSE), then frozen.")
+    res.add(f"seed000_ekf_hmm_q2_input_{best['q2_input']}", 1,
+            "What the GMR saw when Q₂ was estimated (named in the metric, truth or ekf; value always 1).")
+    res.add(f"seed000_ekf_hmm_gmr_input_{best['gmr_input']}", 1,
+            "The GMR conditioning block chosen on training runs (named in the metric; value always 1).")
+    res.add("seed000_ekf_hmm_gate_mps2", f"{best['gate_mps2']:g}",
+            "The GMR outlier gate chosen on training runs (m/s² per step; thesis 15).")
+    res.add("seed000_ekf_hmm_training_score", f"{best['score']:.3f}",
+            "Training-run score of the chosen settings: mean over components of EKF+HMM RMSE / EKF RMSE.")
     for r in scen.itertuples():
         res.add(f"seed000_ekf_hmm_{r.maneuver}_{r.scenario}_MAoT_pct", f"{r.MAoT_pct:.2f}",
                 f"{r.maneuver} {r.scenario}: classifier MAoT over the noise realisations (%; thesis "

@@ -103,3 +103,22 @@ def test_pooled_rmse_equals_one_rmse_over_all_samples(rng):
     rb = np.sqrt(np.mean(b ** 2, axis=(0, 1)))[None]
     both = np.sqrt(np.mean(np.concatenate([a.reshape(-1, 9), b.reshape(-1, 9)]) ** 2, axis=0))
     np.testing.assert_allclose(s0e.pooled_rmse([(ra, 150), (rb, 160)])[0], both, rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_the_target_plans_only_the_study_and_plotly_js():
+    import os
+    import re
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    p = subprocess.run([str(Path(sys.executable).parent / "snakemake"), "--cores", "2", "-n", "--forceall",
+                        "study_seed000_ekf"], cwd=root, capture_output=True, text=True, timeout=300,
+                       env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    out = p.stdout + p.stderr
+    assert p.returncode == 0, out[-3000:]
+    m = re.search(r"Job stats:\njob\s+count\n[- ]+\n(.*?)\ntotal", out, re.S)
+    assert m, out[-3000:]
+    jobs = {r.split()[0]: int(r.split()[1]) for r in m.group(1).strip().splitlines()}
+    assert jobs == {"plotly_js": 1, "study_seed000_ekf": 1}

@@ -85,3 +85,29 @@ rule study_flightcoach_ekf_hmm:
         "envs/pipeline.yaml"
     script:
         "scripts/study.py"
+
+
+rule study_seed000_ekf:
+    input:
+        template="reports/templates/study.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        **study_outputs("seed000_ekf", models=False),
+    params:
+        code_version=PIPELINE_VERSION,
+        study="seed000_ekf",
+        config=config["studies"],
+        job={"seed": config["seed"]},
+        sections={"simulate": config["simulate"], "hmm": config["hmm"]},
+    log:
+        "results/logs/study_seed000_ekf/study.log",
+    benchmark:
+        "results/benchmarks/study_seed000_ekf/study.tsv"
+    threads: 1
+    resources:
+        mem_mb=8000,
+        runtime=120,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/study.py"

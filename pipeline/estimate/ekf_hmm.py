@@ -263,7 +263,45 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
     axes = np.zeros_like(use)
     axes[:, 1:] = use[:, :-1]
 
+    hmm = hmm_filter(ekf, prior, t_ns, z, Q2, axes, acc, jerk, store=store)
+    return EkfHmmTrack(base, hmm, axes.any(axis=-1), axes, pred, V, acc, jerk, gated)
+
+
+def hmm_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, Q2, axes, acc, jerk, *,
+               store: str = "filtered") -> FilterTrack:
+    """The EKF+HMM filter alone, given its per-step HMM axes and GMR inputs (module docstring).
+
+    :func:`run_ekf_hmm` calls it after classifying the baseline EKF; a caller searching ``Q₂``
+    reuses one classification (``track.hmm_axes``, ``track.acc_hmm``, ``track.jerk_hmm``),
+    which does not depend on ``Q₂``.
+
+    Parameters
+    ----------
+    ekf, prior, t_ns, z
+        As :func:`run_ekf_hmm` (``prior`` batch ``(R,)``).
+    Q2 : array_like, shape (9, 9)
+    axes : ndarray of bool, shape (R, T, 3)
+        Step k is predicted with HMM inputs on these NED axes.
+    acc, jerk : ndarray, shape (R, T, 3)
+        GMR inputs; the prediction into step k takes those of step k−1.
+    store : {"filtered", "mean"}
+
+    Returns
+    -------
+    FilterTrack
+    """
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    if prior.mean.ndim == 1:
+        prior = GaussianState(prior.mean[None], prior.cov[None], prior.t_ns)
+    Q2 = np.asarray(Q2, dtype=np.float64)
+    if Q2.shape != (9, 9) or not np.all(np.isfinite(Q2)):
+        raise EkfHmmError(f"hmm_filter: Q2 must be a finite 9×9 matrix, got shape {Q2.shape}")
     z = np.asarray(z, dtype=np.float64)
+    R, T = prior.mean.shape[0], len(t_ns)
+    axes = np.asarray(axes, dtype=bool)
+    if axes.shape != (R, T, 3) or np.shape(acc) != (R, T, 3) or np.shape(jerk) != (R, T, 3):
+        raise EkfHmmError(f"hmm_filter: axes/acc/jerk must be shaped {(R, T, 3)}, got {axes.shape}, "
+                          f"{np.shape(acc)}, {np.shape(jerk)}")
     mean = np.empty((T, R, 9))
     cov = np.empty((T, R, 9, 9)) if store == "filtered" else None
     nis = np.empty((T, R))
@@ -290,12 +328,11 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
     def rt(a):
         return None if a is None else np.swapaxes(a, 0, 1)
 
-    hmm = FilterTrack(t_ns, rt(mean), rt(cov), rt(nis), rt(dof))
-    return EkfHmmTrack(base, hmm, axes.any(axis=-1), axes, pred, V, acc, jerk, gated)
+    return FilterTrack(t_ns, rt(mean), rt(cov), rt(nis), rt(dof))
 
 
 def q2_from_runs(model_set, truth_state: pd.DataFrame, *, scale: float = 1.0, run_col: str = "run_id",
-                 box_heading_rad: float = 0.0, reset_t_ns=None) -> F64:
+                 box_heading_rad: float = 0.0, reset_t_ns=None, input_state: pd.DataFrame | None = None) -> F64:
     """``Q₂``: second moment of the A_H/B one-step errors of ``[r, v, a]`` on truth runs × ``scale``.
 
     For every model-rate sample k with a known classification and every axis kept by the gate,
@@ -315,6 +352,11 @@ def q2_from_runs(model_set, truth_state: pd.DataFrame, *, scale: float = 1.0, ru
         Training runs: ``STATE_COLUMNS``, ``t_ns``, ``run_col`` (+ ``yaw_rad``, ``label``).
     scale : float
         The one tuned scalar ``s`` (> 0).
+    input_state : DataFrame, optional
+        What the classifier and the GMR see (same runs and times as ``truth_state``; default
+        the truth itself). With the baseline EKF's posteriors of the training runs
+        (:func:`ekf_state_frame`), ``e_k`` holds the input errors the EKF+HMM meets at run time
+        (GMR fed by estimates, not by the truth); the errors are still taken against the truth.
 
     Returns
     -------
@@ -331,8 +373,12 @@ def q2_from_runs(model_set, truth_state: pd.DataFrame, *, scale: float = 1.0, ru
     missing = [c for c in (*STATE_COLUMNS, "t_ns", run_col) if c not in truth_state.columns]
     if missing:
         raise EkfHmmError(f"q2_from_runs: truth table lacks column(s) {missing}")
-    cls = model_set.classify(truth_state, run_col=run_col, box_heading_rad=box_heading_rad,
-                             reset_t_ns=reset_t_ns)
+    if input_state is not None:
+        miss = [c for c in (*STATE_COLUMNS, "t_ns", run_col) if c not in input_state.columns]
+        if miss:
+            raise EkfHmmError(f"q2_from_runs: input_state lacks column(s) {miss}")
+    cls = model_set.classify(truth_state if input_state is None else input_state, run_col=run_col,
+                             box_heading_rad=box_heading_rad, reset_t_ns=reset_t_ns)
     rate = model_set.config.rate_hz
     errs = []
     by_run = dict(run_sequences(cls, run_col=run_col))

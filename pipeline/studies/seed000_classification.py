@@ -132,6 +132,35 @@ def load_sets(run: _Run, sets: Path | None):
     return train, test
 
 
+def train_models(train: Mapping[str, pd.DataFrame], hmm: Mapping | None, seed: int, *,
+                 features: str | None = None, n_states=None) -> tuple[ModelsConfig, ManeuverModelSet]:
+    """Step 2: one HMM per known maneuver M1–M4, fitted to the truth training runs.
+
+    Parameters
+    ----------
+    train : mapping
+        ``{maneuver: training set}`` (bulk-set tables with ``run_id``), at least M1–M4.
+    hmm : mapping or None
+        The ``hmm`` config section.
+    seed : int
+        The master seed (training is seeded by it).
+    features : str, optional
+        Override ``hmm.feature_set`` (``state9``, ``state9h``).
+    n_states : int, "auto" or None
+        Override ``hmm.n_states`` for every maneuver.
+
+    Returns
+    -------
+    (ModelsConfig, ManeuverModelSet)
+    """
+    over: dict[str, Any] = {"feature_set": features} if features else {}
+    if n_states is not None:
+        over["n_states"] = n_states if n_states == "auto" else int(n_states)
+    cfg = ModelsConfig.from_section(hmm, seed=int(seed), **over)
+    ms = ManeuverModelSet(config=cfg).fit(pd.concat([tag(train[m], m) for m in KNOWN], ignore_index=True))
+    return cfg, ms
+
+
 def detection_delay(pred, t_s, t_switch, final, hold=5):
     """Seconds from the switch to the first sample from which ``final`` holds ``hold`` samples."""
     ok = (pred == final) & (t_s >= t_switch)
@@ -495,17 +524,12 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
     progress(f"simulating {run.runs} runs of each of {', '.join(ALL)}" if sets is None else f"reading {sets}")
     train, test = load_sets(run, sets)
     progress("training one HMM per known maneuver")
-    over: dict[str, Any] = {"feature_set": st["features"]} if st["features"] else {}
-    if st["n_states"] is not None:
-        over["n_states"] = st["n_states"] if st["n_states"] == "auto" else int(st["n_states"])
-    # training is seeded by the master seed
-    cfg = ModelsConfig.from_section(hmm, seed=run.seed, **over)
     mdir = paths["model_params"].parent
     if paths["model_meta"].parent != mdir or (paths["model_params"].name, paths["model_meta"].name) != (
             "params.npz", "meta.json"):
         raise ValueError(f"study outputs: model_params/model_meta must be <dir>/params.npz and <dir>/meta.json, "
                          f"got {paths['model_params']} and {paths['model_meta']}")
-    ms = ManeuverModelSet(config=cfg).fit(pd.concat([tag(train[m], m) for m in KNOWN], ignore_index=True))
+    cfg, ms = train_models(train, hmm, run.seed, features=st["features"], n_states=st["n_states"])
     ms.save(mdir)
     say(f"trained {ms.labels_} on {sum(train[m]['run_id'].nunique() for m in KNOWN)} runs in "
         f"{progress.elapsed:.0f} s")

@@ -11,7 +11,7 @@ import pytest
 from helpers_maneuvers import synth_bulk
 from pipeline.estimate.base import ConstantAcceleration, GaussianState
 from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
-from pipeline.estimate.ekf_hmm import (EkfHmmError, ekf_state_frame, hmm_step, q2_from_runs,
+from pipeline.estimate.ekf_hmm import (EkfHmmError, ekf_state_frame, hmm_filter, hmm_step, q2_from_runs,
                                        run_ekf_hmm)
 from pipeline.estimate.models import (STATE_COLUMNS, RadarModel, ca_transition, hmm_input,
                                       hmm_transition, initial_cov, white_jerk_q)
@@ -169,3 +169,32 @@ def test_state_frame_lays_runs_end_to_end_with_their_heading():
     np.testing.assert_array_equal(df[list(STATE_COLUMNS)].to_numpy(), mean.reshape(6, 9))
     with pytest.raises(EkfHmmError, match="2 times for 3 steps"):
         ekf_state_frame(mean, [0, 1])
+
+
+def test_the_hmm_filter_alone_reproduces_the_ekf_hmm_from_its_classification(trained, rng):
+    ms, data = trained
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M1", "M2"), rng)
+    Q2 = q2_from_runs(ms, data)
+    tr = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2)
+    again = hmm_filter(ekf, prior, t_ns, z, Q2, tr.hmm_axes, tr.acc_hmm, tr.jerk_hmm)
+    np.testing.assert_array_equal(again.mean, tr.hmm.mean)
+    np.testing.assert_array_equal(again.cov, tr.hmm.cov)
+    # a larger Q₂ changes only the EKF+HMM, never the classification it is given
+    bigger = hmm_filter(ekf, prior, t_ns, z, 10 * Q2, tr.hmm_axes, tr.acc_hmm, tr.jerk_hmm, store="mean")
+    assert bigger.cov is None and not np.allclose(bigger.mean, tr.hmm.mean)
+    with pytest.raises(EkfHmmError, match=r"axes/acc/jerk must be shaped"):
+        hmm_filter(ekf, prior, t_ns, z, Q2, tr.hmm_axes[:, :-1], tr.acc_hmm, tr.jerk_hmm)
+
+
+def test_q2_from_estimated_inputs_equals_the_truth_q2_on_the_truth_and_grows_with_input_noise(trained, rng):
+    ms, data = trained
+    q1 = q2_from_runs(ms, data)
+    np.testing.assert_array_equal(q2_from_runs(ms, data, input_state=data), q1)
+    noisy = data.copy()
+    for c in STATE_COLUMNS[:3]:
+        noisy[c] = noisy[c] + rng.normal(0.0, 0.5, len(noisy))
+    qn = q2_from_runs(ms, data, input_state=noisy)
+    # the errors are still taken against the truth, with the GMR fed by noisy states
+    assert np.trace(qn[6:, 6:]) > np.trace(q1[6:, 6:])
+    with pytest.raises(EkfHmmError, match=r"input_state lacks column"):
+        q2_from_runs(ms, data, input_state=noisy.drop(columns=["pos_n_m"]))

@@ -1,4 +1,5 @@
-"""Seed-000 classification study on simulated truth: Tables 3.1–3.4, 3.10–3.12, GMR errors.
+"""Seed-000 classification study on simulated truth: Tables 3.1–3.4, 3.10–3.12, GMR errors;
+with ``ekf_input`` also on EKF estimates: Tables 3.5–3.8, 3.13–3.15.
 
 Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
 
@@ -25,11 +26,23 @@ Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
    ((3.28), ``Δr`` only), ``acc_interval`` (``â = Δv/dt`` as printed, §13.3) and ``acc_posvel``
    (conditioned on ``Δr`` and the true ``Δv``: information a position-only FD does not have).
 
+6. With ``ekf_input: true`` (``studies.seed000_classification``): the same train/test runs
+   filtered by the CA EKF on radar synthesised from the truth, exactly as the ``ekf_sets`` rule
+   filters the workflow's sets (:func:`pipeline.estimate.sets.ekf_set`, ``estimate.sets``,
+   radar ``simulate.sensors.radar``, ``ekf_rng(seed, "<M>_<train|test>")``): Tables 3.5–3.8
+   (one-class/confidence, train/test, cumulative) with the truth-trained models — the thesis
+   setup — and with models trained the same way on the EKF estimates of the training runs
+   (``trained_on``: truth | ekf); Tables 3.13–3.15: the switch cells on EKF estimates
+   (``ekf_rng(seed, "switch_<K>_<t>s")``), confidence classifier, cumulative (thesis) and
+   windowed (ours), both trainings. Thesis values: digest §11 (truth-trained on EKF input).
+
 Outputs (:data:`OUTPUT_TABLES` under ``results/studies/seed000_classification/``):
 ``report.md`` (every table beside the thesis, the acceptance checks, and where our
 maneuvers behave differently, with numbers), ``results.txt``, ``tables_3_1_3_4.parquet``,
 ``confusion.parquet``, ``switch_tables.parquet``, ``switch_shift.parquet``,
-``gmr_error.parquet``, ``gmr_rmse.parquet``, ``models/`` (params.npz + meta.json), and the
+``gmr_error.parquet``, ``gmr_rmse.parquet``, ``ekf_tables.parquet`` and ``ekf_switch_tables.parquet``
+(empty, marked ``skipped``, without ``ekf_input``), ``models/`` (params.npz + meta.json; the
+truth-trained set), and the
 page ``results/report/studies/seed000_classification.html``.
 
 Sizes (``studies.size``; ``runs`` per maneuver / ``switch_runs`` per switch cell): ``tiny``
@@ -844,6 +857,7 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
                      title=f"Study: seed-000 classification ({run.runs} runs per maneuver)",
                      facts=[("size", size), ("seed", str(run.seed)), ("runs per maneuver", str(run.runs)),
                             ("runs per switch cell", str(run.switch_runs)), ("features", cfg.feature_set),
+                            ("input", "truth" if es is None else f"truth and EKF estimates (q = {es.q:g} m²/s⁵)"),
                             ("tables", ", ".join(f"{t}.parquet" for t in OUTPUT_TABLES))])
     return StudyResult(name=NAME, status="ok", results=dict(res.values),
                        diagnostics={"size": size, "seed": run.seed, "settings": st,

@@ -62,6 +62,15 @@ def test_the_gmr_error_table_equals_the_old_script_summary_at_tiny_size(tiny, go
 
 
 @pytest.mark.slow
+def test_without_ekf_input_the_ekf_tables_are_written_empty_and_marked_skipped(tiny):
+    from pipeline.io.parquet import read_table_meta
+
+    for t in EKF_TABLES:
+        assert tiny.table(t).empty and read_table_meta(tiny.outputs[t])["skipped"] is True
+    assert not [m for m in tiny.figures if m.startswith("seed000_ekf_")]
+
+
+@pytest.mark.slow
 def test_the_tiny_study_meets_the_acceptance_figures_of_the_script_smoke_test(tiny):
     # the assertions of the former tests/models/test_models_studies.py::test_seed000_study_smoke
     r = tiny.figures

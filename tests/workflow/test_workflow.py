@@ -65,7 +65,7 @@ def _planned_jobs(wd: Path, *args: str) -> dict[str, int]:
 DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
 SIM = ("sim-M1-000-bin\tresults/sim/logs/sim-M1-000.bin\tsim-quad\ttest\t"
        "results/sim/logs/sim-M1-000.bin.truth.parquet\t\tsimulated M1 with truth side-car")
-STAGES = ("demo_log", "simulate_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
+STAGES = ("demo_log", "simulate_sets", "ekf_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
           "evaluate_model", "classify_flight", "flight_report", "model_report", "report_index", "plotly_js", "all")
 
 
@@ -94,10 +94,11 @@ def test_dry_run_default_config_plans_every_stage():
     ("simulate", {"simulate_sets", "simulate_logs", "simulate"}),
     ("ingest", {"demo_log", "simulate_logs", "ingest_flight", "ingest"}),
     ("preprocess", {"demo_log", "simulate_logs", "ingest_flight", "preprocess_flight", "preprocess"}),
-    ("train", {"simulate_sets", "train_model", "evaluate_model", "train"}),
-    ("classify", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+    # ekf_sets: the EKF estimates of the sets the shipped simekf model set (input: ekf) trains on
+    ("train", {"simulate_sets", "ekf_sets", "train_model", "evaluate_model", "train"}),
+    ("classify", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "classify_flight", "classify"}),
-    ("report", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+    ("report", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                 "train_model", "evaluate_model", "classify_flight", "plotly_js", "flight_report",
                 "model_report", "report_index", "report"}),
 ])
@@ -128,6 +129,8 @@ BAD_CONFIG = [
     ("model_sets", "model_sets: {sim: {colour: red}}\n", "model_sets.sim.colour"),
     ("model_sets", "model_sets: {sim: {data: simulated, vehicles: [q], hmm: {decision: maybe}}}\n",
      "model_sets.sim.hmm.decision"),
+    ("model_sets", "model_sets: {x: {data: flights, vehicles: [q], input: ekf}}\n", "model_sets.x.input"),
+    ("estimate", "estimate: {sets: {qq: 1}}\n", "estimate.sets.qq"),
     ("studies", "studies: {size: huge}\n", "studies.size"),
 ]
 

@@ -439,9 +439,10 @@ def headline(res: Results, run: _Run, cfg, ms, tables, m5_diag, alt_mode, sw=Non
                         f"Mean over M1–M4 of the acceleration RMSE (m/s²) of the GMR variant {what[suffix]}.")
 
 
-#: seed 000 Tables 3.5–3.8: (split, decision) of each (EKF input)
+#: seed 000 Tables 3.5–3.8: (split, decision) of each (EKF input); ``3.8+bg`` (ours): the
+#: confidence decision with the background model as a rival, as ``3.4+bg``
 EKF_TABLES = {"3.5": ("train", "oneclass"), "3.6": ("train", "confidence"),
-              "3.7": ("test", "oneclass"), "3.8": ("test", "confidence")}
+              "3.7": ("test", "oneclass"), "3.8": ("test", "confidence"), "3.8+bg": ("test", "confidence_bg")}
 #: modes of the EKF-input switch tables 3.13–3.15 (thesis: cumulative; windowed: ours)
 EKF_SWITCH_MODES = ("cumulative", "windowed")
 
@@ -546,6 +547,16 @@ def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None) -> No
             res.add("seed000_ekf_trained_cf_M5_unknown_FA_pct", f"{m5['FA_pct'].iloc[0]:.2f}",
                     "% of M5's EKF-estimated test runs called unknown at the end by the EKF-trained confidence "
                     "classifier.")
+    for trained_on in sorted(set(et.trained_on), key=lambda x: x != "truth"):
+        bg, m5 = rows("3.8+bg", trained_on), rows("3.8+bg", trained_on, ("M5",))
+        if len(bg):
+            res.add(f"seed000_ekf_cfbg_{trained_on}_trained_test_mean_MAoT_pct", f"{bg['MAoT_pct'].mean():.2f}",
+                    f"Mean over M1–M4 of the EKF-input test MAoT with the background rival (3.8+bg, ours), "
+                    f"{trained_on}-trained models.")
+        if len(m5):
+            res.add(f"seed000_ekf_cfbg_{trained_on}_trained_M5_unknown_FA_pct", f"{m5['FA_pct'].iloc[0]:.2f}",
+                    f"% of M5's EKF-estimated test runs called unknown at the end with the background rival "
+                    f"(3.8+bg, ours), {trained_on}-trained models.")
     if esw is not None and len(esw):
         for trained_on in sorted(set(esw.trained_on), key=lambda x: x != "truth"):
             for mode in EKF_SWITCH_MODES:

@@ -10,7 +10,7 @@ import pipeline
 from pipeline.config import ConfigError, validate_config
 from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest
 from pipeline.io.schema import STREAM_NAMES
-from pipeline.models.run import check_model_sets, model_set_config
+from pipeline.models.run import model_set_config
 from pipeline.report.summary import run_summary
 from pipeline.simulate.run import planned_logs, planned_sets
 from pipeline.studies.base import STUDY_TABLES
@@ -21,7 +21,6 @@ PIPELINE_VERSION = pipeline.__version__
 # a bad key or value stops the run here with one line naming it
 try:
     _validated = validate_config(config, source=" + ".join(map(str, workflow.configfiles)) or "config")
-    check_model_sets(_validated)
 except ConfigError as _exc:
     sys.exit(f"uavpipe: {_exc}")
 config.clear()

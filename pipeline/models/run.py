@@ -90,23 +90,6 @@ class ModelStageResult:
 
 
 
-def check_model_sets(config: Mapping) -> None:
-    """Cross-key checks of ``model_sets`` the schema cannot state: ``input: ekf`` needs ``data:
-    simulated`` (the EKF sets are estimates of the simulated truth).
-
-    Raises
-    ------
-    ConfigError
-        One line naming the model set and key.
-    """
-    for name, spec in dict(config.get("model_sets") or {}).items():
-        inp = spec.get("input", "truth")
-        if inp not in INPUTS:
-            raise ConfigError(f"model_sets.{name}.input: {inp!r} is not one of {', '.join(INPUTS)}")
-        if inp == "ekf" and spec.get("data", "simulated") != "simulated":
-            raise ConfigError(f"model_sets.{name}.input: ekf needs data: simulated (got data: {spec.get('data')})")
-
-
 def model_set_config(config: Mapping, model_set: str) -> dict:
     """The entry ``config["model_sets"][model_set]`` with ``hmm`` = the ``hmm`` section merged
     with the entry's own ``hmm`` overrides (what the train/classify/evaluate entry points take).

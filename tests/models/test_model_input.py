@@ -9,7 +9,7 @@ import pytest
 from pipeline.config import ConfigError, validate_config
 from pipeline.io.parquet import read_table, read_table_meta
 from pipeline.models.metrics import THESIS_EKF, THESIS_SWITCH_EKF, THESIS_TRUTH, thesis_side_by_side
-from pipeline.models.run import check_model_sets, run_evaluate, run_train, thesis_tables_for
+from pipeline.models.run import run_evaluate, run_train, thesis_tables_for
 
 
 @pytest.fixture
@@ -25,9 +25,11 @@ def test_input_defaults_to_truth_and_takes_only_truth_or_ekf():
 
 
 def test_ekf_input_on_flight_data_is_a_config_error_naming_the_model_set():
-    check_model_sets({"model_sets": {"a": {"data": "simulated", "vehicles": ["q"], "input": "ekf"}}})
-    with pytest.raises(ConfigError, match=r"^model_sets\.f\.input: ekf needs data: simulated"):
-        check_model_sets({"model_sets": {"f": {"data": "flights", "vehicles": ["q"], "input": "ekf"}}})
+    validate_config({"model_sets": {"a": {"data": "simulated", "vehicles": ["q"], "input": "ekf"}}})
+    validate_config({"model_sets": {"f": {"data": "flights", "vehicles": ["q"], "input": "truth"}}})
+    with pytest.raises(ConfigError, match=r"^model_sets\.f\.input: 'ekf' is not truth with data: flights "
+                                          r"\(input: ekf needs data: simulated\)$"):
+        validate_config({"model_sets": {"f": {"data": "flights", "vehicles": ["q"], "input": "ekf"}}})
 
 
 def test_the_shipped_config_has_simekf_on_ekf_input_beside_sim_on_truth():

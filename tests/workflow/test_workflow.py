@@ -270,6 +270,31 @@ def test_two_model_sets_for_one_vehicle_are_each_trained_evaluated_and_reported(
 
 
 @pytest.mark.slow
+def test_simekf_trains_and_evaluates_on_the_ekf_sets_the_ekf_sets_rule_writes(tiny_run, tmp_path):
+    import numpy as np
+
+    from pipeline.estimate.sets import SET_COLUMNS, run_ekf_sets
+
+    res = tiny_run / "results"
+    names = [f"{m}_{p}" for m in ("M1", "M2") for p in ("train", "test")]
+    assert sorted(p.stem for p in (res / "estimate" / "sets").glob("*.parquet")) == sorted(names)
+    est = read_table(res / "estimate" / "sets" / "M1_train.parquet", SET_COLUMNS)
+    assert est["jerk_n_mps3"].isna().all() and np.isfinite(est["pos_n_m"]).all()
+    # the rule is the entry point: the same sets from the same truth, seed and config
+    cfg = {"q": 3.0, "p0_sigma": [1.0, 0.1, 0.01], "radar": {}}
+    run_ekf_sets({"sets": [res / "sim" / "sets" / "M1_train.parquet"]}, {"sets": [tmp_path / "M1_train.parquet"]},
+                 cfg, seed=20261123)
+    _frames_equal(res / "estimate" / "sets" / "M1_train.parquet", tmp_path / "M1_train.parquet")
+    meta = json.loads((res / "models" / "simekf" / "meta.json").read_text())
+    assert meta["status"] == "ok" and meta["spec"]["input"] == "ekf"
+    assert meta["training_inputs"] == [f"results/estimate/sets/{m}_train.parquet" for m in ("M1", "M2")]
+    ev = read_table(res / "models" / "simekf" / "evaluation.parquet")
+    assert set(ev["table"]) == {"3.5", "3.6", "3.7", "3.8"}
+    assert set(read_table(res / "models" / "sim" / "evaluation.parquet")["table"]) == {"3.1", "3.2", "3.3", "3.4"}
+    assert len(read_table(res / "classify" / "simekf" / "sim-M1-000-bin.parquet")) > 10
+
+
+@pytest.mark.slow
 def test_cli_simulate_equals_the_workflow(tiny_run, tmp_path):
     import hashlib
 

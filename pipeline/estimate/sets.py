@@ -64,6 +64,8 @@ from .models import STATE_COLUMNS, RadarModel, initial_cov
 
 #: the bulk-set columns (``simulate.datasets.SET_COLUMNS`` is this very tuple)
 SET_COLUMNS: tuple[schema.Column, ...] = schema.SIM_SET
+#: a run whose final position error exceeds this (m) counts as diverged (``n_diverged``)
+DIVERGED_M = 10.0
 #: the truth's jerk columns, NaN in an EKF set
 JERK_COLUMNS: tuple[str, ...] = tuple(f"jerk_{a}_mps3" for a in "ned")
 
@@ -145,7 +147,9 @@ def ekf_set(truth: pd.DataFrame, *, radar: RadarModel, q: float, rng: np.random.
         ``alt_cal_m`` = −(estimated ``pos_d``), jerk NaN.
     diagnostics : dict
         ``runs``, ``steps``, ``rmse_{pos,vel,acc}`` (estimate vs truth over all samples),
-        ``nis_mean``.
+        ``nis_mean``, ``n_diverged`` (runs ending more than :data:`DIVERGED_M` from the truth:
+        with the radar on the ground, mostly runs tracked as their mirror image below the
+        radar's horizontal plane, which range and the two direction cosines cannot tell apart).
     """
     df, x, t_ns = truth_runs(truth, where=where)
     R_, T = x.shape[:2]
@@ -153,7 +157,7 @@ def ekf_set(truth: pd.DataFrame, *, radar: RadarModel, q: float, rng: np.random.
     if R_ == 0 or T == 0:
         for c in JERK_COLUMNS:
             out[c] = np.nan
-        return out, {"runs": 0, "steps": 0}
+        return out, {"runs": 0, "steps": 0, "n_diverged": 0}
     P0 = initial_cov(tuple(float(s) for s in p0_sigma))
     x0 = x[:, 0] + rng.standard_normal((R_, 9)) * np.sqrt(np.diag(P0))
     z = np.ascontiguousarray(np.swapaxes(radar.measure(x, rng), 0, 1))  # (T, R, 4)
@@ -171,7 +175,12 @@ def ekf_set(truth: pd.DataFrame, *, radar: RadarModel, q: float, rng: np.random.
     if "alt_cal_m" in out.columns:
         out["alt_cal_m"] = -out["pos_d_m"]
     err = track.mean - x
-    diag = {"runs": int(R_), "steps": int(T), "nis_mean": float(track.nis.mean())}
+    # a direction-cosine radar does not see the sign of the third cosine: a target near the
+    # radar's horizontal plane can be tracked as its mirror image below it (the down error
+    # then grows to twice the height above the site); counted, not hidden
+    diverged = np.linalg.norm(err[:, -1, 0:3], axis=-1) > DIVERGED_M
+    diag = {"runs": int(R_), "steps": int(T), "nis_mean": float(track.nis.mean()),
+            "n_diverged": int(diverged.sum())}
     for g, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6)), ("acc", slice(6, 9))):
         diag[f"rmse_{g}"] = float(np.sqrt(np.mean(err[..., sl] ** 2)))
     return out, diag
@@ -233,9 +242,10 @@ def run_ekf_sets(inputs, outputs, config: Mapping | None, *, seed: int) -> EkfSe
         write_table(est, o, SET_COLUMNS, name=name,
                     extra={"seed": int(seed), "input": "ekf", "truth": str(i), "q": st.q,
                            "p0_sigma": list(st.p0_sigma), "radar_site_ned_m": list(st.radar.site_ned_m),
-                           "runs": diag["runs"], **{k: v for k, v in diag.items() if k.startswith("rmse")}})
+                           "runs": diag["runs"], "n_diverged": diag.get("n_diverged", 0),
+                           **{k: v for k, v in diag.items() if k.startswith("rmse")}})
         diagnostics[name] = diag
         _say(f"ekf set {name}: {diag['runs']} runs x {diag['steps']} steps"
              + (f", RMSE pos/vel/acc {diag['rmse_pos']:.2f} m / {diag['rmse_vel']:.2f} m/s / "
-                f"{diag['rmse_acc']:.2f} m/s2" if diag["runs"] else ""))
+                f"{diag['rmse_acc']:.2f} m/s2, {diag['n_diverged']} diverged" if diag["runs"] else ""))
     return EkfSetsResult("ok", diagnostics)

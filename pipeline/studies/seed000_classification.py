@@ -454,13 +454,17 @@ def ekf_settings(estimate: Mapping | None, simulate: Mapping) -> SetsSettings:
     return SetsSettings.from_config({**dict((estimate or {}).get("sets") or {}), "radar": radar})
 
 
-def ekf_of(sets: Mapping[str, pd.DataFrame], part: str, seed: int, es: SetsSettings) -> dict[str, pd.DataFrame]:
+def ekf_of(sets: Mapping[str, pd.DataFrame], part: str, seed: int, es: SetsSettings,
+           diagnostics: dict | None = None) -> dict[str, pd.DataFrame]:
     """EKF estimates of the per-maneuver sets, each drawn as the ``ekf_sets`` rule draws
-    ``<M>_<part>`` (``ekf_rng(seed, "<M>_<part>")``)."""
+    ``<M>_<part>`` (``ekf_rng(seed, "<M>_<part>")``); each set's diagnostics go into
+    ``diagnostics[<M>]`` when given."""
     out = {}
     for man, df in sets.items():
-        out[man], _ = ekf_set(df, radar=es.radar, q=es.q, p0_sigma=es.p0_sigma,
-                              rng=ekf_rng(seed, f"{man}_{part}"), where=f"{man}_{part}")
+        out[man], diag = ekf_set(df, radar=es.radar, q=es.q, p0_sigma=es.p0_sigma,
+                                 rng=ekf_rng(seed, f"{man}_{part}"), where=f"{man}_{part}")
+        if diagnostics is not None:
+            diagnostics[man] = diag
     return out
 
 
@@ -503,11 +507,14 @@ def ekf_switch_tables(models: Mapping[str, ManeuverModelSet], run: _Run, es: Set
     return pd.DataFrame(cells)
 
 
-def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None) -> None:
+def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse: pd.DataFrame) -> None:
     """The EKF-input ``RESULT`` figures (Tables 3.5–3.8, 3.13–3.15)."""
     def rows(table, trained_on, mans=KNOWN):
         return et[(et.table == table) & (et.trained_on == trained_on) & et.maneuver.isin(mans)].set_index("maneuver")
 
+    res.add("seed000_ekf_diverged_runs", int(rmse["diverged_runs"].sum() + rmse["diverged_train_runs"].sum()),
+            "Train and test runs of M1–M5 whose EKF estimate ends more than 10 m from the truth (mirror image "
+            "below the radar plane).")
     cf = pd.concat([rows("3.6", "truth"), rows("3.8", "truth")])
     res.add("seed000_ekf_cf_min_FA_pct", f"{cf['FA_pct'].min():.2f}",
             "Lowest FA over M1–M4 of the truth-trained confidence classifier on EKF input, train and test "
@@ -583,7 +590,9 @@ def ekf_report(et: pd.DataFrame, esw: pd.DataFrame | None, es: SetsSettings, rms
          f"(truth-trained models classifying EKF estimates); `trained_on: ekf` trains the same models "
          f"on EKF estimates of the training runs (noise-aware; the thesis columns stay the truth-trained "
          f"thesis values).", "",
-         "EKF error (RMSE over all samples of the test runs):", "", md_table(rmse, "{:.3f}"), "",
+         "EKF error (RMSE over all samples of the test runs; diverged: final position error > 10 m, "
+         "mostly runs near the radar's horizontal plane tracked as their mirror image below it — range "
+         "and two direction cosines do not give the sign of the third):", "", md_table(rmse, "{:.3f}"), "",
          md_table(et), ""]
     if esw is not None and len(esw):
         L += ["## EKF input: Tables 3.13–3.15 (switch scenarios, confidence)", "",
@@ -815,17 +824,18 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
                  + "".join(f"| {a} | {b} | {d['samples_pct']:.2f} | {d['in_first_pct']:.1f} | {d['runs_pct']:.1f} "
                            f"| {d['last_s']:.1f} |\n" for a, b, d in (("M4", "M2", m4m2), ("M2", "M4", m2m4))))
 
-    et = esw = None
+    et = esw = rmse = None
     if es is not None:
         # EKF input (Tables 3.5-3.8, 3.13-3.15): the same runs, filtered as the ekf_sets rule
         # filters the workflow's sets; the truth-trained models (the thesis setup) and models
         # trained the same way on the EKF estimates of the training runs
         progress("EKF input: filtering the train and test runs (radar synthesised from the truth)")
-        ekf_train, ekf_test = ekf_of(train, "train", run.seed, es), ekf_of(test, "test", run.seed, es)
-        rmse = pd.DataFrame([{"maneuver": m, **{g: float(np.sqrt(np.mean(np.square(
-            ekf_test[m][cols].to_numpy() - test[m].sort_values(["run_id", "t_ns"], kind="stable")[cols].to_numpy()))))
-            for g, cols in (("pos_m", ["pos_n_m", "pos_e_m", "pos_d_m"]), ("vel_mps", ["vel_n_mps", "vel_e_mps", "vel_d_mps"]),
-                            ("acc_mps2", ["acc_n_mps2", "acc_e_mps2", "acc_d_mps2"]))}} for m in ALL])
+        d_train, d_test = {}, {}
+        ekf_train, ekf_test = ekf_of(train, "train", run.seed, es, d_train), ekf_of(test, "test", run.seed, es, d_test)
+        rmse = pd.DataFrame([{"maneuver": m, "pos_m": d_test[m]["rmse_pos"], "vel_mps": d_test[m]["rmse_vel"],
+                              "acc_mps2": d_test[m]["rmse_acc"], "runs": d_test[m]["runs"],
+                              "diverged_runs": d_test[m]["n_diverged"],
+                              "diverged_train_runs": d_train[m]["n_diverged"]} for m in ALL])
         say(rmse.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         progress("EKF input: training one HMM per known maneuver on the EKF estimates")
         ms_ekf = ManeuverModelSet(config=cfg).fit(pd.concat([tag(ekf_train[m], m) for m in KNOWN], ignore_index=True))
@@ -853,7 +863,7 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
     res = Results()
     headline(res, run, cfg, ms, tables, m5_diag, st["alt_mode"], sw=sw, sh=sh, grmse=grmse)
     if et is not None:
-        ekf_headline(res, et, esw)
+        ekf_headline(res, et, esw, rmse)
     res.add("seed000_m4_as_m2_test_samples_pct", f"{m4m2['samples_pct']:.2f}",
             "Share of the M4 test samples the confidence rule labels M2 (Table 3.4 run; thesis §3.4.2).")
     res.add("seed000_m4_as_m2_in_first_10s_pct", f"{m4m2['in_first_pct']:.1f}",

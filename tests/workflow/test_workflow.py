@@ -366,7 +366,7 @@ def test_cli_classify_equals_the_workflow(tiny_run, tmp_path):
 def test_changing_only_the_seed_reruns_exactly_the_simulated_and_trained_outputs(tiny_run):
     jobs = _planned_jobs(tiny_run, "--config", "seed=7")
     assert {"simulate_sets", "simulate_logs", "demo_log", "train_model"} <= set(jobs), jobs
-    assert jobs["train_model"] == 3  # sim, sim2 and f3a
+    assert jobs["train_model"] == 4  # sim, sim2, simekf and f3a
     # a hyperparameter change retrains and reclassifies, but simulates and ingests nothing
     (tiny_run / "datasets" / "hmm4.yaml").write_text("hmm: {n_iter: 4}\n")
     jobs = _planned_jobs(tiny_run, "--configfile", "datasets/tiny.yaml", "datasets/hmm4.yaml")
@@ -409,8 +409,8 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     with open(wd / "datasets" / "flights.tsv", "a") as fh:
         fh.write("extra\tlogs/extra.bin\tsim-quad\ttest\tnone\t\tadded\n")
     jobs = _planned_jobs(wd)
-    # classified by both model sets of its vehicle (sim, sim2)
-    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "flight_report": 1,
+    # classified by every model set of its vehicle (sim, sim2, simekf)
+    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 3, "flight_report": 1,
                     "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
@@ -421,7 +421,8 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     assert "preprocess:" not in text
     cfg.write_text(text + "preprocess: {rate_hz: 20}\n")
     jobs = _planned_jobs(wd)
-    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "flight_report": 4, "report_index": 1,
+    # 3 sim-quad flights x 3 model sets (sim, sim2, simekf)
+    assert jobs == {"preprocess_flight": 4, "classify_flight": 9, "flight_report": 4, "report_index": 1,
                     "all": 1}, jobs
 
     # snakemake --report over the finished run

@@ -47,6 +47,8 @@ def _expand_path(p):
 SIM_SETS = planned_sets(config["simulate"])
 SIM_LOGS = planned_logs(config["simulate"])
 SIM_MANEUVERS = sorted({n.rsplit("_", 1)[0] for n in SIM_SETS if n.endswith("_test")})
+# the maneuver sets the EKF filters (rules/estimate_sets.smk): what model sets with input: ekf read
+EKF_SETS = [n for n in SIM_SETS if n.endswith(("_train", "_test"))]
 MODEL_SETS = config["model_sets"]
 STUDY_NAMES = list(STUDY_TABLES)  # rules/studies.smk: one target each, not in `all`
 for _row in _manifest.itertuples():
@@ -177,10 +179,15 @@ def _set_labels(model_set):
     return [m for m in SIM_MANEUVERS if m in spec.get("labels", SIM_MANEUVERS)]
 
 
+def _sets_dir(model_set):
+    """Where a simulated model set's bulk sets are: the truth, or its EKF estimates (input: ekf)."""
+    return "results/estimate/sets" if MODEL_SETS[model_set].get("input", "truth") == "ekf" else "results/sim/sets"
+
+
 def train_inputs(wildcards):
     m = wildcards.model_set
     if MODEL_SETS[m]["data"] == "simulated":
-        return {"sets": [f"results/sim/sets/{l}_train.parquet" for l in _set_labels(m)]}
+        return {"sets": [f"{_sets_dir(m)}/{l}_train.parquet" for l in _set_labels(m)]}
     fl = flights_of(m, "train")
     return {
         "states": [f"results/state/{f}.parquet" for f in fl],
@@ -192,8 +199,8 @@ def evaluate_inputs(wildcards):
     m = wildcards.model_set
     if MODEL_SETS[m]["data"] == "simulated":
         return {
-            "train_sets": [f"results/sim/sets/{l}_train.parquet" for l in _set_labels(m)],
-            "test_sets": [f"results/sim/sets/{l}_test.parquet" for l in SIM_MANEUVERS],
+            "train_sets": [f"{_sets_dir(m)}/{l}_train.parquet" for l in _set_labels(m)],
+            "test_sets": [f"{_sets_dir(m)}/{l}_test.parquet" for l in SIM_MANEUVERS],
         }
     return {
         "classified": [

@@ -14,7 +14,7 @@ rule study_seed000_classification:
         study="seed000_classification",
         config=config["studies"],
         job={"seed": config["seed"]},
-        sections={"simulate": config["simulate"], "hmm": config["hmm"]},
+        sections={"simulate": config["simulate"], "hmm": config["hmm"], "estimate": config["estimate"]},
     log:
         "results/logs/study_seed000_classification/study.log",
     benchmark:

@@ -1,4 +1,5 @@
-"""Classification metrics exactly as seed 000 §5 defines them, and the thesis's result tables.
+"""Classification metrics exactly as seed 000 §5 defines them, and the thesis's result tables
+(3.1–3.8 per maneuver, 3.10–3.15 switch scenarios; digest §11).
 
 * **Final accuracy (FA)**: the share of runs whose label at the last sample is correct (in a
   switch scenario the initial maneuver is judged at the switch sample, the final one at the end).
@@ -35,6 +36,23 @@ THESIS_TRUTH = {
             "M5": (100, 96.09)},
 }
 
+#: seed 000 Tables 3.5–3.8 (FA %, MAoT %): the truth-trained models classifying EKF estimates
+#: (radar-only tracking, digest §11); M5 is the unknown maneuver.
+THESIS_EKF = {
+    "3.5": {"classifier": "oneclass", "split": "train",
+            "M1": (100, 76.45), "M2": (100, 97.68), "M3": (100, 94.29), "M4": (100, 89.40)},
+    "3.6": {"classifier": "confidence", "split": "train",
+            "M1": (100, 86.94), "M2": (100, 97.64), "M3": (100, 96.04), "M4": (100, 80.83)},
+    "3.7": {"classifier": "oneclass", "split": "test",
+            "M1": (100, 77.87), "M2": (100, 97.70), "M3": (100, 94.40), "M4": (100, 89.00),
+            "M5": (100, 94.21)},
+    "3.8": {"classifier": "confidence", "split": "test",
+            "M1": (100, 87.88), "M2": (100, 97.64), "M3": (100, 96.06), "M4": (100, 80.60),
+            "M5": (100, 91.59)},
+}
+#: every thesis table of per-maneuver FA/MAoT (truth input 3.1–3.4, EKF input 3.5–3.8)
+THESIS_CLASSIFICATION = {**THESIS_TRUTH, **THESIS_EKF}
+
 #: seed 000 Tables 3.10–3.12, confidence classifier, truth input:
 #: (switch s, scenario) -> (FA initial, FA final, MAoT initial, MAoT final).
 SCENARIOS = {"A": ("M1", "M2"), "B": ("M2", "M4"), "C": ("M3", "M1"), "D": ("M4", "M3")}
@@ -47,6 +65,17 @@ THESIS_SWITCH = {
     (13, "C"): (100, 0, 98.05, 0), (13, "D"): (100, 100, 91.81, 22.14),
 }
 SWITCH_TABLE = {3: "3.10", 8: "3.11", 13: "3.12"}
+#: seed 000 Tables 3.13–3.15: the same scenarios, confidence classifier, EKF input (truth-trained
+#: models): (switch s, scenario) -> (FA initial, FA final, MAoT initial, MAoT final).
+THESIS_SWITCH_EKF = {
+    (3, "A"): (99.59, 100, 84.30, 77.29), (3, "B"): (100, 100, 88.00, 39.59),
+    (3, "C"): (88.48, 100, 80.75, 34.12), (3, "D"): (8.23, 100, 19.20, 34.34),
+    (8, "A"): (100, 1.23, 90.90, 0.06), (8, "B"): (100, 11.52, 94.02, 0.52),
+    (8, "C"): (97.12, 99.17, 88.29, 13.65), (8, "D"): (99.18, 96.71, 48.94, 13.00),
+    (13, "A"): (100, 0, 93.80, 0), (13, "B"): (100, 0, 95.87, 0),
+    (13, "C"): (100, 22.63, 93.67, 1.30), (13, "D"): (100, 84.77, 66.33, 10.25),
+}
+SWITCH_TABLE_EKF = {3: "3.13", 8: "3.14", 13: "3.15"}
 
 
 def is_correct(pred, truth, known: Iterable[str]) -> np.ndarray:
@@ -104,9 +133,9 @@ def confusion(truth_final: Sequence, pred_final: Sequence, labels: Sequence[str]
 
 
 def thesis_side_by_side(ours: pd.DataFrame, table: str) -> pd.DataFrame:
-    """Our per-maneuver FA/MAoT beside the thesis values of Table ``table`` (3.1–3.4; any other
+    """Our per-maneuver FA/MAoT beside the thesis values of Table ``table`` (3.1–3.8; any other
     table name, e.g. an extension of ours, gets NaN thesis columns)."""
-    ref = THESIS_TRUTH.get(table, {})                      # our extensions have no thesis column
+    ref = THESIS_CLASSIFICATION.get(table, {})             # our extensions have no thesis column
     out = ours.copy()
     out.insert(0, "table", table)
     out["thesis_FA_pct"] = [ref.get(m, (np.nan, np.nan))[0] for m in out["maneuver"]]

@@ -7,7 +7,11 @@ A *model set* is one entry of the config's ``model_sets`` section (keyed by name
     sim: {data: simulated, labels: [M1, M2, M3, M4], vehicles: [sim-quad]}
     f3a: {data: flights, vehicles: [f3a-plane], exclude: [tkoff, lnd], hmm: {feature_set: aero}}
 
-``data: simulated`` trains on the simulated bulk sets ``<label>_train.parquet``; ``data:
+``data: simulated`` trains on the simulated bulk sets ``<label>_train.parquet`` — the truth
+(``input: truth``, the default: ``results/sim/sets/``) or its EKF estimates from radar
+synthesised from the truth (``input: ekf``: ``results/estimate/sets/``, rule ``ekf_sets``,
+:mod:`pipeline.estimate.sets`; the noise-aware models), and is evaluated on the matching test
+sets (Tables 3.1–3.4, or 3.5–3.8 for EKF input); ``data:
 flights`` on the labelled segments of the manifest's ``role: train`` flights of ``vehicles``
 (each segment is one training run). ``vehicles`` also names the flights the set classifies
 (``results/classify/<model_set>/<flight>.parquet``); two model sets may name one vehicle. The
@@ -42,11 +46,33 @@ from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
 from ..io.stage import declared, declared_list
 from .base import ModelError, ModelsConfig
-from .metrics import THESIS_TRUTH, per_maneuver_table, thesis_side_by_side
+from .metrics import THESIS_CLASSIFICATION, per_maneuver_table, thesis_side_by_side
 
 #: (split, decision) -> seed 000 table of truth-input results
 THESIS_TABLES = {("train", "oneclass"): "3.1", ("train", "confidence"): "3.2",
                  ("test", "oneclass"): "3.3", ("test", "confidence"): "3.4"}
+#: (split, decision) -> seed 000 table of EKF-input results (the thesis's models were
+#: truth-trained; a model set with ``input: ekf`` is trained on EKF estimates too, so its rows
+#: put our noise-aware models beside the thesis's truth-trained ones on the same kind of input)
+THESIS_TABLES_EKF = {("train", "oneclass"): "3.5", ("train", "confidence"): "3.6",
+                     ("test", "oneclass"): "3.7", ("test", "confidence"): "3.8"}
+#: the values of a model set's ``input`` (simulated sets: truth, or EKF estimates of it)
+INPUTS = ("truth", "ekf")
+
+
+def thesis_tables_for(spec: Mapping) -> dict[tuple[str, str], str]:
+    """The ``(split, decision) -> thesis table`` map of a simulated model set: 3.1–3.4 for
+    ``input: truth`` (the default), 3.5–3.8 for ``input: ekf``.
+
+    Raises
+    ------
+    ConfigError
+        When ``input`` is neither.
+    """
+    inp = spec.get("input", "truth")
+    if inp not in INPUTS:
+        raise ConfigError(f"model_sets: input {inp!r} is not one of {', '.join(INPUTS)}")
+    return THESIS_TABLES_EKF if inp == "ekf" else THESIS_TABLES
 
 
 @dataclass(frozen=True)
@@ -284,8 +310,9 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
     """FA / MAoT per maneuver (seed 000 §5) beside the thesis values; writes ``outputs.evaluation``.
 
     ``data: simulated``: the model classifies the simulated ``inputs.train_sets`` and
-    ``inputs.test_sets`` with both decision rules, as Tables 3.1-3.4 (truth input; labels the
-    model lacks, e.g. M5, are correct only as ``unknown``). ``data: flights``: the
+    ``inputs.test_sets`` with both decision rules, as Tables 3.1-3.4 (``input: truth``) or
+    3.5-3.8 (``input: ekf``: the sets are EKF estimates; labels the model lacks, e.g. M5, are
+    correct only as ``unknown``). ``data: flights``: the
     classifications of the ``role: test`` flights (``inputs.classified``), one run per labelled
     segment (no thesis values). ``inputs.params``/``inputs.meta``: the trained set.
     """
@@ -297,6 +324,8 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
     train_sets, test_sets = declared_list(inputs, "train_sets"), declared_list(inputs, "test_sets")
     classified = declared_list(inputs, "classified")
     status, error = model_status(model_dir)
+    simulated = spec.get("data", "simulated") == "simulated"
+    tables_of = thesis_tables_for(spec) if simulated else {}
     rows = []
     if status == "ok":
         ms = ManeuverModelSet.load(model_dir)
@@ -308,7 +337,7 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
                 for decision in ("oneclass", "confidence"):
                     res = ms.classify(df, decision=decision, gmr=False)
                     tab = per_maneuver_table(res, ms.labels_, truth_col="truth")
-                    tab = thesis_side_by_side(tab, THESIS_TABLES[(split, decision)])
+                    tab = thesis_side_by_side(tab, tables_of[(split, decision)])
                     tab["split"], tab["decision"] = split, decision
                     rows.append(tab)
         else:
@@ -330,6 +359,7 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
         pd.DataFrame({c: pd.Series([], dtype=float if c.endswith("pct") else str) for c in EVAL_COLUMNS})
     write_table(table, out_path, name="model_evaluation",
                 extra={"model_set": name, "model": name, "status": status, "error": error,
-                       "thesis_tables": sorted(THESIS_TRUTH) if spec.get("data", "simulated") == "simulated" else []})
+                       "input": spec.get("input", "truth") if simulated else "flights",
+                       "thesis_tables": sorted(t for t in set(tables_of.values()) if t in THESIS_CLASSIFICATION)})
     _say(f"{name}: evaluation with {len(table)} rows ({status})")
     return ModelStageResult(name, status, error, {"n_rows": len(table)})

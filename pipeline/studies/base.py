@@ -41,7 +41,7 @@ DEFAULT_SIZE = "small"
 #: beside the output layout, so the rules need not import the studies themselves
 STUDY_TABLES: dict[str, tuple[str, ...]] = {
     "seed000_classification": ("tables_3_1_3_4", "confusion", "switch_tables", "switch_shift",
-                               "gmr_error", "gmr_rmse"),
+                               "gmr_error", "gmr_rmse", "ekf_tables", "ekf_switch_tables"),
     "flightcoach_classification": ("p23_segments", "p23_timeline", "f23_segments", "oneclass_slack_sweep"),
     "flightcoach_ekf_hmm": ("maneuvers", "train_maneuvers", "tuning", "timeline"),
     "seed000_ekf": ("q_tuning", "mc_time", "mc_rmse", "q2_tuning", "scenarios", "hmm_rmse", "hmm_time"),

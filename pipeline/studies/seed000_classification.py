@@ -1,4 +1,5 @@
-"""Seed-000 classification study on simulated truth: Tables 3.1–3.4, 3.10–3.12, GMR errors.
+"""Seed-000 classification study on simulated truth: Tables 3.1–3.4, 3.10–3.12, GMR errors;
+with ``ekf_input`` also on EKF estimates: Tables 3.5–3.8, 3.13–3.15.
 
 Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
 
@@ -25,11 +26,23 @@ Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
    ((3.28), ``Δr`` only), ``acc_interval`` (``â = Δv/dt`` as printed, §13.3) and ``acc_posvel``
    (conditioned on ``Δr`` and the true ``Δv``: information a position-only FD does not have).
 
+6. With ``ekf_input: true`` (``studies.seed000_classification``): the same train/test runs
+   filtered by the CA EKF on radar synthesised from the truth, exactly as the ``ekf_sets`` rule
+   filters the workflow's sets (:func:`pipeline.estimate.sets.ekf_set`, ``estimate.sets``,
+   radar ``simulate.sensors.radar``, ``ekf_rng(seed, "<M>_<train|test>")``): Tables 3.5–3.8
+   (one-class/confidence, train/test, cumulative) with the truth-trained models — the thesis
+   setup — and with models trained the same way on the EKF estimates of the training runs
+   (``trained_on``: truth | ekf); Tables 3.13–3.15: the switch cells on EKF estimates
+   (``ekf_rng(seed, "switch_<K>_<t>s")``), confidence classifier, cumulative (thesis) and
+   windowed (ours), both trainings. Thesis values: digest §11 (truth-trained on EKF input).
+
 Outputs (:data:`OUTPUT_TABLES` under ``results/studies/seed000_classification/``):
 ``report.md`` (every table beside the thesis, the acceptance checks, and where our
 maneuvers behave differently, with numbers), ``results.txt``, ``tables_3_1_3_4.parquet``,
 ``confusion.parquet``, ``switch_tables.parquet``, ``switch_shift.parquet``,
-``gmr_error.parquet``, ``gmr_rmse.parquet``, ``models/`` (params.npz + meta.json), and the
+``gmr_error.parquet``, ``gmr_rmse.parquet``, ``ekf_tables.parquet`` and ``ekf_switch_tables.parquet``
+(empty, marked ``skipped``, without ``ekf_input``), ``models/`` (params.npz + meta.json; the
+truth-trained set), and the
 page ``results/report/studies/seed000_classification.html``.
 
 Sizes (``studies.size``; ``runs`` per maneuver / ``switch_runs`` per switch cell): ``tiny``
@@ -54,8 +67,9 @@ import plotly.graph_objects as go
 from ..config import ROOT, ConfigError, load_config, section
 from ..io.parquet import write_table
 from ..models import ManeuverModelSet, ModelsConfig
-from ..models.metrics import (SCENARIOS, SWITCH_TABLE, THESIS_SWITCH, confusion, is_correct,
-                              per_maneuver_table, thesis_side_by_side)
+from ..estimate.sets import SetsSettings, ekf_rng, ekf_set
+from ..models.metrics import (SCENARIOS, SWITCH_TABLE, SWITCH_TABLE_EKF, THESIS_SWITCH, THESIS_SWITCH_EKF, confusion,
+                              is_correct, per_maneuver_table, thesis_side_by_side)
 from ..report.study import build_study_page, layout
 from ..simulate.datasets import DatasetSettings, set_rng, simulate_set
 from ..simulate.scenarios import SimSettings
@@ -78,6 +92,7 @@ DEFAULTS: dict[str, Any] = {
     "features": None,        # override models.feature_set (state9, state9h)
     "n_states": None,        # override models.n_states for every maneuver: an int or "auto"
     "skip": [],              # parts left out: "switch", "gmr" (their tables are written empty)
+    "ekf_input": False,      # also classify EKF estimates: Tables 3.5-3.8, 3.13-3.15 (ekf_* tables)
 }
 #: per-size settings
 SIZES: dict[str, dict[str, Any]] = {
@@ -171,8 +186,15 @@ def detection_delay(pred, t_s, t_switch, final, hold=5):
 
 def switch_cell(ms, key, ts, run: _Run, mode):
     """One cell of Tables 3.10–3.12: scenario ``key`` switching at ``ts`` s, in ``mode``."""
-    first, final = SCENARIOS[key]
     df = simulate_runs("switch", key, run.switch_runs, run.seed, f"switch_{key}_{ts:g}s", run.sim, t_switch=ts)
+    return switch_stats(ms, df, key, ts, mode)
+
+
+def switch_stats(ms, df, key, ts, mode, thesis_cells=THESIS_SWITCH, tables=SWITCH_TABLE):
+    """FA/MAoT of the first and final maneuver, detection delay and change point of one switch
+    cell's runs ``df`` (truth for Tables 3.10–3.12; EKF estimates with ``THESIS_SWITCH_EKF``
+    and ``SWITCH_TABLE_EKF`` for 3.13–3.15), confidence classifier in ``mode``."""
+    first, final = SCENARIOS[key]
     res = ms.classify(df, mode=mode, decision="confidence", gmr=False)
     fa_i, fa_f, ma_i, ma_f, delay, cps = [], [], [], [], [], []
     for _, g in res.groupby("run_id", sort=False):
@@ -188,8 +210,8 @@ def switch_cell(ms, key, ts, run: _Run, mode):
         delay.append(detection_delay(pred, t_s, ts, final))
         ch = g["change_t_ns"].to_numpy()[g["change"].to_numpy()]
         cps.append(ch[0] * 1e-9 if len(ch) else np.nan)
-    thesis = THESIS_SWITCH.get((int(ts), key), (np.nan,) * 4) if float(ts).is_integer() else (np.nan,) * 4
-    return {"table": SWITCH_TABLE.get(int(ts), ""), "switch_s": ts, "scenario": key, "first": first, "final": final,
+    thesis = thesis_cells.get((int(ts), key), (np.nan,) * 4) if float(ts).is_integer() else (np.nan,) * 4
+    return {"table": tables.get(int(ts), ""), "switch_s": ts, "scenario": key, "first": first, "final": final,
             "mode": mode, "n_runs": len(fa_i), "FA_initial_pct": 100 * np.mean(fa_i),
             "FA_final_pct": 100 * np.mean(fa_f), "MAoT_initial_pct": 100 * np.mean(ma_i),
             "MAoT_final_pct": 100 * np.mean(ma_f), "detection_delay_s": float(np.nanmedian(delay))
@@ -446,9 +468,186 @@ def headline(res: Results, run: _Run, cfg, ms, tables, m5_diag, alt_mode, sw=Non
                         f"Mean over M1–M4 of the acceleration RMSE (m/s²) of the GMR variant {what[suffix]}.")
 
 
-def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | None) -> list:
-    """The page's plots: MAoT beside the thesis, switch-cell final MAoT, GMR error over time."""
+#: seed 000 Tables 3.5–3.8: (split, decision) of each (EKF input); ``3.8+bg`` (ours): the
+#: confidence decision with the background model as a rival, as ``3.4+bg``
+EKF_TABLES = {"3.5": ("train", "oneclass"), "3.6": ("train", "confidence"),
+              "3.7": ("test", "oneclass"), "3.8": ("test", "confidence"), "3.8+bg": ("test", "confidence_bg")}
+#: modes of the EKF-input switch tables 3.13–3.15 (thesis: cumulative; windowed: ours)
+EKF_SWITCH_MODES = ("cumulative", "windowed")
+
+
+def ekf_settings(estimate: Mapping | None, simulate: Mapping) -> SetsSettings:
+    """The EKF of the ``ekf_sets`` rule: ``estimate.sets`` and the simulated radar
+    (``simulate.sensors.radar``)."""
+    radar = dict((simulate.get("sensors") or {}).get("radar") or {})
+    return SetsSettings.from_config({**dict((estimate or {}).get("sets") or {}), "radar": radar})
+
+
+def ekf_of(sets: Mapping[str, pd.DataFrame], part: str, seed: int, es: SetsSettings,
+           diagnostics: dict | None = None) -> dict[str, pd.DataFrame]:
+    """EKF estimates of the per-maneuver sets, each drawn as the ``ekf_sets`` rule draws
+    ``<M>_<part>`` (``ekf_rng(seed, "<M>_<part>")``); each set's diagnostics go into
+    ``diagnostics[<M>]`` when given."""
+    out = {}
+    for man, df in sets.items():
+        out[man], diag = ekf_set(df, radar=es.radar, q=es.q, p0_sigma=es.p0_sigma,
+                                 rng=ekf_rng(seed, f"{man}_{part}"), where=f"{man}_{part}")
+        if diagnostics is not None:
+            diagnostics[man] = diag
+    return out
+
+
+def ekf_tables(models: Mapping[str, ManeuverModelSet], train: Mapping, test: Mapping) -> pd.DataFrame:
+    """Tables 3.5–3.8 (cumulative mode, EKF input) for every model set of ``models``
+    (``{"truth": truth-trained (the thesis setup), "ekf": EKF-trained}``)."""
+    tabs = []
+    for trained_on, ms in models.items():
+        for table, (split_name, decision) in EKF_TABLES.items():
+            sets_ = train if split_name == "train" else test
+            mans = KNOWN if split_name == "train" else ALL
+            df = pd.concat([tag(sets_[m], m) for m in mans], ignore_index=True)
+            res = ms.classify(df, mode="cumulative", decision=decision, gmr=False)
+            t = thesis_side_by_side(per_maneuver_table(res, KNOWN, truth_col="truth"), table)
+            t.insert(1, "classifier", decision)
+            t.insert(2, "split", split_name)
+            t.insert(3, "trained_on", trained_on)
+            tabs.append(t)
+    return pd.concat(tabs, ignore_index=True)
+
+
+def ekf_switch_tables(models: Mapping[str, ManeuverModelSet], run: _Run, es: SetsSettings,
+                      progress=None) -> pd.DataFrame:
+    """Tables 3.13–3.15: the switch cells on EKF estimates (each cell's runs simulated as for
+    3.10–3.12, then filtered as the ``ekf_sets`` rule filters ``switch_<K>_<t>s``), confidence
+    classifier, :data:`EKF_SWITCH_MODES`, for every model set of ``models``."""
+    cells = []
+    for ts in (3.0, 8.0, 13.0):
+        for key in "ABCD":
+            name = f"switch_{key}_{ts:g}s"
+            df = simulate_runs("switch", key, run.switch_runs, run.seed, name, run.sim, t_switch=ts)
+            est, _ = ekf_set(df, radar=es.radar, q=es.q, p0_sigma=es.p0_sigma, rng=ekf_rng(run.seed, name),
+                             where=name)
+            for trained_on, ms in models.items():
+                for mode in EKF_SWITCH_MODES:
+                    if progress is not None:
+                        progress(f"EKF input: switch scenario {key} at {ts:g} s, {mode}, {trained_on}-trained")
+                    c = switch_stats(ms, est, key, ts, mode, THESIS_SWITCH_EKF, SWITCH_TABLE_EKF)
+                    cells.append({**c, "trained_on": trained_on})
+    return pd.DataFrame(cells)
+
+
+def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse: pd.DataFrame) -> None:
+    """The EKF-input ``RESULT`` figures (Tables 3.5–3.8, 3.13–3.15)."""
+    def rows(table, trained_on, mans=KNOWN):
+        return et[(et.table == table) & (et.trained_on == trained_on) & et.maneuver.isin(mans)].set_index("maneuver")
+
+    res.add("seed000_ekf_diverged_runs", int(rmse["diverged_runs"].sum() + rmse["diverged_train_runs"].sum()),
+            "Train and test runs of M1–M5 whose EKF estimate ends more than 10 m from the truth (mirror image "
+            "below the radar plane).")
+    cf = pd.concat([rows("3.6", "truth"), rows("3.8", "truth")])
+    res.add("seed000_ekf_cf_min_FA_pct", f"{cf['FA_pct'].min():.2f}",
+            "Lowest FA over M1–M4 of the truth-trained confidence classifier on EKF input, train and test "
+            "(Tables 3.6, 3.8; thesis 100).")
+    res.add("seed000_ekf_cf_min_MAoT_minus_thesis_pct", f"{(cf['MAoT_pct'] - cf['thesis_MAoT_pct']).min():.2f}",
+            "Lowest of our MAoT minus the thesis's over M1–M4 in Tables 3.6 and 3.8 (truth-trained, EKF input).")
+    for man in KNOWN:
+        r = rows("3.8", "truth").loc[man]
+        res.add(f"seed000_ekf_cf_test_{man}_MAoT_pct", f"{r['MAoT_pct']:.2f}",
+                f"{man} test-run MAoT of the truth-trained confidence classifier on EKF input (Table 3.8; "
+                f"thesis {r['thesis_MAoT_pct']:.2f}).")
+    for table, name, what in (("3.8", "cf", "confidence classifier (Table 3.8)"),
+                              ("3.7", "1c", "one-class classifier (Table 3.7)")):
+        m5 = rows(table, "truth", ("M5",))
+        if len(m5):
+            res.add(f"seed000_ekf_{name}_M5_unknown_FA_pct", f"{m5['FA_pct'].iloc[0]:.2f}",
+                    f"% of M5's EKF-estimated test runs whose final label is unknown, truth-trained {what}.")
+            res.add(f"seed000_ekf_{name}_M5_unknown_MAoT_pct", f"{m5['MAoT_pct'].iloc[0]:.2f}",
+                    f"% of M5's EKF-estimated test samples labelled unknown, truth-trained {what}.")
+    oc = pd.concat([rows("3.5", "truth"), rows("3.7", "truth")])
+    res.add("seed000_ekf_1c_min_MAoT_minus_thesis_pct", f"{(oc['MAoT_pct'] - oc['thesis_MAoT_pct']).min():.2f}",
+            "Lowest of our MAoT minus the thesis's over M1–M4 in Tables 3.5 and 3.7 (one-class, truth-trained, "
+            "EKF input).")
+    if "ekf" in set(et.trained_on):
+        for table, name in (("3.8", "cf"), ("3.7", "1c")):
+            tt, ee = rows(table, "truth")["MAoT_pct"].mean(), rows(table, "ekf")["MAoT_pct"].mean()
+            res.add(f"seed000_ekf_{name}_test_mean_MAoT_truth_trained_pct", f"{tt:.2f}",
+                    f"Mean over M1–M4 of the test-run MAoT on EKF input, truth-trained models (Table {table}).")
+            res.add(f"seed000_ekf_{name}_test_mean_MAoT_ekf_trained_pct", f"{ee:.2f}",
+                    f"Mean over M1–M4 of the test-run MAoT on EKF input, models trained on EKF estimates "
+                    f"(Table {table} setup).")
+            res.add(f"seed000_ekf_{name}_test_mean_MAoT_gain_pct", f"{ee - tt:.2f}",
+                    f"EKF-trained minus truth-trained mean MAoT over M1–M4 on EKF test runs (Table {table}; "
+                    f"target ≥ 0).")
+        m5 = rows("3.8", "ekf", ("M5",))
+        if len(m5):
+            res.add("seed000_ekf_trained_cf_M5_unknown_FA_pct", f"{m5['FA_pct'].iloc[0]:.2f}",
+                    "% of M5's EKF-estimated test runs called unknown at the end by the EKF-trained confidence "
+                    "classifier.")
+    for trained_on in sorted(set(et.trained_on), key=lambda x: x != "truth"):
+        bg, m5 = rows("3.8+bg", trained_on), rows("3.8+bg", trained_on, ("M5",))
+        if len(bg):
+            res.add(f"seed000_ekf_cfbg_{trained_on}_trained_test_mean_MAoT_pct", f"{bg['MAoT_pct'].mean():.2f}",
+                    f"Mean over M1–M4 of the EKF-input test MAoT with the background rival (3.8+bg, ours), "
+                    f"{trained_on}-trained models.")
+        if len(m5):
+            res.add(f"seed000_ekf_cfbg_{trained_on}_trained_M5_unknown_FA_pct", f"{m5['FA_pct'].iloc[0]:.2f}",
+                    f"% of M5's EKF-estimated test runs called unknown at the end with the background rival "
+                    f"(3.8+bg, ours), {trained_on}-trained models.")
+    if esw is not None and len(esw):
+        for trained_on in sorted(set(esw.trained_on), key=lambda x: x != "truth"):
+            for mode in EKF_SWITCH_MODES:
+                g = esw[(esw.trained_on == trained_on) & (esw["mode"] == mode)]
+                res.add(f"seed000_ekf_switch_{mode}_{trained_on}_trained_mean_final_MAoT_pct",
+                        f"{g['MAoT_final_pct'].mean():.2f}",
+                        f"Mean final-maneuver MAoT over the 12 switch cells on EKF input, {mode} mode, "
+                        f"{trained_on}-trained models (Tables 3.13–3.15; thesis cumulative, truth-trained: "
+                        f"{np.mean([v[3] for v in THESIS_SWITCH_EKF.values()]):.2f}).")
+                res.add(f"seed000_ekf_switch_{mode}_{trained_on}_trained_mean_initial_MAoT_pct",
+                        f"{g['MAoT_initial_pct'].mean():.2f}",
+                        f"Mean first-maneuver MAoT over the 12 switch cells on EKF input, {mode} mode, "
+                        f"{trained_on}-trained models (thesis cumulative, truth-trained: "
+                        f"{np.mean([v[2] for v in THESIS_SWITCH_EKF.values()]):.2f}).")
+
+
+def ekf_report(et: pd.DataFrame, esw: pd.DataFrame | None, es: SetsSettings, rmse: pd.DataFrame) -> list[str]:
+    """The EKF-input section of ``report.md``."""
+    L = ["", "## EKF input: Tables 3.5–3.8 (cumulative), truth- and EKF-trained models", "",
+         f"Radar synthesised from the truth (site {list(es.radar.site_ned_m)} m NED, σ = "
+         f"{list(es.radar.sigma)}; `simulate.sensors.radar`), CA EKF with white-jerk q = {es.q:g} m²/s⁵, "
+         f"P₀ = diag({', '.join(f'{s:g}²' for s in es.p0_sigma)}), initial state = truth + N(0, P₀) "
+         f"(`estimate.sets`, pipeline/estimate/sets.py). `trained_on: truth` is the thesis setup "
+         f"(truth-trained models classifying EKF estimates); `trained_on: ekf` trains the same models "
+         f"on EKF estimates of the training runs (noise-aware; the thesis columns stay the truth-trained "
+         f"thesis values).", "",
+         "EKF error (RMSE over all samples of the test runs; diverged: final position error > 10 m, "
+         "mostly runs near the radar's horizontal plane tracked as their mirror image below it — range "
+         "and two direction cosines do not give the sign of the third):", "", md_table(rmse, "{:.3f}"), "",
+         md_table(et), ""]
+    if esw is not None and len(esw):
+        L += ["## EKF input: Tables 3.13–3.15 (switch scenarios, confidence)", "",
+              "Thesis values: cumulative mode, truth-trained models.", "",
+              md_table(esw.drop(columns=["table", "first", "final"]), "{:.1f}"), ""]
+    return L
+
+
+def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | None,
+            et: pd.DataFrame | None = None) -> list:
+    """The page's plots: MAoT beside the thesis, switch-cell final MAoT, GMR error over time and,
+    with EKF input, Tables 3.5–3.8."""
     figs = []
+    if et is not None and len(et):
+        fig = go.Figure()
+        for (table, trained_on), g in et[et["maneuver"].isin(ALL)].groupby(["table", "trained_on"], sort=False):
+            fig.add_trace(go.Bar(x=g["maneuver"], y=g["MAoT_pct"], name=f"{table} ours, {trained_on}-trained"))
+        th = et[et["trained_on"] == "truth"].dropna(subset=["thesis_MAoT_pct"])
+        for table, g in th.groupby("table", sort=False):
+            fig.add_trace(go.Scatter(x=g["maneuver"], y=g["thesis_MAoT_pct"], mode="markers",
+                                     marker=dict(symbol="x", size=9), name=f"{table} thesis"))
+        fig.update_layout(barmode="group", yaxis_title="MAoT (%)")
+        ekf_fig = ("Tables 3.5–3.8: MAoT on EKF input",
+                   layout(fig, "Tables 3.5–3.8: MAoT on EKF estimates (bars: ours, ×: thesis, truth-trained)"))
+    else:
+        ekf_fig = None
     t = tables[tables["maneuver"].isin(ALL)]
     fig = go.Figure()
     for table, g in t.groupby("table", sort=False):
@@ -477,12 +676,14 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
             fig.add_trace(go.Scatter(x=a.index, y=np.sqrt(a.to_numpy()), mode="lines", name=f"{man} {q}"))
         fig.update_layout(xaxis_title="t (s)", yaxis_title="error std, mean over n/e/d (m/s²)")
         figs.append(("GMR error over time", layout(fig, "GMR vs finite-difference acceleration error over time")))
+    if ekf_fig is not None:
+        figs.append(ekf_fig)
     return figs
 
 
 def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *,
                                seed: int, simulate: Mapping | None = None,
-                               hmm: Mapping | None = None) -> StudyResult:
+                               hmm: Mapping | None = None, estimate: Mapping | None = None) -> StudyResult:
     """Run the seed-000 classification study and write its tables, report, results and page.
 
     Parameters
@@ -499,6 +700,9 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
         The master seed (simulation, split and training).
     simulate, hmm : mapping, optional
         The ``simulate`` and ``hmm`` config sections (default: ``datasets/config.yaml``'s).
+    estimate : mapping, optional
+        The ``estimate`` section (its ``sets`` sub-section: the EKF of ``ekf_input``; default
+        ``datasets/config.yaml``'s).
 
     Returns
     -------
@@ -510,15 +714,20 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
     bad = sorted(skip - {"switch", "gmr"})
     if bad:
         raise ConfigError(f"studies.{NAME}.skip: unknown part(s) {bad}; known: switch, gmr")
-    if simulate is None or hmm is None:
+    if simulate is None or hmm is None or estimate is None:
         cfg_file = load_config()
         simulate = section(cfg_file, "simulate") if simulate is None else simulate
         hmm = section(cfg_file, "hmm") if hmm is None else hmm
+        estimate = section(cfg_file, "estimate") if estimate is None else estimate
+    es = ekf_settings(estimate, simulate) if st["ekf_input"] else None  # a bad key fails before any work
     run = _Run(runs=int(st["runs"]), switch_runs=int(st["switch_runs"]), seed=int(seed), sim=dict(simulate))
     sets = input_path(inputs, "sets")
     template = input_path(inputs, "template", ROOT / "reports" / "templates" / "study.html.j2")
     paths = {k: output_path(outputs, k) for k in ("report", "results", "page", *OUTPUT_TABLES,
                                                    "model_params", "model_meta")}
+    if not st["ekf_input"]:  # declared outputs are always written: empty, marked skipped
+        for k, n in (("ekf_tables", "seed000_tables_3_5_3_8"), ("ekf_switch_tables", "seed000_tables_3_13_3_15")):
+            write_table(pd.DataFrame(), paths[k], name=n, extra={"skipped": True})
     progress = Progress()
 
     progress(f"simulating {run.runs} runs of each of {', '.join(ALL)}" if sets is None else f"reading {sets}")
@@ -638,10 +847,47 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
                  "| last (s) |\n|---|---|---|---|---|---|\n"
                  + "".join(f"| {a} | {b} | {d['samples_pct']:.2f} | {d['in_first_pct']:.1f} | {d['runs_pct']:.1f} "
                            f"| {d['last_s']:.1f} |\n" for a, b, d in (("M4", "M2", m4m2), ("M2", "M4", m2m4))))
+
+    et = esw = rmse = None
+    if es is not None:
+        # EKF input (Tables 3.5-3.8, 3.13-3.15): the same runs, filtered as the ekf_sets rule
+        # filters the workflow's sets; the truth-trained models (the thesis setup) and models
+        # trained the same way on the EKF estimates of the training runs
+        progress("EKF input: filtering the train and test runs (radar synthesised from the truth)")
+        d_train, d_test = {}, {}
+        ekf_train, ekf_test = ekf_of(train, "train", run.seed, es, d_train), ekf_of(test, "test", run.seed, es, d_test)
+        rmse = pd.DataFrame([{"maneuver": m, "pos_m": d_test[m]["rmse_pos"], "vel_mps": d_test[m]["rmse_vel"],
+                              "acc_mps2": d_test[m]["rmse_acc"], "runs": d_test[m]["runs"],
+                              "diverged_runs": d_test[m]["n_diverged"],
+                              "diverged_train_runs": d_train[m]["n_diverged"]} for m in ALL])
+        say(rmse.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
+        progress("EKF input: training one HMM per known maneuver on the EKF estimates")
+        ms_ekf = ManeuverModelSet(config=cfg).fit(pd.concat([tag(ekf_train[m], m) for m in KNOWN], ignore_index=True))
+        models = {"truth": ms, "ekf": ms_ekf}
+        progress("EKF input: Tables 3.5-3.8")
+        et = ekf_tables(models, ekf_train, ekf_test)
+        write_table(et, paths["ekf_tables"], name="seed000_tables_3_5_3_8",
+                    extra={"runs_per_maneuver": run.runs, "seed": run.seed, "size": size, "q": es.q,
+                           "p0_sigma": list(es.p0_sigma)})
+        with pd.option_context("display.width", 200, "display.max_columns", 20):
+            say(et.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+        if "switch" not in skip:
+            esw = ekf_switch_tables(models, run, es, progress)
+            write_table(esw, paths["ekf_switch_tables"], name="seed000_tables_3_13_3_15",
+                        extra={"switch_runs": run.switch_runs, "seed": run.seed, "size": size, "q": es.q})
+            with pd.option_context("display.width", 250, "display.max_columns", 30):
+                say(esw.drop(columns=["first", "final", "table"]).to_string(index=False, float_format=lambda x: f"{x:.1f}"))
+        else:
+            write_table(pd.DataFrame(), paths["ekf_switch_tables"], name="seed000_tables_3_13_3_15",
+                        extra={"skipped": True})
+        with open(paths["report"], "a") as fh:
+            fh.write("\n".join(ekf_report(et, esw, es, rmse)) + "\n")
     say(f"report: {paths['report']}")
 
     res = Results()
     headline(res, run, cfg, ms, tables, m5_diag, st["alt_mode"], sw=sw, sh=sh, grmse=grmse)
+    if et is not None:
+        ekf_headline(res, et, esw, rmse)
     res.add("seed000_m4_as_m2_test_samples_pct", f"{m4m2['samples_pct']:.2f}",
             "Share of the M4 test samples the confidence rule labels M2 (Table 3.4 run; thesis §3.4.2).")
     res.add("seed000_m4_as_m2_in_first_10s_pct", f"{m4m2['in_first_pct']:.1f}",
@@ -652,10 +898,11 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
             "Wall time of the study (s), simulation to results, page excluded.")
     res.write(paths["results"])
     build_study_page(NAME, paths["page"], results=paths["results"], report_md=paths["report"], template=template,
-                     definitions=res.definitions, figures=figures(tables, sw, gerr),
+                     definitions=res.definitions, figures=figures(tables, sw, gerr, et),
                      title=f"Study: seed-000 classification ({run.runs} runs per maneuver)",
                      facts=[("size", size), ("seed", str(run.seed)), ("runs per maneuver", str(run.runs)),
                             ("runs per switch cell", str(run.switch_runs)), ("features", cfg.feature_set),
+                            ("input", "truth" if es is None else f"truth and EKF estimates (q = {es.q:g} m²/s⁵)"),
                             ("tables", ", ".join(f"{t}.parquet" for t in OUTPUT_TABLES))])
     return StudyResult(name=NAME, status="ok", results=dict(res.values),
                        diagnostics={"size": size, "seed": run.seed, "settings": st,

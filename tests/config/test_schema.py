@@ -89,6 +89,9 @@ def test_the_old_file_with_the_renames_validates_to_the_same_dict_as_the_new_one
     vehicles = new["preprocess"]["vehicles"]
     added = {k: vehicles.pop(k) for k in set(vehicles) - set(old["preprocess"]["vehicles"])}
     assert added and all({**v, "doc": ""} == {**vehicles["default"], "doc": ""} for v in added.values())
+    # issue 14: the simekf model set, sim's maneuvers on the EKF estimates of the sets
+    simekf = new["model_sets"].pop("simekf")
+    assert simekf == {**new["model_sets"]["sim"], "input": "ekf"}
     assert validate_config(old) == new
 
 
@@ -174,7 +177,14 @@ BAD = [
     ("estimate", {"estimate": {"ekf_hmm": {"q2_scale": "big"}}}, "estimate.ekf_hmm.q2_scale: 'big' is not a number"),
     ("estimate", {"estimate": {"synthetic_radar": {"v": {"sigma_rnage_m": 1}}}},
      "estimate.synthetic_radar.v.sigma_rnage_m: unknown key"),
+    ("model_sets", {"model_sets": {"s": {"data": "simulated", "vehicles": ["q"], "input": "gps"}}},
+     "model_sets.s.input: 'gps' is not one of truth, ekf"),
+    ("estimate", {"estimate": {"sets": {"qq": 1}}}, "estimate.sets.qq: unknown key"),
+    ("estimate", {"estimate": {"sets": {"q": 0}}}, r"estimate.sets.q: 0 is out of range \(must be > 0\)"),
+    ("estimate", {"estimate": {"sets": {"p0_sigma": [1, 2]}}}, "estimate.sets.p0_sigma: .* needs exactly 3"),
     ("studies", {"studies": {"sise": "tiny"}}, "studies.sise: unknown key"),
+    ("studies", {"studies": {"seed000_classification": {"ekf_input": "yes"}}},
+     "studies.seed000_classification.ekf_input: 'yes' is not true/false"),
     ("studies", {"studies": {"size": "huge"}}, "studies.size: 'huge' is not one of tiny, small, thesis"),
     ("top", {"foo": {}}, "foo: unknown section"),
     ("top", {"seed": "x"}, "seed: 'x' is not an integer"),

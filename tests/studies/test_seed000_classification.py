@@ -17,6 +17,9 @@ from pipeline.studies import STUDY_TABLES
 from pipeline.studies.base import StudyError, study_settings
 
 NAME = "seed000_classification"
+#: the EKF-input tables (ekf_input: true; written empty otherwise), newer than the old script's
+#: goldens: tested in test_seed000_ekf_input.py
+EKF_TABLES = ("ekf_tables", "ekf_switch_tables")
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +50,7 @@ def test_every_headline_figure_is_defined_in_one_sentence_on_the_page(tiny):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("table", [t for t in STUDY_TABLES[NAME] if t != "gmr_error"])
+@pytest.mark.parametrize("table", [t for t in STUDY_TABLES[NAME] if t not in ("gmr_error", *EKF_TABLES)])
 def test_each_table_equals_the_old_script_at_tiny_size(tiny, golden, table):
     pd.testing.assert_frame_equal(tiny.table(table), pd.read_parquet(golden / f"{NAME}_tiny" / f"{table}.parquet"))
 
@@ -56,6 +59,15 @@ def test_each_table_equals_the_old_script_at_tiny_size(tiny, golden, table):
 def test_the_gmr_error_table_equals_the_old_script_summary_at_tiny_size(tiny, golden, gmr_error_summary):
     got = gmr_error_summary(tiny.table("gmr_error"))
     pd.testing.assert_frame_equal(got, pd.read_parquet(golden / f"{NAME}_tiny" / "gmr_error_summary.parquet"))
+
+
+@pytest.mark.slow
+def test_without_ekf_input_the_ekf_tables_are_written_empty_and_marked_skipped(tiny):
+    from pipeline.io.parquet import read_table_meta
+
+    for t in EKF_TABLES:
+        assert tiny.table(t).empty and read_table_meta(tiny.outputs[t])["skipped"] is True
+    assert not [m for m in tiny.figures if m.startswith("seed000_ekf_")]
 
 
 @pytest.mark.slow

@@ -34,5 +34,5 @@ def test_a_finished_run_prints_the_summary_with_skipped_rows_and_the_report_path
     assert p.returncode == 0, p.stderr[-3000:]
     assert "uavpipe: 1 flight(s): 1 ok, 0 failed; 1 manifest row(s) skipped" in p.stderr
     assert "  skipped  ghost: /nonexistent/x.bin not found" in p.stderr
-    assert "  model sets: sim not run, f3a not run" in p.stderr
+    assert "  model sets: sim not run, simekf not run, f3a not run" in p.stderr
     assert "  report: results/index.html (not written)" in p.stderr

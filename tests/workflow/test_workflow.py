@@ -46,7 +46,7 @@ def _planned_jobs(wd: Path, *args: str) -> dict[str, int]:
 DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
 SIM = ("sim-M1-000-bin\tresults/sim/logs/sim-M1-000.bin\tsim-quad\ttest\t"
        "results/sim/logs/sim-M1-000.bin.truth.parquet\t\tsimulated M1 with truth side-car")
-STAGES = ("demo_log", "simulate_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
+STAGES = ("demo_log", "simulate_sets", "ekf_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
           "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "flight_report", "model_report",
           "report_index", "plotly_js", "all")
 
@@ -76,12 +76,13 @@ def test_dry_run_default_config_plans_every_stage():
     ("simulate", {"simulate_sets", "simulate_logs", "simulate"}),
     ("ingest", {"demo_log", "simulate_logs", "ingest_flight", "ingest"}),
     ("preprocess", {"demo_log", "simulate_logs", "ingest_flight", "preprocess_flight", "preprocess"}),
-    ("train", {"simulate_sets", "train_model", "evaluate_model", "train"}),
-    ("classify", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+    # ekf_sets: the EKF estimates of the sets the shipped simekf model set (input: ekf) trains on
+    ("train", {"simulate_sets", "ekf_sets", "train_model", "evaluate_model", "train"}),
+    ("classify", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "classify_flight", "classify"}),
     ("estimate", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "estimate_q2", "estimate_flight", "estimate"}),
-    ("report", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+    ("report", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                 "train_model", "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "plotly_js",
                 "flight_report", "model_report", "report_index", "report"}),
 ])
@@ -112,6 +113,8 @@ BAD_CONFIG = [
     ("model_sets", "model_sets: {sim: {colour: red}}\n", "model_sets.sim.colour"),
     ("model_sets", "model_sets: {sim: {data: simulated, vehicles: [q], hmm: {decision: maybe}}}\n",
      "model_sets.sim.hmm.decision"),
+    ("model_sets", "model_sets: {x: {data: flights, vehicles: [q], input: ekf}}\n", "model_sets.x.input"),
+    ("estimate", "estimate: {sets: {qq: 1}}\n", "estimate.sets.qq"),
     ("studies", "studies: {size: huge}\n", "studies.size"),
     ("estimate", "estimate: {ekf: {qq: 1.0}}\n", "estimate.ekf.qq"),
 ]
@@ -261,6 +264,31 @@ def test_two_model_sets_for_one_vehicle_are_each_trained_evaluated_and_reported(
 
 
 @pytest.mark.slow
+def test_simekf_trains_and_evaluates_on_the_ekf_sets_the_ekf_sets_rule_writes(tiny_run, tmp_path):
+    import numpy as np
+
+    from pipeline.estimate.sets import SET_COLUMNS, run_ekf_sets
+
+    res = tiny_run / "results"
+    names = [f"{m}_{p}" for m in ("M1", "M2") for p in ("train", "test")]
+    assert sorted(p.stem for p in (res / "estimate" / "sets").glob("*.parquet")) == sorted(names)
+    est = read_table(res / "estimate" / "sets" / "M1_train.parquet", SET_COLUMNS)
+    assert est["jerk_n_mps3"].isna().all() and np.isfinite(est["pos_n_m"]).all()
+    # the rule is the entry point: the same sets from the same truth, seed and config
+    cfg = {"q": 3.0, "p0_sigma": [1.0, 0.1, 0.01], "radar": {}}
+    run_ekf_sets({"sets": [res / "sim" / "sets" / "M1_train.parquet"]}, {"sets": [tmp_path / "M1_train.parquet"]},
+                 cfg, seed=20261123)
+    _frames_equal(res / "estimate" / "sets" / "M1_train.parquet", tmp_path / "M1_train.parquet")
+    meta = json.loads((res / "models" / "simekf" / "meta.json").read_text())
+    assert meta["status"] == "ok" and meta["spec"]["input"] == "ekf"
+    assert meta["training_inputs"] == [f"results/estimate/sets/{m}_train.parquet" for m in ("M1", "M2")]
+    ev = read_table(res / "models" / "simekf" / "evaluation.parquet")
+    assert set(ev["table"]) == {"3.5", "3.6", "3.7", "3.8"}
+    assert set(read_table(res / "models" / "sim" / "evaluation.parquet")["table"]) == {"3.1", "3.2", "3.3", "3.4"}
+    assert len(read_table(res / "classify" / "simekf" / "sim-M1-000-bin.parquet")) > 10
+
+
+@pytest.mark.slow
 def test_cli_simulate_equals_the_workflow(tiny_run, tmp_path):
     import hashlib
 
@@ -332,7 +360,7 @@ def test_cli_classify_equals_the_workflow(tiny_run, tmp_path):
 def test_changing_only_the_seed_reruns_exactly_the_simulated_and_trained_outputs(tiny_run):
     jobs = _planned_jobs(tiny_run, "--config", "seed=7")
     assert {"simulate_sets", "simulate_logs", "demo_log", "train_model"} <= set(jobs), jobs
-    assert jobs["train_model"] == 3  # sim, sim2 and f3a
+    assert jobs["train_model"] == 4  # sim, sim2, simekf and f3a
     # a hyperparameter change retrains and reclassifies, but simulates and ingests nothing
     (tiny_run / "datasets" / "hmm4.yaml").write_text("hmm: {n_iter: 4}\n")
     jobs = _planned_jobs(tiny_run, "--configfile", "datasets/tiny.yaml", "datasets/hmm4.yaml")
@@ -387,8 +415,8 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     with open(wd / "datasets" / "flights.tsv", "a") as fh:
         fh.write("extra\tlogs/extra.bin\tsim-quad\ttest\tnone\t\tadded\n")
     jobs = _planned_jobs(wd)
-    # classified by both model sets of its vehicle (sim, sim2)
-    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "estimate_flight": 1,
+    # classified by every model set of its vehicle (sim, sim2, simekf), estimated once
+    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 3, "estimate_flight": 1,
                     "flight_report": 1, "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
@@ -399,8 +427,9 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     assert "preprocess:" not in text
     cfg.write_text(text + "preprocess: {rate_hz: 20}\n")
     jobs = _planned_jobs(wd)
-    # (estimated: the three sim-quad flights; the broken flight's vehicle is generic)
-    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "estimate_flight": 3, "flight_report": 4,
+    # 3 sim-quad flights x 3 model sets (sim, sim2, simekf); estimated: the three sim-quad flights
+    # (the broken flight's vehicle is generic)
+    assert jobs == {"preprocess_flight": 4, "classify_flight": 9, "estimate_flight": 3, "flight_report": 4,
                     "report_index": 1, "all": 1}, jobs
 
     # snakemake --report over the finished run

@@ -1,0 +1,81 @@
+"""A model set's ``input`` (truth | ekf): the thesis tables it is evaluated against, and the
+config checks (``input: ekf`` needs simulated data)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.config import ConfigError, validate_config
+from pipeline.io.parquet import read_table, read_table_meta
+from pipeline.models.metrics import THESIS_EKF, THESIS_SWITCH_EKF, THESIS_TRUTH, thesis_side_by_side
+from pipeline.models.run import run_evaluate, run_train, thesis_tables_for
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(5)
+
+
+def test_input_defaults_to_truth_and_takes_only_truth_or_ekf():
+    cfg = validate_config({"model_sets": {"s": {"data": "simulated", "vehicles": ["q"]}}})
+    assert cfg["model_sets"]["s"]["input"] == "truth"
+    with pytest.raises(ConfigError, match=r"^model_sets\.s\.input: 'gps' is not one of truth, ekf$"):
+        validate_config({"model_sets": {"s": {"data": "simulated", "vehicles": ["q"], "input": "gps"}}})
+
+
+def test_ekf_input_on_flight_data_is_a_config_error_naming_the_model_set():
+    validate_config({"model_sets": {"a": {"data": "simulated", "vehicles": ["q"], "input": "ekf"}}})
+    validate_config({"model_sets": {"f": {"data": "flights", "vehicles": ["q"], "input": "truth"}}})
+    with pytest.raises(ConfigError, match=r"^model_sets\.f\.input: 'ekf' is not truth with data: flights "
+                                          r"\(input: ekf needs data: simulated\)$"):
+        validate_config({"model_sets": {"f": {"data": "flights", "vehicles": ["q"], "input": "ekf"}}})
+
+
+def test_the_shipped_config_has_simekf_on_ekf_input_beside_sim_on_truth():
+    from pipeline.config import load_config
+
+    sets = load_config()["model_sets"]
+    assert sets["simekf"]["input"] == "ekf" and sets["simekf"]["data"] == "simulated"
+    assert sets["sim"]["input"] == "truth"
+    assert sets["simekf"]["labels"] == sets["sim"]["labels"]
+
+
+def test_truth_input_maps_to_tables_3_1_to_3_4_and_ekf_input_to_3_5_to_3_8():
+    assert thesis_tables_for({}) == {("train", "oneclass"): "3.1", ("train", "confidence"): "3.2",
+                                     ("test", "oneclass"): "3.3", ("test", "confidence"): "3.4"}
+    assert thesis_tables_for({"input": "ekf"}) == {("train", "oneclass"): "3.5", ("train", "confidence"): "3.6",
+                                                   ("test", "oneclass"): "3.7", ("test", "confidence"): "3.8"}
+    assert set(THESIS_EKF) == {"3.5", "3.6", "3.7", "3.8"} and not set(THESIS_EKF) & set(THESIS_TRUTH)
+
+
+def test_the_thesis_ekf_tables_hold_the_digest_values():
+    # digest §11, verbatim: Table 3.8 M1 100/87.88, M5 100/91.59; Table 3.5 M1 100/76.45
+    assert THESIS_EKF["3.8"]["M1"] == (100, 87.88) and THESIS_EKF["3.8"]["M5"] == (100, 91.59)
+    assert THESIS_EKF["3.5"]["M1"] == (100, 76.45) and "M5" not in THESIS_EKF["3.5"]
+    assert THESIS_SWITCH_EKF[(3, "D")] == (8.23, 100, 19.20, 34.34)
+    assert THESIS_SWITCH_EKF[(13, "D")] == (100, 84.77, 66.33, 10.25) and len(THESIS_SWITCH_EKF) == 12
+    import pandas as pd
+
+    t = thesis_side_by_side(pd.DataFrame({"maneuver": ["M4"], "n_runs": [1], "FA_pct": [1.0], "MAoT_pct": [2.0]}), "3.7")
+    assert (t["thesis_FA_pct"].iloc[0], t["thesis_MAoT_pct"].iloc[0]) == (100, 89.00)
+
+
+def test_an_ekf_input_model_set_is_evaluated_as_tables_3_5_to_3_8(synth, rng, tmp_path):
+    _, bulk = synth
+    sets = []
+    for lab in ("M1", "M2"):
+        p = tmp_path / f"{lab}_train.parquet"
+        bulk([lab], 3, rng).to_parquet(p)
+        sets.append(p)
+    spec = {"data": "simulated", "input": "ekf", "vehicles": ["x"], "hmm": {"n_states": 3, "n_iter": 5}}
+    model = {"params": tmp_path / "m" / "params.npz", "meta": tmp_path / "m" / "meta.json"}
+    assert run_train({"sets": sets}, model, spec, model_set="m", seed=3).status == "ok"
+    out = tmp_path / "m" / "evaluation.parquet"
+    run_evaluate({**model, "train_sets": sets, "test_sets": sets}, {"evaluation": out}, spec, model_set="m")
+    ev = read_table(out)
+    assert set(ev["table"]) == {"3.5", "3.6", "3.7", "3.8"}
+    r = ev[(ev.table == "3.8") & (ev.maneuver == "M1")].iloc[0]
+    assert (r.thesis_FA_pct, r.thesis_MAoT_pct) == THESIS_EKF["3.8"]["M1"]
+    meta = read_table_meta(out)
+    assert meta["input"] == "ekf" and meta["thesis_tables"] == ["3.5", "3.6", "3.7", "3.8"]

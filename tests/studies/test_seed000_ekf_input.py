@@ -1,0 +1,64 @@
+"""The seed-000 classification study with ``ekf_input: true`` at ``tiny`` size: Tables 3.5–3.8
+and 3.13–3.15 on EKF estimates, truth- and EKF-trained, beside the thesis values."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.io.parquet import read_table_meta
+from pipeline.models.metrics import THESIS_EKF, THESIS_SWITCH_EKF
+
+NAME = "seed000_classification"
+pytestmark = pytest.mark.slow   # the tiny study plus the EKF part: about a minute on 2 cores
+
+
+@pytest.fixture(scope="module")
+def tiny_ekf(ran, tmp_path_factory):
+    return ran(NAME, tmp_path_factory.mktemp("seed000ekf"), {"size": "tiny", NAME: {"ekf_input": True}})
+
+
+def test_tables_3_5_to_3_8_are_written_for_truth_and_ekf_trained_models_beside_the_thesis(tiny_ekf):
+    et = tiny_ekf.table("ekf_tables")
+    assert set(et["table"]) == {"3.5", "3.6", "3.7", "3.8", "3.8+bg"} and set(et["trained_on"]) == {"truth", "ekf"}
+    for r in et.itertuples():
+        if r.table in THESIS_EKF:
+            assert (r.thesis_FA_pct, r.thesis_MAoT_pct) == THESIS_EKF[r.table][r.maneuver]
+        else:                                               # ours (background rival): no thesis value
+            assert np.isnan(r.thesis_FA_pct) and np.isnan(r.thesis_MAoT_pct)
+    assert set(et[et.split == "test"]["maneuver"]) == {"M1", "M2", "M3", "M4", "M5"}   # M5 reported
+    assert et["n_runs"].gt(0).all() and et["MAoT_pct"].between(0, 100).all()
+    meta = read_table_meta(tiny_ekf.outputs["ekf_tables"])
+    assert meta["q"] == 3.0 and meta["runs_per_maneuver"] == 40
+
+
+def test_tables_3_13_to_3_15_cover_every_cell_in_both_modes_and_both_trainings(tiny_ekf):
+    sw = tiny_ekf.table("ekf_switch_tables")
+    assert len(sw) == 12 * 2 * 2
+    assert set(sw["mode"]) == {"cumulative", "windowed"} and set(sw["table"]) == {"3.13", "3.14", "3.15"}
+    r = sw[(sw.scenario == "D") & (sw.switch_s == 3.0)].iloc[0]
+    assert r.thesis_FA_initial_pct == THESIS_SWITCH_EKF[(3, "D")][0]
+    assert sw["n_runs"].eq(4).all()
+
+
+def test_the_ekf_trained_models_classify_ekf_input_at_least_as_well_as_the_truth_trained(tiny_ekf):
+    r = tiny_ekf.figures
+    assert float(r["seed000_ekf_cf_test_mean_MAoT_ekf_trained_pct"]) >= \
+        float(r["seed000_ekf_cf_test_mean_MAoT_truth_trained_pct"])
+    assert float(r["seed000_ekf_cf_test_mean_MAoT_gain_pct"]) >= 0
+    for k in ("seed000_ekf_cf_min_FA_pct", "seed000_ekf_cf_min_MAoT_minus_thesis_pct", "seed000_ekf_cf_M5_unknown_FA_pct",
+              "seed000_ekf_switch_cumulative_truth_trained_mean_final_MAoT_pct",
+              "seed000_ekf_switch_windowed_ekf_trained_mean_final_MAoT_pct"):
+        assert np.isfinite(float(r[k])), k
+
+
+def test_the_ekf_section_and_figures_are_on_the_report_and_the_page(tiny_ekf):
+    report = Path(tiny_ekf.outputs["report"]).read_text()
+    assert "EKF input: Tables 3.5–3.8" in report and "Tables 3.13–3.15" in report
+    page = Path(tiny_ekf.outputs["page"]).read_text()
+    for metric in (m for m in tiny_ekf.figures if m.startswith("seed000_ekf_")):
+        row = page[page.index(f"<code>{metric}</code>"):].split("</tr>")[0]
+        assert row.count("<td") == 2 and "<td>–</td>" not in row, metric
+    assert "Tables 3.5\\u20133.8: MAoT on EKF" in page and page.count("Plotly.newPlot") == 4   # JSON-escaped title

@@ -195,6 +195,16 @@ def train_inputs(wildcards):
     }
 
 
+def q2_inputs(wildcards):
+    """The EKF+HMM's Q2 data of a model set: its training data, and for a model set trained on EKF
+    estimates (input: ekf) the truth of the same runs too (the one-step errors are against it)."""
+    d = train_inputs(wildcards)
+    m = wildcards.model_set
+    if MODEL_SETS[m]["data"] == "simulated" and MODEL_SETS[m].get("input", "truth") == "ekf":
+        d["truth_sets"] = [f"results/sim/sets/{l}_train.parquet" for l in _set_labels(m)]
+    return d
+
+
 def evaluate_inputs(wildcards):
     m = wildcards.model_set
     if MODEL_SETS[m]["data"] == "simulated":

@@ -4,7 +4,7 @@
 
 rule estimate_q2:
     input:
-        unpack(train_inputs),
+        unpack(q2_inputs),
         params="results/models/{model_set}/params.npz",
         meta="results/models/{model_set}/meta.json",
     output:

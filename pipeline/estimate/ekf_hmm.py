@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..models.features import decimation_factor, run_sequences
+from ..models.features import GMR_FEATURE_SETS, decimation_factor, run_sequences
 from ..models.metrics import UNKNOWN
 from .base import GaussianState
 from .ekf import ExtendedKalmanFilter, FilterTrack, run_filter
@@ -47,8 +47,6 @@ from .models import STATE_COLUMNS, ca_transition, hmm_input, hmm_transition
 
 F64 = NDArray[np.float64]
 
-#: feature sets whose models give GMR acceleration/jerk (the EKF+HMM needs them)
-GMR_FEATURE_SETS = ("state9", "state9h", "state9box")
 #: state index of each component's NED axis (state ordered [r(3), v(3), a(3)])
 _AXIS_OF = np.tile(np.arange(3), 3)
 

@@ -479,7 +479,10 @@ def run_q2(inputs, outputs, config: Mapping, *, model_set: str) -> Q2Result:
     ----------
     inputs : mapping
         ``params`` (its ``meta.json`` beside it) and the set's training data: ``sets``
-        (simulated bulk sets), or ``states`` and ``segments`` (training flights).
+        (simulated bulk sets), or ``states`` and ``segments`` (training flights); for a model
+        set trained on EKF estimates (``input: ekf``) also ``truth_sets``, the truth of the same
+        runs: the classifier and GMR then see the estimates and the one-step errors are taken
+        against the truth.
     outputs : mapping
         ``q2``: ``results/estimate/q2/<model_set>.json`` with ``status``, ``error``,
         ``scale``, ``n_runs`` and ``Q2`` (9×9, state order pos/vel/acc NED).
@@ -504,11 +507,14 @@ def run_q2(inputs, outputs, config: Mapping, *, model_set: str) -> Q2Result:
             reason = f"model set {model_set} has no GMR (feature set {ms.config.feature_set})"
         else:
             runs = _training_runs(inputs)
+            truth_sets = declared_list(inputs, "truth_sets")
+            # a model set trained on EKF estimates: the GMR sees those, the errors are the truth's
+            truth = _training_runs({"sets": truth_sets}) if truth_sets else runs
             if not len(runs):
                 reason = "no training runs"
             else:
                 try:
-                    Q2 = q2_from_runs(ms, runs, scale=scale)
+                    Q2 = q2_from_runs(ms, truth, scale=scale, input_state=runs if truth_sets else None)
                 except ValueError as exc:
                     reason = f"Q2 failed: {type(exc).__name__}: {exc}"
                 else:

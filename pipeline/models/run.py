@@ -282,7 +282,11 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
             resets = seg["t_start_ns"].to_numpy()
         try:
             ms = ManeuverModelSet.load(model_dir)
-            res = ms.classify(lab, mode=mode, decision=decision, reset_t_ns=resets)
+            # box-frame feature sets need the aerobatic box heading (FlightCoach meta, copied to
+            # the state metadata by preprocess); 0 where the log has none
+            box = st_meta.get("box_rotation_rad")
+            res = ms.classify(lab, mode=mode, decision=decision, reset_t_ns=resets,
+                              box_heading_rad=float(box) if box is not None else 0.0)
         except ValueError as exc:  # ModelError and numerical failures on odd flights
             reason = f"classification failed: {type(exc).__name__}: {exc}"
         else:

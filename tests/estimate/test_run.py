@@ -170,3 +170,26 @@ def test_without_truth_the_nees_is_nan_and_the_filter_starts_from_the_first_meas
     # from the first measurement (the site is below the flight) the position starts within metres
     run = read_table(tmp_path / "state" / "f1.parquet")
     assert abs(ekf["x_pos_n_m"].iloc[0] - run["pos_n_m"].iloc[0]) < 10.0
+
+
+def test_q2_of_a_model_set_trained_on_estimates_takes_its_errors_against_the_truth(tmp_path, models):
+    """``truth_sets`` beside ``sets`` (input: ekf): the GMR sees the estimates, the one-step errors
+    are the truth's; noisier inputs give a larger Q₂ than the truth alone."""
+    data = pd.read_parquet(models / "M_train.parquet")
+    noisy = data.copy()
+    rng = np.random.default_rng(7)
+    for c in ("pos_n_m", "pos_e_m", "pos_d_m"):
+        noisy[c] = noisy[c] + rng.normal(0, 0.3, len(noisy))
+    est = tmp_path / "est" / "M_train.parquet"
+    est.parent.mkdir()
+    noisy.to_parquet(est)
+    args = ({"q2_scale": 1.0},)
+    truth_only = run_q2({"params": models / "sim" / "params.npz", "sets": [models / "M_train.parquet"]},
+                        {"q2": tmp_path / "a.json"}, *args, model_set="sim")
+    both = run_q2({"params": models / "sim" / "params.npz", "sets": [est], "truth_sets": [models / "M_train.parquet"]},
+                  {"q2": tmp_path / "b.json"}, *args, model_set="sim")
+    assert truth_only.status == both.status == "ok"
+    qa = np.array(json.loads((tmp_path / "a.json").read_text())["Q2"])
+    qb = np.array(json.loads((tmp_path / "b.json").read_text())["Q2"])
+    # the truth's own position increments are unchanged, so only the GMR inputs differ: larger errors
+    assert np.trace(qb[6:, 6:]) > np.trace(qa[6:, 6:])

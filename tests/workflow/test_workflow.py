@@ -80,7 +80,8 @@ def test_dry_run_default_config_plans_every_stage():
     ("train", {"simulate_sets", "ekf_sets", "train_model", "evaluate_model", "train"}),
     ("classify", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "classify_flight", "classify"}),
-    ("estimate", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+    # the EKF+HMM's model is simekf (input: ekf): its Q2 needs the EKF sets and the truth sets
+    ("estimate", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "estimate_q2", "estimate_flight", "estimate"}),
     ("report", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                 "train_model", "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "plotly_js",
@@ -147,7 +148,7 @@ def test_an_ekf_hmm_model_that_is_no_model_set_stops_the_dry_run_naming_it(tmp_p
     p = _smk(wd, "-n", check=False)
     lines = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("uavpipe: ")]
     assert p.returncode != 0 and len(lines) == 1, p.stdout + p.stderr
-    assert "estimate.ekf_hmm.model: no model set 'simm' (model_sets: sim, f3a)" in lines[0]
+    assert "estimate.ekf_hmm.model: no model set 'simm' (model_sets: sim, simekf, f3a)" in lines[0]
 
 
 CLI_COMMANDS = (["simulate", "OUT"], ["preprocess", "IN", "-o", "OUT"], ["ingest", "IN", "-o", "OUT"],

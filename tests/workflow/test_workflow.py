@@ -406,7 +406,7 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
         m = read_table_meta(res / "estimate" / e / "demo-quad.parquet")
         assert m["status"] == "failed" and "no radar stream" in m["error"]
         assert not (res / "estimate" / e / "broken.parquet").exists()
-    assert json.loads((res / "estimate" / "q2" / "sim.json").read_text())["status"] == "ok"
+    assert json.loads((res / "estimate" / "q2" / "simekf.json").read_text())["status"] == "ok"  # the EKF+HMM's model set
     page = (res / "report" / "flights" / "sim-M1-000-bin.html").read_text()
     assert "Estimation error vs truth: acceleration" in page and "EKF+HMM mode (" in page
     assert _planned_jobs(wd) == {}

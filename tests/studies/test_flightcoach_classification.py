@@ -116,3 +116,15 @@ def test_a_missing_flight_fails_with_one_line_naming_the_file(tmp_path):
         flightcoach_inputs(tmp_path)
     msg = str(e.value)
     assert "\n" not in msg and str(tmp_path / FLIGHTCOACH_DIR) in msg and "not found" in msg
+
+
+def test_the_calibration_refines_from_the_grid_point_below_to_the_one_above_the_maximisers():
+    from pipeline.studies.flightcoach_classification import p21_scores, refine_grid
+
+    fine = refine_grid([0.0, 0.5, 1.0, 1.5, 2.0, 3.0], [50, 50, 57, 57, 54, 40], step=0.25)
+    assert fine == [0.75, 1.25, 1.75]                               # [0.5, 2.0] without the coarse points
+    assert refine_grid([1.5], [57]) == [] and refine_grid([1.0, 2.0], [1, 2], step=0) == []
+    seg = pd.DataFrame({"known": [True, True, False, False, False],
+                        "pred_end": ["hB", "unknown", "unknown", "unknown", "loop"]})
+    assert p21_scores(seg) == pytest.approx({"known_accepted": 50.0, "unknown_rejected": 200 / 3,
+                                             "balanced": 25.0 + 100 / 3})

@@ -132,3 +132,65 @@ def test_new_streams_do_not_move_t0():
     first_sensor = min(int(log[s]["t_ns"].min()) for s in ("imu", "gps", "attitude") if len(log[s]))
     assert first_sensor >= 0
     assert int(log["params"]["t_ns"].min()) < 0  # the parameter dump precedes the sensors
+
+
+# --- synthetic logs (uavpipe's DataFlash writer, read back by pymavlink): no shared data ------
+
+def _synthetic_log(path):
+    from pipeline.io.dataflash.writer import DataFlashWriter
+
+    with DataFlashWriter(path) as w:
+        w.define("IMU", 162, "QBffffff", "TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
+        w.define("BAT", 70, "QBfffffcf", "TimeUS,Instance,Volt,VoltR,Curr,CurrTot,EnrgTot,Temp,Res")
+        w.define("VIBE", 71, "QBfffI", "TimeUS,IMU,VibeX,VibeY,VibeZ,Clip")
+        w.define("RATE", 72, "Qffffff", "TimeUS,RDes,R,ROut,PDes,P,POut")  # no yaw: not mapped
+        w.define("ATT", 73, "QccccCC", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw")
+        w.define("MSG", 74, "QZ", "TimeUS,Message")
+        w.write_params({"A_B": 1.5}, time_us=500_000)
+        w.write("IMU", TimeUS=1_000_000, I=0, AccZ=-9.8)
+        w.write("BAT", TimeUS=1_100_000, Instance=1, Volt=16.25, Curr=12.5, CurrTot=750.0, Temp=31.5)
+        w.write("VIBE", TimeUS=1_200_000, IMU=0, VibeX=1.5, VibeY=2.5, VibeZ=3.5, Clip=4)
+        w.write("VIBE", TimeUS=1_200_000, IMU=1, VibeX=0.5, VibeY=0.5, VibeZ=0.5, Clip=7)
+        w.write("RATE", TimeUS=1_300_000, RDes=90.0)
+        w.write("ATT", TimeUS=1_400_000, DesRoll=10.0, DesPitch=-5.0, DesYaw=270.0)
+        w.write("MSG", TimeUS=1_500_000, Message="hello")
+        w.write_params({"A_B": 2.0}, time_us=1_600_000)
+    return path
+
+
+def test_synthetic_modern_log_fills_the_new_streams_as_pymavlink_reads_it(tmp_path):
+    p = _synthetic_log(tmp_path / "v11.bin")
+    log, orc = read_log(p), pymavlink_by_type(p)
+    b = log["battery"].iloc[0]
+    assert (b["instance"], b["t_ns"]) == (1, 100_000_000)
+    assert (b["voltage_V"], b["current_A"], b["consumed_Ah"]) == (16.25, 12.5, 0.75)
+    assert b["temp_degC"] == pytest.approx(orc["BAT"][0].Temp) == 31.5
+    v = log["vibration"]
+    assert v["instance"].tolist() == [0, 1]  # Copter 4: one VIBE per IMU, Clip -> clip_<IMU>
+    assert v["clip_0"].iloc[0] == 4 and np.isnan(v["clip_1"].iloc[0])
+    assert v["clip_1"].iloc[1] == 7 and v["vibe_z_mps2"].tolist() == [3.5, 0.5]
+    s = log["setpoint"]
+    assert s["src"].astype(str).tolist() == ["ATT"]  # RATE lacks YDes: not mapped
+    np.testing.assert_allclose(s[["roll_rad", "pitch_rad", "yaw_rad"]].iloc[0],
+                               np.deg2rad([orc["ATT"][0].DesRoll, orc["ATT"][0].DesPitch, orc["ATT"][0].DesYaw]))
+    assert log["messages"]["text"].tolist() == ["hello"]
+    prm = log["params"]
+    assert prm["value"].tolist() == [1.5, 2.0] and prm["t_ns"].tolist() == [-500_000_000, 600_000_000]
+    assert log.meta["params"] == {"A_B": 2.0} and log.meta["diagnostics"]["timestamp_anomalies"] == {}
+    assert log.meta["t0_boot_ns"] == 1_000_000_000  # PARM before the IMU does not move t0
+
+
+def test_old_copter_curr_integers_are_hundredths_of_volts_and_amps(tmp_path):
+    from pipeline.io.dataflash.writer import DataFlashWriter
+
+    p = tmp_path / "old.bin"
+    with DataFlashWriter(p) as w:
+        w.define("IMU", 131, "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
+        w.define("CURR", 132, "IhIhhhf", "TimeMS,ThrOut,ThrInt,Volt,Curr,Vcc,CurrTot")
+        w.write("IMU", TimeMS=1000, AccZ=-9.8)
+        w.write("CURR", TimeMS=1100, Volt=1640, Curr=294, Vcc=5000, CurrTot=66.5)
+    orc = pymavlink_by_type(p)["CURR"][0]
+    b = read_log(p)["battery"].iloc[0]
+    assert (orc.Volt, orc.Curr) == (1640, 294)
+    assert (b["voltage_V"], b["current_A"], b["consumed_Ah"], b["t_ns"]) == \
+        (pytest.approx(16.40), pytest.approx(2.94), pytest.approx(0.0665), 100_000_000)

@@ -102,3 +102,70 @@ def test_gps_quality_equals_pyulog(real):
     for col, f in (("hdop", "hdop"), ("vdop", "vdop"), ("fix_type", "fix_type"), ("n_sats", "satellites_used"),
                    ("hacc_m", "eph")):
         assert np.array_equal(g[col], d.data[f].astype(float))
+
+
+# --- a synthetic ULog (the tests' ULog writer, parsed by pyulog): no shared data needed -------
+
+def _ulog_msg(kind: str, payload: bytes) -> bytes:
+    import struct
+
+    return struct.pack("<HB", len(payload), ord(kind)) + payload
+
+
+def test_synthetic_ulog_fills_every_new_stream(tmp_path):
+    import struct
+
+    from helpers_ulog import ULogWriter
+    from pipeline.frames.rotations import euler_to_quat
+
+    F = [("uint64_t", "timestamp")]
+    w = ULogWriter(start_us=2_000_000)
+    w.add_param("MPC_XY_VEL_MAX", 12.0)
+    ts = np.array([2_100_000, 2_200_000], np.uint64)
+    w.topic("battery_status", F + [("float", "voltage_v"), ("float", "current_a"), ("float", "discharged_mah"),
+                                   ("float", "remaining"), ("float", "temperature")],
+            {"timestamp": ts, "voltage_v": np.array([16.5, 16.25], np.float32),
+             "current_a": np.array([10.0, 12.5], np.float32), "discharged_mah": np.array([100.0, 150.0], np.float32),
+             "remaining": np.array([0.75, 0.5], np.float32), "temperature": np.array([25.0, 26.0], np.float32)})
+    q = euler_to_quat(np.array([0.25, 0.0]), np.array([-0.125, 0.0]), np.array([1.5, -3.0]))
+    w.topic("vehicle_attitude_setpoint", F + [("float[4]", "q_d")],
+            {"timestamp": ts, "q_d": q.astype(np.float32)})
+    w.topic("vehicle_rates_setpoint", F + [("float", "roll"), ("float", "pitch"), ("float", "yaw")],
+            {"timestamp": ts, "roll": np.array([0.5, 0.0], np.float32), "pitch": np.zeros(2, np.float32),
+             "yaw": np.array([-0.25, 1.0], np.float32)})
+    w.topic("trajectory_setpoint", F + [("float[3]", "velocity")],
+            {"timestamp": ts, "velocity": np.array([[1.0, 2.0, -0.5], [np.nan, np.nan, 0.0]], np.float32)})
+    w.topic("vehicle_imu_status", F + [("uint32_t[3]", "accel_clipping"), ("float", "accel_vibration_metric"),
+                                       ("float", "gyro_vibration_metric")],
+            {"timestamp": ts, "accel_clipping": np.array([[0, 0, 0], [3, 0, 1]], np.uint32),
+             "accel_vibration_metric": np.array([0.5, 4.0], np.float32),
+             "gyro_vibration_metric": np.array([0.01, 0.02], np.float32)}, multi_id=1)
+    w.log("WARNING", 2_150_000, "low battery")
+    data = w.to_bytes()
+    k = b"float MPC_XY_VEL_MAX"
+    data += _ulog_msg("P", bytes([len(k)]) + k + struct.pack("<f", 8.0))  # a change after the data
+    p = tmp_path / "v11.ulg"
+    p.write_bytes(data)
+
+    log = read_log(p)
+    b = log["battery"]
+    assert b["t_ns"].tolist() == [100_000_000, 200_000_000]
+    assert b["voltage_V"].tolist() == [16.5, 16.25] and b["consumed_Ah"].tolist() == [0.1, 0.15]
+    assert b["remaining_frac"].tolist() == [0.75, 0.5] and b["temp_degC"].tolist() == [25.0, 26.0]
+    s = log["setpoint"]
+    att = s[s["src"].astype(str) == "vehicle_attitude_setpoint"]
+    np.testing.assert_allclose(att[["roll_rad", "pitch_rad", "yaw_rad"]].to_numpy(float),
+                               [[0.25, -0.125, 1.5], [0.0, 0.0, -3.0]], atol=1e-6)
+    rate = s[s["src"].astype(str) == "vehicle_rates_setpoint"]
+    assert rate["p_radps"].tolist() == [0.5, 0.0] and rate["r_radps"].tolist() == [-0.25, 1.0]
+    vel = s[s["src"].astype(str) == "trajectory_setpoint"]
+    assert vel["vel_n_mps"].iloc[0] == 1.0 and np.isnan(vel["vel_n_mps"].iloc[1])
+    assert vel["vel_d_mps"].tolist() == [-0.5, 0.0]
+    v = log["vibration"]
+    assert (v["instance"] == 1).all() and v["clip_0"].tolist() == [0, 3] and v["clip_2"].tolist() == [0, 1]
+    assert v["acc_vibration_mps2"].tolist() == [0.5, 4.0]
+    m = log["messages"].iloc[0]
+    assert (m["text"], m["severity"], m["t_ns"]) == ("low battery", 4.0, 150_000_000)  # WARNING = 4
+    prm = log["params"]
+    assert prm["src"].astype(str).tolist() == ["initial_parameters", "changed_parameters"]
+    assert prm["value"].tolist() == [12.0, 8.0] and prm["t_ns"].iloc[0] == 0 and prm["t_ns"].iloc[1] > 0

@@ -83,6 +83,11 @@ def test_attitude_and_rate_setpoints_equal_pymavlink_in_radians(real):
         v = _rows(log, "setpoint", "NTUN")
         assert np.array_equal(v["vel_n_mps"], _vals(orc["NTUN"], "DVelX") * 0.01)
         assert np.array_equal(v["vel_e_mps"], _vals(orc["NTUN"], "DVelY") * 0.01)
+    if orc.get("CTUN") and "DCRt" in orc["CTUN"][0]._fieldnames:
+        c = _rows(log, "setpoint", "CTUN")
+        assert len(c) == len(orc["CTUN"])
+        assert np.array_equal(c["vel_d_mps"], -_vals(orc["CTUN"], "DCRt") * 0.01)  # cm/s up -> m/s down
+        assert np.array_equal(c["t_ns"], _t_ns(orc["CTUN"], log))
 
 
 def test_messages_and_params_equal_pymavlink_records(real):
@@ -146,6 +151,7 @@ def _synthetic_log(path):
         w.define("RATE", 72, "Qffffff", "TimeUS,RDes,R,ROut,PDes,P,POut")  # no yaw: not mapped
         w.define("ATT", 73, "QccccCC", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw")
         w.define("MSG", 74, "QZ", "TimeUS,Message")
+        w.define("PSCD", 75, "Qffffffff", "TimeUS,TPD,PD,DVD,TVD,VD,DAD,TAD,AD")
         w.write_params({"A_B": 1.5}, time_us=500_000)
         w.write("IMU", TimeUS=1_000_000, I=0, AccZ=-9.8)
         w.write("BAT", TimeUS=1_100_000, Instance=1, Volt=16.25, Curr=12.5, CurrTot=750.0, Temp=31.5)
@@ -154,6 +160,7 @@ def _synthetic_log(path):
         w.write("RATE", TimeUS=1_300_000, RDes=90.0)
         w.write("ATT", TimeUS=1_400_000, DesRoll=10.0, DesPitch=-5.0, DesYaw=270.0)
         w.write("MSG", TimeUS=1_500_000, Message="hello")
+        w.write("PSCD", TimeUS=1_550_000, TVD=-1.25, DVD=-1.0)
         w.write_params({"A_B": 2.0}, time_us=1_600_000)
     return path
 
@@ -170,8 +177,9 @@ def test_synthetic_modern_log_fills_the_new_streams_as_pymavlink_reads_it(tmp_pa
     assert v["clip_0"].iloc[0] == 4 and np.isnan(v["clip_1"].iloc[0])
     assert v["clip_1"].iloc[1] == 7 and v["vibe_z_mps2"].tolist() == [3.5, 0.5]
     s = log["setpoint"]
-    assert s["src"].astype(str).tolist() == ["ATT"]  # RATE lacks YDes: not mapped
-    np.testing.assert_allclose(s[["roll_rad", "pitch_rad", "yaw_rad"]].iloc[0],
+    assert s["src"].astype(str).tolist() == ["ATT", "PSCD"]  # RATE lacks YDes: not mapped
+    assert s["vel_d_mps"].iloc[1] == orc["PSCD"][0].TVD == -1.25 and np.isnan(s["vel_n_mps"].iloc[1])
+    np.testing.assert_allclose(s[["roll_rad", "pitch_rad", "yaw_rad"]].iloc[0].to_numpy(float),
                                np.deg2rad([orc["ATT"][0].DesRoll, orc["ATT"][0].DesPitch, orc["ATT"][0].DesYaw]))
     assert log["messages"]["text"].tolist() == ["hello"]
     prm = log["params"]

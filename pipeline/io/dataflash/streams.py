@@ -24,7 +24,8 @@ radar           RADR (simulation): ``Rng``, ``U``, ``V``, ``RR``, ``I``; PARM RA
 battery         BAT/BAT2 (else CURR/CURR2) ``Volt`` V, ``Curr`` A (old integer fields 1/100),
                 ``CurrTot`` mAh -> Ah, ``RemPct`` -> fraction, ``Temp``
 setpoint        ATT ``DesRoll/DesPitch/DesYaw`` deg -> rad; RATE ``RDes/PDes/YDes`` deg/s ->
-                rad/s; copter NTUN ``DVelX/DVelY`` cm/s -> north/east m/s
+                rad/s; copter NTUN ``DVelX/DVelY`` cm/s -> north/east m/s, CTUN ``DCRt``
+                cm/s up -> down m/s; PSCN/PSCE/PSCD ``TVN/TVE/TVD`` m/s
 messages        MSG ``Message`` (no severity in DataFlash: NaN)
 params          PARM ``Name``, ``Value``, every record at its time
 vibration       VIBE ``VibeX/Y/Z`` m/s², ``Clip0..2`` (Copter 4: per ``IMU``, ``Clip``)
@@ -597,6 +598,30 @@ def _setpoint_ntun(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
     return d
 
 
+def _setpoint_ctun(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """Copter CTUN ``DCRt`` (desired climb rate, integer cm/s, up) -> ``vel_d_mps`` = −DCRt/100
+    (plane CTUN has none; a float ``DCRt`` of unknown unit is not mapped)."""
+    c = ctx.res.tables[name]
+    if "DCRt" not in c or _fmt_of(ctx, name)["DCRt"] not in "hHiI":
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d["vel_d_mps"] = -c["DCRt"].astype(np.float64) * 0.01
+    return d
+
+
+def _setpoint_psc(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """Copter 4.1+ PSCN/PSCE/PSCD ``TVN``/``TVE``/``TVD`` (target velocity, m/s) -> one
+    velocity-setpoint axis per message."""
+    axis = name[-1].lower()
+    c = ctx.res.tables[name]
+    key = f"TV{name[-1]}"
+    if key not in c:
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d[f"vel_{axis}_mps"] = c[key].astype(np.float64)
+    return d
+
+
 def _messages(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
     """MSG ``Message`` (DataFlash logs no severity: NaN)."""
     c = ctx.res.tables[name]
@@ -665,7 +690,8 @@ STREAM_TABLE: tuple[tuple[str, str | tuple[str, ...], Builder], ...] = (
     ("battery", "BAT", _battery), ("battery", "BAT2", _battery),
     ("battery", "CURR", _battery), ("battery", "CURR2", _battery),
     ("setpoint", "ATT", _setpoint_att), ("setpoint", "RATE", _setpoint_rate),
-    ("setpoint", "NTUN", _setpoint_ntun),
+    ("setpoint", "NTUN", _setpoint_ntun), ("setpoint", "CTUN", _setpoint_ctun),
+    ("setpoint", "PSCN", _setpoint_psc), ("setpoint", "PSCE", _setpoint_psc), ("setpoint", "PSCD", _setpoint_psc),
     ("messages", "MSG", _messages),
     ("params", "PARM", _params),
     ("vibration", "VIBE", _vibration),

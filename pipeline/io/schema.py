@@ -65,7 +65,8 @@ def _f(name: str, unit: str, frame: str = "", doc: str = "") -> Column:
 
 
 COMMON = (
-    Column("t_ns", "int64", "ns", "", "time since the log's first sample (t0 in meta)"),
+    Column("t_ns", "int64", "ns", "",
+           "time since the log's first sample (t0 in meta; event streams may precede it)"),
     Column("instance", "uint8", "1", "", "sensor instance (ArduPilot I, ULog multi_id)"),
     Column("src", "category", "", "", "source message type or topic"),
     Column("t_boot_ns", "Int64", "ns", "", "the source's own boot-time stamp, where it has one"),

@@ -153,6 +153,7 @@ class FlightLog:
         (:func:`pipeline.io.schema.conform_arrow`). Timestamp anomalies (backwards jumps,
         duplicates) are counted per stream in the order the reader produced the rows (= file
         order) and stored in ``meta['diagnostics']['timestamp_anomalies']``; the samples are kept.
+        Event streams (``schema.EVENT_STREAMS``: messages, params) are not counted.
         """
         meta = {**schema.new_meta(), **meta}
         diag = {**schema.new_diagnostics(), **(meta.get("diagnostics") or {})}
@@ -164,7 +165,7 @@ class FlightLog:
             if name not in schema.STREAM_NAMES:
                 raise schema.SchemaError(f"unknown stream(s) {[name]}")
             if _is_frame(data):
-                if len(data) and name != "labels":
+                if len(data) and name != "labels" and name not in schema.EVENT_STREAMS:
                     if "instance" not in data.columns:
                         data = data.assign(instance=0)
                     a = schema.timestamp_anomalies(data)
@@ -174,7 +175,7 @@ class FlightLog:
                 continue
             table, a = schema.conform_arrow_counted(name, data)
             data = None  # drop the loose columns before the next stream
-            if a["backwards"] or a["duplicate"]:
+            if (a["backwards"] or a["duplicate"]) and name not in schema.EVENT_STREAMS:
                 anomalies[name] = a
             out[name] = table
         out = {name: out[name] if name in out else schema.empty_arrow(name) for name in schema.STREAM_NAMES}

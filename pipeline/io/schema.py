@@ -25,7 +25,9 @@ import numpy as np
 from .lazy import pandas as pd  # imported on first use: the Arrow path below needs none
 import pyarrow as pa
 
-SCHEMA_VERSION = "1.0.0"
+#: 1.1.0 (minor): the streams ``battery``, ``setpoint``, ``messages``, ``params``, ``vibration``
+#: and the ``gps`` columns ``hdop``/``vdop`` are new; every 1.0.0 column is unchanged.
+SCHEMA_VERSION = "1.1.0"
 
 #: Number of RC input / servo output channels carried by the ``control`` stream.
 N_RC = 18
@@ -63,7 +65,8 @@ def _f(name: str, unit: str, frame: str = "", doc: str = "") -> Column:
 
 
 COMMON = (
-    Column("t_ns", "int64", "ns", "", "time since the log's first sample (t0 in meta)"),
+    Column("t_ns", "int64", "ns", "",
+           "time since the log's first sample (t0 in meta; event streams may precede it)"),
     Column("instance", "uint8", "1", "", "sensor instance (ArduPilot I, ULog multi_id)"),
     Column("src", "category", "", "", "source message type or topic"),
     Column("t_boot_ns", "Int64", "ns", "", "the source's own boot-time stamp, where it has one"),
@@ -88,6 +91,8 @@ STREAMS: dict[str, tuple[Column, ...]] = {
         _f("n_sats", "1"),
         _f("hacc_m", "m"),
         _f("vacc_m", "m"),
+        _f("hdop", "1", "", "horizontal dilution of precision"),
+        _f("vdop", "1", "", "vertical dilution of precision"),
     ),
     "baro": (
         _f("press_Pa", "Pa"),
@@ -125,6 +130,37 @@ STREAMS: dict[str, tuple[Column, ...]] = {
         Column("mode", "string", "", "", "flight mode name (or number when unknown)"),
         Column("armed", "boolean", "", "", "armed state where the source has it"),
     ),
+    "battery": (
+        _f("voltage_V", "V", "", "battery (pack) voltage"),
+        _f("current_A", "A", "", "battery current, positive discharging"),
+        _f("consumed_Ah", "A.h", "", "charge drawn since boot"),
+        _f("remaining_frac", "1", "", "remaining capacity, 0..1, as the autopilot estimates it"),
+        _f("temp_degC", "degC"),
+    ),
+    "setpoint": (
+        _f("roll_rad", "rad", "ZYX", "attitude setpoint (ZYX Euler, FRD -> NED)"),
+        _f("pitch_rad", "rad", "ZYX"),
+        _f("yaw_rad", "rad", "ZYX"),
+        _f("p_radps", "rad/s", "FRD", "body rate setpoint"),
+        _f("q_radps", "rad/s", "FRD"),
+        _f("r_radps", "rad/s", "FRD"),
+        *(_f(f"vel_{a}_mps", "m/s", "NED", "velocity setpoint") for a in _NED),
+    ),
+    "messages": (
+        Column("text", "string", "", "", "the autopilot's text message"),
+        _f("severity", "1", "", "MAV_SEVERITY / syslog level 0 emergency .. 7 debug; NaN: not logged"),
+    ),
+    "params": (
+        Column("name", "string", "", "", "parameter name"),
+        _f("value", "1", "", "parameter value (unit per parameter)"),
+    ),
+    "vibration": (
+        *(_f(f"vibe_{a}_mps2", "m/s^2", "FRD", "accelerometer vibration level (autopilot's metric)")
+          for a in _XYZ),
+        _f("acc_vibration_mps2", "m/s^2", "", "one-number accelerometer vibration metric (PX4)"),
+        _f("gyr_vibration_radps", "rad/s", "", "one-number gyro vibration metric (PX4)"),
+        *(_f(f"clip_{i}", "1", "", f"accelerometer {i} clipping events since boot") for i in range(3)),
+    ),
     "radar": (
         _f("range_m", "m", "", "as measured: rho + tau_RD * rho_dot"),
         _f("dcos_u", "1", "NED", "direction cosine (north component)"),
@@ -152,6 +188,14 @@ LABELS: tuple[Column, ...] = (
 )
 
 STREAM_NAMES: tuple[str, ...] = (*STREAMS, "labels")
+
+#: Event streams (schema 1.1): records, not samples of a signal. Several may share a stamp (a
+#: parameter dump at boot), so they are not counted in the timestamp anomalies, and they may
+#: precede ``t_ns = 0`` (the first *sensor* record; see the readers), as ULog's stale topics do.
+EVENT_STREAMS: tuple[str, ...] = ("messages", "params")
+
+#: The streams added by schema 1.1 (none of them moves a reader's ``t0``).
+STREAMS_1_1: tuple[str, ...] = ("battery", "setpoint", "messages", "params", "vibration")
 
 #: Columns of the derived ``state`` table (preprocess output; style.md §3.2).
 STATE: tuple[Column, ...] = (

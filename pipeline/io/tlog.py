@@ -104,8 +104,19 @@ Message -> stream mapping (units converted to SI, NED/FRD)
 ``DISTANCE_SENSOR``          ``rangefinder`` instance ``id``: cm -> m, ``valid`` =
                              ``min_distance <= current_distance <= max_distance``,
                              ``orientation`` (MAV_SENSOR_ORIENTATION).
-``STATUSTEXT``               ``diagnostics['messages']`` (first 1000).
-``PARAM_VALUE``              ``meta['params']`` (last value per name).
+``STATUSTEXT``               ``messages`` (``text``, ``severity`` MAV_SEVERITY), all of
+                             them; also ``diagnostics['messages']`` (first 1000).
+``PARAM_VALUE``              ``params`` (every record: name, value, time); also
+                             ``meta['params']`` (last value per name).
+``BATTERY_STATUS``           ``battery`` instance ``id`` (sum of cell voltages, cA, mAh,
+                             %, cdegC); without it ``SYS_STATUS`` (mV, cA, %), unknown
+                             values NaN, SYS_STATUS left out when it has none.
+``ATTITUDE_TARGET``          ``setpoint``: ``q`` -> ZYX Euler rad, body rates rad/s
+                             (``type_mask`` ignored fields NaN);
+                             ``NAV_CONTROLLER_OUTPUT`` ``nav_roll/nav_pitch/nav_bearing``
+                             deg -> rad; ``POSITION_TARGET_LOCAL_NED`` (frame 1) velocity.
+``VIBRATION``                ``vibration``: ``vibration_x/y/z`` m/s², ``clipping_0..2``.
+``GPS_RAW_INT`` ``eph/epv``  also ``gps`` ``hdop``/``vdop`` (× 0.01; 65535 NaN).
 ===========================  ==========================================================
 
 NED origin (``meta['ned_origin']``): the vehicle's first ``GPS_GLOBAL_ORIGIN`` (the EKF origin
@@ -226,9 +237,22 @@ _FIELDS: dict[str, tuple[str, ...]] = {
     "HEARTBEAT": ("type", "autopilot", "base_mode", "custom_mode"),
     "GPS_GLOBAL_ORIGIN": ("latitude", "longitude", "altitude"),
     "HOME_POSITION": ("latitude", "longitude", "altitude"),
+    # schema 1.1 streams (battery, setpoint, vibration)
+    "SYS_STATUS": ("voltage_battery", "current_battery", "battery_remaining"),
+    "BATTERY_STATUS": ("id", "voltages", "current_battery", "current_consumed", "battery_remaining",
+                       "temperature"),
+    "ATTITUDE_TARGET": ("time_boot_ms", "type_mask", "q", "body_roll_rate", "body_pitch_rate",
+                        "body_yaw_rate"),
+    "NAV_CONTROLLER_OUTPUT": ("nav_roll", "nav_pitch", "nav_bearing"),
+    "POSITION_TARGET_LOCAL_NED": ("time_boot_ms", "coordinate_frame", "type_mask", "vx", "vy", "vz"),
+    "VIBRATION": ("time_usec", "vibration_x", "vibration_y", "vibration_z", "clipping_0", "clipping_1",
+                  "clipping_2"),
 }
+#: Types added with schema 1.1: not counted when picking the vehicle (the pick stays as it was).
+_V11_TYPES = frozenset({"SYS_STATUS", "BATTERY_STATUS", "ATTITUDE_TARGET", "NAV_CONTROLLER_OUTPUT",
+                        "POSITION_TARGET_LOCAL_NED", "VIBRATION"})
 #: Messages only a vehicle sends: used to pick the vehicle's (sysid, compid).
-_VEHICLE_TYPES = frozenset(_FIELDS) - {"HEARTBEAT", "GPS_GLOBAL_ORIGIN", "HOME_POSITION"}
+_VEHICLE_TYPES = frozenset(_FIELDS) - {"HEARTBEAT", "GPS_GLOBAL_ORIGIN", "HOME_POSITION"} - _V11_TYPES
 _BOOT_SCALE = {"time_boot_ms": 1_000_000, "time_usec": 1_000}
 #: Integer fields kept as int64 (times, and lat/lon: 1e-7 deg integers exceed float32 but
 #: not float64 -- int64 keeps the conversion a single rounding).
@@ -388,11 +412,11 @@ def _keep(res: _Scan, msg, ts: int, size: int, mode_string) -> None:
             res.heartbeat_ids.setdefault(sender, (msg.type, msg.autopilot))
             res.mode_names.append(mode_string(msg))
     elif mtype == "STATUSTEXT":
-        if len(res.texts) < 4 * MAX_MESSAGES:
-            text = msg.text
-            if isinstance(text, bytes):
-                text = text.decode("utf-8", "replace")
-            res.texts.append((ts, *sender, int(msg.severity), str(text)))
+        # every text: the messages stream holds them all (diagnostics the first 1000)
+        text = msg.text
+        if isinstance(text, bytes):
+            text = text.decode("utf-8", "replace")
+        res.texts.append((ts, *sender, int(msg.severity), str(text)))
     elif mtype == "PARAM_VALUE":
         pid = msg.param_id
         if isinstance(pid, bytes):
@@ -423,7 +447,7 @@ class TlogReader(LogReader):
 
     name = "tlog"
     source_format = "mavlink_tlog"
-    version = "1"
+    version = "2"  # 2: the schema 1.1 streams
     priority = 15
 
     @classmethod
@@ -593,6 +617,8 @@ def _build(res: _Scan) -> FlightLog:
             "vel_n_mps": vel * np.cos(cog), "vel_e_mps": vel * np.sin(cog),
             "fix_type": tab["fix_type"], "n_sats": _nan_int(tab["satellites_visible"], 255),
             "hacc_m": hacc, "vacc_m": vacc,
+            # eph/epv: HDOP/VDOP x 100 in current MAVLink (65535: unknown)
+            "hdop": _nan_int(tab["eph"], 65535) * 0.01, "vdop": _nan_int(tab["epv"], 65535) * 0.01,
         }))
     tab = tabs.get("GLOBAL_POSITION_INT")
     if tab is not None and len(tab["ts"]):
@@ -679,6 +705,27 @@ def _build(res: _Scan) -> FlightLog:
             "valid": (cur >= tab["min_distance"]) & (cur <= tab["max_distance"]),
             "orientation": tab["orientation"]}))
 
+    _battery(tabs, streams, t_ns)
+    _setpoint(tabs, streams, t_ns, t_boot)
+    tab = tabs.get("VIBRATION")
+    if tab is not None and len(tab["ts"]):
+        streams["vibration"].append(dict({
+            "t_ns": t_ns(tab), "instance": 0, "src": "VIBRATION", "t_boot_ns": t_boot(tab, "time_usec"),
+            **{f"vibe_{a}_mps2": tab[f"vibration_{a}"] for a in "xyz"},
+            **{f"clip_{i}": tab[f"clipping_{i}"] for i in range(3)}}))
+    texts = [(ts, sev, text) for ts, s, c, sev, text in res.texts if (s, c) == vehicle]
+    if texts:
+        streams["messages"].append({
+            "t_ns": (np.array([x[0] for x in texts], np.int64) - t0) * 1000, "instance": 0,
+            "src": "STATUSTEXT", "severity": np.array([x[1] for x in texts], np.float64),
+            "text": np.array([x[2] for x in texts], dtype=object)})
+    prm = [(ts, pid, val) for ts, s, c, pid, val in res.params if (s, c) == vehicle]
+    if prm:
+        streams["params"].append({
+            "t_ns": (np.array([x[0] for x in prm], np.int64) - t0) * 1000, "instance": 0,
+            "src": "PARAM_VALUE", "name": np.array([x[1] for x in prm], dtype=object),
+            "value": np.array([x[2] for x in prm], np.float64)})
+
     # meta
     diag["record_counts"] = dict(sorted(res.counts.items()))
     diag["records_dropped"] = dict(sorted((k, v) for k, v in res.dropped.items() if v))
@@ -707,6 +754,72 @@ def _build(res: _Scan) -> FlightLog:
                  "bytes_decoded": int(res.bytes_kept)},
     )
     return FlightLog.from_streams(meta, dict(streams))
+
+
+def _battery(tabs, streams, t_ns) -> None:
+    """BATTERY_STATUS (instance ``id``; voltage = sum of the reported cells, mV; ``current_battery``
+    cA; ``current_consumed`` mAh; ``battery_remaining`` %; ``temperature`` cdegC), else
+    SYS_STATUS (``voltage_battery`` mV, ``current_battery`` cA, ``battery_remaining`` %).
+    Unknown values (-1, UINT16_MAX, INT16_MAX; SYS_STATUS voltage 0 = no monitor) are NaN."""
+    tab = tabs.get("BATTERY_STATUS")
+    if tab is not None and len(tab["ts"]):
+        cells = np.atleast_2d(tab["voltages"]).astype(np.float64)
+        cells = np.where(cells == 65535, np.nan, cells)
+        have = np.isfinite(cells).any(axis=1)
+        volt = np.where(have, np.nansum(np.where(np.isfinite(cells), cells, 0.0), axis=1) * 1e-3, np.nan)
+        streams["battery"].append({
+            "t_ns": t_ns(tab), "instance": tab["id"].astype(np.uint8), "src": "BATTERY_STATUS",
+            "voltage_V": volt, "current_A": _nan_int(tab["current_battery"], -1) * 0.01,
+            "consumed_Ah": _nan_int(tab["current_consumed"], -1) * 1e-3,
+            "remaining_frac": _nan_int(tab["battery_remaining"], -1) * 0.01,
+            "temp_degC": _nan_int(tab["temperature"], 32767) * 0.01})
+        return
+    tab = tabs.get("SYS_STATUS")
+    if tab is not None and len(tab["ts"]):
+        volt = _nan_int(tab["voltage_battery"], 0, 65535) * 1e-3
+        cur = _nan_int(tab["current_battery"], -1) * 0.01
+        rem = _nan_int(tab["battery_remaining"], -1) * 0.01
+        if np.isfinite(volt).any() or np.isfinite(cur).any() or np.isfinite(rem).any():
+            streams["battery"].append({"t_ns": t_ns(tab), "instance": 0, "src": "SYS_STATUS",
+                                       "voltage_V": volt, "current_A": cur, "remaining_frac": rem})
+
+
+def _setpoint(tabs, streams, t_ns, t_boot) -> None:
+    """ATTITUDE_TARGET (``q`` -> ZYX Euler, body rates; ``type_mask`` bits 1/2/4 ignore a rate,
+    128 the attitude: NaN), NAV_CONTROLLER_OUTPUT (``nav_roll``/``nav_pitch``/``nav_bearing``
+    deg -> roll/pitch/yaw rad) and POSITION_TARGET_LOCAL_NED in ``MAV_FRAME_LOCAL_NED`` (1)
+    (``vx vy vz``; ``type_mask`` bits 8/16/32 ignore them)."""
+    from ..frames.rotations import quat_to_euler
+
+    tab = tabs.get("ATTITUDE_TARGET")
+    if tab is not None and len(tab["ts"]):
+        mask = tab["type_mask"].astype(np.int64)
+        q = np.atleast_2d(tab["q"]).astype(np.float64)
+        eul = np.column_stack(quat_to_euler(q)).astype(np.float64)
+        eul[(mask & 128) != 0] = np.nan
+        d = {"t_ns": t_ns(tab), "instance": 0, "src": "ATTITUDE_TARGET", "t_boot_ns": t_boot(tab, "time_boot_ms"),
+             "roll_rad": eul[:, 0], "pitch_rad": eul[:, 1], "yaw_rad": eul[:, 2]}
+        for bit, f, col in ((1, "body_roll_rate", "p_radps"), (2, "body_pitch_rate", "q_radps"),
+                            (4, "body_yaw_rate", "r_radps")):
+            d[col] = np.where((mask & bit) != 0, np.nan, tab[f])
+        streams["setpoint"].append(d)
+    tab = tabs.get("NAV_CONTROLLER_OUTPUT")
+    if tab is not None and len(tab["ts"]):
+        streams["setpoint"].append({
+            "t_ns": t_ns(tab), "instance": 0, "src": "NAV_CONTROLLER_OUTPUT",
+            "roll_rad": np.deg2rad(tab["nav_roll"]), "pitch_rad": np.deg2rad(tab["nav_pitch"]),
+            "yaw_rad": np.deg2rad(tab["nav_bearing"])})
+    tab = tabs.get("POSITION_TARGET_LOCAL_NED")
+    if tab is not None and len(tab["ts"]):
+        keep = tab["coordinate_frame"] == 1
+        if keep.any():
+            tab = {k: v[keep] for k, v in tab.items()}
+            mask = tab["type_mask"].astype(np.int64)
+            d = {"t_ns": t_ns(tab), "instance": 0, "src": "POSITION_TARGET_LOCAL_NED",
+                 "t_boot_ns": t_boot(tab, "time_boot_ms")}
+            for bit, f, col in ((8, "vx", "vel_n_mps"), (16, "vy", "vel_e_mps"), (32, "vz", "vel_d_mps")):
+                d[col] = np.where((mask & bit) != 0, np.nan, tab[f])
+            streams["setpoint"].append(d)
 
 
 def _control(tabs, streams, t_ns, t_boot) -> None:

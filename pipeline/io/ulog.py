@@ -32,6 +32,18 @@ ULog topic                                 stream             conversion
                                                               (>= ``noutputs`` NaN), raw as logged
 ``vehicle_status``                         ``mode``           ``nav_state`` name, ``armed`` =
                                                               ``arming_state == 2``; rows on change
+``battery_status``                         ``battery``        V, A, mAh -> Ah, remaining 0..1, degC
+``vehicle_attitude_setpoint``              ``setpoint``       ``roll/pitch/yaw_body`` rad, else
+                                                              ``q_d`` -> ZYX Euler
+``vehicle_rates_setpoint``                 ``setpoint``       ``roll pitch yaw`` rad/s -> p q r
+``vehicle_local_position_setpoint`` (or    ``setpoint``       ``vx vy vz`` / ``velocity[i]`` NED
+``trajectory_setpoint``)
+``vehicle_imu_status`` (or                 ``vibration``      accel/gyro vibration metrics,
+``estimator_status`` ``vibe[2]/vibe[1]``)                     ``accel_clipping[i]`` -> ``clip_i``
+logged messages (``L``, tagged ``C``)      ``messages``       ``text``, ``severity`` = syslog level
+initial + changed parameters               ``params``         initial at ``t_ns = 0``, changes at
+                                                              their time
+(GPS topic ``hdop``/``vdop``)              ``gps``            dilutions as logged
 =========================================  =================  ===================================
 
 Time. ``t_boot_ns = timestamp * 1000`` (``timestamp``: µs since boot, the publication time of
@@ -109,7 +121,7 @@ class ULogReader(LogReader):
 
     name = "ulog"
     source_format = "px4_ulog"
-    version = "1"
+    version = "2"  # 2: the schema 1.1 streams
     priority = 10
 
     @classmethod
@@ -171,6 +183,19 @@ class ULogReader(LogReader):
                 "command units), written raw into servo_*_us")
         for d in topics.get("vehicle_status", []):
             add("mode", _mode(d, conv))
+        # schema 1.1 streams
+        for d in topics.get("battery_status", []):
+            add("battery", _battery(d, conv))
+        for d in topics.get("vehicle_attitude_setpoint", []):
+            add("setpoint", _attitude_setpoint(d, conv))
+        for d in topics.get("vehicle_rates_setpoint", []):
+            add("setpoint", _rates_setpoint(d, conv))
+        vel_topic = next((n for n in ("vehicle_local_position_setpoint", "trajectory_setpoint") if n in topics), None)
+        for d in topics.get(vel_topic, []):
+            add("setpoint", _velocity_setpoint(d, conv))
+        vib_topic = next((n for n in ("vehicle_imu_status", "estimator_status") if n in topics), None)
+        for d in topics.get(vib_topic, []):
+            add("vibration", _vibration(d, conv))
 
         out = {k: pd.concat(v, ignore_index=True) if len(v) > 1 else v[0] for k, v in streams.items()}
         if conv.n_before_start:
@@ -180,7 +205,10 @@ class ULogReader(LogReader):
         meta = schema.new_meta(t0_boot_ns=t0_us * 1000)
         meta["ned_origin"] = _ned_origin(topics, out.get("gps"), diag)
         _utc(meta, topics, out, cfg, t0_us)
-        _messages(ulog, diag, t0_us)
+        streams_ev = _messages(ulog, diag, t0_us)
+        if streams_ev is not None:
+            out["messages"] = streams_ev
+        out["params"] = _params(ulog, t0_us)
         if ulog.dropouts:
             total = int(sum(int(o.duration) for o in ulog.dropouts))
             diag["dropouts"] = {"count": len(ulog.dropouts), "total_ms": total}
@@ -367,7 +395,8 @@ def _gps(d, conv: _Conv) -> pd.DataFrame | None:
         v = _f(d, f"vel_{a}_m_s")
         cols[f"vel_{a}_mps"] = v if v is not None else _nan(d)
     for col, names in (("fix_type", ("fix_type",)), ("n_sats", ("satellites_used",)),
-                       ("hacc_m", ("eph",)), ("vacc_m", ("epv",))):
+                       ("hacc_m", ("eph",)), ("vacc_m", ("epv",)), ("hdop", ("hdop",)),
+                       ("vdop", ("vdop",))):
         v = _f(d, *names)
         cols[col] = v if v is not None else _nan(d)
     return conv.frame(d, cols)
@@ -489,6 +518,70 @@ def _mode(d, conv: _Conv) -> pd.DataFrame | None:
     return df[change].reset_index(drop=True)
 
 
+def _battery(d, conv: _Conv) -> pd.DataFrame | None:
+    """``battery_status``: ``voltage_v`` V, ``current_a`` A, ``discharged_mah`` mAh -> Ah,
+    ``remaining`` 0..1, ``temperature`` degC."""
+    v = _f(d, "voltage_v")
+    if v is None:
+        return None
+    mah = _f(d, "discharged_mah")
+    cols = {"voltage_V": v, "current_A": _f(d, "current_a"),
+            "consumed_Ah": None if mah is None else mah * 1e-3,
+            "remaining_frac": _f(d, "remaining"), "temp_degC": _f(d, "temperature")}
+    return conv.frame(d, {k: (x if x is not None else _nan(d)) for k, x in cols.items()})
+
+
+def _attitude_setpoint(d, conv: _Conv) -> pd.DataFrame | None:
+    """``vehicle_attitude_setpoint``: ``roll_body/pitch_body/yaw_body`` (rad, older logs), else
+    the quaternion ``q_d`` (FRD -> NED, scalar first) as ZYX Euler angles."""
+    from ..frames.rotations import quat_to_euler
+
+    rpy = [_f(d, f"{a}_body") for a in ("roll", "pitch", "yaw")]
+    if any(x is None for x in rpy):
+        q = _vec(d, "q_d[{}]", 4)
+        if q is None:
+            return None
+        rpy = list(quat_to_euler(np.column_stack(q)))
+    return conv.frame(d, {"roll_rad": rpy[0], "pitch_rad": rpy[1], "yaw_rad": rpy[2]})
+
+
+def _rates_setpoint(d, conv: _Conv) -> pd.DataFrame | None:
+    """``vehicle_rates_setpoint`` ``roll/pitch/yaw`` (rad/s, body FRD)."""
+    r = [_f(d, a) for a in ("roll", "pitch", "yaw")]
+    if any(x is None for x in r):
+        return None
+    return conv.frame(d, {"p_radps": r[0], "q_radps": r[1], "r_radps": r[2]})
+
+
+def _velocity_setpoint(d, conv: _Conv) -> pd.DataFrame | None:
+    """``vehicle_local_position_setpoint`` (else ``trajectory_setpoint``) ``vx vy vz`` or
+    ``velocity[0..2]`` (m/s, NED; NaN where the controller sets none)."""
+    v = _vec(d, "velocity[{}]") or ([_f(d, a) for a in ("vx", "vy", "vz")] if "vx" in d.data else None)
+    if v is None:
+        return None
+    return conv.frame(d, {"vel_n_mps": v[0], "vel_e_mps": v[1], "vel_d_mps": v[2]})
+
+
+def _vibration(d, conv: _Conv) -> pd.DataFrame | None:
+    """``vehicle_imu_status`` ``accel_vibration_metric`` (m/s²), ``gyro_vibration_metric``
+    (rad/s), ``accel_clipping[0..2]`` (counts since boot); older logs ``estimator_status``
+    ``vibe[2]`` (accel high-frequency vibration, m/s²) and ``vibe[1]`` (gyro, rad/s)."""
+    if d.name == "estimator_status":
+        acc, gyr = _f(d, "vibe[2]"), _f(d, "vibe[1]")
+        if acc is None or gyr is None:
+            return None
+        return conv.frame(d, {"acc_vibration_mps2": acc, "gyr_vibration_radps": gyr})
+    acc, gyr = _f(d, "accel_vibration_metric"), _f(d, "gyro_vibration_metric")
+    if acc is None and gyr is None:
+        return None
+    cols = {"acc_vibration_mps2": acc if acc is not None else _nan(d),
+            "gyr_vibration_radps": gyr if gyr is not None else _nan(d)}
+    clip = _vec(d, "accel_clipping[{}]")
+    if clip is not None:
+        cols.update({f"clip_{i}": c for i, c in enumerate(clip)})
+    return conv.frame(d, cols)
+
+
 def _ned_origin(topics: dict, gps: pd.DataFrame | None, diag: dict) -> dict | None:
     """``ref_lat/ref_lon/ref_alt`` of the first globally referenced local-position sample.
     ``ref_alt`` is AMSL; the ellipsoidal height adds the GPS geoid separation
@@ -541,12 +634,48 @@ def _utc(meta: dict, topics: dict, out: dict, cfg: dict, t0_us: int) -> None:
         return
 
 
-def _messages(ulog, diag: dict, t0_us: int) -> None:
-    msgs = [(int(m.timestamp), m.log_level_str(), str(m.message).strip()) for m in ulog.logged_messages]
+def _level(m) -> float:
+    """Syslog level 0 (emergency) .. 7 (debug) of a logged message (ULog stores it as the
+    ASCII digit, ``'6'`` = 54)."""
+    lv = int(m.log_level)
+    return float(lv - 48 if lv >= 48 else lv)
+
+
+def _messages(ulog, diag: dict, t0_us: int) -> pd.DataFrame | None:
+    """Logged messages (``L`` and tagged ``C``): all of them as the ``messages`` stream (None
+    when there are none), the first 1000 also in ``diag['messages']``."""
+    msgs = [(int(m.timestamp), m.log_level_str(), str(m.message).strip(), _level(m), "logged_messages")
+            for m in ulog.logged_messages]
     for lst in ulog.logged_messages_tagged.values():
-        msgs += [(int(m.timestamp), m.log_level_str(), str(m.message).strip()) for m in lst]
+        msgs += [(int(m.timestamp), m.log_level_str(), str(m.message).strip(), _level(m),
+                  "logged_messages_tagged") for m in lst]
     msgs.sort(key=lambda m: m[0])
     diag["messages"] = [{"t_ns": (t - t0_us) * 1000, "level": lvl, "text": txt}
-                        for t, lvl, txt in msgs[:1000]]
+                        for t, lvl, txt, _, _ in msgs[:1000]]
     if len(msgs) > 1000:
         diag["warnings"].append(f"{len(msgs)} logged messages, first 1000 kept")
+    if not msgs:
+        return None
+    ts = np.array([m[0] for m in msgs], dtype=np.int64)
+    return pd.DataFrame({"t_ns": (ts - t0_us) * 1000, "t_boot_ns": ts * 1000,
+                         "instance": np.zeros(len(ts), np.uint8), "src": [m[4] for m in msgs],
+                         "text": [m[2] for m in msgs], "severity": [m[3] for m in msgs]})
+
+
+def _params(ulog, t0_us: int) -> pd.DataFrame:
+    """Initial parameters (written before the data: at the logger start, ``t_ns = 0``) then
+    every changed parameter at its own time. Non-numeric values are NaN."""
+    def num(v) -> float:
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return float("nan")
+
+    init = list(ulog.initial_parameters.items())
+    changed = list(ulog.changed_parameters)
+    ts = np.array([t0_us] * len(init) + [int(t) for t, _, _ in changed], dtype=np.int64)
+    return pd.DataFrame({
+        "t_ns": (ts - t0_us) * 1000, "t_boot_ns": ts * 1000, "instance": np.zeros(len(ts), np.uint8),
+        "src": ["initial_parameters"] * len(init) + ["changed_parameters"] * len(changed),
+        "name": [str(k) for k, _ in init] + [str(k) for _, k, _ in changed],
+        "value": np.array([num(v) for _, v in init] + [num(v) for _, _, v in changed], dtype=np.float64)})

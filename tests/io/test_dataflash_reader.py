@@ -20,6 +20,7 @@ from helpers import realdata_file
 from helpers_time import gps_minus_utc
 from pipeline.frames.rotations import quat_to_euler
 from pipeline.io import dataflash as df
+from pipeline.io import schema
 from pipeline.io.base import IngestError
 from pipeline.io.dataflash.writer import RADR, DataFlashWriter
 from pipeline.io.registry import detect, read_log
@@ -305,8 +306,14 @@ def test_params_modes_and_utc_match_pymavlink(real_log):
 
 def test_timestamps_are_ns_since_first_sample(real_log):
     rel, log, res, orc = real_log
-    firsts = [int(v["t_ns"].min()) for k, v in log.streams.items() if len(v) and k != "labels"]
+    # t_ns = 0 is the first sensor record; the event streams (schema 1.1: params, messages)
+    # keep their true stamps, so a parameter dump logged before it has t_ns < 0
+    firsts = [int(v["t_ns"].min()) for k, v in log.streams.items()
+              if len(v) and k != "labels" and k not in schema.EVENT_STREAMS]
     assert min(firsts) == 0
+    for k in schema.EVENT_STREAMS:
+        if len(log[k]):
+            assert int(log[k]["t_ns"].min()) > -1_000_000_000  # within a second before
     assert log.meta["diagnostics"]["timestamp_anomalies"] == {}
 
 

@@ -8,7 +8,8 @@ stream          source
 ==============  ===============================================================================
 imu             IMU/IMU2/IMU3 ``Gyr*`` rad/s, ``Acc*`` m/s² (ArduPilot body axes are FRD), ``T``
 gps             GPS/GPS2 ``Lat/Lng`` deg, ``Alt`` MSL, ``Spd``/``GCrs``/``VZ`` -> NED velocity,
-                ``Status`` -> fix_type, ``NSats``; GPA ``HAcc``/``VAcc``, ``Und`` -> WGS-84 height
+                ``Status`` -> fix_type, ``NSats``, ``HDop``; GPA ``HAcc``/``VAcc``/``VDop``,
+                ``Und`` -> WGS-84 height
 baro            BARO/BAR2/BAR3 ``Alt``, ``Press``, ``Temp``; old logs: CTUN ``BarAlt``
 mag             MAG/MAG2/MAG3 mGauss × 10⁻⁷ -> T
 attitude        ATT (instance 0) and AHR2 (instance 1) ZYX Euler deg -> quaternion
@@ -20,9 +21,17 @@ airspeed        ARSP/ASP2
 control         RCIN/RCI2 ``C1..C16`` (old ``Chan1..8``) -> ``rc_i_us``; RCOU/RCO2/RCO3 -> servo
 mode            MODE (``ModeNum``/``Mode`` -> pymavlink's mode names), EV 10/11 -> ``armed``
 radar           RADR (simulation): ``Rng``, ``U``, ``V``, ``RR``, ``I``; PARM RADR_SN/SE/SD/TAU
+battery         BAT/BAT2 (else CURR/CURR2) ``Volt`` V, ``Curr`` A (old integer fields 1/100),
+                ``CurrTot`` mAh -> Ah, ``RemPct`` -> fraction, ``Temp``
+setpoint        ATT ``DesRoll/DesPitch/DesYaw`` deg -> rad; RATE ``RDes/PDes/YDes`` deg/s ->
+                rad/s; copter NTUN ``DVelX/DVelY`` cm/s -> north/east m/s, CTUN ``DCRt``
+                cm/s up -> down m/s; PSCN/PSCE/PSCD ``TVN/TVE/TVD`` m/s
+messages        MSG ``Message`` (no severity in DataFlash: NaN)
+params          PARM ``Name``, ``Value``, every record at its time
+vibration       VIBE ``VibeX/Y/Z`` m/s², ``Clip0..2`` (Copter 4: per ``IMU``, ``Clip``)
 ==============  ===============================================================================
 
-PARM -> ``meta['params']``; MSG -> ``meta['diagnostics']['messages']``; ORGN (else the first 3D
+PARM -> also ``meta['params']``; MSG -> also ``meta['diagnostics']['messages']``; ORGN (else the first 3D
 GPS fix, else POS) -> ``meta['ned_origin']``.
 
 Time. ``t_ns = TimeUS·1000`` (``TimeMS·10⁶`` on old logs; old ``GPS`` uses its boot-time
@@ -52,7 +61,7 @@ from .decode import DecodeResult
 
 SOURCE_FORMAT = "ardupilot_dataflash"
 READER_NAME = "dataflash"
-READER_VERSION = "1"
+READER_VERSION = "2"  # 2: the schema 1.1 streams
 
 GPS_EPOCH_UNIX_S = 315964800
 #: pymavlink's fixed GPS − UTC (DFReader._gpsTimeToTime), true since 2017-01-01; the reader
@@ -247,6 +256,8 @@ def _gps(ctx: _Ctx, name: str, parts: list[Part]) -> Part:  # GPS (+ GPA accurac
         d["vel_d_mps"] = c["VZ"].astype(np.float64)  # ArduPilot logs NED velocity.z (down)
     d["fix_type"] = c["Status"].astype(np.float64)
     d["n_sats"] = c["NSats"].astype(np.float64)
+    if "HDop" in c:
+        d["hdop"] = c["HDop"].astype(np.float64)
     gpa_name = "GPA" if name == "GPS" else "GPA2"
     if gpa_name in T and "TimeUS" in c and "TimeUS" in T[gpa_name]:
         g = T[gpa_name]
@@ -254,7 +265,7 @@ def _gps(ctx: _Ctx, name: str, parts: list[Part]) -> Part:  # GPS (+ GPA accurac
         k = _match((gi, np.asarray(g["TimeUS"])), (d["instance"], np.asarray(c["TimeUS"])))
         if k is not None:
             ok = k >= 0
-            for src_c, dst in (("HAcc", "hacc_m"), ("VAcc", "vacc_m")):
+            for src_c, dst in (("HAcc", "hacc_m"), ("VAcc", "vacc_m"), ("VDop", "vdop")):
                 if src_c in g:
                     v = np.full(len(k), np.nan)
                     v[ok] = g[src_c][k[ok]]
@@ -521,6 +532,139 @@ def _radar(ctx: _Ctx, name: str, parts: list[Part]) -> Part:  # simulation messa
     return d
 
 
+def _fmt_of(ctx: _Ctx, name: str) -> dict[str, str]:
+    """Field name -> format character of message ``name``."""
+    f = ctx.res.formats[name]
+    return dict(zip(f.dtype.names, f.fmt))
+
+
+def _battery(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """BAT/BAT2 (Copter 3.6+) or CURR/CURR2 (older): ``Volt`` V, ``Curr`` A, ``CurrTot`` mAh.
+
+    Old logs (Copter 3.1) store ``Volt``/``Curr`` as unscaled integers in 1/100 V and 1/100 A
+    (``Volt`` 1640 = 16.40 V); ``CurrTot`` is mAh in every version (FMTU ``i`` × 3.6 = A·s)."""
+    if name.startswith("CURR") and any(p["src"].startswith("BAT") for p in parts):
+        return None  # a log with both: BAT is the battery monitor's own record
+    c = ctx.res.tables[name]
+    if "Volt" not in c:
+        return None
+    fmt = _fmt_of(ctx, name)
+    d, _ = ctx.base(name, "BAT" if name.startswith("BAT") else "CURR")
+    for src_c, dst in (("Volt", "voltage_V"), ("Curr", "current_A")):
+        if src_c in c:
+            v = c[src_c].astype(np.float64)
+            d[dst] = v * 0.01 if fmt[src_c] in "hHiI" else v
+    if "CurrTot" in c:
+        d["consumed_Ah"] = c["CurrTot"].astype(np.float64) * 1e-3
+    if "RemPct" in c:
+        d["remaining_frac"] = c["RemPct"].astype(np.float64) * 0.01
+    if "Temp" in c:
+        d["temp_degC"] = c["Temp"].astype(np.float64)
+    return d
+
+
+def _setpoint_att(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """ATT ``DesRoll``/``DesPitch``/``DesYaw`` (deg) -> attitude setpoint (rad)."""
+    c = ctx.res.tables[name]
+    if not all(k in c for k in ("DesRoll", "DesPitch", "DesYaw")):
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d["roll_rad"] = np.deg2rad(c["DesRoll"].astype(np.float64))
+    d["pitch_rad"] = np.deg2rad(c["DesPitch"].astype(np.float64))
+    d["yaw_rad"] = np.deg2rad(c["DesYaw"].astype(np.float64))
+    return d
+
+
+def _setpoint_rate(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """RATE ``RDes``/``PDes``/``YDes`` (deg/s) -> body-rate setpoint (rad/s)."""
+    c = ctx.res.tables[name]
+    if not all(k in c for k in ("RDes", "PDes", "YDes")):
+        return None
+    d, _ = ctx.base(name, name, 0)
+    for k, col in (("RDes", "p_radps"), ("PDes", "q_radps"), ("YDes", "r_radps")):
+        d[col] = np.deg2rad(c[k].astype(np.float64))
+    return d
+
+
+def _setpoint_ntun(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """Copter NTUN ``DVelX``/``DVelY`` (cm/s, north/east; plane NTUN has none) -> velocity
+    setpoint (m/s)."""
+    c = ctx.res.tables[name]
+    if not ("DVelX" in c and "DVelY" in c):
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d["vel_n_mps"] = c["DVelX"].astype(np.float64) * 0.01
+    d["vel_e_mps"] = c["DVelY"].astype(np.float64) * 0.01
+    return d
+
+
+def _setpoint_ctun(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """Copter CTUN ``DCRt`` (desired climb rate, integer cm/s, up) -> ``vel_d_mps`` = −DCRt/100
+    (plane CTUN has none; a float ``DCRt`` of unknown unit is not mapped)."""
+    c = ctx.res.tables[name]
+    if "DCRt" not in c or _fmt_of(ctx, name)["DCRt"] not in "hHiI":
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d["vel_d_mps"] = -c["DCRt"].astype(np.float64) * 0.01
+    return d
+
+
+def _setpoint_psc(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """Copter 4.1+ PSCN/PSCE/PSCD ``TVN``/``TVE``/``TVD`` (target velocity, m/s) -> one
+    velocity-setpoint axis per message."""
+    axis = name[-1].lower()
+    c = ctx.res.tables[name]
+    key = f"TV{name[-1]}"
+    if key not in c:
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d[f"vel_{axis}_mps"] = c[key].astype(np.float64)
+    return d
+
+
+def _messages(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """MSG ``Message`` (DataFlash logs no severity: NaN)."""
+    c = ctx.res.tables[name]
+    if "Message" not in c:
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d["text"] = np.array([str(m) for m in c["Message"].tolist()], dtype=object)
+    return d
+
+
+def _params(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """PARM ``Name``/``Value``, every record (initial values and changes), at its time."""
+    c = ctx.res.tables[name]
+    if not ("Name" in c and "Value" in c):
+        return None
+    d, _ = ctx.base(name, name, 0)
+    d["name"] = np.array([str(m) for m in c["Name"].tolist()], dtype=object)
+    d["value"] = c["Value"].astype(np.float64)
+    return d
+
+
+def _vibration(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """VIBE ``VibeX/Y/Z`` (m/s², the accelerometer's high-passed RMS) and ``Clip0..2``
+    (clipping counts since boot); Copter 4 logs one VIBE per IMU (``IMU`` field, one ``Clip``),
+    which goes to ``clip_<IMU>``."""
+    c = ctx.res.tables[name]
+    if not all(f"Vibe{a}" in c for a in "XYZ"):
+        return None
+    d, _ = ctx.base(name, name, 0)
+    if "IMU" in c:
+        d["instance"] = np.asarray(c["IMU"]).astype(np.uint8)
+    for a in "XYZ":
+        d[f"vibe_{a.lower()}_mps2"] = c[f"Vibe{a}"].astype(np.float64)
+    for i in range(3):
+        if f"Clip{i}" in c:
+            d[f"clip_{i}"] = c[f"Clip{i}"].astype(np.float64)
+    if "Clip" in c:
+        inst = d["instance"]
+        for i in range(3):
+            d[f"clip_{i}"] = np.where(inst == i, c["Clip"].astype(np.float64), np.nan)
+    return d
+
+
 Builder = Callable[[_Ctx, str, list], "Part | list[Part] | None"]
 
 #: The one mapping table: (stream, message, builder), in stream order and, within a stream, in
@@ -543,6 +687,14 @@ STREAM_TABLE: tuple[tuple[str, str | tuple[str, ...], Builder], ...] = (
     ("control", "RCO2", _control), ("control", "RCO3", _control),
     ("mode", ("MODE", "EV"), _mode),
     ("radar", "RADR", _radar),
+    ("battery", "BAT", _battery), ("battery", "BAT2", _battery),
+    ("battery", "CURR", _battery), ("battery", "CURR2", _battery),
+    ("setpoint", "ATT", _setpoint_att), ("setpoint", "RATE", _setpoint_rate),
+    ("setpoint", "NTUN", _setpoint_ntun), ("setpoint", "CTUN", _setpoint_ctun),
+    ("setpoint", "PSCN", _setpoint_psc), ("setpoint", "PSCE", _setpoint_psc), ("setpoint", "PSCD", _setpoint_psc),
+    ("messages", "MSG", _messages),
+    ("params", "PARM", _params),
+    ("vibration", "VIBE", _vibration),
 )
 
 #: Stream -> message types it is built from (documentation and the "contains" checks).
@@ -552,6 +704,10 @@ for _stream, _msg, _ in STREAM_TABLE:
     STREAM_SOURCES[_stream] += tuple(m for m in ((_msg,) if isinstance(_msg, str) else _msg)
                                      if m not in STREAM_SOURCES[_stream])
 del _stream, _msg
+
+
+#: Streams whose records do not define t0 (schema 1.1; t0 stays the first sensor record).
+_NOT_T0 = frozenset(schema.STREAMS_1_1)
 
 
 def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,
@@ -595,7 +751,8 @@ def stream_parts(res: DecodeResult, diag: dict | None = None) -> dict[str, list[
 
 def _first_time_us(res: DecodeResult, clock: _Clock) -> int:
     """t0: boot time of the first (in file order) timed record of a canonically mapped type."""
-    mapped = {n for names in STREAM_SOURCES.values() for n in names}
+    # the sensor streams only: the 1.1 streams (PARM, MSG, CURR, ...) do not move t0
+    mapped = {n for stream, names in STREAM_SOURCES.items() if stream not in _NOT_T0 for n in names}
     best = None
     for names in (mapped, set(res.formats)):
         for name in names:

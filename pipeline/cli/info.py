@@ -6,7 +6,7 @@ import json
 import sys
 from pathlib import Path
 
-from ..io import registry
+from ..io import registry, schema
 from ..io.base import IngestError
 from ..io.manifest import reader_names
 from .progress import progress_bar
@@ -24,10 +24,7 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-#: streams of measurements (not pilot inputs, modes, labels or simulation truth): the span
-#: a reader of the log means by "how long was the flight logged"
-SENSOR_STREAMS = ("imu", "gps", "baro", "mag", "attitude", "local_position", "odometry",
-                  "rangefinder", "airspeed", "radar")
+SENSOR_STREAMS = schema.SENSOR_STREAMS
 
 
 def _sensor_span(log) -> dict | None:

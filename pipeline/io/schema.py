@@ -193,6 +193,10 @@ STREAM_NAMES: tuple[str, ...] = (*STREAMS, "labels")
 #: parameter dump at boot), so they are not counted in the timestamp anomalies, and they may
 #: precede ``t_ns = 0`` (the first *sensor* record; see the readers), as ULog's stale topics do.
 EVENT_STREAMS: tuple[str, ...] = ("messages", "params")
+#: streams of measurements (not pilot inputs, modes, setpoints, events, labels or simulation
+#: truth): the span a reader of the log means by "how long was the flight logged"
+SENSOR_STREAMS: tuple[str, ...] = ("imu", "gps", "baro", "mag", "attitude", "local_position", "odometry",
+                                   "rangefinder", "airspeed", "radar")
 
 #: The streams added by schema 1.1 (none of them moves a reader's ``t0``).
 STREAMS_1_1: tuple[str, ...] = ("battery", "setpoint", "messages", "params", "vibration")

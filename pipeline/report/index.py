@@ -62,7 +62,7 @@ def flight_summary(flight_id: str, meta_path: str | os.PathLike) -> dict:
     if row["status"] == "failed":
         return row
     durs = []
-    for s in schema.STREAMS:
+    for s in schema.SENSOR_STREAMS:  # parameter dumps and messages may precede the first sample
         p = d / f"{s}.parquet"
         if p.exists():
             t = pd.read_parquet(p, columns=["t_ns"])["t_ns"]

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..config import ConfigError
+from ..config import ROOT, ConfigError
 
 #: the study sizes, smallest first
 SIZES = ("tiny", "small", "thesis")
@@ -163,6 +163,19 @@ def flightcoach_inputs(realdata_dir: str | os.PathLike, files: Mapping[str, str]
             raise StudyError(f"{p}: FlightCoach file not found (input {k!r} of the {study} "
                              f"study; it needs the real logs of ../shared/realdata: set realdata_dir)")
     return files
+
+
+def flightcoach_paths(inputs: Mapping | None, files: Mapping[str, str], study: str) -> dict[str, Path]:
+    """A FlightCoach study's declared flights, each defaulting to its file under
+    ``$UAVPIPE_REALDATA`` (or ``../shared/realdata`` beside the repository)/:data:`FLIGHTCOACH_DIR`;
+    a missing one is a :class:`StudyError` naming it (one line)."""
+    d = Path(os.environ.get("UAVPIPE_REALDATA", ROOT.parent / "shared" / "realdata")) / FLIGHTCOACH_DIR
+    paths = {k: input_path(inputs, k, d / f) for k, f in files.items()}
+    for k, p in paths.items():
+        if not p.is_file():
+            raise StudyError(f"{p}: FlightCoach file not found (input {k!r}; the {study} study needs "
+                             f"../shared/realdata/{FLIGHTCOACH_DIR}, set realdata_dir or UAVPIPE_REALDATA)")
+    return paths
 
 
 def output_path(outputs: Mapping, key: str) -> Path:

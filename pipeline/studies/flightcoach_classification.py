@@ -74,7 +74,7 @@ from ..io.registry import read_log
 from ..models import ManeuverModelSet, ModelsConfig
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
-from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_FILES, STUDY_TABLES, Progress, Results, StudyError, StudyResult, input_path, md_table, output_path, say,
+from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_FILES, STUDY_TABLES, Progress, Results, StudyResult, flightcoach_paths, input_path, md_table, output_path, say,
                    study_outputs, study_settings, write_text)
 
 NAME = "flightcoach_classification"
@@ -224,14 +224,8 @@ def timeline(res: pd.DataFrame) -> pd.DataFrame:
 
 
 def _flight_paths(inputs: Mapping | None) -> dict[str, Path]:
-    """The four declared flights (default: :func:`default_inputs`); one line if one is missing."""
-    dflt = default_inputs()
-    paths = {k: input_path(inputs, k, dflt[k]) for k in FLIGHTS}
-    for k, p in paths.items():
-        if not p.is_file():
-            raise StudyError(f"{p}: FlightCoach file not found (input {k!r}; the {NAME} study needs "
-                             f"../shared/realdata/{SUBDIR}, set realdata_dir or UAVPIPE_REALDATA)")
-    return paths
+    """The declared flights (default: their files under the real-data folder); one line if one is missing."""
+    return flightcoach_paths(inputs, FLIGHTS, NAME)
 
 
 def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, p23, whole, f23, sw, chosen,

@@ -77,7 +77,7 @@ from ..models.features import decimate
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
 from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, STUDY_TABLES, Progress, Results, StudyError,
-                   StudyResult, input_path, md_table, output_path, say, study_outputs, study_settings,
+                   StudyResult, flightcoach_paths, input_path, md_table, output_path, say, study_outputs, study_settings,
                    write_text)
 
 NAME = "flightcoach_ekf_hmm"
@@ -128,13 +128,8 @@ def default_inputs(realdata_dir: str | os.PathLike | None = None) -> dict[str, s
 
 
 def _flight_paths(inputs: Mapping | None) -> dict[str, Path]:
-    dflt = default_inputs()
-    paths = {k: input_path(inputs, k, dflt[k]) for k in FLIGHTS}
-    for k, p in paths.items():
-        if not p.is_file():
-            raise StudyError(f"{p}: FlightCoach file not found (input {k!r}; the {NAME} study needs "
-                             f"../shared/realdata/{SUBDIR}, set realdata_dir or UAVPIPE_REALDATA)")
-    return paths
+    """The declared flights (default: their files under the real-data folder); one line if one is missing."""
+    return flightcoach_paths(inputs, FLIGHTS, NAME)
 
 
 def load(path: Path) -> tuple[pd.DataFrame, pd.DataFrame, float]:

@@ -243,6 +243,9 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             figs.append((f"Maneuver timeline ({m})", fig))
     est_figs, est_facts = estimate_panels(estimates or {}, truth=log["truth"], state=st)
     figs.extend(est_figs)
+    # flight-mode bands behind every time panel (not the 3-D path and the ground track)
+    for _, f in figs[2:]:
+        plots.mode_bands(f, log["mode"], log.duration_s)
     divs = figure_divs(figs)
     tables = [("Log messages", *plots.messages_table(log["messages"])),
               ("Parameters", *plots.params_table(log["params"]))]

@@ -422,20 +422,55 @@ def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> g
     return layout(fig, title)
 
 
+def label_colour(lab: str) -> str:
+    """The colour of a maneuver label, the same for the labelled segment and the classifier's
+    prediction on every page (``unknown``: grey)."""
+    import zlib
+
+    if str(lab) == "unknown":
+        return "#999999"
+    return _CYCLE[zlib.crc32(str(lab).encode()) % len(_CYCLE)]
+
+
+def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None = None) -> go.Figure:
+    """Shade the flight-mode intervals of ``mode`` (the canonical ``mode`` stream) behind a time
+    panel, one colour per mode name, the name written at the top of each band. Returns ``fig``."""
+    m = _first(mode)
+    if fig is None or m is None or "mode" not in m:
+        return fig
+    m = m.dropna(subset=["mode"]).sort_values("t_ns", kind="stable")
+    if not len(m):
+        return fig
+    t = m["t_ns"].to_numpy() * 1e-9
+    names = m["mode"].astype(str).to_numpy()
+    keep = np.r_[True, names[1:] != names[:-1]]    # a repeated record continues its band
+    t, names = t[keep], names[keep]
+    end = np.r_[t[1:], max(t_end_s if t_end_s is not None else t[-1], t[-1])]
+    for t0, t1, name in zip(t, end, names):
+        if t1 <= t0:
+            continue
+        fig.add_vrect(x0=t0, x1=t1, fillcolor=label_colour(f"mode {name}"), opacity=0.08, line_width=0,
+                      layer="below", annotation_text=name, annotation_position="top left",
+                      annotation_font_size=9)
+    return fig
+
+
 def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = None) -> go.Figure | None:
     """Maneuver timeline: labelled segments as bars; classifier label and confidence if given."""
     fig = go.Figure()
     if segments is not None and len(segments):
         for r in segments.itertuples():
             t0, t1 = r.t_start_ns * 1e-9, r.t_end_ns * 1e-9
-            fig.add_trace(go.Scatter(x=[t0, t1], y=["truth", "truth"], mode="lines", line=dict(width=14),
+            fig.add_trace(go.Scatter(x=[t0, t1], y=["truth", "truth"], mode="lines",
+                                     line=dict(width=14, color=label_colour(r.label)),
                                      name=str(r.label), showlegend=False, hovertext=str(r.label)))
             fig.add_annotation(x=(t0 + t1) / 2, y="truth", text=str(r.label), showarrow=False, yshift=14,
                                font=dict(size=9))
     if classified is not None and len(classified):
         d = decimate(classified)
         for lab, g in d.groupby(d["label"].astype(str), sort=True):
-            fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers", marker=dict(size=6),
+            fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers",
+                                     marker=dict(size=6, color=label_colour(lab)),
                                      text=[lab] * len(g), name=f"classifier: {lab}"))
         if "confidence" in d:
             fig.add_trace(go.Scatter(x=_t(d), y=d["confidence"], mode="lines", name="confidence V", yaxis="y2"))
@@ -484,8 +519,8 @@ def mode_timeline(df: pd.DataFrame | None) -> go.Figure | None:
                              marker=dict(size=5, color=np.where(mode, "#d62728", "#1f77b4")),
                              name="prediction model", showlegend=False))
     for lab, g in d.groupby(d["pred"].astype(str), sort=True):
-        fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers", marker=dict(size=6),
-                                 name=f"classifier: {lab}"))
+        fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers",
+                                 marker=dict(size=6, color=label_colour(lab)), name=f"classifier: {lab}"))
     if d["V_best"].notna().any():
         fig.add_trace(go.Scatter(x=_t(d), y=d["V_best"], mode="lines", name="confidence V", yaxis="y2"))
         fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="V [log10]"))

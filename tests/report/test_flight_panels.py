@@ -154,3 +154,25 @@ def test_the_demo_flight_page_draws_the_new_panels_and_tables(tmp_path):
         assert drawn in text and f"{drawn}: no data" not in text, drawn
     assert "<td>ArduCopter V4.5.0 (uavpipe demo flight)</td>" in text   # a MSG record, with its time
     assert "<td>INS_GYRO_FILTER</td><td>20</td>" in text                 # a PARM record
+
+
+def test_flight_mode_bands_cover_each_mode_until_the_next_and_the_last_until_the_end():
+    import plotly.graph_objects as go
+
+    mode = _stream("mode", 4, 1.0, mode=["STABILIZE", "STABILIZE", "LOITER", "LAND"])
+    fig = plots.mode_bands(go.Figure(go.Scatter(x=[0, 10], y=[0, 1])), mode, 10.0)
+    bands = [(s.x0, s.x1) for s in fig.layout.shapes]
+    assert bands == [(0.0, 2.0), (2.0, 3.0), (3.0, 10.0)]   # the repeated STABILIZE continues its band
+    assert [a.text for a in fig.layout.annotations] == ["STABILIZE", "LOITER", "LAND"]
+    assert plots.mode_bands(go.Figure(), None).layout.shapes == ()
+
+
+def test_a_maneuver_label_has_one_colour_for_its_segment_and_its_prediction():
+    seg = pd.DataFrame({"t_start_ns": [0, 5 * 10**9], "t_end_ns": [4 * 10**9, 9 * 10**9], "label": ["M1", "M2"]})
+    cls = pd.DataFrame({"t_ns": np.arange(10) * 10**9, "label": ["M1"] * 5 + ["unknown"] * 5,
+                        "confidence": np.zeros(10)})
+    fig = plots.timeline(seg, cls)
+    seg_colour = {t.name: t.line.color for t in fig.data if t.mode == "lines" and t.y[0] == "truth"}
+    pred_colour = {t.name: t.marker.color for t in fig.data if t.mode == "markers"}
+    assert seg_colour["M1"] == pred_colour["classifier: M1"] == plots.label_colour("M1")
+    assert pred_colour["classifier: unknown"] == "#999999"

@@ -229,6 +229,10 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),
         ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"], "Accelerometer (FRD)", "m/s²")),
         ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"], "Gyroscope (FRD)", "rad/s")),
+        ("RC inputs", plots.time_series(log["control"], [f"rc_{i}_us" for i in range(1, schema.N_RC + 1)],
+                                        "RC inputs", "pulse width [µs]")),
+        ("Actuator outputs", plots.time_series(log["control"], [f"servo_{i}_us" for i in range(1, schema.N_SERVO + 1)],
+                                               "Actuator outputs (servo/ESC)", "pulse width [µs]")),
         ("GPS quality (fix type, satellites, HDOP/EPH)", plots.gps_quality(log["gps"])),
         ("Vibration", plots.vibration(log["vibration"], imu)),
         ("Battery", plots.battery(log["battery"])),
@@ -247,6 +251,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     for _, f in figs[2:]:
         plots.mode_bands(f, log["mode"], log.duration_s)
     divs = figure_divs(figs)
+    # one linked time axis: zooming any time panel zooms them all (the template's script)
+    linked = [f"plot-{i}" for i, (_, f) in enumerate(figs) if i >= 2 and f is not None]
     tables = [("Log messages", *plots.messages_table(log["messages"])),
               ("Parameters", *plots.params_table(log["params"]))]
 
@@ -276,6 +282,6 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
                                     + (f" ({cm.get('error')})" if cm.get("error") else "")))
     facts.extend(est_facts)
     page = render(template, 
-        flight_id=meta.get("flight_id"), facts=facts, plots=divs, tables=tables, plotly_js=plotly_js,
+        flight_id=meta.get("flight_id"), facts=facts, plots=divs, tables=tables, linked=linked, plotly_js=plotly_js,
         index_href=index_href, failed=meta.get("status") == "failed", error=meta.get("error"))
     write_page(page, out_html)

@@ -414,9 +414,13 @@ def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> g
     cols = [c for c in cols if c in df and df[c].notna().any()]
     if not cols:
         return None
-    d = decimate(df[["t_ns", *cols]], cols=cols)
-    fig = go.Figure([go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c)))
-                     for c in cols])
+    # each trace keeps its own extremes; many channels (RC, servos) share one panel's budget
+    # (at least 1000 points each), so a 32-output log does not make a 30 MB page
+    mp = max(1000, 3 * MAX_POINTS // len(cols))
+    fig = go.Figure()
+    for c in cols:
+        d = decimate(df[["t_ns", c]].dropna(), mp, cols=[c])
+        fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title=ylabel)
     return layout(fig, title)

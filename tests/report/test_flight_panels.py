@@ -176,3 +176,13 @@ def test_a_maneuver_label_has_one_colour_for_its_segment_and_its_prediction():
     pred_colour = {t.name: t.marker.color for t in fig.data if t.mode == "markers"}
     assert seg_colour["M1"] == pred_colour["classifier: M1"] == plots.label_colour("M1")
     assert pred_colour["classifier: unknown"] == "#999999"
+
+
+def test_many_channels_share_one_panels_point_budget():
+    n, k = 50_000, 16
+    ctl = _stream("control", n, 50.0, **{f"servo_{i}_us": 1500 + 400 * np.sin(np.arange(n) / (100 + i))
+                                         for i in range(1, k + 1)})
+    fig = plots.time_series(ctl, [f"servo_{i}_us" for i in range(1, 33)], "Actuator outputs", "pulse width [µs]")
+    assert len(fig.data) == k and fig.data[0].name == "servo output 1 [µs]"
+    assert sum(len(t.x) for t in fig.data) <= k * 1002
+    assert max(t.y.max() for t in fig.data) == ctl[[f"servo_{i}_us" for i in range(1, k + 1)]].max().max()

@@ -227,8 +227,6 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("Velocity", plots.with_setpoint(
             _velocity(st, log), [f"vel_{a}_mps" for a in "ned"], log["setpoint"],
             [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),
-        ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"], "Accelerometer (FRD)", "m/s²")),
-        ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"], "Gyroscope (FRD)", "rad/s")),
         ("RC inputs", plots.time_series(log["control"], [f"rc_{i}_us" for i in range(1, schema.N_RC + 1)],
                                         "RC inputs", "pulse width [µs]")),
         ("Actuator outputs", plots.time_series(log["control"], [f"servo_{i}_us" for i in range(1, schema.N_SERVO + 1)],
@@ -236,6 +234,11 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("GPS quality (fix type, satellites, HDOP/EPH)", plots.gps_quality(log["gps"])),
         ("Vibration", plots.vibration(log["vibration"], imu)),
         ("Battery", plots.battery(log["battery"])),
+        # raw IMU: the sensor's axes (FRD by convention, before the mount correction of the state)
+        ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"],
+                                            "Accelerometer (raw, sensor frame)", "specific force [m/s²]")),
+        ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"],
+                                        "Gyroscope (raw, sensor frame)", "angular rate [rad/s]")),
     ]
     if len(timelines) <= 1:
         figs.append(("Maneuver timeline", plots.timeline(seg, next(iter(timelines.values()), None))))

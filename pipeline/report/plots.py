@@ -121,6 +121,8 @@ def colour(key: str) -> str:
     first token of ``key`` found there, checked from the component (``acc_x_mps2`` -> ``x``);
     otherwise a stable pick from the cycle by the name (never by trace order)."""
     toks = [t for t in str(key).replace(" ", "_").split("_") if t]
+    if len(toks) > 1 and toks[1].isdigit():  # numbered channels (rc_3_us, servo_3_us): by number
+        return _CYCLE[(int(toks[1]) - 1) % len(_CYCLE)]
     for t in (*toks[1:], *toks[:1]):
         if t in PALETTE:
             return PALETTE[t]
@@ -136,8 +138,9 @@ def _t(df: pd.DataFrame) -> np.ndarray:
 def layout(fig: go.Figure, title: str, **kw) -> go.Figure:
     """Apply the report's figure style (margins, height, template, horizontal legend) and
     ``title`` to ``fig``; ``kw`` overrides any of those options. Returns ``fig``."""
+    # the horizontal legend sits below the x-axis title, never on it
     opts = {"margin": dict(l=50, r=20, t=40, b=40), "height": 360, "template": "plotly_white",
-            "legend": dict(orientation="h"), **kw}
+            "legend": dict(orientation="h", yanchor="top", y=-0.22), **kw}
     fig.update_layout(title=title, **opts)
     # plain numbers on every axis: no SI-prefixed "−0.38k" ticks on confidence or log axes
     fig.update_xaxes(exponentformat="none")

@@ -62,6 +62,8 @@ def test_a_component_has_the_same_colour_in_every_quantity_and_its_setpoint():
     assert plots.colour("roll") == plots.colour("roll_rad") == plots.colour("p_radps")
     assert len({plots.colour(f"acc_{a}_mps2") for a in "xyz"}) == 3
     assert plots.colour("an unknown series") == plots.colour("an unknown series")
+    assert len({plots.colour(f"servo_{i}_us") for i in range(1, 11)}) == 10
+    assert plots.colour("rc_2_us") == plots.colour("servo_2_us")
 
 
 def test_a_confidence_axis_has_plain_number_ticks_not_si_prefixes():

@@ -65,6 +65,28 @@ def _ned_track(log, state: pd.DataFrame | None) -> pd.DataFrame | None:
     return None
 
 
+def _body_rates(state: pd.DataFrame | None, imu: pd.DataFrame) -> pd.DataFrame | None:
+    """Body rates p, q, r: the state's (mount-corrected) where preprocessed, else the first
+    gyro's (``gyr_{x,y,z}_radps``, FRD convention)."""
+    cols = ["p_radps", "q_radps", "r_radps"]
+    if state is not None and len(state) and set(cols) <= set(state.columns) and state["p_radps"].notna().any():
+        return state[["t_ns", *cols]]
+    g = _first_instance(imu)
+    if not len(g):
+        return None
+    return pd.DataFrame({"t_ns": g["t_ns"].to_numpy(), **{c: g[f"gyr_{a}_radps"].to_numpy()
+                                                          for c, a in zip(cols, "xyz")}})
+
+
+def _velocity(state: pd.DataFrame | None, log) -> pd.DataFrame | None:
+    """NED velocity: the state's, else the autopilot's local_position, else GPS."""
+    cols = [f"vel_{a}_mps" for a in "ned"]
+    for df in (state, _first_instance(log["local_position"]), _first_instance(log["gps"])):
+        if df is not None and len(df) and set(cols) <= set(df.columns) and df["vel_n_mps"].notna().any():
+            return df[["t_ns", *cols]]
+    return None
+
+
 def _error_norms(est: pd.DataFrame, ref_t: np.ndarray, ref: np.ndarray) -> pd.DataFrame:
     """Per-step error norms of position, velocity, acceleration of an ``estimate`` table against
     a reference track (``ref`` (N, 9) at ``ref_t``, linearly interpolated; NaN outside it)."""
@@ -198,9 +220,25 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("3-D path", plots.path_3d(ned)),
         ("Ground track", plots.ground_track(ned)),
         ("Altitude", plots.altitude(alt_series, calib_pts)),
-        ("Attitude", plots.attitude(att, euler)),
-        ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"], "Accelerometer (FRD)", "m/s²")),
-        ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"], "Gyroscope (FRD)", "rad/s")),
+        ("Attitude", plots.attitude(att, euler, log["setpoint"])),
+        ("Body rates vs setpoint", plots.with_setpoint(
+            _body_rates(st, imu), ["p_radps", "q_radps", "r_radps"], log["setpoint"],
+            ["p_radps", "q_radps", "r_radps"], "Body rates vs setpoint (FRD)", "body rate [rad/s]")),
+        ("Velocity", plots.with_setpoint(
+            _velocity(st, log), [f"vel_{a}_mps" for a in "ned"], log["setpoint"],
+            [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),
+        ("RC inputs", plots.time_series(log["control"], [f"rc_{i}_us" for i in range(1, schema.N_RC + 1)],
+                                        "RC inputs", "pulse width [µs]")),
+        ("Actuator outputs", plots.time_series(log["control"], [f"servo_{i}_us" for i in range(1, schema.N_SERVO + 1)],
+                                               "Actuator outputs (servo/ESC)", "pulse width [µs]")),
+        ("GPS quality (fix type, satellites, HDOP/EPH)", plots.gps_quality(log["gps"])),
+        ("Vibration", plots.vibration(log["vibration"], imu)),
+        ("Battery", plots.battery(log["battery"])),
+        # raw IMU: the sensor's axes (FRD by convention, before the mount correction of the state)
+        ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"],
+                                            "Accelerometer (raw, sensor frame)", "specific force [m/s²]")),
+        ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"],
+                                        "Gyroscope (raw, sensor frame)", "angular rate [rad/s]")),
     ]
     if len(timelines) <= 1:
         figs.append(("Maneuver timeline", plots.timeline(seg, next(iter(timelines.values()), None))))
@@ -212,7 +250,14 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             figs.append((f"Maneuver timeline ({m})", fig))
     est_figs, est_facts = estimate_panels(estimates or {}, truth=log["truth"], state=st)
     figs.extend(est_figs)
+    # flight-mode bands behind every time panel (not the 3-D path and the ground track)
+    for _, f in figs[2:]:
+        plots.mode_bands(f, log["mode"], log.duration_s)
     divs = figure_divs(figs)
+    # one linked time axis: zooming any time panel zooms them all (the template's script)
+    linked = [f"plot-{i}" for i, (_, f) in enumerate(figs) if i >= 2 and f is not None]
+    tables = [("Log messages", *plots.messages_table(log["messages"])),
+              ("Parameters", *plots.params_table(log["params"]))]
 
     def known(v) -> str:  # a failed ingest has no reader or format: say so, never "None"
         return "–" if v in (None, "") else str(v)
@@ -240,6 +285,6 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
                                     + (f" ({cm.get('error')})" if cm.get("error") else "")))
     facts.extend(est_facts)
     page = render(template, 
-        flight_id=meta.get("flight_id"), facts=facts, plots=divs, plotly_js=plotly_js,
+        flight_id=meta.get("flight_id"), facts=facts, plots=divs, tables=tables, linked=linked, plotly_js=plotly_js,
         index_href=index_href, failed=meta.get("status") == "failed", error=meta.get("error"))
     write_page(page, out_html)

@@ -15,13 +15,120 @@ import plotly.graph_objects as go
 MAX_POINTS = 4000
 
 
-def decimate(df: pd.DataFrame, max_points: int = MAX_POINTS) -> pd.DataFrame:
-    """Every k-th row so that at most ``max_points`` remain (keeps the last row)."""
+def decimate(df: pd.DataFrame, max_points: int = MAX_POINTS, cols: list[str] | None = None) -> pd.DataFrame:
+    """Rows of ``df`` for display: the minimum and maximum of every numeric column per bucket.
+
+    The rows are cut into ``B`` consecutive buckets of equal row count; per bucket and column
+    the rows holding the minimum and the maximum are kept (with the first and last row), so a
+    spike survives the decimation, as it would not under every-k-th-row. ``B`` is
+    ``max_points // (2 · n_columns)``, so at most about ``max_points`` rows remain. For display
+    only: analysis always uses the full table.
+
+    Parameters
+    ----------
+    df : DataFrame
+        Rows in plotting order (usually by ``t_ns``).
+    max_points : int
+        Upper bound of the rows kept (plus the first and last).
+    cols : list of str, optional
+        The columns whose extremes are kept; default every numeric column except ``t_ns``,
+        ``instance`` and ``t_boot_ns``.
+    """
     n = len(df)
     if n <= max_points:
         return df
-    idx = np.unique(np.r_[np.arange(0, n, int(np.ceil(n / max_points))), n - 1])
-    return df.iloc[idx]
+    if cols is None:
+        cols = [c for c in df.columns if c not in ("t_ns", "instance", "t_boot_ns")
+                and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
+    if not cols:  # nothing to keep extremes of: evenly spaced rows
+        return df.iloc[np.unique(np.r_[np.linspace(0, n - 1, max_points).astype(np.int64), n - 1])]
+    n_b = max(1, max_points // (2 * len(cols)))
+    bucket = np.arange(n, dtype=np.int64) * n_b // n
+    starts = np.searchsorted(bucket, np.arange(n_b))
+    keep = [np.array([0, n - 1])]
+    for c in cols:
+        v = pd.to_numeric(df[c], errors="coerce").to_numpy(np.float64)
+        # lexsort: by bucket, then value; NaN sorts last, so a bucket's first row is its minimum
+        # (of -v: its maximum) whenever the bucket has a finite value
+        for w in (v, -v):
+            order = np.lexsort((w, bucket))
+            keep.append(order[starts])
+    return df.iloc[np.unique(np.concatenate(keep))]
+
+
+#: unit suffix of a canonical column name -> the unit as displayed ("" dimensionless)
+UNITS = {"m": "m", "mps": "m/s", "mps2": "m/s²", "mps3": "m/s³", "rad": "rad", "radps": "rad/s",
+         "deg": "°", "Pa": "Pa", "degC": "°C", "V": "V", "A": "A", "Ah": "A·h", "T": "T", "us": "µs",
+         "ns": "ns", "s": "s", "Hz": "Hz", "frac": "", "pct": "%"}
+#: name tokens -> words (quantities, components, qualifiers)
+WORDS = {"acc": "acceleration", "gyr": "angular rate", "vel": "velocity", "pos": "position",
+         "jerk": "jerk", "mag": "magnetic field", "alt": "altitude", "press": "pressure",
+         "temp": "temperature", "voltage": "voltage", "current": "current", "consumed": "charge drawn",
+         "remaining": "remaining capacity", "vibe": "vibration", "vibration": "vibration",
+         "rc": "RC input", "servo": "servo output", "dist": "distance", "airspeed": "airspeed",
+         "diff": "differential", "lat": "latitude", "lon": "longitude", "hacc": "horizontal accuracy",
+         "vacc": "vertical accuracy", "hdop": "HDOP", "vdop": "VDOP", "fix": "fix", "type": "type",
+         "sats": "satellites", "clip": "clipping events", "range": "range", "rate": "rate",
+         "n": "north", "e": "east", "d": "down", "x": "x", "y": "y", "z": "z",
+         "wgs84": "(WGS-84)", "msl": "(MSL)", "rel": "(relative)", "cal": "(calibrated)",
+         "roll": "roll", "pitch": "pitch", "yaw": "yaw", "hmm": "HMM", "gated": "gated",
+         "dcos": "direction cosine", "u": "u", "v": "v"}
+#: whole names that read better spelled out
+NAMES = {"n_sats": "satellites", "fix_type": "fix type", "p_radps": "roll rate [rad/s]",
+         "q_radps": "pitch rate [rad/s]", "r_radps": "yaw rate [rad/s]",
+         "acc_vibration_mps2": "accelerometer vibration [m/s²]",
+         "gyr_vibration_radps": "gyro vibration [rad/s]", "remaining_frac": "remaining capacity [0..1]",
+         "t_ns": "t [ns]", "t_s": "t [s]", "q_w": "quaternion w", "q_x": "quaternion x",
+         "q_y": "quaternion y", "q_z": "quaternion z"}
+
+
+def label(col: str) -> str:
+    """Display label with unit of a canonical column name: ``acc_x_mps2`` -> ``acceleration x [m/s²]``.
+
+    The schema puts the SI unit in the name's last token (``_m``, ``_mps``, ``_mps2``,
+    ``_rad``, ``_radps``, ``_deg``, ``_Pa``, ``_degC``, ``_V``, ``_A``, ...); the other tokens
+    become words (:data:`WORDS`), unknown tokens stay as they are, a dimensionless name gets
+    no brackets. ``x_`` (an estimate column) reads "estimated".
+    """
+    if col in NAMES:
+        return NAMES[col]
+    prefix = ""
+    if col.startswith("x_") and len(col) > 2 and col[2:] not in NAMES:
+        prefix, col = "estimated ", col[2:]
+    toks = col.split("_")
+    unit = None
+    if len(toks) > 1 and toks[-1] in UNITS:
+        unit = UNITS[toks.pop()]
+    if toks and toks[-1].isdigit() and toks[0] in ("rc", "servo", "clip"):
+        toks[-1] = str(int(toks[-1]) + (1 if toks[0] == "clip" else 0))
+    words = " ".join(WORDS.get(t, t) for t in toks)
+    return prefix + (f"{words} [{unit}]" if unit else words)
+
+
+#: one colour per component, so x/north/roll (and their setpoints) look alike on every panel
+PALETTE = {"x": "#1f77b4", "y": "#ff7f0e", "z": "#2ca02c", "n": "#1f77b4", "e": "#ff7f0e", "d": "#2ca02c",
+           "roll": "#1f77b4", "pitch": "#ff7f0e", "yaw": "#2ca02c", "p": "#1f77b4", "q": "#ff7f0e",
+           "r": "#2ca02c", "voltage": "#d62728", "current": "#9467bd", "remaining": "#8c564b",
+           "consumed": "#7f7f7f", "fix": "#1f77b4", "sats": "#ff7f0e", "hdop": "#2ca02c",
+           "vdop": "#17becf", "hacc": "#d62728", "vacc": "#9467bd", "baro": "#1f77b4",
+           "track": "#ff7f0e", "calibrated": "#2ca02c", "rangefinder": "#9467bd", "gps": "#8c564b"}
+_CYCLE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+          "#bcbd22", "#17becf")
+
+
+def colour(key: str) -> str:
+    """The colour of a quantity or component (:data:`PALETTE`), the same on every panel: the
+    first token of ``key`` found there, checked from the component (``acc_x_mps2`` -> ``x``);
+    otherwise a stable pick from the cycle by the name (never by trace order)."""
+    toks = [t for t in str(key).replace(" ", "_").split("_") if t]
+    if len(toks) > 1 and toks[1].isdigit():  # numbered channels (rc_3_us, servo_3_us): by number
+        return _CYCLE[(int(toks[1]) - 1) % len(_CYCLE)]
+    for t in (*toks[1:], *toks[:1]):
+        if t in PALETTE:
+            return PALETTE[t]
+    import zlib
+
+    return _CYCLE[zlib.crc32(str(key).encode()) % len(_CYCLE)]
 
 
 def _t(df: pd.DataFrame) -> np.ndarray:
@@ -31,9 +138,13 @@ def _t(df: pd.DataFrame) -> np.ndarray:
 def layout(fig: go.Figure, title: str, **kw) -> go.Figure:
     """Apply the report's figure style (margins, height, template, horizontal legend) and
     ``title`` to ``fig``; ``kw`` overrides any of those options. Returns ``fig``."""
+    # the horizontal legend sits below the x-axis title, never on it
     opts = {"margin": dict(l=50, r=20, t=40, b=40), "height": 360, "template": "plotly_white",
-            "legend": dict(orientation="h"), **kw}
+            "legend": dict(orientation="h", yanchor="top", y=-0.22), **kw}
     fig.update_layout(title=title, **opts)
+    # plain numbers on every axis: no SI-prefixed "−0.38k" ticks on confidence or log axes
+    fig.update_xaxes(exponentformat="none")
+    fig.update_yaxes(exponentformat="none")
     return fig
 
 
@@ -43,7 +154,8 @@ def path_3d(ned: pd.DataFrame) -> go.Figure | None:
         return None
     d = decimate(ned.dropna(subset=["pos_n_m", "pos_e_m", "pos_d_m"]))
     fig = go.Figure(go.Scatter3d(x=d["pos_e_m"], y=d["pos_n_m"], z=-d["pos_d_m"], mode="lines",
-                                 line=dict(width=3, color=_t(d), colorscale="Viridis"), name="path"))
+                                 line=dict(width=3, color=_t(d), colorscale="Viridis", showscale=True,
+                                           colorbar=dict(title="t [s]")), name="path"))
     fig.update_layout(scene=dict(xaxis_title="east [m]", yaxis_title="north [m]", zaxis_title="up [m]",
                                  aspectmode="data"))
     return layout(fig, "3-D path (local NED, up = −d)", height=480)
@@ -82,8 +194,8 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
     fig = go.Figure()
     for name, df in series.items():
         if df is not None and len(df) and df["alt_m"].notna().any():
-            d = decimate(df)
-            fig.add_trace(go.Scatter(x=_t(d), y=d["alt_m"], mode="lines", name=name))
+            d = decimate(df[["t_ns", "alt_m"]], cols=["alt_m"])
+            fig.add_trace(go.Scatter(x=_t(d), y=d["alt_m"], mode="lines", name=name, line=dict(color=colour(name))))
     if calib_points is not None and len(calib_points):
         fig.add_trace(go.Scatter(x=_t(calib_points), y=calib_points["alt_m"], mode="markers",
                                  marker=dict(size=6, symbol="x"), name="calibration points"))
@@ -94,18 +206,207 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
     return layout(fig, "Altitude")
 
 
-def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> go.Figure | None:
-    """Roll, pitch, yaw in degrees (ZYX, for display) against time."""
+def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+             setpoint: pd.DataFrame | None = None) -> go.Figure | None:
+    """Roll, pitch, yaw in degrees (ZYX, for display; yaw unwrapped) against time, with the
+    ``setpoint`` stream's attitude (dashed, same colour per angle) where it has one."""
     if att is None or not len(att) or euler is None:
         return None
     fig = go.Figure()
     t = _t(att)
     for name, a in zip(("roll", "pitch", "yaw"), euler):
-        d = decimate(pd.DataFrame({"t": t, "v": np.degrees(a)}))
-        fig.add_trace(go.Scatter(x=d["t"], y=d["v"], mode="lines", name=name))
+        v = np.degrees(np.unwrap(a) if name == "yaw" else a)
+        d = decimate(pd.DataFrame({"t_ns": att["t_ns"].to_numpy(), "v": v}))
+        fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} [°]",
+                                 line=dict(color=colour(name))))
+    sp = _first(setpoint)
+    if sp is not None:
+        for name in ("roll", "pitch", "yaw"):
+            c = f"{name}_rad"
+            ok = sp.dropna(subset=[c]) if c in sp else sp.iloc[:0]
+            if not len(ok):
+                continue
+            a = ok[c].to_numpy(np.float64)
+            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(),
+                                       "v": np.degrees(np.unwrap(a) if name == "yaw" else a)}))
+            fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} setpoint [°]",
+                                     line=dict(color=colour(name), dash="dash")))
     fig.update_xaxes(title="t [s]")
-    fig.update_yaxes(title="angle [deg]")
-    return layout(fig, "Attitude (ZYX Euler)")
+    fig.update_yaxes(title="angle [°]")
+    return layout(fig, "Attitude vs setpoint (ZYX Euler, yaw unwrapped)" if len(fig.data) > 3
+                  else "Attitude (ZYX Euler, yaw unwrapped)")
+
+
+def _first(df: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The first instance of a stream, ``None`` when it has no rows."""
+    if df is None or not len(df):
+        return None
+    return df[df["instance"] == df["instance"].min()] if "instance" in df else df
+
+
+def with_setpoint(df: pd.DataFrame | None, cols: list[str], setpoint: pd.DataFrame | None,
+                  sp_cols: list[str], title: str, ylabel: str) -> go.Figure | None:
+    """Measured ``cols`` of ``df`` (solid) and the matching ``sp_cols`` of ``setpoint`` (dashed,
+    same colour per component) against time; ``None`` when neither has data."""
+    fig = go.Figure()
+    for frame, cs, dash, suffix in ((_first(df), cols, None, ""), (_first(setpoint), sp_cols, "dash", " setpoint")):
+        if frame is None:
+            continue
+        for c in cs:
+            if c not in frame or not frame[c].notna().any():
+                continue
+            d = decimate(frame[["t_ns", c]].dropna(), cols=[c])
+            lab = label(c)
+            name = lab.replace(" [", f"{suffix} [") if "[" in lab else lab + suffix
+            fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=name,
+                                     line=dict(color=colour(c), dash=dash)))
+    if not fig.data:
+        return None
+    fig.update_xaxes(title="t [s]")
+    fig.update_yaxes(title=ylabel)
+    return layout(fig, title)
+
+
+def gps_quality(gps: pd.DataFrame | None) -> go.Figure | None:
+    """GPS quality: fix type, satellites, HDOP/VDOP (left axis) and the receiver's horizontal /
+    vertical accuracy in metres (right axis); ``None`` when the stream has none of them."""
+    g = _first(gps)
+    if g is None:
+        return None
+    fig = go.Figure()
+    for c in ("fix_type", "n_sats", "hdop", "vdop"):
+        if c in g and g[c].notna().any():
+            d = decimate(g[["t_ns", c]].dropna(), cols=[c])
+            fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
+    right = False
+    for c in ("hacc_m", "vacc_m"):
+        if c in g and g[c].notna().any():
+            d = decimate(g[["t_ns", c]].dropna(), cols=[c])
+            fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis="y2",
+                                     line=dict(color=colour(c), dash="dot")))
+            right = True
+    if not fig.data:
+        return None
+    if right:
+        fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="accuracy [m]"))
+    fig.update_xaxes(title="t [s]")
+    fig.layout.yaxis.title = "fix type (3 = 3-D), satellites, DOP"
+    return layout(fig, "GPS quality")
+
+
+def accel_rms(imu: pd.DataFrame | None, window_s: float = 1.0) -> pd.DataFrame | None:
+    """Accelerometer RMS about the window mean (the vibration part) in ``window_s`` windows.
+
+    Returns ``DataFrame(t_ns (window centre), acc_x_mps2, acc_y_mps2, acc_z_mps2)`` of the
+    first instance, ``None`` without accelerometer data. Per axis
+    ``rms = sqrt(mean((a - mean(a))²))`` over the samples of each window (the population
+    standard deviation), so gravity and slow manoeuvres drop out."""
+    i = _first(imu)
+    cols = [f"acc_{a}_mps2" for a in "xyz"]
+    if i is None or not all(c in i for c in cols):
+        return None
+    i = i.dropna(subset=cols)
+    if not len(i):
+        return None
+    w = int(window_s * 1e9)
+    key = i["t_ns"].to_numpy(np.int64) // w
+    g = i[cols].groupby(key)
+    out = g.std(ddof=0)
+    out = out[g.size() >= 2]
+    if not len(out):
+        return None
+    return pd.DataFrame({"t_ns": out.index.to_numpy(np.int64) * w + w // 2,
+                         **{c: out[c].to_numpy() for c in cols}})
+
+
+def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.Figure | None:
+    """Vibration: the autopilot's metric (``vibration`` stream: VIBE x/y/z, PX4's one-number
+    metrics, clipping counts on the right axis) where logged, else the accelerometer RMS in
+    1 s windows (:func:`accel_rms`); ``None`` when neither exists."""
+    v = _first(vib)
+    fig = go.Figure()
+    if v is not None:
+        for c in ("vibe_x_mps2", "vibe_y_mps2", "vibe_z_mps2", "acc_vibration_mps2", "gyr_vibration_radps"):
+            if c in v and v[c].notna().any():
+                d = decimate(v[["t_ns", c]].dropna(), cols=[c])
+                fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
+        clips = [c for c in ("clip_0", "clip_1", "clip_2") if c in v and v[c].notna().any()]
+        for c in clips:
+            d = decimate(v[["t_ns", c]].dropna(), cols=[c])
+            fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis="y2",
+                                     line=dict(dash="dot")))
+        if clips:
+            fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="clipping events"))
+        title, ylab = "Vibration (autopilot's metric)", "vibration [m/s²]"
+    if not fig.data:
+        r = accel_rms(imu)
+        if r is None:
+            return None
+        for c in ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2"):
+            fig.add_trace(go.Scatter(x=_t(r), y=r[c], mode="lines", name=label(c).replace(" [", " RMS ["),
+                                     line=dict(color=colour(c))))
+        title, ylab = "Vibration (accelerometer RMS about the mean, 1 s windows)", "RMS [m/s²]"
+    fig.update_xaxes(title="t [s]")
+    fig.layout.yaxis.title = ylab
+    return layout(fig, title)
+
+
+def battery(bat: pd.DataFrame | None) -> go.Figure | None:
+    """Battery voltage (left axis), current and remaining capacity in % (right axis)."""
+    b = _first(bat)
+    if b is None:
+        return None
+    fig = go.Figure()
+    if "voltage_V" in b and b["voltage_V"].notna().any():
+        d = decimate(b[["t_ns", "voltage_V"]].dropna(), cols=["voltage_V"])
+        fig.add_trace(go.Scatter(x=_t(d), y=d["voltage_V"], mode="lines", name=label("voltage_V"),
+                                 line=dict(color=colour("voltage_V"))))
+    right = []
+    for c, scale, name in (("current_A", 1.0, label("current_A")), ("remaining_frac", 100.0, "remaining capacity [%]")):
+        if c in b and b[c].notna().any():
+            d = decimate(b[["t_ns", c]].dropna(), cols=[c])
+            fig.add_trace(go.Scatter(x=_t(d), y=d[c] * scale, mode="lines", name=name, yaxis="y2",
+                                     line=dict(color=colour(c))))
+            right.append(name.split(" [")[0])
+    if not fig.data:
+        return None
+    if right:
+        fig.update_layout(yaxis2=dict(overlaying="y", side="right", title=" / ".join(right) + " [A, %]"))
+    fig.update_xaxes(title="t [s]")
+    fig.layout.yaxis.title = "voltage [V]"
+    return layout(fig, "Battery")
+
+
+#: MAV_SEVERITY / syslog levels
+SEVERITY = ("emergency", "alert", "critical", "error", "warning", "notice", "info", "debug")
+
+
+def messages_table(msgs: pd.DataFrame | None) -> tuple[list[str], list[list[str]]]:
+    """The log's text messages as ``(headers, rows)``: time [s], severity, text (time order)."""
+    headers = ["t [s]", "severity", "text"]
+    if msgs is None or not len(msgs):
+        return headers, []
+    m = msgs.sort_values("t_ns", kind="stable")
+    rows = []
+    for t, sev, text in zip(m["t_ns"].to_numpy(), m["severity"].to_numpy(np.float64, na_value=np.nan),
+                            m["text"].astype(object).to_numpy()):
+        s = SEVERITY[int(sev)] if np.isfinite(sev) and 0 <= sev < len(SEVERITY) else "–"
+        rows.append([f"{t * 1e-9:.3f}", s, "" if text is None or text is pd.NA else str(text)])
+    return headers, rows
+
+
+def params_table(params: pd.DataFrame | None) -> tuple[list[str], list[list[str]]]:
+    """The parameters as ``(headers, rows)``: name, last value, time of that value [s], and
+    how many times it was set (sorted by name)."""
+    headers = ["name", "value", "t [s]", "times set"]
+    if params is None or not len(params):
+        return headers, []
+    p = params.dropna(subset=["name"]).sort_values("t_ns", kind="stable")
+    rows = []
+    for name, g in p.groupby(p["name"].astype(str), sort=True):
+        last = g.iloc[-1]
+        rows.append([name, f"{float(last['value']):.7g}", f"{int(last['t_ns']) * 1e-9:.3f}", str(len(g))])
+    return headers, rows
 
 
 def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> go.Figure | None:
@@ -116,11 +417,49 @@ def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> g
     cols = [c for c in cols if c in df and df[c].notna().any()]
     if not cols:
         return None
-    d = decimate(df)
-    fig = go.Figure([go.Scatter(x=_t(d), y=d[c], mode="lines", name=c) for c in cols])
+    # each trace keeps its own extremes; many channels (RC, servos) share one panel's budget
+    # (at least 1000 points each), so a 32-output log does not make a 30 MB page
+    mp = max(1000, 3 * MAX_POINTS // len(cols))
+    fig = go.Figure()
+    for c in cols:
+        d = decimate(df[["t_ns", c]].dropna(), mp, cols=[c])
+        fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title=ylabel)
     return layout(fig, title)
+
+
+def label_colour(lab: str) -> str:
+    """The colour of a maneuver label, the same for the labelled segment and the classifier's
+    prediction on every page (``unknown``: grey)."""
+    import zlib
+
+    if str(lab) == "unknown":
+        return "#999999"
+    return _CYCLE[zlib.crc32(str(lab).encode()) % len(_CYCLE)]
+
+
+def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None = None) -> go.Figure:
+    """Shade the flight-mode intervals of ``mode`` (the canonical ``mode`` stream) behind a time
+    panel, one colour per mode name, the name written at the top of each band. Returns ``fig``."""
+    m = _first(mode)
+    if fig is None or m is None or "mode" not in m:
+        return fig
+    m = m.dropna(subset=["mode"]).sort_values("t_ns", kind="stable")
+    if not len(m):
+        return fig
+    t = m["t_ns"].to_numpy() * 1e-9
+    names = m["mode"].astype(str).to_numpy()
+    keep = np.r_[True, names[1:] != names[:-1]]    # a repeated record continues its band
+    t, names = t[keep], names[keep]
+    end = np.r_[t[1:], max(t_end_s if t_end_s is not None else t[-1], t[-1])]
+    for t0, t1, name in zip(t, end, names):
+        if t1 <= t0:
+            continue
+        fig.add_vrect(x0=t0, x1=t1, fillcolor=label_colour(f"mode {name}"), opacity=0.08, line_width=0,
+                      layer="below", annotation_text=name, annotation_position="top left",
+                      annotation_font_size=9)
+    return fig
 
 
 def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = None) -> go.Figure | None:
@@ -129,14 +468,16 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
     if segments is not None and len(segments):
         for r in segments.itertuples():
             t0, t1 = r.t_start_ns * 1e-9, r.t_end_ns * 1e-9
-            fig.add_trace(go.Scatter(x=[t0, t1], y=["truth", "truth"], mode="lines", line=dict(width=14),
+            fig.add_trace(go.Scatter(x=[t0, t1], y=["truth", "truth"], mode="lines",
+                                     line=dict(width=14, color=label_colour(r.label)),
                                      name=str(r.label), showlegend=False, hovertext=str(r.label)))
             fig.add_annotation(x=(t0 + t1) / 2, y="truth", text=str(r.label), showarrow=False, yshift=14,
                                font=dict(size=9))
     if classified is not None and len(classified):
         d = decimate(classified)
         for lab, g in d.groupby(d["label"].astype(str), sort=True):
-            fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers", marker=dict(size=6),
+            fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers",
+                                     marker=dict(size=6, color=label_colour(lab)),
                                      text=[lab] * len(g), name=f"classifier: {lab}"))
         if "confidence" in d:
             fig.add_trace(go.Scatter(x=_t(d), y=d["confidence"], mode="lines", name="confidence V", yaxis="y2"))
@@ -185,8 +526,8 @@ def mode_timeline(df: pd.DataFrame | None) -> go.Figure | None:
                              marker=dict(size=5, color=np.where(mode, "#d62728", "#1f77b4")),
                              name="prediction model", showlegend=False))
     for lab, g in d.groupby(d["pred"].astype(str), sort=True):
-        fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers", marker=dict(size=6),
-                                 name=f"classifier: {lab}"))
+        fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers",
+                                 marker=dict(size=6, color=label_colour(lab)), name=f"classifier: {lab}"))
     if d["V_best"].notna().any():
         fig.add_trace(go.Scatter(x=_t(d), y=d["V_best"], mode="lines", name="confidence V", yaxis="y2"))
         fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="V [log10]"))

@@ -155,3 +155,30 @@ def test_model_report_in_headless_chromium(report_tree, tmp_path):
         assert table in r["text"]
     assert "98.21" in r["text"]  # the thesis's M1 MAoT beside ours
     assert (tmp_path / "model.png").stat().st_size > 1000
+
+
+def test_zooming_one_time_panel_of_a_flight_page_zooms_the_others(report_tree):
+    _need_browser()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                     args=["--no-sandbox", "--disable-gpu", '--host-resolver-rules=MAP * ~NOTFOUND'])
+        page = browser.new_page(viewport={"width": 1280, "height": 900})
+        page.goto((report_tree / "report" / "flights" / "demo-quad.html").as_uri(), wait_until="load")
+        page.wait_for_timeout(1000)
+        ranges = page.evaluate("""async () => {
+            const divs = Array.from(document.querySelectorAll('.plotly-graph-div')).slice(2);
+            await Plotly.relayout(divs[0], {'xaxis.range': [10, 20]});
+            await new Promise(r => setTimeout(r, 500));
+            const first = divs.map(d => d.layout.xaxis.range.slice());
+            // a mouse zoom reports the two ends separately
+            await Plotly.relayout(divs[1], {'xaxis.range[0]': 30, 'xaxis.range[1]': 40});
+            await new Promise(r => setTimeout(r, 500));
+            return [first, divs.map(d => d.layout.xaxis.range.slice())];
+        }""")
+        browser.close()
+    first, second = ranges
+    assert len(first) >= 3, ranges
+    assert all(r == [10, 20] for r in first), first
+    assert all(r == [30, 40] for r in second), second

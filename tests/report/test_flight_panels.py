@@ -1,0 +1,188 @@
+"""The flight page's panels fed by the schema 1.1 streams (issue 13, item 2): each is drawn from
+its stream, or the page says in one line that the flight has no data for it."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.io import schema
+from pipeline.report import plots
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _stream(stream: str, n: int, rate_hz: float, /, **cols) -> pd.DataFrame:
+    """A canonical ``stream`` table of ``n`` rows at ``rate_hz`` with the given columns (every
+    other column of the schema present and empty, as readers leave it)."""
+    df = pd.DataFrame({"t_ns": (np.arange(n) * 1e9 / rate_hz).astype(np.int64),
+                       "instance": np.zeros(n, np.uint8), "src": "X", **cols})
+    for c in schema.STREAMS[stream]:
+        if c.name not in df:
+            df[c.name] = np.nan
+    return df
+
+
+def _names(fig) -> list[str]:
+    return [t.name for t in fig.data]
+
+
+def test_the_gps_quality_panel_draws_fix_type_satellites_dop_and_accuracy_on_its_own_axis():
+    n = 50
+    gps = _stream("gps", n, 5.0, fix_type=np.full(n, 3.0), n_sats=np.full(n, 12.0), hdop=np.full(n, 0.8),
+                  hacc_m=np.linspace(2.0, 0.5, n))
+    fig = plots.gps_quality(gps)
+    assert _names(fig) == ["fix type", "satellites", "HDOP", "horizontal accuracy [m]"]
+    assert fig.data[-1].yaxis == "y2" and fig.layout.yaxis2.title.text == "accuracy [m]"
+    assert plots.gps_quality(gps.assign(fix_type=np.nan, n_sats=np.nan, hdop=np.nan, hacc_m=np.nan)) is None
+    assert plots.gps_quality(None) is None
+
+
+def test_the_vibration_panel_prefers_the_autopilots_metric():
+    n = 40
+    vib = _stream("vibration", n, 10.0, vibe_x_mps2=np.full(n, 3.0), vibe_y_mps2=np.full(n, 4.0),
+                  vibe_z_mps2=np.full(n, 9.0), clip_0=np.arange(n, dtype=float))
+    fig = plots.vibration(vib, None)
+    assert _names(fig)[:3] == [f"vibration {a} [m/s²]" for a in "xyz"]
+    assert "clipping events 1" in _names(fig) and fig.layout.yaxis2.title.text == "clipping events"
+    assert fig.layout.title.text.startswith("Vibration (autopilot")
+
+
+def test_the_vibration_panel_falls_back_to_the_accelerometer_rms_in_one_second_windows():
+    rng = np.random.default_rng(5)
+    n, rate = 500, 50.0                                 # 10 s at 50 Hz
+    acc = {"acc_x_mps2": 1.0 + 0.3 * rng.standard_normal(n), "acc_y_mps2": np.zeros(n),
+           "acc_z_mps2": -9.81 + np.sin(np.arange(n))}
+    imu = _stream("imu", n, rate, **acc)
+    r = plots.accel_rms(imu)
+    assert len(r) == 10 and (r["t_ns"] == np.arange(10) * 10**9 + 5 * 10**8).all()
+    # the oracle: population standard deviation of each second's 50 samples
+    np.testing.assert_allclose(r["acc_x_mps2"], acc["acc_x_mps2"].reshape(10, 50).std(axis=1), rtol=1e-12)
+    np.testing.assert_allclose(r["acc_y_mps2"], 0.0, atol=0)
+    fig = plots.vibration(None, imu)
+    assert _names(fig) == [f"acceleration {a} RMS [m/s²]" for a in "xyz"]
+    assert "1 s windows" in fig.layout.title.text
+    assert plots.vibration(None, None) is None
+
+
+def test_the_battery_panel_draws_voltage_left_and_current_and_remaining_percent_right():
+    n = 30
+    bat = _stream("battery", n, 1.0, voltage_V=np.linspace(16.8, 15.0, n), current_A=np.full(n, 12.0),
+                  remaining_frac=np.linspace(1.0, 0.7, n))
+    fig = plots.battery(bat)
+    assert _names(fig) == ["voltage [V]", "current [A]", "remaining capacity [%]"]
+    assert [t.yaxis for t in fig.data] == [None, "y2", "y2"]
+    np.testing.assert_allclose(fig.data[2].y, np.linspace(100.0, 70.0, n))
+    assert plots.battery(bat.iloc[:0]) is None
+
+
+def test_attitude_is_drawn_against_the_setpoint_with_yaw_unwrapped():
+    from pipeline.frames.rotations import quat_to_euler
+
+    n = 100
+    yaw = np.linspace(0.0, 4 * np.pi, n)                 # two full turns
+    q = np.c_[np.cos(yaw / 2), np.zeros(n), np.zeros(n), np.sin(yaw / 2)]
+    att = _stream("attitude", n, 10.0, q_w=q[:, 0], q_x=q[:, 1], q_y=q[:, 2], q_z=q[:, 3])
+    sp = _stream("setpoint", n, 10.0, roll_rad=np.zeros(n), pitch_rad=np.zeros(n), yaw_rad=np.angle(np.exp(1j * yaw)))
+    fig = plots.attitude(att, quat_to_euler(q), sp)
+    assert _names(fig) == ["roll [°]", "pitch [°]", "yaw [°]", "roll setpoint [°]", "pitch setpoint [°]",
+                           "yaw setpoint [°]"]
+    np.testing.assert_allclose(fig.data[2].y, np.degrees(yaw), atol=1e-6)
+    np.testing.assert_allclose(fig.data[5].y, np.degrees(yaw), atol=1e-6)
+    assert fig.data[0].line.color == fig.data[3].line.color and fig.data[3].line.dash == "dash"
+    assert "setpoint" in fig.layout.title.text
+    assert "setpoint" not in plots.attitude(att, quat_to_euler(q), None).layout.title.text
+
+
+def test_body_rates_with_a_setpoint_share_the_colour_per_axis():
+    n = 20
+    rates = pd.DataFrame({"t_ns": np.arange(n) * 10**8, "p_radps": np.ones(n), "q_radps": np.zeros(n),
+                          "r_radps": np.zeros(n)})
+    sp = _stream("setpoint", n, 10.0, p_radps=np.ones(n))
+    fig = plots.with_setpoint(rates, ["p_radps", "q_radps", "r_radps"], sp, ["p_radps", "q_radps", "r_radps"],
+                              "Body rates", "body rate [rad/s]")
+    assert _names(fig) == ["roll rate [rad/s]", "pitch rate [rad/s]", "yaw rate [rad/s]", "roll rate setpoint [rad/s]"]
+    assert fig.data[0].line.color == fig.data[3].line.color
+    assert plots.with_setpoint(None, ["p_radps"], None, ["p_radps"], "x", "y") is None
+
+
+def test_messages_and_parameters_become_tables_with_times():
+    msgs = _stream("messages", 3, 1.0, text=["EKF3 IMU0 is using GPS", "Arming checks", "Crash"],
+                   severity=[6.0, np.nan, 2.0])
+    headers, rows = plots.messages_table(msgs)
+    assert headers == ["t [s]", "severity", "text"]
+    assert rows == [["0.000", "info", "EKF3 IMU0 is using GPS"], ["1.000", "–", "Arming checks"],
+                    ["2.000", "critical", "Crash"]]
+    par = _stream("params", 3, 1.0, name=["B_P", "A_P", "B_P"], value=[1.0, 0.5, 2.0])
+    headers, rows = plots.params_table(par)
+    assert headers == ["name", "value", "t [s]", "times set"]
+    assert rows == [["A_P", "0.5", "1.000", "1"], ["B_P", "2", "2.000", "2"]]
+    assert plots.messages_table(None)[1] == [] and plots.params_table(msgs.iloc[:0])[1] == []
+
+
+def test_a_flight_without_the_new_streams_says_so_in_one_line_per_panel(tmp_path):
+    from pipeline.io.ingest import outputs_for, run_ingest
+    from pipeline.report.flight import build_flight_report
+
+    bad = tmp_path / "bad.bin"
+    bad.write_bytes(b"garbage" * 50)
+    run_ingest({"log": bad}, outputs_for(tmp_path / "ingest"), None, flight_id="bad")
+    page = tmp_path / "bad.html"
+    build_flight_report(tmp_path / "ingest", page, template=ROOT / "reports" / "templates" / "flight.html.j2",
+                        plotly_js="plotly.min.js")
+    text = html.unescape(page.read_text())
+    for title in ("GPS quality (fix type, satellites, HDOP/EPH)", "Vibration", "Battery", "Attitude",
+                  "Body rates vs setpoint", "Velocity", "Log messages", "Parameters"):
+        assert f"{title}: no data in this flight" in text, title
+
+
+def test_the_demo_flight_page_draws_the_new_panels_and_tables(tmp_path):
+    from pipeline.io.ingest import outputs_for, run_ingest
+    from pipeline.report.flight import build_flight_report
+    from pipeline.simulate.demo import write_demo_flight
+
+    write_demo_flight(tmp_path / "demo.bin", seed=1, duration_s=30.0)
+    run_ingest({"log": tmp_path / "demo.bin"}, outputs_for(tmp_path / "ingest"), None, flight_id="demo")
+    page = tmp_path / "demo.html"
+    build_flight_report(tmp_path / "ingest", page, template=ROOT / "reports" / "templates" / "flight.html.j2",
+                        plotly_js="plotly.min.js")
+    text = html.unescape(page.read_text())
+    for drawn in ("GPS quality", "Attitude vs setpoint", "Body rates vs setpoint", "Vibration (accelerometer RMS"):
+        assert drawn in text and f"{drawn}: no data" not in text, drawn
+    assert "<td>ArduCopter V4.5.0 (uavpipe demo flight)</td>" in text   # a MSG record, with its time
+    assert "<td>INS_GYRO_FILTER</td><td>20</td>" in text                 # a PARM record
+
+
+def test_flight_mode_bands_cover_each_mode_until_the_next_and_the_last_until_the_end():
+    import plotly.graph_objects as go
+
+    mode = _stream("mode", 4, 1.0, mode=["STABILIZE", "STABILIZE", "LOITER", "LAND"])
+    fig = plots.mode_bands(go.Figure(go.Scatter(x=[0, 10], y=[0, 1])), mode, 10.0)
+    bands = [(s.x0, s.x1) for s in fig.layout.shapes]
+    assert bands == [(0.0, 2.0), (2.0, 3.0), (3.0, 10.0)]   # the repeated STABILIZE continues its band
+    assert [a.text for a in fig.layout.annotations] == ["STABILIZE", "LOITER", "LAND"]
+    assert plots.mode_bands(go.Figure(), None).layout.shapes == ()
+
+
+def test_a_maneuver_label_has_one_colour_for_its_segment_and_its_prediction():
+    seg = pd.DataFrame({"t_start_ns": [0, 5 * 10**9], "t_end_ns": [4 * 10**9, 9 * 10**9], "label": ["M1", "M2"]})
+    cls = pd.DataFrame({"t_ns": np.arange(10) * 10**9, "label": ["M1"] * 5 + ["unknown"] * 5,
+                        "confidence": np.zeros(10)})
+    fig = plots.timeline(seg, cls)
+    seg_colour = {t.name: t.line.color for t in fig.data if t.mode == "lines" and t.y[0] == "truth"}
+    pred_colour = {t.name: t.marker.color for t in fig.data if t.mode == "markers"}
+    assert seg_colour["M1"] == pred_colour["classifier: M1"] == plots.label_colour("M1")
+    assert pred_colour["classifier: unknown"] == "#999999"
+
+
+def test_many_channels_share_one_panels_point_budget():
+    n, k = 50_000, 16
+    ctl = _stream("control", n, 50.0, **{f"servo_{i}_us": 1500 + 400 * np.sin(np.arange(n) / (100 + i))
+                                         for i in range(1, k + 1)})
+    fig = plots.time_series(ctl, [f"servo_{i}_us" for i in range(1, 33)], "Actuator outputs", "pulse width [µs]")
+    assert len(fig.data) == k and fig.data[0].name == "servo output 1 [µs]"
+    assert sum(len(t.x) for t in fig.data) <= k * 1002
+    assert max(t.y.max() for t in fig.data) == ctl[[f"servo_{i}_us" for i in range(1, k + 1)]].max().max()

@@ -141,6 +141,20 @@ def _check_gmr(model_set) -> None:
                           f"does not give (GMR feature sets: {', '.join(GMR_FEATURE_SETS)})")
 
 
+def _batched(prior: GaussianState) -> GaussianState:
+    """One run (mean ``(9,)``) as a batch of one."""
+    if prior.mean.ndim == 1:
+        return GaussianState(prior.mean[None], prior.cov[None], prior.t_ns)
+    return prior
+
+
+def _q2(Q2, caller: str) -> F64:
+    Q2 = np.asarray(Q2, dtype=np.float64)
+    if Q2.shape != (9, 9) or not np.all(np.isfinite(Q2)):
+        raise EkfHmmError(f"{caller}: Q2 must be a finite 9×9 matrix, got shape {Q2.shape}")
+    return Q2
+
+
 def _classified_arrays(cls: pd.DataFrame, t_ns: NDArray[np.int64], R: int, run_index: dict):
     """Classifier rows -> (R, T) arrays, each step holding the newest output at or before it."""
     T = len(t_ns)
@@ -245,11 +259,7 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
     if store not in ("filtered", "mean"):
         raise EkfHmmError(f"run_ekf_hmm: store must be 'filtered' or 'mean', not {store!r}")
     t_ns = np.asarray(t_ns, dtype=np.int64)
-    if prior.mean.ndim == 1:
-        prior = GaussianState(prior.mean[None], prior.cov[None], prior.t_ns)
-    Q2 = np.asarray(Q2, dtype=np.float64)
-    if Q2.shape != (9, 9) or not np.all(np.isfinite(Q2)):
-        raise EkfHmmError(f"run_ekf_hmm: Q2 must be a finite 9×9 matrix, got shape {Q2.shape}")
+    prior, Q2 = _batched(prior), _q2(Q2, "run_ekf_hmm")   # before the costly baseline and classification
     base = run_filter(ekf, prior, t_ns, z, store=store)
     R, T = base.mean.shape[:2]
     frame = ekf_state_frame(base.mean, t_ns, yaw_rad=yaw_rad)
@@ -289,11 +299,7 @@ def hmm_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, Q2, axe
     FilterTrack
     """
     t_ns = np.asarray(t_ns, dtype=np.int64)
-    if prior.mean.ndim == 1:
-        prior = GaussianState(prior.mean[None], prior.cov[None], prior.t_ns)
-    Q2 = np.asarray(Q2, dtype=np.float64)
-    if Q2.shape != (9, 9) or not np.all(np.isfinite(Q2)):
-        raise EkfHmmError(f"hmm_filter: Q2 must be a finite 9×9 matrix, got shape {Q2.shape}")
+    prior, Q2 = _batched(prior), _q2(Q2, "hmm_filter")
     z = np.asarray(z, dtype=np.float64)
     R, T = prior.mean.shape[0], len(t_ns)
     axes = np.asarray(axes, dtype=bool)

@@ -165,12 +165,19 @@ def flightcoach_inputs(realdata_dir: str | os.PathLike, files: Mapping[str, str]
     return files
 
 
+def flightcoach_defaults(files: Mapping[str, str], realdata_dir: str | os.PathLike | None = None) -> dict[str, str]:
+    """``{input name: path}`` of a FlightCoach study's ``files`` under ``realdata_dir`` (default
+    ``$UAVPIPE_REALDATA``, else ``../shared/realdata`` beside the repository)/:data:`FLIGHTCOACH_DIR`."""
+    d = Path(realdata_dir or os.environ.get("UAVPIPE_REALDATA", ROOT.parent / "shared" / "realdata"))
+    return {k: str(d / FLIGHTCOACH_DIR / f) for k, f in files.items()}
+
+
 def flightcoach_paths(inputs: Mapping | None, files: Mapping[str, str], study: str) -> dict[str, Path]:
     """A FlightCoach study's declared flights, each defaulting to its file under
     ``$UAVPIPE_REALDATA`` (or ``../shared/realdata`` beside the repository)/:data:`FLIGHTCOACH_DIR`;
     a missing one is a :class:`StudyError` naming it (one line)."""
-    d = Path(os.environ.get("UAVPIPE_REALDATA", ROOT.parent / "shared" / "realdata")) / FLIGHTCOACH_DIR
-    paths = {k: input_path(inputs, k, d / f) for k, f in files.items()}
+    dflt = flightcoach_defaults(files)
+    paths = {k: input_path(inputs, k, dflt[k]) for k in files}
     for k, p in paths.items():
         if not p.is_file():
             raise StudyError(f"{p}: FlightCoach file not found (input {k!r}; the {study} study needs "

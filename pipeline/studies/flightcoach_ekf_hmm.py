@@ -77,7 +77,7 @@ from ..models.features import decimate
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
 from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, STUDY_TABLES, Progress, Results, StudyError,
-                   StudyResult, flightcoach_paths, input_path, md_table, output_path, say, study_outputs, study_settings,
+                   StudyResult, flightcoach_defaults, flightcoach_paths, input_path, md_table, output_path, say, study_outputs, study_settings,
                    write_text)
 
 NAME = "flightcoach_ekf_hmm"
@@ -123,8 +123,7 @@ def outputs_for(results_dir: str = "results") -> dict[str, str]:
 def default_inputs(realdata_dir: str | os.PathLike | None = None) -> dict[str, str]:
     """The two FlightCoach files under ``realdata_dir`` (default: ``$UAVPIPE_REALDATA`` or
     ``../shared/realdata`` beside the repository)."""
-    d = Path(realdata_dir or os.environ.get("UAVPIPE_REALDATA", ROOT.parent / "shared" / "realdata"))
-    return {k: str(d / SUBDIR / f) for k, f in FLIGHTS.items()}
+    return flightcoach_defaults(FLIGHTS, realdata_dir)
 
 
 def _flight_paths(inputs: Mapping | None) -> dict[str, Path]:

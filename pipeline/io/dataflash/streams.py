@@ -563,27 +563,25 @@ def _battery(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
     return d
 
 
-def _setpoint_att(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
-    """ATT ``DesRoll``/``DesPitch``/``DesYaw`` (deg) -> attitude setpoint (rad)."""
-    c = ctx.res.tables[name]
-    if not all(k in c for k in ("DesRoll", "DesPitch", "DesYaw")):
-        return None
-    d, _ = ctx.base(name, name, 0)
-    d["roll_rad"] = np.deg2rad(c["DesRoll"].astype(np.float64))
-    d["pitch_rad"] = np.deg2rad(c["DesPitch"].astype(np.float64))
-    d["yaw_rad"] = np.deg2rad(c["DesYaw"].astype(np.float64))
-    return d
+def _setpoint_deg(fields: tuple[tuple[str, str], ...], doc: str):
+    """A builder of one setpoint message whose ``fields`` (source, column) are in degrees (or
+    deg/s) and become radians; a log whose message lacks one of them gives no part."""
+    def build(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+        c = ctx.res.tables[name]
+        if not all(k in c for k, _ in fields):
+            return None
+        d, _ = ctx.base(name, name, 0)
+        for k, col in fields:
+            d[col] = np.deg2rad(c[k].astype(np.float64))
+        return d
+    build.__doc__ = doc
+    return build
 
 
-def _setpoint_rate(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
-    """RATE ``RDes``/``PDes``/``YDes`` (deg/s) -> body-rate setpoint (rad/s)."""
-    c = ctx.res.tables[name]
-    if not all(k in c for k in ("RDes", "PDes", "YDes")):
-        return None
-    d, _ = ctx.base(name, name, 0)
-    for k, col in (("RDes", "p_radps"), ("PDes", "q_radps"), ("YDes", "r_radps")):
-        d[col] = np.deg2rad(c[k].astype(np.float64))
-    return d
+_setpoint_att = _setpoint_deg((("DesRoll", "roll_rad"), ("DesPitch", "pitch_rad"), ("DesYaw", "yaw_rad")),
+                              "ATT ``DesRoll``/``DesPitch``/``DesYaw`` (deg) -> attitude setpoint (rad).")
+_setpoint_rate = _setpoint_deg((("RDes", "p_radps"), ("PDes", "q_radps"), ("YDes", "r_radps")),
+                               "RATE ``RDes``/``PDes``/``YDes`` (deg/s) -> body-rate setpoint (rad/s).")
 
 
 def _setpoint_ntun(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from .models import STATE_COLUMNS, STATE_GROUPS
 
@@ -21,8 +20,16 @@ F64 = NDArray[np.float64]
 
 def rmse(err: ArrayLike, axis=(0, 1)) -> F64:
     """Root mean square of ``err`` over ``axis`` (default: runs and time → one per component)."""
-    e = np.asarray(err, dtype=np.float64)
-    return np.sqrt(np.nanmean(e * e, axis=axis))
+    e2 = np.square(np.asarray(err, dtype=np.float64))
+    return _root_mean(e2, axis)
+
+
+def _root_mean(e2: F64, axis) -> F64:
+    """``sqrt(mean)`` of the finite entries of ``e2`` over ``axis``; NaN where there are none
+    (no empty-slice warning: a flight without reference is not an error)."""
+    n = np.sum(np.isfinite(e2), axis=axis)
+    total = np.nansum(e2, axis=axis)
+    return np.sqrt(np.divide(total, n, out=np.full(np.shape(total), np.nan), where=n > 0))
 
 
 def rmse_groups(err: ArrayLike) -> dict[str, float]:
@@ -43,7 +50,7 @@ def rmse_groups(err: ArrayLike) -> dict[str, float]:
     per = rmse(e, axis=0)
     out = {name: float(v) for name, v in zip(STATE_COLUMNS, per)}
     for g, sl in STATE_GROUPS.items():
-        out[g] = float(np.sqrt(np.nanmean(np.sum(e[:, sl] ** 2, axis=1))))
+        out[g] = float(_root_mean(np.sum(e[:, sl] ** 2, axis=1), 0))
     return out
 
 
@@ -61,6 +68,8 @@ def nis(innovation: ArrayLike, S: ArrayLike) -> F64:
 
 def chi2_band(dof: int, n_runs: int = 1, alpha: float = 0.05) -> tuple[float, float]:
     """Two-sided ``1 − α`` band of a run-averaged NEES/NIS: ``χ²_{α/2, 1−α/2}(N·dof)/N``."""
+    from scipy.stats import chi2  # here: scipy.stats costs ~1 s to import, and only the bands need it
+
     n = dof * n_runs
     lo, hi = chi2.ppf([alpha / 2, 1 - alpha / 2], n)
     return float(lo / n_runs), float(hi / n_runs)

@@ -53,7 +53,8 @@ from ..io.stage import declared, declared_list
 from .base import ConstantAcceleration, GaussianState
 from .ekf import ExtendedKalmanFilter, run_filter
 from .ekf_hmm import GMR_FEATURE_SETS, q2_from_runs, run_ekf_hmm
-from .models import RADAR_FIELDS, STATE_COLUMNS, RadarModel, initial_cov
+from .metrics import nees, rmse_groups
+from .models import RADAR_FIELDS, STATE_COLUMNS, STATE_GROUPS, RadarModel, initial_cov
 from .smoother import rts_smooth
 from .table import estimate_frame
 
@@ -283,24 +284,19 @@ def _ekf_hmm_blocker(inputs, config: Mapping) -> tuple[str, Any, F64 | None]:
 
 
 def _rmse(err: F64) -> dict[str, float]:
-    out = {}
-    for g, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6)), ("acc", slice(6, 9))):
-        e = err[:, sl]
-        ok = np.isfinite(e).all(axis=1)
-        out[g] = float(np.sqrt(np.mean(np.sum(e[ok] ** 2, axis=1)))) if ok.any() else float("nan")
-    return out
+    """3-D RMSE per group (``pos``, ``vel``, ``acc``); rows with a NaN in the group left out."""
+    return {g: v for g, v in rmse_groups(err).items() if g in STATE_GROUPS}
 
 
 def _nees(ref: F64 | None, mean: F64, cov: F64) -> F64 | None:
+    """NEES per step against ``ref`` (None without one; NaN where the reference is missing)."""
     if ref is None:
         return None
     err = mean - ref
     ok = np.isfinite(err).all(axis=1)
     out = np.full(len(err), np.nan)
     if ok.any():
-        # eᵀP⁻¹e as metrics.nees (not imported: its scipy.stats import costs every job ~1 s)
-        e = err[ok]
-        out[ok] = np.einsum("ti,ti->t", e, np.linalg.solve(cov[ok], e[..., None])[..., 0])
+        out[ok] = nees(err[ok], cov[ok])
     return out
 
 

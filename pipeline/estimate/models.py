@@ -287,3 +287,115 @@ def initial_cov(sigma: tuple[float, float, float] = (1.0, 0.1, 0.01), n_axes: in
     """Initial covariance ``P₀ = diag(σ_r², σ_v², σ_a²)`` per axis group (seed 000 §3,
     Ch. 2 MC initialisation ``[1·randn(3); 0.1·randn(3); 0.01·randn(3)]``)."""
     return np.diag(np.repeat(np.square(np.asarray(sigma, dtype=np.float64)), n_axes))
+
+
+# --------------------------------------------------------------------------------------------
+# Coordinated-turn helpers, safe at ω → 0 (shared by the bearing-only bank, the IMM and the
+# particle filters, seeds 001/002/003). Convention (pinned by tests): NED with (x, y) = (N, E),
+# course θ measured from N toward E, ω = dθ/dt > 0 a right turn, so the velocity rotates as
+# v̇_N = −ω v_E, v̇_E = ω v_N.
+# --------------------------------------------------------------------------------------------
+
+#: below this |ω T| (rad) the turn coefficients use their Taylor series: the closed forms lose
+#: all digits there (1 − cos ωT cancels) while the 4-term series is exact to round-off
+_TURN_SERIES_BELOW = 1e-3
+
+
+def turn_coefficients(omega: ArrayLike, dt: float | ArrayLike) -> tuple[F64, F64]:
+    """``s = sin(ωT)/ω`` and ``c = (1 − cos ωT)/ω``, finite and smooth through ω = 0.
+
+    .. math::
+
+        s(\\omega) = \\frac{\\sin\\omega T}{\\omega} \\to T - \\frac{\\omega^2T^3}{6},\\qquad
+        c(\\omega) = \\frac{1-\\cos\\omega T}{\\omega} \\to \\frac{\\omega T^2}{2}
+                     - \\frac{\\omega^3T^4}{24}
+
+    (Bar-Shalom, Li & Kirubarajan 2001 §11.7.1; seed 002 §2 CPPV-CT, seed 003 §3 the turn
+    modes). Vectorised over any broadcastable ``omega`` and ``dt``.
+    """
+    w = np.asarray(omega, dtype=np.float64)
+    T = np.asarray(dt, dtype=np.float64)
+    wT = w * T
+    small = np.abs(wT) < _TURN_SERIES_BELOW
+    safe = np.where(small, 1.0, w)
+    wT2 = wT * wT
+    s = np.where(small, T * (1.0 - wT2 / 6.0 + wT2 * wT2 / 120.0), np.sin(wT) / safe)
+    c = np.where(small, T * wT * (0.5 - wT2 / 24.0 + wT2 * wT2 / 720.0), (1.0 - np.cos(wT)) / safe)
+    return s, c
+
+
+def turn_coefficient_derivatives(omega: ArrayLike, dt: float | ArrayLike) -> tuple[F64, F64]:
+    """``ds/dω`` and ``dc/dω`` of :func:`turn_coefficients`, finite through ω = 0.
+
+    .. math::
+
+        \\frac{ds}{d\\omega} = \\frac{T\\cos\\omega T - s}{\\omega} \\to -\\frac{\\omega T^3}{3},
+        \\qquad
+        \\frac{dc}{d\\omega} = \\frac{T\\sin\\omega T - c}{\\omega} \\to \\frac{T^2}{2}
+                               - \\frac{\\omega^2 T^4}{8}
+
+    The ω-column of every coordinated-turn Jacobian (EKF banks, IMM modes).
+    """
+    w = np.asarray(omega, dtype=np.float64)
+    T = np.asarray(dt, dtype=np.float64)
+    wT = w * T
+    small = np.abs(wT) < _TURN_SERIES_BELOW
+    safe = np.where(small, 1.0, w)
+    s, c = turn_coefficients(w, T)
+    wT2 = wT * wT
+    ds = np.where(small, -T * T * wT * (1.0 / 3.0 - wT2 / 30.0), (T * np.cos(wT) - s) / safe)
+    dc = np.where(small, T * T * (0.5 - wT2 / 8.0 + wT2 * wT2 / 144.0), (T * np.sin(wT) - c) / safe)
+    return ds, dc
+
+
+def ct_transition(x: ArrayLike, dt: float) -> F64:
+    """Coordinated-turn step of ``x = [N, E, v_N, v_E, ω, …]`` (any trailing components kept).
+
+    .. math::
+
+        \\begin{aligned}
+        N' &= N + s\\,v_N - c\\,v_E, & v_N' &= \\cos(\\omega T) v_N - \\sin(\\omega T) v_E,\\\\
+        E' &= E + c\\,v_N + s\\,v_E, & v_E' &= \\sin(\\omega T) v_N + \\cos(\\omega T) v_E,
+        \\end{aligned}
+
+    with ``s, c`` from :func:`turn_coefficients` and ω unchanged: the exact solution of
+    ``v̇_N = −ω v_E, v̇_E = ω v_N`` over ``T``, reducing to constant velocity at ω = 0.
+    ``x`` has shape (..., ≥ 5); the leading axes (particles, filters, runs) are vectorised.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    w = x[..., 4]
+    s, c = turn_coefficients(w, dt)
+    cw, sw = np.cos(w * dt), np.sin(w * dt)
+    out = x.copy()
+    vn, ve = x[..., 2], x[..., 3]
+    out[..., 0] = x[..., 0] + s * vn - c * ve
+    out[..., 1] = x[..., 1] + c * vn + s * ve
+    out[..., 2] = cw * vn - sw * ve
+    out[..., 3] = sw * vn + cw * ve
+    return out
+
+
+def ct_jacobian(x: ArrayLike, dt: float) -> F64:
+    """Jacobian ``∂f/∂x`` of :func:`ct_transition` (shape (..., n, n), n = x.shape[-1]).
+
+    The ω column uses :func:`turn_coefficient_derivatives`, so it stays exact through ω = 0
+    (where it is ``[−T² v_E/2, T² v_N/2, −T v_E, T v_N]``).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = x.shape[-1]
+    w, vn, ve = x[..., 4], x[..., 2], x[..., 3]
+    s, c = turn_coefficients(w, dt)
+    ds, dc = turn_coefficient_derivatives(w, dt)
+    cw, sw = np.cos(w * dt), np.sin(w * dt)
+    F = np.broadcast_to(np.eye(n), x.shape[:-1] + (n, n)).copy()
+    F[..., 0, 2], F[..., 0, 3], F[..., 0, 4] = s, -c, ds * vn - dc * ve
+    F[..., 1, 2], F[..., 1, 3], F[..., 1, 4] = c, s, dc * vn + ds * ve
+    F[..., 2, 2], F[..., 2, 3], F[..., 2, 4] = cw, -sw, -dt * (sw * vn + cw * ve)
+    F[..., 3, 2], F[..., 3, 3], F[..., 3, 4] = sw, cw, dt * (cw * vn - sw * ve)
+    return F
+
+
+def wrap_angle(a: ArrayLike) -> F64:
+    """Wrap angles to ``[−π, π)`` (bearing residuals, headings)."""
+    a = np.asarray(a, dtype=np.float64)
+    return (a + np.pi) % (2.0 * np.pi) - np.pi

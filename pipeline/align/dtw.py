@@ -20,7 +20,9 @@ asymmetric ``w_k = Δi`` (2.24); the normalised distance (2.23) is ``g(n−1, m�
 window of ``window_size = r`` (the tests check distance, normalised distance and path against
 it); symmetric1 has no path-independent normaliser, so its normalised distance is NaN, as in
 dtw-python. With symmetric1 and the squared Euclidean local cost, ``√g`` is dtaidistance's
-``dtw_ndim.distance`` with its ``window = r + 1``.
+``dtw_ndim.distance`` with its ``window = r + 1`` (its window keeps ``|i − j| < w``) on equal
+lengths, and without a window on any lengths; on unequal lengths dtaidistance widens its band
+by ``|n − m|`` on the longer side, where this one (dtw-python's) stays ``|i − j| ≤ r``.
 
 Implementation: numba kernels over the rows, each row's local costs computed first as a
 vectorisable loop over the features (``y`` stored feature-major), then the serial recursion.

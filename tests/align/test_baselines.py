@@ -45,6 +45,15 @@ def test_the_dba_average_of_identical_demos_is_that_demo(rng):
     np.testing.assert_allclose(dba_average([d]), d, rtol=0, atol=1e-14)
 
 
+def test_each_dba_iteration_equals_dtaidistances_dba_update_from_the_same_start(rng):
+    barycenter = pytest.importorskip("dtaidistance.dtw_barycenter")
+    demos = [np.cumsum(rng.standard_normal((n, 2)), axis=0) for n in (40, 45, 38, 50)]
+    theirs = demos[1]
+    for k in (1, 2, 3):
+        theirs = barycenter.dba(demos, theirs, use_c=True)
+        np.testing.assert_allclose(dba_average(demos, init=demos[1], n_iter=k), theirs, rtol=0, atol=1e-12)
+
+
 def test_dba_of_time_warped_copies_is_closer_to_the_signal_than_the_plain_mean(rng):
     sig, demos = _warped_copies(rng)
     avg, mean = dba_average(demos), np.mean(demos, axis=0)

@@ -8,9 +8,8 @@ import pytest
 from pipeline.align.baselines import (AUTO_GRID, dba_average, medoid_index, per_demo_smooth, smooth,
                                       smooth_track)
 from pipeline.align.dtw import dtw
-from pipeline.estimate.base import GaussianState, position_measurement
+from pipeline.estimate.base import ConstantAcceleration, GaussianState, position_measurement
 from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
-from pipeline.estimate.base import ConstantAcceleration
 from pipeline.estimate.smoother import rts_smooth
 
 DT = 0.05

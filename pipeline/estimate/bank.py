@@ -30,7 +30,8 @@ Tables 5.1–5.3 ``table5_1_ft20_ft29``, ``table5_2_ft10``, ``table5_3_ft50``);
 ``model_for(settings) -> CppvModel | MpcModel``, ``CvModel(...)`` (the IMM's CV mode);
 ``components_step(model, comp, dt, vo (R, 2), z (R,), sigma_rad, *, gate, gate_chi2)
 -> (Components, StepStats)``; ``combine(mean, cov, logw, angle_idx) -> (mean, cov)``;
-``weight_entropy(logw)``;
+``weight_entropy(logw)``; ``check_inputs(t_s, z_rad, ownship)``; ``first_bearing(z)``;
+``logsumexp(a, axis)``; ``angle_index(names)``; ``mpc_components_to_cppv(mean, cov, vo)``;
 ``run_bank(settings, t_s (T,), z_rad (T,) | (R, T), sigma_rad=None, ownship=None, *, gate=None,
 store_cov=True, store_weights=True, store_components=False, engine="numba") -> BankTrack``.
 
@@ -310,13 +311,16 @@ class StepStats:
     """One bank step: ``loglik`` (R,) = ``log Σ W_{k−1} N(ỹ; 0, S)`` (the IMM's Λ, D4; 0
     where not measured), ``nis`` (R,) of the mixture prediction (NaN where no bearing),
     ``measured`` (R,) a bearing was used, ``gated`` (R,) rejected by the gate, ``new_diverged``
-    (R, C)."""
+    (R, C); ``ymix``/``Smix`` (R,) the mean and variance of the mixture's predicted
+    innovation (``nis = ymix²/Smix``; the IMM combines them over modes)."""
 
     loglik: F64
     nis: F64
     measured: NDArray[np.bool_]
     gated: NDArray[np.bool_]
     new_diverged: NDArray[np.bool_]
+    ymix: F64 | None = None
+    Smix: F64 | None = None
 
 
 @dataclass(frozen=True)
@@ -547,11 +551,16 @@ def components_step(model, comp: Components, dt: float, vo: ArrayLike, z: ArrayL
     lw = np.where(div, -np.inf, lw)
     norm = logsumexp(lw)
     lw = lw - np.where(np.isfinite(norm), norm, 0.0)[:, None]
-    return Components(m1, c1, lw, div), StepStats(loglik, nis, use, gated, new_div)
+    return Components(m1, c1, lw, div), StepStats(loglik, nis, use, gated, new_div, ym, Sm)
 
 
 def combine(mean: F64, cov: F64 | None, logw: F64, angle_idx: tuple[int, ...] = ()) -> tuple[F64, F64 | None]:
-    """Mixture moments (3.21–3.22) with circular means and wrapped deviations on ``angle_idx``.
+    """Mixture moments (3.21–3.22) with wrapped deviations on the angle components ``angle_idx``.
+
+    An angle's mean is ``θ_ref + Σ W wrap(θᵢ − θ_ref)`` about the heaviest component's ``θ_ref``
+    (the linear mean of the thesis wherever no component sits across the ±π cut, and correct
+    across it); deviations ``dᵢ`` are wrapped too. The mean is not wrapped (a component's θ
+    accumulates ωT; :func:`wrap_angle` it for output).
 
     Parameters
     ----------
@@ -562,15 +571,15 @@ def combine(mean: F64, cov: F64 | None, logw: F64, angle_idx: tuple[int, ...] = 
     w = np.exp(logw)
     w = np.where(np.isfinite(w), w, 0.0)
     mw = np.where((w > 0)[..., None], mean, 0.0)
+    if angle_idx:
+        ref = np.take_along_axis(mw, np.argmax(w, axis=-1)[..., None, None], axis=-2)  # (..., 1, n)
+        mw = mw.copy()
+        for a in angle_idx:
+            mw[..., a] = ref[..., a] + wrap_angle(mw[..., a] - ref[..., a])
     m = np.einsum("...c,...cn->...n", w, mw)
-    for a in angle_idx:
-        m[..., a] = np.arctan2(np.einsum("...c,...c->...", w, np.sin(mw[..., a])),
-                               np.einsum("...c,...c->...", w, np.cos(mw[..., a])))
     if cov is None:
         return m, None
     d = mw - m[..., None, :]
-    for a in angle_idx:
-        d[..., a] = wrap_angle(d[..., a])
     cw = np.where((w > 0)[..., None, None], cov, 0.0)
     P = np.einsum("...c,...cij->...ij", w, cw) + np.einsum("...c,...ci,...cj->...ij", w, d, d)
     return m, P
@@ -609,7 +618,8 @@ class BankTrack:
     state_names : tuple of str
         Of ``mean``/``cov`` (the filters' coordinates); ``cppv_*`` are in :data:`CPPV_STATE`.
     mean, cov : (R, T, n), (R, T, n, n) or None
-        Combined estimate in the filters' own coordinates (circular on angles).
+        Combined estimate in the filters' own coordinates (wrapped deviations on angles;
+        angles in the output wrapped to [−π, π)).
     cppv_mean, cppv_cov : (R, T, 5), (R, T, 5, 5) or None
         Combined estimate in CPPV (the same arrays as ``mean``/``cov`` for a CPPV bank).
     ml_index : (R, T) int
@@ -658,7 +668,9 @@ class BankTrack:
         return (~self.measured).sum(axis=1)
 
 
-def _inputs(t_s, z_rad, ownship, R_hint: int | None = None):
+def check_inputs(t_s: ArrayLike, z_rad: ArrayLike, ownship: ArrayLike | None) -> tuple[F64, F64, F64]:
+    """``(t (T,), z (R, T), v_o (R, T, 2))`` from :func:`run_bank`'s inputs, each checked with
+    one clear error."""
     t = np.asarray(t_s, dtype=np.float64)
     if t.ndim != 1 or len(t) < 1:
         raise ValueError(f"run_bank: t_s must be 1-D with >= 1 step, got shape {t.shape}")
@@ -724,7 +736,7 @@ def run_bank(settings: "BankSettings | str | Mapping[str, Any]", t_s: ArrayLike,
     if not (sigma > 0):
         raise ValueError(f"run_bank: sigma_rad must be > 0, got {sigma_rad}")
     gate = s.gate if gate is None else bool(gate)
-    t, z, vo = _inputs(t_s, z_rad, ownship)
+    t, z, vo = check_inputs(t_s, z_rad, ownship)
     R_, T = z.shape
     model = model_for(s, engine)
     comp = bank_prior(s, first_bearing(z), sigma, vo[:, 0])
@@ -752,19 +764,23 @@ def run_bank(settings: "BankSettings | str | Mapping[str, Any]", t_s: ArrayLike,
             ll[k], nis[k], measured[k], gated[k] = st.loglik, st.nis, st.measured, st.gated
             div_step[st.new_diverged] = k
         m, P = combine(comp.mean, comp.cov if store_cov else None, comp.logw, aidx)
+        for a in aidx:
+            m[..., a] = wrap_angle(m[..., a])
         mean[k] = m
         if store_cov:
             cov[k] = P
         i = np.argmax(comp.logw, axis=1)
         mli[k] = i
-        xm, Pm = comp.mean[rr, i], comp.cov[rr, i]
+        xm, Pm = comp.mean[rr, i].copy(), comp.cov[rr, i]
         if mpc:
             xc, Pc = mpc_components_to_cppv(comp.mean, comp.cov if store_cov else None, vo[:, k][:, None, :])
             m2, P2 = combine(xc, Pc, comp.logw, angle_index(CPPV_STATE))
+            m2[..., 3] = wrap_angle(m2[..., 3])
             cm[k] = m2
             if store_cov:
                 cc[k] = P2
             xm, Pm = xc[rr, i], (Pc[rr, i] if store_cov else None)
+        xm[..., 3] = wrap_angle(xm[..., 3])
         mlm[k] = xm
         if store_cov:
             mlc[k] = Pm

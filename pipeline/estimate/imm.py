@@ -40,7 +40,7 @@ without ω, §4.2); ``ekf_mode(name, model, mean (R, n), cov (R, n, n)) -> ImmMo
 ``embed(mean, cov, names_src, names_dst, fill_mean, fill_cov)``;
 ``mix_components(modes, comps, mu_ij) -> list[Components]`` (one mixing stage);
 ``run_imm(modes, transition, t_s, z_rad, sigma_rad, ownship=None, *, mix_every=None, mu0=None,
-output_names=CPPV_STATE, store_cov=True, store_weights=False) -> ImmTrack`` with
+output_names=CPPV_STATE, store_cov=True, store_weights=False, algebra="numba") -> ImmTrack`` with
 ``transition`` a (K, K) matrix or ``(T_d_hz, delta)``.
 
 A saved HMM's ``transmat`` enters through :func:`pipeline.estimate.markov.hmm_to_step`.
@@ -226,7 +226,7 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
             z_rad: ArrayLike, sigma_rad: float, ownship: ArrayLike | None = None, *,
             mix_every: int | None = None, mu0: ArrayLike | None = None,
             output_names: Sequence[str] = CPPV_STATE, store_cov: bool = True,
-            store_weights: bool = False) -> ImmTrack:
+            store_weights: bool = False, algebra: str = "numba") -> ImmTrack:
     """Run the IMM over runs × time (module docstring).
 
     Parameters
@@ -244,6 +244,10 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
         Initial mode probabilities (default uniform).
     output_names : sequence of str
         The combined output's state.
+    store_cov, store_weights : bool
+        Keep the output covariances (R, T, n, n) and every mode's weights (R, T, C_j).
+    algebra : {"numba", "ekf"}
+        As :func:`~pipeline.estimate.bank.components_step`.
     """
     K = len(modes)
     if K < 1:
@@ -297,7 +301,7 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
             v = 0.5 * (vo[:, k - 1] + vo[:, k])
             lls, yms, Sms = [], [], []
             for j, m in enumerate(modes):
-                comps[j], st = components_step(m.model, comps[j], dt, v, z[:, k], sigma_rad)
+                comps[j], st = components_step(m.model, comps[j], dt, v, z[:, k], sigma_rad, algebra=algebra)
                 lls.append(st.loglik)
                 yms.append(st.ymix)
                 Sms.append(st.Smix)

@@ -73,7 +73,7 @@ from numpy.typing import ArrayLike, NDArray
 from .base import GaussianState, LinearTransition
 from .ekf import ExtendedKalmanFilter
 from .models import (ANGLE_STATES, CPPV_STATE, CV_CPPV_STATE, MPC_STATE, BearingMeasurement,
-                     cppv_jacobian, cppv_process_noise, cppv_to_mpc, cppv_transition,
+                     cppv_jacobian, cppv_predict, cppv_process_noise, cppv_to_mpc, cppv_transition,
                      cv_cppv_jacobian, cv_cppv_transition, cv_process_noise, mpc_to_cppv,
                      mpc_to_cppv_jacobian,
                      mpc_transition, numerical_jacobian, wrap_angle)
@@ -335,7 +335,7 @@ class CppvModel:
     coords: str = "cppv"
 
     def predict(self, mean: F64, dt: float, vo: F64) -> tuple[F64, F64]:
-        return cppv_transition(mean, dt, vo * dt), cppv_jacobian(mean, dt)
+        return cppv_predict(mean, dt, vo * dt)
 
     def noise(self, dt: float) -> F64:
         s = self.settings

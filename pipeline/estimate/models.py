@@ -416,6 +416,12 @@ def wrap_angle(a: ArrayLike) -> F64:
 CPPV_STATE: tuple[str, ...] = ("r_n_m", "r_e_m", "v_mps", "theta_rad", "omega_rps")
 CV_CPPV_STATE: tuple[str, ...] = CPPV_STATE[:4]
 MPC_STATE: tuple[str, ...] = ("beta_dot_rps", "rdot_over_r_ps", "beta_rad", "inv_r_pm", "omega_rps")
+try:  # numba is a runtime dependency; the pure-numpy path stays for a broken install
+    from numba import njit
+except ImportError:  # pragma: no cover
+    njit = None
+
+
 #: components that are angles (wrapped deviations, circular means)
 ANGLE_STATES: frozenset[str] = frozenset({"theta_rad", "beta_rad"})
 
@@ -476,6 +482,60 @@ def cppv_jacobian(x: ArrayLike, dt: float | ArrayLike) -> F64:
     F[..., 3, 4] = dt
     return F
 
+
+
+def _cppv_predict_kernel(x, dt, u, series_below):  # pragma: no cover - compiled by numba
+    """:func:`cppv_transition` and :func:`cppv_jacobian` in one compiled pass over (M, 5)
+    (the same closed forms and Taylor series as :func:`turn_coefficients`)."""
+    M = x.shape[0]
+    fx = np.empty((M, 5))
+    F = np.zeros((M, 5, 5))
+    T = dt
+    for m in range(M):
+        v, th, w = x[m, 2], x[m, 3], x[m, 4]
+        wT = w * T
+        wT2 = wT * wT
+        if abs(wT) < series_below:
+            s = T * (1.0 - wT2 / 6.0 + wT2 * wT2 / 120.0)
+            c = T * wT * (0.5 - wT2 / 24.0 + wT2 * wT2 / 720.0)
+            ds = -T * T * wT * (1.0 / 3.0 - wT2 / 30.0)
+            dc = T * T * (0.5 - wT2 / 8.0 + wT2 * wT2 / 144.0)
+        else:
+            s = np.sin(wT) / w
+            c = (1.0 - np.cos(wT)) / w
+            ds = (T * np.cos(wT) - s) / w
+            dc = (T * np.sin(wT) - c) / w
+        ct, st = np.cos(th), np.sin(th)
+        dn = v * (s * ct - c * st)
+        de = v * (c * ct + s * st)
+        fx[m, 0] = x[m, 0] + dn - u[m, 0]
+        fx[m, 1] = x[m, 1] + de - u[m, 1]
+        fx[m, 2] = v
+        fx[m, 3] = th + wT
+        fx[m, 4] = w
+        for i in range(5):
+            F[m, i, i] = 1.0
+        F[m, 0, 2], F[m, 0, 3], F[m, 0, 4] = s * ct - c * st, -de, v * (ds * ct - dc * st)
+        F[m, 1, 2], F[m, 1, 3], F[m, 1, 4] = c * ct + s * st, dn, v * (dc * ct + ds * st)
+        F[m, 3, 4] = T
+    return fx, F
+
+
+if njit is not None:
+    _cppv_predict_kernel = njit(cache=True)(_cppv_predict_kernel)
+
+
+def cppv_predict(x: ArrayLike, dt: float, u: ArrayLike | None = None) -> tuple[F64, F64]:
+    """``(cppv_transition(x, dt, u), cppv_jacobian(x, dt))`` in one compiled pass (numba;
+    numpy where numba is missing); ``x`` (..., 5), scalar ``dt``."""
+    x = np.asarray(x, dtype=np.float64)
+    if njit is None:  # pragma: no cover
+        return cppv_transition(x, dt, u), cppv_jacobian(x, dt)
+    shape = x.shape[:-1]
+    U = _ownship_step(u, shape)
+    fx, F = _cppv_predict_kernel(np.ascontiguousarray(x.reshape(-1, 5)), float(dt),
+                                 np.ascontiguousarray(U.reshape(-1, 2)), _TURN_SERIES_BELOW)
+    return fx.reshape(shape + (5,)), F.reshape(shape + (5, 5))
 
 def cppv_process_noise(dt: float, sigma_v2: float, sigma_omega_dot2: float, *,
                        faithful: bool = False, v_dt_power: int = 2) -> F64:
@@ -560,12 +620,6 @@ def mpc_jacobian(y: ArrayLike, vo: ArrayLike) -> F64:
     J[..., 2, 0] = 1.0
     J[..., 3, 1], J[..., 3, 3] = -y4, -y2
     return J
-
-
-try:  # numba is a runtime dependency; the pure-numpy path stays for a broken install
-    from numba import njit
-except ImportError:  # pragma: no cover
-    njit = None
 
 
 def _mpc_euler_py(y, vo, dt_sub, n_sub):

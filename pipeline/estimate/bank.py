@@ -73,9 +73,8 @@ from numpy.typing import ArrayLike, NDArray
 from .base import GaussianState, LinearTransition
 from .ekf import ExtendedKalmanFilter
 from .models import (ANGLE_STATES, CPPV_STATE, CV_CPPV_STATE, MPC_STATE, BearingMeasurement,
-                     cppv_jacobian, cppv_predict, cppv_process_noise, cppv_to_mpc, cppv_transition,
-                     cv_cppv_jacobian, cv_cppv_transition, cv_process_noise, mpc_to_cppv,
-                     mpc_to_cppv_jacobian,
+                     cppv_predict, cppv_process_noise, cppv_to_mpc, cv_cppv_jacobian,
+                     cv_cppv_transition, cv_process_noise, mpc_to_cppv, mpc_to_cppv_jacobian,
                      mpc_transition, numerical_jacobian, wrap_angle)
 
 F64 = NDArray[np.float64]

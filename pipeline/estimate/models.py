@@ -40,6 +40,7 @@ Also here: the constant-acceleration transition ``A(dt)`` of seed 000 eq. 2.16 (
 from __future__ import annotations
 
 import functools
+import importlib.util
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -416,10 +417,24 @@ def wrap_angle(a: ArrayLike) -> F64:
 CPPV_STATE: tuple[str, ...] = ("r_n_m", "r_e_m", "v_mps", "theta_rad", "omega_rps")
 CV_CPPV_STATE: tuple[str, ...] = CPPV_STATE[:4]
 MPC_STATE: tuple[str, ...] = ("beta_dot_rps", "rdot_over_r_ps", "beta_rad", "inv_r_pm", "omega_rps")
-try:  # numba is a runtime dependency; the pure-numpy path stays for a broken install
-    from numba import njit
-except ImportError:  # pragma: no cover
-    njit = None
+#: numba is a runtime dependency; a broken install falls back to the numpy paths
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+
+
+def lazy_njit(fn):
+    """``numba.njit(cache=True)(fn)``, compiled (or loaded from the cache) on the first call:
+    importing numba costs ~1 s, and most users of this module never call a kernel."""
+    compiled = []
+
+    @functools.wraps(fn)
+    def call(*args):
+        if not compiled:
+            from numba import njit
+            compiled.append(njit(cache=True)(fn))
+        return compiled[0](*args)
+
+    call.py_func = fn
+    return call
 
 
 #: components that are angles (wrapped deviations, circular means)
@@ -521,15 +536,14 @@ def _cppv_predict_kernel(x, dt, u, series_below):  # pragma: no cover - compiled
     return fx, F
 
 
-if njit is not None:
-    _cppv_predict_kernel = njit(cache=True)(_cppv_predict_kernel)
+_cppv_predict_kernel = lazy_njit(_cppv_predict_kernel)
 
 
 def cppv_predict(x: ArrayLike, dt: float, u: ArrayLike | None = None) -> tuple[F64, F64]:
     """``(cppv_transition(x, dt, u), cppv_jacobian(x, dt))`` in one compiled pass (numba;
     numpy where numba is missing); ``x`` (..., 5), scalar ``dt``."""
     x = np.asarray(x, dtype=np.float64)
-    if njit is None:  # pragma: no cover
+    if not HAVE_NUMBA:  # pragma: no cover
         return cppv_transition(x, dt, u), cppv_jacobian(x, dt)
     shape = x.shape[:-1]
     U = _ownship_step(u, shape)
@@ -667,8 +681,7 @@ def _mpc_euler_kernel(y, vo, dt_sub, n_sub):  # pragma: no cover - compiled by n
     return yo, Phi
 
 
-if njit is not None:
-    _mpc_euler_kernel = njit(cache=True, fastmath=False)(_mpc_euler_kernel)
+_mpc_euler_kernel = lazy_njit(_mpc_euler_kernel)
 
 
 def mpc_transition(y: ArrayLike, vo: ArrayLike, dt: float, *, substep_s: float = 0.001,
@@ -695,7 +708,7 @@ def mpc_transition(y: ArrayLike, vo: ArrayLike, dt: float, *, substep_s: float =
     n_sub = max(1, int(round(float(dt) / substep_s)))
     h = float(dt) / n_sub
     yf, vf = np.ascontiguousarray(y.reshape(-1, 5)), np.ascontiguousarray(vo.reshape(-1, 2))
-    if engine == "numba" and njit is not None:
+    if engine == "numba" and HAVE_NUMBA:
         yo, Phi = _mpc_euler_kernel(yf, vf, h, n_sub)
     elif engine in ("numba", "numpy"):
         yo, Phi = _mpc_euler_py(yf, vf, h, n_sub)

@@ -25,7 +25,8 @@ through mixing (D4) and its likelihood is ``Λ = Σ_n W_{k−1}ⁿ N(ỹ_n; 0, S
 Mixing runs every ``mix_every`` steps (the thesis's rate ``T_d``: ``mix_every =
 round(1/(T_d T))``, 20 Hz at T = 0.05 s is every step); between mixes the modes run
 separately and μ is still updated every step with ``c̄ = μ_{k−1}`` (D5); μ₀ uniform (D5:
-[0.5, 0.5]). The output combines the modes over ``output_names`` (default the CPPV state);
+[0.5, 0.5]). There is no NIS gate in the IMM (a per-mode gate would make the Λ_j
+incomparable). The output combines the modes over ``output_names`` (default the CPPV state);
 a state a mode lacks comes from the first mode that has every output state (ω from the CT
 bank, D3).
 
@@ -35,7 +36,7 @@ Public API (stable)
 ``bank_mode(settings, beta0 (R,), sigma_rad, vo0=None, name="ct", engine="numba") -> ImmMode``;
 ``cv_mode_from(mode, cv_model=CvModel(), name="cv") -> ImmMode`` (the bank's combined moments
 without ω, §4.2); ``ekf_mode(name, model, mean (R, n), cov (R, n, n)) -> ImmMode``;
-``switching_matrix(delta, K=2)``; ``mix_interval(T_d_hz, dt_s)``;
+``switching_matrix(delta, K=2)``; ``mode_metadata(mode)``; ``mix_interval(T_d_hz, dt_s)``;
 ``mixing_probabilities(mu (R, K), Pi) -> (cbar (R, K), mu_ij (R, K, K))``;
 ``embed(mean, cov, names_src, names_dst, fill_mean, fill_cov)``;
 ``mix_components(modes, comps, mu_ij) -> list[Components]`` (one mixing stage);
@@ -48,6 +49,7 @@ A saved HMM's ``transmat`` enters through :func:`pipeline.estimate.markov.hmm_to
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -103,6 +105,19 @@ def cv_mode_from(mode: ImmMode, cv_model: CvModel | None = None, name: str = "cv
     m, P = combine(p.mean, p.cov, p.logw, angle_index(mode.names))
     idx = [mode.names.index(n) for n in cv_model.names]
     return ekf_mode(name, cv_model, m[:, idx], P[:, idx][:, :, idx])
+
+
+def mode_metadata(mode: ImmMode) -> dict[str, Any]:
+    """A mode's settings for the output metadata (a bank's :meth:`BankSettings.metadata`, a
+    CV model's noise parameters)."""
+    model = mode.model
+    s = getattr(model, "settings", None)
+    out: dict[str, Any] = {"coords": model.coords, "n_components": int(mode.prior.mean.shape[1])}
+    if s is not None:
+        out.update(s.metadata())
+    else:
+        out.update({k: v for k, v in dataclasses.asdict(model).items() if k != "names"})
+    return out
 
 
 def switching_matrix(delta: float, K: int = 2) -> F64:
@@ -348,6 +363,7 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
                  "between_mixes": "mu updated every step with cbar = mu_{k-1} (D5)",
                  "bank_weights": "kept through mixing (D4)"})
     meta["mu0"] = (np.full(K, 1.0 / K) if mu0 is None else np.asarray(mu0, dtype=np.float64)).tolist()
+    meta["mode_models"] = {m.name: mode_metadata(m) for m in modes}
     return ImmTrack(t, out_names, rt(mean), rt(cov), tuple(m.name for m in modes), rt(mode_p),
                     tuple(rt(a) for a in mode_mean), rt(ll), rt(nis), rt(measured), mixed,
                     tuple(c.diverged.copy() for c in comps),

@@ -9,7 +9,7 @@ from pipeline.estimate.crlb import crlb
 from pipeline.estimate.ekf import ExtendedKalmanFilter
 from pipeline.estimate.metrics import (CHI2_5_0999, bearing_errors, bearing_metrics, bearing_nees,
                                        divergence_flag, mean_abs_angle_error, mean_relative_abs_error)
-from pipeline.estimate.models import BearingMeasurement, cppv_jacobian, cppv_transition
+from pipeline.estimate.models import BearingMeasurement, cppv_jacobian, cppv_process_noise, cppv_transition
 
 SIG = np.deg2rad(0.2)
 VO = np.array([40.0, 0.0])
@@ -83,3 +83,17 @@ def test_the_d8_divergence_flag():
     q[0, 100:280] = 30.0  # 9 s: not enough
     q[0, 300:400] = 30.0
     assert divergence_flag(rel, q, t).tolist() == [False, True, True]
+
+
+def test_the_crlb_with_process_noise_equals_the_ekf_on_the_truth_with_that_noise():
+    t, X = truth(T=200)
+    P0 = np.diag([200.0 ** 2, 300.0 ** 2, 10.0 ** 2, 0.5 ** 2, 0.05 ** 2])
+    Qf = lambda dt: cppv_process_noise(dt, 1e-3, 5e-6)  # noqa: E731
+    b = crlb(X, t, P0, SIG, process_noise=Qf)
+    ekf = ExtendedKalmanFilter(LinearTransition(np.eye(5), np.zeros((5, 5))), BearingMeasurement(SIG))
+    P = P0
+    for k in range(1, len(t)):
+        F = cppv_jacobian(X[k - 1], t[k] - t[k - 1])
+        P = ekf.update(GaussianState(X[k], F @ P @ F.T + Qf(0.05)), np.arctan2(X[k, 1:2], X[k, 0:1])).cov
+    assert b.bound[-1] == pytest.approx(P, rel=1e-5, abs=1e-10)
+    assert np.all(b.std[-1] >= crlb(X, t, P0, SIG).std[-1])  # noise only loosens the bound

@@ -93,6 +93,7 @@ def test_mode_probabilities_sum_to_one_and_cv_wins_after_a_ct_to_cv_switch():
     tr = run_imm([cv_mode_from(ct), ct], (20.0, 1e-4), t, z, SIG, own)
     assert tr.mode_p.sum(axis=-1) == pytest.approx(np.ones((1, 1000)))
     assert tr.mixed[1:].all() and tr.metadata["mix_every"] == 1
+    assert tr.metadata["mode_models"]["cv"]["sigma_theta_dot2"] > 0 and tr.metadata["mode_models"]["ct"]["n_filters"] == 30
     assert tr.mode_p[0, 500:600, 0].mean() < 0.5  # turning: the bank holds
     assert tr.mode_p[0, 900:, 0].mean() > 0.5     # flying straight: CV takes over
     assert tr.state_names == CPPV_STATE and tr.mode_mean[0].shape == (1, 1000, 4)

@@ -284,6 +284,11 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
         raise ValueError(f"run_imm: transition matrix shaped {Pi.shape} for {K} modes")
     if every < 1:
         raise ValueError(f"run_imm: mix_every must be >= 1, got {every}")
+    for a in range(K):
+        for b_ in range(a + 1, K):
+            if not set(modes[a].names) & set(modes[b_].names):
+                raise ValueError(f"run_imm: modes {modes[a].name!r} and {modes[b_].name!r} share no state, so they "
+                                 "cannot mix (D3 embeds by state name; use CPPV-coordinate modes)")
     for m in modes:
         if m.prior.mean.shape[0] != R_:
             raise ValueError(f"run_imm: mode {m.name!r} has {m.prior.mean.shape[0]} runs, the bearings {R_}")

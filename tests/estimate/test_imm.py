@@ -128,5 +128,8 @@ def test_bad_imm_input_is_one_clear_error():
     ct = bank_mode("cppv_10_1_6", z[:, 0], SIG)
     with pytest.raises(ValueError, match="shaped"):
         run_imm([ct], np.eye(2), t, z, SIG, own)
+    mpc = bank_mode(BankSettings(coords="mpc", n_r=2, n_omega=1, n_theta=1), z[:, 0], SIG)
+    with pytest.raises(ValueError, match="share no state"):
+        run_imm([cv_mode_from(ct), mpc], switching_matrix(1e-3), t, z, SIG, own)
     with pytest.raises(ValueError, match="row 0 sums"):
         run_imm([ct, ct], np.array([[0.5, 0.4], [0.5, 0.5]]), t, z, SIG, own)

@@ -809,37 +809,40 @@ class BankTrack:
         return (~self.measured).sum(axis=1)
 
 
-def check_inputs(t_s: ArrayLike, z_rad: ArrayLike, ownship: ArrayLike | None) -> tuple[F64, F64, F64]:
+def check_inputs(t_s: ArrayLike, z_rad: ArrayLike, ownship: ArrayLike | None,
+                 who: str = "run_bank") -> tuple[F64, F64, F64]:
     """``(t (T,), z (R, T), v_o (R, T, 2))`` from :func:`run_bank`'s inputs, each checked with
     one clear error."""
     t = np.asarray(t_s, dtype=np.float64)
     if t.ndim != 1 or len(t) < 1:
-        raise ValueError(f"run_bank: t_s must be 1-D with >= 1 step, got shape {t.shape}")
+        raise ValueError(f"{who}: t_s must be 1-D with >= 1 step, got shape {t.shape}")
     if len(t) > 1 and not np.all(np.diff(t) > 0):
-        raise ValueError("run_bank: t_s must be strictly increasing")
+        raise ValueError(f"{who}: t_s must be strictly increasing")
     z = np.asarray(z_rad, dtype=np.float64)
     if z.ndim == 1:
         z = z[None]
     if z.ndim != 2 or z.shape[1] != len(t):
-        raise ValueError(f"run_bank: z_rad shaped {np.shape(z_rad)}, expected ({len(t)},) or (R, {len(t)})")
+        raise ValueError(f"{who}: z_rad shaped {np.shape(z_rad)}, expected ({len(t)},) or (R, {len(t)})")
     R_, T = z.shape
     if ownship is None:
         vo = np.zeros((R_, T, 2))
     else:
         o = np.asarray(ownship, dtype=np.float64)
         if o.shape[-1] not in (2, 4) or o.shape[-2] != T or o.ndim not in (2, 3):
-            raise ValueError(f"run_bank: ownship shaped {o.shape}, expected (T, 4|2) or (R, T, 4|2) with T={T}")
+            raise ValueError(f"{who}: ownship shaped {o.shape}, expected (T, 4|2) or (R, T, 4|2) with T={T}")
+        if o.ndim == 3 and o.shape[0] not in (1, R_):
+            raise ValueError(f"{who}: ownship has {o.shape[0]} runs, the bearings {R_}")
         vo = np.broadcast_to(o[..., -2:], (R_, T, 2))
         if not np.isfinite(vo).all():
-            raise ValueError("run_bank: the ownship velocity has non-finite values")
+            raise ValueError(f"{who}: the ownship velocity has non-finite values")
     return t, z, vo
 
 
-def first_bearing(z: F64) -> F64:
+def first_bearing(z: F64, who: str = "run_bank") -> F64:
     """Each run's first finite bearing (R,); a run without one is an error."""
     ok = np.isfinite(z)
     if not ok.any(axis=1).all():
-        raise ValueError(f"run_bank: run(s) {np.flatnonzero(~ok.any(axis=1)).tolist()} have no finite bearing")
+        raise ValueError(f"{who}: run(s) {np.flatnonzero(~ok.any(axis=1)).tolist()} have no finite bearing")
     return z[np.arange(len(z)), ok.argmax(axis=1)]
 
 

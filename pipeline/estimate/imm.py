@@ -267,9 +267,9 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
     K = len(modes)
     if K < 1:
         raise ValueError("run_imm: need at least one mode")
-    t, z, vo = check_inputs(t_s, z_rad, ownship)
+    t, z, vo = check_inputs(t_s, z_rad, ownship, who="run_imm")
     R_, T = z.shape
-    first_bearing(z)
+    first_bearing(z, who="run_imm")
     meta: dict[str, Any] = {}
     if isinstance(transition, tuple):
         T_d, delta = float(transition[0]), float(transition[1])

@@ -102,11 +102,16 @@ class GaussianPositionLikelihood:
     reinit_spread : float
         On re-initialisation the measured components are drawn ``z + reinit_spread·σ·N(0, 1)``;
         the others are kept from the (degenerate) particles.
+    gate : float, optional
+        A particle whose normalised residual ``|(z − x)/σ|`` exceeds ``gate`` gets weight
+        exactly zero (``−∞``): without it log-weights never underflow, so a filter that lost
+        the track would never re-initialise (seed 001 §13 item 7).
     """
 
     sigma: float | tuple[float, ...] = 1.0
     index: tuple[int, ...] = (0, 1)
     reinit_spread: float = 3.0
+    gate: float | None = None
 
     def _sig(self) -> F64:
         s = np.broadcast_to(np.asarray(self.sigma, dtype=np.float64), (len(self.index),))
@@ -115,7 +120,11 @@ class GaussianPositionLikelihood:
     def __call__(self, x: F64, z: F64) -> F64:
         s = self._sig()
         r = (np.asarray(z, dtype=np.float64)[None, :] - x[:, list(self.index)]) / s
-        return -0.5 * np.einsum("ij,ij->i", r, r) - float(np.sum(np.log(np.sqrt(2 * np.pi) * s)))
+        d2 = np.einsum("ij,ij->i", r, r)
+        ll = -0.5 * d2 - float(np.sum(np.log(np.sqrt(2 * np.pi) * s)))
+        if self.gate is not None:
+            ll[d2 > self.gate * self.gate] = -np.inf
+        return ll
 
     def reinit(self, x: F64, z: F64, rng: np.random.Generator) -> F64:
         out = np.array(x, dtype=np.float64, copy=True)
@@ -373,6 +382,7 @@ class ParticleFilter:
         self.x = self.x[idx]
         self.mode = self.mode[idx]
         self.logw = np.full(self.N, -np.log(self.N))
+        self.neff = float(self.N)
 
     def resample_if_needed(self) -> bool:
         """Resample when ``every_step`` or ``N_eff < threshold·N``; whether it did."""

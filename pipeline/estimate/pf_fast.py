@@ -27,6 +27,8 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
+from .models import turn_coefficients
+
 F64 = NDArray[np.float64]
 
 #: particles per random-number block (the unit of parallel work)
@@ -424,8 +426,6 @@ def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: Arra
     -------
     mean : (T, 7); mode_p : (T, K); x : (N, 7) final particles; mode : (N,) final modes
     """
-    from .models import turn_coefficients
-
     X = np.ascontiguousarray(np.asarray(x0, dtype=np.float64).T).copy()
     if X.shape[0] != 7:
         raise ValueError(f"jm_run: particles must have shape (N, 7), got {X.T.shape}")

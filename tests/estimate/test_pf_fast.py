@@ -23,7 +23,7 @@ def test_the_kernel_generator_draws_standard_normals():
 def test_the_fused_cv_bootstrap_filter_matches_the_kalman_filter_mean():
     Z = _track()
     m0, P0 = np.array([0.0, 0.0, 2.0, 0.0]), np.diag([4.0, 4.0, 4.0, 4.0])
-    n, seeds = 50_000, 10
+    n, seeds = 20_000, 10
     # the kernel predicts before every measurement, so the KF does too
     kf = np.array([m for m, _ in _cv_kalman_from_predict(m0, P0, Z)])
     # independent runs (prior sample and seed), so their spread is the Monte Carlo error

@@ -48,3 +48,21 @@ def test_pf_tables_never_enter_the_error_panels_of_the_kalman_estimators(tmp_pat
     figs, _ = estimate_panels({"pf_jm": p}, truth=pd.DataFrame(), state=None)
     assert figs[0] == ("Estimates (the flight's vehicle is not in estimate.vehicles)", None)
     assert figs[-1][1] is not None and not [t for t in figs[-1][1].data if t.yaxis == "y2"]
+
+
+def test_the_flight_pages_classification_is_put_beside_a_pf_table_without_one(tmp_path):
+    p = tmp_path / "pf_jm" / "f.parquet"
+    p.parent.mkdir()
+    _pf_table(p, with_cls=False)
+    from pipeline.io.parquet import write_table
+
+    cls = pd.DataFrame({"run_id": "0", "t_ns": np.arange(0, 5_000_000_000, 200_000_000, dtype=np.int64),
+                        "ll_M1": -2.0, "ll_M2": -2.0})
+    cp = tmp_path / "f.parquet"
+    write_table(cls, cp, name="classification", extra={"status": "ok"})
+    figs, facts = estimate_panels({"pf_jm": p}, truth=None, state=None, classified={"sim": cp})
+    fig = figs[-1][1]
+    right = [t for t in fig.data if t.yaxis == "y2"]
+    assert {t.name for t in right} == {"classifier: M1", "classifier: M2"}
+    assert np.allclose(right[0].y, 0.5)
+    assert any(k == "jump-Markov PF" and "classifier sim" in v for k, v in facts)

@@ -2,17 +2,6 @@
 # per flight of estimate.pf.vehicles, measured by the state's NED position; outputs join the
 # `estimate` target and the flight pages (which put the classifier's softmax beside the mode
 # fractions, so the filter itself never waits for, or reruns with, the classifier).
-from pipeline.estimate.pf_run import job_config as pf_job_config
-
-PF_ESTIMATED = [f for f in FLIGHTS if flights.loc[f, "vehicle"] in config["estimate"]["pf"]["vehicles"]]
-
-
-def pf_paths(flight=None):
-    return [f"results/estimate/pf_jm/{f}.parquet" for f in (PF_ESTIMATED if flight is None else [flight])]
-
-
-def flight_pf_estimates(wildcards):
-    return pf_paths(wildcards.flight) if wildcards.flight in PF_ESTIMATED else []
 
 
 rule estimate_pf_jm:

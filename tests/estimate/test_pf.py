@@ -179,3 +179,17 @@ def test_mode_fractions_favour_the_mode_that_generated_a_straight_track():
     tr = run_pf(pf, np.arange(40) * int(DT * 1e9), Z)
     assert np.allclose(tr.mode_p.sum(axis=1), 1.0)
     assert tr.mode_p[10:, 0].mean() > 0.8
+
+
+def test_side_arrays_travel_with_their_particles_through_resampling():
+    pf = _cv_pf(1000, 11, every_step=True).init(mean=np.zeros(4), cov=np.eye(4))
+    pf.aux["tag"] = np.arange(1000)
+    pf.aux["pos0"] = pf.x[:, 0].copy()
+    pf.step(0.0, [0.5, 0.0])  # no prediction: the resampled particles keep their positions
+    assert np.array_equal(pf.aux["pos0"], pf.x[:, 0])
+    assert len(np.unique(pf.aux["tag"])) < 1000
+
+
+def test_a_singular_initial_covariance_draws_fixed_components_exactly():
+    pf = _cv_pf(500, 12).init(mean=[1.0, 2.0, 3.0, 4.0], cov=np.diag([1.0, 0.0, 1.0, 0.0]))
+    assert np.all(pf.x[:, 1] == 2.0) and np.all(pf.x[:, 3] == 4.0) and pf.x[:, 0].std() > 0.5

@@ -147,7 +147,8 @@ class GaussianPositionLikelihood:
         out = np.array(x, dtype=np.float64, copy=True)
         s = self._sig()
         idx = list(self.index)
-        out[:, idx] = np.asarray(z, dtype=np.float64)[None, :] + self.reinit_spread * s * rng.standard_normal((len(x), len(idx)))
+        noise = rng.standard_normal((len(x), len(idx)))
+        out[:, idx] = np.asarray(z, dtype=np.float64)[None, :] + self.reinit_spread * s * noise
         return out
 
 
@@ -243,7 +244,8 @@ class ParticleFilter:
             raise ValueError("ParticleFilter: need at least one mode model")
         for k, m in enumerate(self.models):
             if not callable(getattr(m, "propagate", None)):
-                raise ValueError(f"ParticleFilter: mode model {k} ({type(m).__name__}) has no propagate(x, dt, rng)")
+                raise ValueError(f"ParticleFilter: mode model {k} ({type(m).__name__}) has no "
+                                 "propagate(x, dt, rng)")
         self.K = len(self.models)
         if Pi is None or callable(Pi):
             self._Pi = None
@@ -251,11 +253,13 @@ class ParticleFilter:
         else:
             P = check_stochastic(Pi, "ParticleFilter Pi")
             if P.shape[0] != self.K:
-                raise ValueError(f"ParticleFilter: Pi is {P.shape[0]}x{P.shape[0]} but there are {self.K} mode models")
+                raise ValueError(f"ParticleFilter: Pi is {P.shape[0]}x{P.shape[0]} but there are "
+                                 f"{self.K} mode models")
             self._Pi = P
             self._transition = None
         if resample not in SCHEMES:
-            raise ValueError(f"ParticleFilter: unknown resample scheme {resample!r}; expected one of {', '.join(SCHEMES)}")
+            raise ValueError(f"ParticleFilter: unknown resample scheme {resample!r}; expected one of "
+                             f"{', '.join(SCHEMES)}")
         if int(n_particles) < 1:
             raise ValueError(f"ParticleFilter: n_particles must be >= 1, got {n_particles}")
         if not (0.0 <= threshold <= 1.0):

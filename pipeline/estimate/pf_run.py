@@ -234,7 +234,8 @@ def run_pf_jm(inputs, outputs, config: Mapping[str, Any], *, flight_id: str | No
 
     def fail(reason: str) -> PfResult:
         _say(f"{fid}: placeholder ({reason})")
-        _placeholder(out, {**base, "status": "failed", "error": reason, "n_steps": 0, "n_predict_only": 0, "n_reinit": 0})
+        _placeholder(out, {**base, "status": "failed", "error": reason, "n_steps": 0, "n_predict_only": 0,
+                           "n_reinit": 0})
         return PfResult(fid, "failed", reason, {"n_steps": 0})
 
     sp = declared(inputs, "state")
@@ -256,8 +257,9 @@ def run_pf_jm(inputs, outputs, config: Mapping[str, Any], *, flight_id: str | No
         return fail(f"{len(good)} sample(s) with a position: nothing to filter")
     k0 = good[0]
     t, z = t[k0:], z[k0:]
-    vel = state[["vel_n_mps", "vel_e_mps"]].to_numpy(np.float64)[idx][k0] if {"vel_n_mps", "vel_e_mps"} <= set(state.columns) else np.zeros(2)
-    vel = np.where(np.isfinite(vel), vel, 0.0)
+    vcols = ["vel_n_mps", "vel_e_mps"]
+    vel = state[vcols].to_numpy(np.float64)[idx][k0] if set(vcols) <= set(state.columns) else np.zeros(2)
+    vel = np.where(np.isfinite(vel), vel, 0.0)  # the first fix's velocity, 0 where the state has none
     dt_ref = 1.0 / float(cfg["rate_hz"]) if cfg.get("rate_hz") else float(np.median(np.diff(t))) * 1e-9
     rng = pf_rng(seed, fid)
     pf = jm_filter(cfg, dt_ref, rng)
@@ -286,7 +288,8 @@ def run_pf_jm(inputs, outputs, config: Mapping[str, Any], *, flight_id: str | No
             **track_meta(tr), "dt_ref_s": dt_ref, "rate_hz": cfg.get("rate_hz"),
             "dwell_s": {m: float(cfg["dwell_s"][m]) for m in PF_JM_MODES},
             "Pi_ref": pf.transition_matrix(dt_ref).tolist(), "noise": cfg["noise"],
-            "measurement": "state pos_n_m/pos_e_m", "position_source": (st_meta.get("preprocess") or {}).get("sources", {}).get("position"),
+            "measurement": "state pos_n_m/pos_e_m",
+            "position_source": ((st_meta.get("preprocess") or {}).get("sources") or {}).get("position"),
             "measurement_sigma_m": float(cfg["measurement_sigma_m"]), "resample": cfg["resample"],
             "threshold": float(cfg["threshold"]), "gate_sigma": cfg.get("gate_sigma"),
             "init_sigma": [s_pos, s_vel], "mode_fraction_mean": frac, **cls_info,

@@ -168,27 +168,34 @@ def classifier_softmax(cls: pd.DataFrame, t_ns: NDArray[np.int64]) -> dict[str, 
 
 
 def pf_frame(t_ns: NDArray[np.int64], mean: F64, cov: F64, mode_p: F64, neff: F64, resampled,
-             modes=PF_JM_MODES, extra: Mapping[str, F64] | None = None) -> pd.DataFrame:
-    """A ``pf`` table from a filter track (state columns :data:`~pipeline.estimate.models.PF_STATE`)."""
-    n = len(PF_STATE)
+             modes=PF_JM_MODES, extra: Mapping[str, F64] | None = None,
+             table: tuple[schema.Column, ...] = schema.PF) -> pd.DataFrame:
+    """A ``pf`` table (or ``table``, a tuple of columns extending it) from a filter track.
+
+    ``mean`` (T, n) and ``cov`` (T, n, n) follow :data:`~pipeline.estimate.models.PF_STATE`; a
+    filter with a shorter state (e.g. the weave classifier's [N, E, v_N, v_E, ω]) leaves the
+    missing components NaN. ``extra``: further columns (``cls_p_*``, or those of ``table``).
+    """
+    T, n = len(t_ns), mean.shape[1]
+    nan = np.full(T, np.nan)
     cols: dict[str, Any] = {"t_ns": np.asarray(t_ns, dtype=np.int64)}
     for i, c in enumerate(PF_STATE):
-        cols[f"x_{c}"] = mean[:, i]
-    for i in range(n):
-        for j in range(i, n):
-            cols[f"P_{i}_{j}"] = cov[:, i, j]
+        cols[f"x_{c}"] = mean[:, i] if i < n else nan
+    for i in range(len(PF_STATE)):
+        for j in range(i, len(PF_STATE)):
+            cols[f"P_{i}_{j}"] = cov[:, i, j] if j < n else nan
     for k, m in enumerate(modes):
         cols[f"mode_p_{m}"] = mode_p[:, k]
     cols["neff"] = np.asarray(neff, dtype=np.float64)
     cols["resampled"] = np.asarray(resampled, dtype=bool)
     cols.update(extra or {})
-    return schema.conform(schema.PF, pd.DataFrame(cols))
+    return schema.conform(tuple(table), pd.DataFrame(cols))
 
 
-def table_columns(df: pd.DataFrame) -> tuple[schema.Column, ...]:
-    """The ``pf`` columns of ``df`` with the wildcard families (``mode_p_*``, ``cls_p_*``) named."""
+def table_columns(df: pd.DataFrame, table: tuple[schema.Column, ...] = schema.PF) -> tuple[schema.Column, ...]:
+    """The columns of ``table`` in ``df`` with the wildcard families (``mode_p_*``, ``cls_p_*``) named."""
     out = []
-    for c in schema.PF:
+    for c in table:
         if c.name.endswith("*"):
             out += [schema.Column(n, c.dtype, c.unit, c.frame, c.doc) for n in df.columns
                     if str(n).startswith(c.name[:-1])]
@@ -197,9 +204,11 @@ def table_columns(df: pd.DataFrame) -> tuple[schema.Column, ...]:
     return tuple(out)
 
 
-def write_pf(df: pd.DataFrame, path, extra: dict) -> None:
-    """Write a ``pf`` table (units per column, wildcard families included) atomically."""
-    write_table(df, path, table_columns(df), name="pf", extra=extra)
+def write_pf(df: pd.DataFrame, path, extra: dict, *, table: tuple[schema.Column, ...] = schema.PF,
+             name: str = "pf") -> None:
+    """Write a ``pf`` table (or ``table`` named ``name``; units per column, wildcard families
+    included) atomically."""
+    write_table(df, path, table_columns(df, table), name=name, extra=extra)
 
 
 def _placeholder(path, extra: dict) -> None:

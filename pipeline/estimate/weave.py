@@ -61,7 +61,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..config import build, cfield, validate_section
 from .markov import check_stochastic
-from .models import Radar2DModel, ct_transition, wrap_angle
+from .models import Radar2DModel, ct_transition, curvilinear_axes
+from .resample import get_resampler
 
 F64 = NDArray[np.float64]
 
@@ -277,11 +278,10 @@ def _draw_categorical(P_rows: F64, u: F64) -> NDArray[np.int64]:
 
 
 def _resample_rows(w: F64, rng: np.random.Generator, scheme: str) -> NDArray[np.int64]:
-    """Ancestor indices (R, N) for normalised weights ``w`` (R, N)."""
-    R_, N = w.shape
-    if scheme == "multinomial":
-        return np.stack([rng.choice(N, size=N, p=w[r]) for r in range(R_)])
-    raise ValueError(f"{_h}.resample: {scheme!r} needs the PF core's resampling (pipeline.estimate.resample)")
+    """Ancestor indices (R, N) for normalised weights ``w`` (R, N): the PF core's resampler
+    (:func:`pipeline.estimate.resample.get_resampler`) row by row."""
+    draw = get_resampler(scheme)
+    return np.stack([draw(w[r], rng) for r in range(w.shape[0])])
 
 
 def _initial_cloud(z0: F64, z1: F64, sensor, cfg: HmpfConfig, N: int, rng: np.random.Generator):
@@ -385,9 +385,8 @@ def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) ->
         pos_old = x[..., 0:2].copy()
         x = ct_transition(x, dt)
         z1, z2 = rng.standard_normal((2, R_, N))
-        spd = np.hypot(x[..., 2], x[..., 3])
-        safe = np.where(spd > 0, spd, 1.0)
-        tn, te = np.where(spd > 0, x[..., 2] / safe, 1.0), np.where(spd > 0, x[..., 3] / safe, 0.0)
+        t_ax, _ = curvilinear_axes(x[..., 2:4])
+        tn, te = t_ax[..., 0], t_ax[..., 1]
         # CM (seed 003 §4.2.2): Q = σ_T² t tᵀ + σ_N² n nᵀ, t = v/|v|, n = (−t_E, t_N) its right-hand
         # normal in NED; ACT keeps its noise in N/E ("a turn can be entered in any direction")
         aT, aN = cfg.sigma_at_mps2 * z1, cfg.sigma_an_mps2 * z2

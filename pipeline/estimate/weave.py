@@ -57,11 +57,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..config import build, cfield, validate_section
 from .markov import check_stochastic
-from .models import Radar2DModel, ct_transition, curvilinear_axes
+from .models import Radar2DModel, ct_transition
 from .resample import get_resampler
 
 F64 = NDArray[np.float64]
@@ -79,6 +80,10 @@ LEAF_SIGN = np.array([0, -1, 1, -1, 0, 1, 0], dtype=np.int8)
 STATE: tuple[str, ...] = ("pos_n_m", "pos_e_m", "vel_n_mps", "vel_e_mps", "omega_radps")
 
 _h = "estimate.pf.hmpf"
+#: log of the smallest normal double: a likelihood below it is a zero weight
+_LOG_TINY = float(np.log(np.finfo(np.float64).tiny))
+#: keys of estimate.pf.hmpf that are not the filter's
+_NOT_FILTER_KEYS = ("vehicles", "from_train", "turn_threshold_radps", "radar")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -114,9 +119,9 @@ class HmpfConfig:
 
     @classmethod
     def from_config(cls, sec: Mapping[str, Any] | None, **override) -> "HmpfConfig":
-        """From ``estimate.pf.hmpf`` (validated, defaulted; the ``vehicles``, ``from_train`` and
-        ``radar`` keys belong to the rule and the sensor), then ``override``."""
-        sec = {k: v for k, v in validate_section(_h, sec).items() if k not in ("vehicles", "from_train", "radar")}
+        """From ``estimate.pf.hmpf`` (validated, defaulted; the ``vehicles``, ``from_train``,
+        ``turn_threshold_radps`` and ``radar`` keys belong to the rule and the sensor), then ``override``."""
+        sec = {k: v for k, v in validate_section(_h, sec).items() if k not in _NOT_FILTER_KEYS}
         cfg = build(cls, {**sec, **override})
         check_stochastic(cfg.pi_m, f"{_h}.pi_m")
         lo, hi = cfg.omega_init_radps
@@ -271,12 +276,6 @@ class HmpfTrack:
         return self.mode_p[..., W]
 
 
-def _draw_categorical(P_rows: F64, u: F64) -> NDArray[np.int64]:
-    """Index drawn from each row of probabilities ``P_rows`` (..., K) with uniforms ``u`` (...)."""
-    c = np.cumsum(P_rows, axis=-1)
-    return np.minimum((u[..., None] >= c).sum(axis=-1), P_rows.shape[-1] - 1)
-
-
 def _resample_rows(w: F64, rng: np.random.Generator, scheme: str) -> NDArray[np.int64]:
     """Ancestor indices (R, N) for normalised weights ``w`` (R, N): the PF core's resampler
     (:func:`pipeline.estimate.resample.get_resampler`) row by row."""
@@ -303,7 +302,144 @@ def _initial_cloud(z0: F64, z1: F64, sensor, cfg: HmpfConfig, N: int, rng: np.ra
     return x, m, sm, leaf
 
 
-def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) -> HmpfTrack:
+@njit(cache=True)
+def _switch_p(x, x_max, method_min, p1, p2, n, cap):
+    x = abs(x)
+    if method_min:
+        return min((x / x_max) ** n, cap)
+    return p1 if x < x_max else p2
+
+
+@njit(cache=True)
+def _k_modes(m, sm, leaf, delta, theta, omega, u, Pi, leaf_sign, enter, method_min, p1, p2, n_exp, cap,
+             delta_max, theta_max, w_lo, w_hi):
+    """Steps 1–3 of the module docstring per particle, in place: mode, submode (with the A3/A4
+    entry rules), leaf and the turn rate this step uses. ``u`` (4, R, N) uniforms from the
+    caller's generator. Returns the per-particle 'leaf changed' flags."""
+    R_, N = m.shape
+    changed = np.zeros((R_, N), dtype=np.bool_)
+    for r in range(R_):
+        for i in range(N):
+            mo = m[r, i]
+            c = 0.0
+            mn = 3
+            for j in range(4):
+                c += Pi[mo, j]
+                if u[0, r, i] < c:
+                    mn = j
+                    break
+            s_ = sm[r, i]
+            if mn == 3 and mo != 3:
+                if enter == 1:
+                    s_ = min(int(u[3, r, i] * 4.0), 3)
+                elif enter == 2:
+                    s_ = 2 * min(int(u[3, r, i] * 2.0), 1)
+                delta[r, i] = 0.0
+                theta[r, i] = 0.0
+            if mn == 3:
+                if s_ == 0 or s_ == 2:
+                    p = _switch_p(theta[r, i], theta_max, method_min, p1, p2, n_exp, cap)
+                else:
+                    p = _switch_p(delta[r, i], delta_max, method_min, p1, p2, n_exp, cap)
+                if u[1, r, i] < p:
+                    s_ = (s_ + 1) % 4
+            lf = mn if mn < 3 else 3 + s_
+            ch = lf != leaf[r, i]
+            sg = leaf_sign[lf]
+            w0 = omega[r, i]
+            if sg != 0:
+                if ch or np.sign(w0) != sg:
+                    omega[r, i] = sg * (w_lo + (w_hi - w_lo) * u[2, r, i])
+            else:
+                omega[r, i] = 0.0
+            m[r, i] = mn
+            sm[r, i] = s_
+            leaf[r, i] = lf
+            changed[r, i] = ch
+    return changed
+
+
+@njit(cache=True)
+def _k_noise(x, pos_old, omega_used, leaf, changed, delta, theta, g, leaf_sign, dt, s_at, s_an, s_axy, s_alpha):
+    """Steps 3–4 after the deterministic turn step: CM (along/cross-track) or ACT (N/E) noise,
+    the ω random walk, the δ/θ counters, and the turn-sign guard. ``g`` (3, R, N) standard
+    normals. Returns the guard mask."""
+    R_, N = leaf.shape
+    guard = np.zeros((R_, N), dtype=np.bool_)
+    h = 0.5 * dt * dt
+    for r in range(R_):
+        for i in range(N):
+            sg = leaf_sign[leaf[r, i]]
+            if sg != 0:
+                an = s_axy * g[0, r, i]
+                ae = s_axy * g[1, r, i]
+            else:
+                vn, ve = x[r, i, 2], x[r, i, 3]
+                sp = np.sqrt(vn * vn + ve * ve)
+                if sp > 1e-9:
+                    tn, te = vn / sp, ve / sp
+                else:
+                    tn, te = 1.0, 0.0
+                aT, aN = s_at * g[0, r, i], s_an * g[1, r, i]
+                an = aT * tn - aN * te   # n = (−t_E, t_N), the right-hand normal in NED
+                ae = aT * te + aN * tn
+            x[r, i, 0] += h * an
+            x[r, i, 1] += h * ae
+            x[r, i, 2] += dt * an
+            x[r, i, 3] += dt * ae
+            if sg != 0:
+                x[r, i, 4] = omega_used[r, i] + s_alpha * g[2, r, i]
+                guard[r, i] = np.sign(x[r, i, 4]) != sg
+            else:
+                x[r, i, 4] = 0.0
+            if changed[r, i]:
+                delta[r, i] = 0.0
+                theta[r, i] = 0.0
+            else:
+                dn, de = x[r, i, 0] - pos_old[r, i, 0], x[r, i, 1] - pos_old[r, i, 1]
+                delta[r, i] += np.sqrt(dn * dn + de * de)
+                theta[r, i] += omega_used[r, i] * dt
+    return guard
+
+
+@njit(cache=True)
+def _k_stats(x, w, m, sm, mean, cov, mode_p, submode_p):
+    """Weighted mean and covariance of x (R, N, 5) and the mode/submode fractions, into the outputs."""
+    R_, N, n = x.shape
+    for r in range(R_):
+        mu = np.zeros(n)
+        mp = np.zeros(4)
+        sp = np.zeros(4)
+        for i in range(N):
+            wi = w[r, i]
+            for a in range(n):
+                mu[a] += wi * x[r, i, a]
+            mp[m[r, i]] += wi
+            if m[r, i] == 3:
+                sp[sm[r, i]] += wi
+        C = np.zeros((n, n))
+        for i in range(N):
+            wi = w[r, i]
+            for a in range(n):
+                da = x[r, i, a] - mu[a]
+                for b in range(a, n):
+                    C[a, b] += wi * da * (x[r, i, b] - mu[b])
+        for a in range(n):
+            for b in range(a + 1, n):
+                C[b, a] = C[a, b]
+        mean[r] = mu
+        cov[r] = C
+        mode_p[r] = mp
+        submode_p[r] = sp
+
+
+def _fractions(w, m, sm, mode_p, submode_p):
+    for j in range(4):
+        mode_p[:, j] = np.sum(w * (m == j), axis=1)
+        submode_p[:, j] = np.sum(w * ((m == W) & (sm == j)), axis=1)
+
+
+def hmpf_filter(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) -> HmpfTrack:
     """Run the weave classifier over measurements ``z`` (R, T, M) (or (T, M): one run).
 
     Parameters
@@ -313,9 +449,11 @@ def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) ->
         row with a NaN is a predict-only step (the first two rows must be finite: they seed the
         cloud).
     sensor : GpsSensor or RadarSensor
+        ``log_likelihood(z (R, M), x (R, N, 5)) -> (R, N)``, ``position(z)``, ``position_sigma(z)``.
     cfg : HmpfConfig
     rng : numpy.random.Generator
-        The one source of randomness.
+        The one source of randomness (the per-particle kernels take their uniforms and normals
+        from it).
 
     Returns
     -------
@@ -331,8 +469,13 @@ def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) ->
     dt = float(cfg.dt_s)
     Pi_m = check_stochastic(cfg.pi_m, f"{_h}.pi_m")
     lo, hi = cfg.omega_init_radps
+    if cfg.method not in ("if_else", "min"):
+        raise ValueError(f"{_h}.method: {cfg.method!r} is not if_else or min")
+    enter = {"keep": 0, "uniform": 1, "curve": 2}[cfg.enter_submode]
+    sign_tab = LEAF_SIGN.astype(np.int64)
 
     x, m, sm, leaf = _initial_cloud(z[:, 0], z[:, 1], sensor, cfg, N, rng)
+    m, sm, leaf = m.astype(np.int64), sm.astype(np.int64), leaf.astype(np.int64)
     delta = np.zeros((R_, N))
     theta = np.zeros((R_, N))
     logw = np.full((R_, N), -np.log(N))
@@ -346,70 +489,32 @@ def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) ->
     n_reinit = np.zeros(R_, dtype=np.int64)
     n_guarded = np.zeros((R_, T), dtype=np.int64)
 
-    def record(k, w):
-        mean[:, k] = np.einsum("rn,rni->ri", w, x)
-        d = x - mean[:, k][:, None, :]
-        cov[:, k] = np.einsum("rn,rni,rnj->rij", w, d, d)
-        for j in range(4):
-            mode_p[:, k, j] = np.sum(w * (m == j), axis=1)
-            submode_p[:, k, j] = np.sum(w * ((m == W) & (sm == j)), axis=1)
-
-    record(0, np.exp(logw))
+    w = np.full((R_, N), 1.0 / N)
+    m_, c_, mp_, sp_ = (np.empty((R_, 5)), np.empty((R_, 5, 5)), np.empty((R_, 4)), np.empty((R_, 4)))
+    _k_stats(x, w, m, sm, m_, c_, mp_, sp_)
+    mean[:, 0], cov[:, 0], mode_p[:, 0], submode_p[:, 0] = m_, c_, mp_, sp_
     neff[:, 0] = N
     for k in range(1, T):
-        # 1. mode: m_k ~ Π_m[m_{k−1}]
-        m_new = _draw_categorical(Pi_m[m], rng.random((R_, N)))
-        entering = (m_new == W) & (m != W)
-        if cfg.enter_submode == "uniform":
-            sm = np.where(entering, rng.integers(0, 4, (R_, N)), sm)
-        elif cfg.enter_submode == "curve":
-            sm = np.where(entering, 2 * rng.integers(0, 2, (R_, N)), sm)
-        delta = np.where(entering, 0.0, delta)  # digest A4: counters restart on entering W
-        theta = np.where(entering, 0.0, theta)
-        # 2. submode: advance along CL → SL → CR → SR with p_cs(θ) in curves, p_sc(δ) on straights
-        curve_sm = (sm == CL) | (sm == CR)
-        p_adv = np.where(curve_sm, switch_probability(theta, cfg.theta_max_rad, cfg),
-                         switch_probability(delta, cfg.delta_max_m, cfg))
-        adv = (m_new == W) & (rng.random((R_, N)) < p_adv)
-        sm = np.where(adv, (sm + 1) % 4, sm)
-        m = m_new
-        leaf_new = leaf_of(m, sm)
-        changed = leaf_new != leaf
-        sign = LEAF_SIGN[leaf_new]
-        curve = sign != 0
-        # 3. dynamics: a new curve draws |ω| ~ U[lo, hi] signed by the leaf; straights have ω = 0
-        w_old = x[..., 4]
-        w_now = np.where(curve & (changed | (np.sign(w_old) != sign)),
-                         sign * rng.uniform(lo, hi, (R_, N)), np.where(curve, w_old, 0.0))
-        x[..., 4] = w_now
+        # 1–3. mode, submode, leaf and this step's ω (kernel), then the exact turn step
+        omega = np.ascontiguousarray(x[..., 4])
+        changed = _k_modes(m, sm, leaf, delta, theta, omega, rng.random((4, R_, N)), Pi_m, sign_tab, enter,
+                           cfg.method == "min", cfg.p1, cfg.p2, float(cfg.min_exponent), cfg.min_cap,
+                           cfg.delta_max_m, cfg.theta_max_rad, lo, hi)
+        x[..., 4] = omega
         pos_old = x[..., 0:2].copy()
         x = ct_transition(x, dt)
-        z1, z2 = rng.standard_normal((2, R_, N))
-        t_ax, _ = curvilinear_axes(x[..., 2:4])
-        tn, te = t_ax[..., 0], t_ax[..., 1]
-        # CM (seed 003 §4.2.2): Q = σ_T² t tᵀ + σ_N² n nᵀ, t = v/|v|, n = (−t_E, t_N) its right-hand
-        # normal in NED; ACT keeps its noise in N/E ("a turn can be entered in any direction")
-        aT, aN = cfg.sigma_at_mps2 * z1, cfg.sigma_an_mps2 * z2
-        a_n = np.where(curve, cfg.sigma_axy_mps2 * z1, aT * tn - aN * te)
-        a_e = np.where(curve, cfg.sigma_axy_mps2 * z2, aT * te + aN * tn)
-        x[..., 0] += 0.5 * dt * dt * a_n
-        x[..., 1] += 0.5 * dt * dt * a_e
-        x[..., 2] += dt * a_n
-        x[..., 3] += dt * a_e
-        alpha = cfg.sigma_alpha_radps * rng.standard_normal((R_, N))
-        x[..., 4] = np.where(curve, w_now + alpha, 0.0)
-        # 4. segment counters (eqs. 2.3, 2.4; reset on a leaf change, digest A4)
-        step = np.hypot(x[..., 0] - pos_old[..., 0], x[..., 1] - pos_old[..., 1])
-        delta = np.where(changed, 0.0, delta + step)
-        theta = np.where(changed, 0.0, theta + w_now * dt)
-        leaf = leaf_new
-        # 5. weights: likelihood and the turn-sign guard
-        guard = curve & (np.sign(x[..., 4]) != sign)
+        # CM (seed 003 §4.2.2): Q = σ_T² t tᵀ + σ_N² n nᵀ about t = v/|v|; ACT keeps its noise in
+        # N/E ("a turn can be entered in any direction"); then δ, θ and the turn-sign guard
+        guard = _k_noise(x, pos_old, omega, leaf, changed, delta, theta, rng.standard_normal((3, R_, N)), sign_tab,
+                         dt, cfg.sigma_at_mps2, cfg.sigma_an_mps2, cfg.sigma_axy_mps2, cfg.sigma_alpha_radps)
         n_guarded[:, k] = guard.sum(axis=1)
+        # 5. weights
         zk = z[:, k]
         ok = np.all(np.isfinite(zk), axis=-1)
         ll = np.where(ok[:, None], sensor.log_likelihood(np.where(ok[:, None], zk, 0.0), x), 0.0)
-        logw = np.where(guard, -np.inf, logw + ll)
+        # a likelihood that underflows in linear terms (p(z|x) < the smallest normal double) is a zero
+        # weight, so a measurement no particle can explain re-initialises instead of being followed
+        logw = np.where(guard | (ll < _LOG_TINY), -np.inf, logw + ll)
         top = logw.max(axis=1, keepdims=True)
         dead = ~np.isfinite(top[:, 0])
         if dead.any():  # every weight zero: re-initialise around z_k (positions), modes uniform
@@ -417,8 +522,8 @@ def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) ->
             for r in np.flatnonzero(dead):
                 zr = zk[r] if ok[r] else z[r, max(j for j in range(k) if np.all(np.isfinite(z[r, j])))]
                 p = sensor.position(zr)
-                sp = float(sensor.position_sigma(zr))
-                x[r, :, 0:2] = p + cfg.init_k_sigma * sp * rng.uniform(-1, 1, (N, 2))
+                spr = float(sensor.position_sigma(zr))
+                x[r, :, 0:2] = p + cfg.init_k_sigma * spr * rng.uniform(-1, 1, (N, 2))
                 m[r] = rng.integers(0, 4, N)
                 sm[r] = rng.integers(0, 4, N)
                 leaf[r] = leaf_of(m[r], sm[r])
@@ -429,9 +534,8 @@ def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) ->
         w = np.exp(logw - top)
         w /= w.sum(axis=1, keepdims=True)
         neff[:, k] = 1.0 / np.sum(w * w, axis=1)
-        mean[:, k] = np.einsum("rn,rni->ri", w, x)
-        d = x - mean[:, k][:, None, :]
-        cov[:, k] = np.einsum("rn,rni,rnj->rij", w, d, d)
+        _k_stats(x, w, m, sm, m_, c_, mp_, sp_)   # the estimate before resampling (digest A10)
+        mean[:, k], cov[:, k] = m_, c_
         # 6. resample (every step by default) and report the fractions after it
         do = neff[:, k] < cfg.ess_fraction * N if cfg.ess_fraction < 1.0 else np.ones(R_, dtype=bool)
         if do.any():
@@ -443,9 +547,7 @@ def run_hmpf(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator) ->
             w[do] = 1.0 / N
             resampled[do, k] = True
         logw = np.log(np.maximum(w, 1e-300))
-        for j in range(4):
-            mode_p[:, k, j] = np.sum(w * (m == j), axis=1)
-            submode_p[:, k, j] = np.sum(w * ((m == W) & (sm == j)), axis=1)
+        _fractions(w, m, sm, mode_p[:, k], submode_p[:, k])
     af, flag = detector(mode_p[..., W], cfg.detector_window, cfg.tau, cfg.startup_steps)
     return HmpfTrack(mean=mean, cov=cov, mode_p=mode_p, submode_p=submode_p, neff=neff, resampled=resampled,
                      af=af, weave_detected=flag, n_reinit=n_reinit, n_guarded=n_guarded)

@@ -6,7 +6,7 @@ of :data:`~.base.STUDY_TABLES` ``["pf"]``) and the page ``results/report/studies
 **Seed 003 part** (van de Kerkhof 2014; digest 003 §8–§9, §11 items 6–8). Noise-free tracks
 from :mod:`pipeline.simulate.ship` (the thesis's §3.1 start (200, 200) m, velocity (1, 1) m/s,
 |ω| = 0.1 rad/s; T = 1 s), one GPS (1 m) or 2-D radar (10 m, 0.005 rad, 3 m/s) realisation per
-seed, all runs of a scenario filtered in one batch by :func:`pipeline.estimate.weave.run_hmpf`.
+seed, all runs of a scenario filtered in one batch by :func:`pipeline.estimate.weave.hmpf_filter`.
 The filter's δ_max and θ_max on the simulated weave are 1.2× the weave's own straight length
 and turn angle — the thesis's "slightly overestimated" simulation practice (§3.3, App. A) —
 unless a scenario says otherwise; the §4.3 final values (500 m, π; the config defaults, used on
@@ -28,7 +28,7 @@ import plotly.graph_objects as go
 
 from ..config import ROOT
 from ..estimate.models import Radar2DModel, radar2d_range_criterion
-from ..estimate.weave import MODES, GpsSensor, HmpfConfig, RadarSensor, run_hmpf, stationary_distribution
+from ..estimate.weave import MODES, GpsSensor, HmpfConfig, RadarSensor, hmpf_filter, stationary_distribution
 from ..io.parquet import write_table
 from ..report.study import build_study_page, layout
 from ..simulate.seeds import set_rng
@@ -243,7 +243,7 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
         # realisations (paired comparisons); each scenario's filter has its own generator
         rz = set_rng(seed, f"pf/noise/{noise_key or tr.name}/{sensor}")
         z = gps_measure(tr, R_, rz, base.gps_sigma_m) if sensor == "gps" else radar_measure(tr, R_, rz, radar)
-        out = run_hmpf(z, gps if sensor == "gps" else rad, cfg, set_rng(seed, f"pf/filter/{name}"))
+        out = hmpf_filter(z, gps if sensor == "gps" else rad, cfg, set_rng(seed, f"pf/filter/{name}"))
         runs.append(summarise(name, sensor, tr, out, cfg, startup))
         tls.append(timeline(name, tr, out))
         return runs[-1]

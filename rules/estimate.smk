@@ -59,4 +59,4 @@ rule estimate_flight:
 
 rule estimate:
     input:
-        estimate_paths(),
+        estimate_paths() + hmpf_paths(),

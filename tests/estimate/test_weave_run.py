@@ -76,3 +76,17 @@ def test_a_flight_without_positions_gets_a_placeholder_with_the_reason(tmp_path)
     res = run_hmpf({"state": str(p)}, {"hmpf": str(out)}, {}, flight_id="empty")
     assert res.status == "failed" and "positions" in res.error
     assert len(read_table(out)) == 0 and read_table_meta(out)["status"] == "failed"
+
+
+def test_the_flight_page_shows_the_weave_af_with_the_tau_line(tmp_path):
+    from pipeline.report.flight import estimate_panels
+    tr = weave_track(n_turns=3)
+    p_state = tmp_path / "s.parquet"
+    write_table(state_of(tr), p_state, schema.STATE, name="state")
+    out = tmp_path / "hmpf" / "f.parquet"
+    run_hmpf({"state": str(p_state)}, {"hmpf": str(out)}, {"n_particles": 100}, flight_id="f")
+    figs, facts = estimate_panels({"hmpf": str(out)}, truth=None, state=None)
+    title, fig = figs[-1]
+    assert title == "Weave classifier AF(k)" and fig is not None
+    assert any(getattr(s, "y0", None) == 0.269 for s in fig.layout.shapes)
+    assert facts[-1][0] == "hmpf" and "δ_max 500 m" in facts[-1][1]

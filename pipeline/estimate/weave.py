@@ -47,7 +47,16 @@ The detector (§6): ``AF(k)`` is the mean of the weave fraction F over the last 
 (over all steps so far while k < N); a weave is declared while ``AF(k) ≥ τ = 0.269``, never
 during the first 25 steps.
 
-Vectorised over runs and particles: arrays ``(R, N)``; one generator drives a batch.
+Vectorised over runs and particles: arrays ``(R, N)``. The per-particle logic (mode and
+submode draws, the leaf's noise, the counters, the guard, the weighted statistics) runs in
+``@njit`` kernels fed with uniforms and normals drawn from the caller's one generator, so a
+seed fixes the result; the turn step is :func:`~.models.ct_transition` and the resampling the
+PF core's (:mod:`pipeline.estimate.resample`), each once.
+
+API: :class:`HmpfConfig` (``estimate.pf.hmpf``), :func:`hmpf_filter` ``(z, sensor, cfg, rng)
+-> HmpfTrack``, sensors :class:`GpsSensor` / :class:`RadarSensor`, and the exact parts
+:func:`stationary_distribution`, :func:`switch_probability`, :func:`submode_matrix`,
+:func:`leaf_of`, :func:`detector`. Real flights: :mod:`pipeline.estimate.weave_run`.
 """
 
 from __future__ import annotations

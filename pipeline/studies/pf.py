@@ -97,6 +97,9 @@ def summarise(name: str, sensor: str, tr: ShipTrack, out, cfg: HmpfConfig, start
     flag = out.weave_detected
     first = np.array([int(np.argmax(f)) if f.any() else -1 for f in flag])
     third = int(tr.turn_end[2]) if len(tr.turn_end) >= 3 and tr.weave.any() else -1
+    # the first flag once the weave has begun (a flag before it is a false alarm, counted apart)
+    w0 = int(np.flatnonzero(tr.weave)[0]) if tr.weave.any() else 0
+    first_in = np.array([w0 + int(np.argmax(f[w0:])) if f[w0:].any() else -1 for f in flag])
     return pd.DataFrame({
         "scenario": name, "sensor": sensor, "seed": np.arange(out.mean.shape[0]),
         "delta_max_m": cfg.delta_max_m, "theta_max_rad": cfg.theta_max_rad, "method": cfg.method,
@@ -104,8 +107,9 @@ def summarise(name: str, sensor: str, tr: ShipTrack, out, cfg: HmpfConfig, start
         "weave_frac_in_weave": F[:, inw].mean(axis=1) if inw.any() else np.nan,
         "weave_frac_off_weave": F[:, off].mean(axis=1) if off.any() else np.nan,
         "ever_flagged": flag.any(axis=1), "first_flag_step": first,
+        "flagged_before_weave": flag[:, :w0].any(axis=1) if tr.weave.any() else False,
         "third_turn_end_step": third,
-        "flag_delay_steps": np.where((first >= 0) & (third >= 0), first - third, np.nan)
+        "flag_delay_steps": np.where((first_in >= 0) & (third >= 0), first_in - third, np.nan)
         if third >= 0 else np.nan,
         "pos_rmse_m": np.sqrt(np.mean(np.sum(e * e, axis=-1) / 2.0, axis=1)),
         "vel_rmse_mps": np.sqrt(np.mean(np.sum(ev * ev, axis=-1) / 2.0, axis=1)),
@@ -320,9 +324,13 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     delay = w_gps["flag_delay_steps"].to_numpy(dtype=float)
     n_in80 = int(np.sum(np.isfinite(delay) & (delay <= 80)))
     res.add("pf_hmpf_weave_flagged_within_80_seeds", f"{n_in80}/{R_}",
-            "Weave GPS track: seeds flagged at or before 80 steps after the end of the 3rd alternating turn.")
+            "Weave GPS track: seeds flagged (once the weave has begun) at or before 80 steps after the end of "
+            "the 3rd alternating turn.")
     res.add("pf_hmpf_weave_flag_delay_median_steps", f"{np.nanmedian(delay) if np.isfinite(delay).any() else np.nan:.0f}",
-            "Weave GPS track: median over flagged seeds of (first flag step − end of the 3rd turn); negative = earlier.")
+            "Weave GPS track: median over flagged seeds of (first flag in the weave − end of the 3rd turn); "
+            "negative = earlier.")
+    res.add("pf_hmpf_weave_flagged_before_weave_seeds", f"{int(w_gps['flagged_before_weave'].sum())}/{R_}",
+            "Weave GPS track: seeds flagged on the lead straight, before the first turn (false alarms).")
     checks.append(("weave flagged within 80 steps of the 3rd turn (GPS)", f"{n_in80}/{R_} seeds", "every seed",
                    n_in80 == R_))
 

@@ -389,6 +389,10 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     res.add("pf_hmpf_max_0.8x_weave_frac", f"{lo_w:.3f}",
             "GPS weave with δ_max/θ_max at 0.8× the weave's: weave fraction during the weave.")
     res.add("pf_hmpf_max_1.2x_weave_frac", f"{hi_w:.3f}", "The same at 1.2× the weave's.")
+    res.add("pf_hmpf_max_0.8x_weave_frac_off_weave", f"{float(w_lo['weave_frac_off_weave'].mean()):.3f}",
+            "GPS weave, maxima at 0.8×: weave fraction on the lead and tail straights (after start-up; lower is better).")
+    res.add("pf_hmpf_max_1.2x_weave_frac_off_weave", f"{float(w_hi['weave_frac_off_weave'].mean()):.3f}",
+            "The same at 1.2×.")
     checks.append(("δ_max/θ_max 0.8× worse than 1.2×", f"{lo_w:.3f} vs {hi_w:.3f}", "0.8× < 1.2×", lo_w < hi_w))
     res.add("pf_hmpf_final_settings_weave_frac", f"{float(w_fin['weave_frac_in_weave'].mean()):.3f}",
             "GPS weave with the §4.3 final δ_max = 500 m, θ_max = π (the config defaults): weave fraction during the weave.")

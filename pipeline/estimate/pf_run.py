@@ -28,11 +28,12 @@ there (``init_sigma`` m/s), ω = a = 0, modes uniform; weights 1/N. Randomness f
 outside ``gate_sigma`` standard deviations re-initialises around the fix (counted,
 ``n_reinit``).
 
-**Beside the classifier.** Where the flight is classified (``inputs.classified``,
-``results/classify/<model_set>/<flight>.parquet``), the classifier's softmax of its
-``ll_<label>`` columns at the nearest classified sample (within two of its periods) is written
-beside the mode fractions as ``cls_p_<label>``; the two are different class sets (motion modes
-against maneuvers), shown side by side on the flight page.
+**Beside the classifier.** :func:`classifier_softmax` is the classifier's softmax of its
+``ll_<label>`` columns at the nearest classified sample (within two of its periods). The flight
+page puts it beside the mode fractions (the workflow's rule does not pass the classification,
+so the filter never waits for or reruns with the classifier); given ``inputs.classified``
+(``results/classify/<model_set>/<flight>.parquet``, e.g. from a script) it is written into the
+table as ``cls_p_<label>``. The two are different class sets (motion modes against maneuvers).
 
 Failures are placeholders: no state, a failed preprocess or no position gives an empty ``pf``
 table with ``status: failed`` and the reason.

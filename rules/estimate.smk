@@ -59,5 +59,5 @@ rule estimate_flight:
 
 rule estimate:
     input:
-        estimate_paths(),
+        estimate_paths() + hmpf_paths(),
         pf_paths(),

@@ -28,7 +28,7 @@ rule flight_report:
         segments="results/segments/{flight}.parquet",
         calibration="results/calibration/{flight}.parquet",
         classified=flight_classified,
-        estimates=flight_estimates,
+        estimates=lambda wc: flight_estimates(wc) + flight_hmpf(wc),
         template="reports/templates/flight.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:

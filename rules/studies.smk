@@ -111,3 +111,29 @@ rule study_seed000_ekf:
         "envs/pipeline.yaml"
     script:
         "scripts/study.py"
+
+
+rule study_pf:
+    input:
+        template="reports/templates/study.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        **study_outputs("pf", models=False),
+    params:
+        code_version=PIPELINE_VERSION,
+        study="pf",
+        config=config["studies"],
+        job={"seed": config["seed"]},
+        sections={"estimate": config["estimate"]},
+    log:
+        "results/logs/study_pf/study.log",
+    benchmark:
+        "results/benchmarks/study_pf/study.tsv"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/study.py"

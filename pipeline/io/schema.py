@@ -347,6 +347,29 @@ ESTIMATE_HMM: tuple[Column, ...] = (
     _f("V_best", "1", "", "online Viterbi confidence of the label"),
 )
 
+#: Columns of the seed-003 weave classifier output (``results/estimate/hmpf/<flight>.parquet``,
+#: issue 17): the particle mean ``x_*`` of the planar state [N, E, v_N, v_E, ω] (NED, ω > 0 a
+#: right turn), the upper triangle of its particle covariance ``P_<i>_<j>``, the class
+#: (mode) fractions after resampling ``mode_p_<S|L|R|W>``, the weave submode fractions
+#: ``submode_p_<CL|SL|CR|SR>``, N_eff before resampling, whether the step resampled, the
+#: detector's windowed weave fraction ``af`` and its flag. A new table: ``SCHEMA_VERSION`` stays.
+_HMPF_STATE = (("pos_n_m", "m"), ("pos_e_m", "m"), ("vel_n_mps", "m/s"), ("vel_e_mps", "m/s"),
+               ("omega_radps", "rad/s"))
+HMPF: tuple[Column, ...] = (
+    Column("t_ns", "int64", "ns"),
+    *(_f(f"x_{n}", u, "NED", "particle mean") for n, u in _HMPF_STATE),
+    *(_f(f"P_{i}_{j}", f"({_HMPF_STATE[i][1]})*({_HMPF_STATE[j][1]})", "NED",
+         f"covariance of x_{_HMPF_STATE[i][0]} and x_{_HMPF_STATE[j][0]}")
+      for i in range(5) for j in range(i, 5)),
+    *(_f(f"mode_p_{m}", "1", "", f"fraction of particles in mode {m} (straight/left/right/weave)")
+      for m in ("S", "L", "R", "W")),
+    *(_f(f"submode_p_{m}", "1", "", f"fraction of particles in weave submode {m}") for m in ("CL", "SL", "CR", "SR")),
+    _f("neff", "1", "", "effective sample size before resampling"),
+    Column("resampled", "bool", "", "", "the particles were resampled at this step"),
+    _f("af", "1", "", "detector: weave fraction averaged over the last detector_window steps"),
+    Column("weave_detected", "bool", "", "", "af >= tau after the start-up steps"),
+)
+
 #: Columns of a particle-filter output (issue 17, ``results/estimate/pf_jm/<flight>.parquet``,
 #: :mod:`pipeline.estimate.pf_run`): the weighted mean ``x_<c>`` of the horizontal PF state
 #: (:data:`pipeline.estimate.models.PF_STATE`: N/E position, velocity, turn rate, acceleration)
@@ -385,6 +408,7 @@ TABLES: dict[str, tuple[Column, ...]] = {
     "model_evaluation": MODEL_EVALUATION,
     "estimate": ESTIMATE,
     "estimate_hmm": ESTIMATE_HMM,
+    "hmpf": HMPF,
     "pf": PF,
 }
 

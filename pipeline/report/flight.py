@@ -112,8 +112,15 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
 
     Error norms per group (position, velocity, acceleration) for every estimator, against the
     reference its metadata names (``truth``: the ingest truth stream, ``state``: the
-    preprocessed state); the EKF+HMM mode timeline. A panel without data keeps a title that
-    says why (placeholder reason, no reference)."""
+    preprocessed state); the EKF+HMM mode timeline; the weave classifier's AF(k) with its τ
+    line (estimator ``hmpf``, issue 17). A panel without data keeps a title that says why
+    (placeholder reason, no reference)."""
+    estimates = dict(estimates)
+    hm = estimates.pop("hmpf", None)
+    if hm:
+        figs, facts = estimate_panels(estimates, truth=truth, state=state)
+        wf, wfa = weave_panels(hm)
+        return figs + wf, facts + wfa
     estimates = {e: p for e, p in estimates.items() if p and Path(p).exists()}
     # the particle filters (issue 17) have their own table (``pf``) and panels
     pf = {e: estimates.pop(e) for e in [e for e in estimates if e in PF_ESTIMATORS]}
@@ -191,6 +198,23 @@ def pf_panels(estimates: Mapping[str, str | os.PathLike],
                              + (f"; classifier {m.get('classifier')}" if m.get("classifier") else "")))
         figs.append((f"{label} mode fractions", plots.pf_mode_fractions(t, label)))
     return figs, facts
+
+
+def weave_panels(path: str | os.PathLike) -> tuple[list, list]:
+    """The hmpf (seed-003 weave classifier) panel and fact of a flight page (issue 17)."""
+    if not Path(path).exists():
+        return [], []
+    meta, df = read_table_meta(path), read_table(path)
+    if meta.get("status") == "failed" or not len(df):
+        return [(f"Weave classifier (no estimate: {meta.get('reason')})", None)], \
+            [("hmpf", f"placeholder: {meta.get('reason')}")]
+    first = meta.get("first_detection_t_ns")
+    fact = (f"{meta.get('n_steps')} steps of {meta.get('dt_s')} s, δ_max {meta.get('delta_max_m', 0):.0f} m, "
+            f"θ_max {meta.get('theta_max_rad', 0):.2f} rad ({meta.get('maxima_source')}), first weave "
+            + (f"at {first / 1e9:.0f} s" if first is not None else "never") +
+            f", flagged {100 * meta.get('fraction_flagged', 0):.0f} % of steps")
+    return [("Weave classifier AF(k)", plots.weave_af(df, meta.get("tau", 0.269), meta.get("startup_steps", 25)))], \
+        [("hmpf", fact)]
 
 
 def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLike, *,

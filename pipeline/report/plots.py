@@ -565,3 +565,27 @@ def pf_mode_fractions(df: pd.DataFrame | None, name: str = "PF") -> go.Figure | 
     fig.update_xaxes(title="t [s]")
     fig.update_layout(yaxis=dict(range=[0, 1], title="mode fraction"))
     return layout(fig, f"{name} mode fractions" + (" beside the classifier" if cls else ""), height=300)
+
+
+# -- issue 17: seed-003 weave classifier (hmpf) ---------------------------------------------------
+
+def weave_af(df: pd.DataFrame | None, tau: float = 0.269, startup_steps: int = 25) -> go.Figure | None:
+    """hmpf detector: the windowed weave fraction AF(k) with the τ line (start-up steps blanked),
+    the per-step weave fraction F(k) and the flagged steps."""
+    if df is None or not len(df):
+        return None
+    t = _t(df)
+    k = np.arange(len(df))
+    af = np.where(k >= startup_steps, df["af"].to_numpy(np.float64), np.nan)
+    fig = go.Figure()
+    fig.add_trace(go.Scatter(x=t, y=df["mode_p_W"], mode="lines", line=dict(width=1, color="#bbbbbb"),
+                             name="weave fraction F(k)"))
+    fig.add_trace(go.Scatter(x=t, y=af, mode="lines", line=dict(color="#d62728"), name="AF(k)"))
+    flag = df["weave_detected"].astype(bool).to_numpy()
+    if flag.any():
+        fig.add_trace(go.Scatter(x=t[flag], y=np.full(int(flag.sum()), 1.02), mode="markers",
+                                 marker=dict(size=4, color="#d62728"), name="weave declared"))
+    fig.add_hline(y=tau, line_dash="dash", annotation_text=f"τ = {tau:g}")
+    fig.update_xaxes(title="t [s]")
+    fig.update_yaxes(title="fraction", range=[0, 1.05])
+    return layout(fig, f"Weave classifier (hmpf): AF(k) ≥ τ on {100 * flag.mean():.0f} % of steps", height=280)

@@ -1,0 +1,226 @@
+"""The seed-003 weave classifier (``hmpf``) on real flights: one job per flight of
+``estimate.pf.hmpf.vehicles`` writes ``results/estimate/hmpf/<flight>.parquet`` (table ``hmpf``).
+
+The flight's preprocessed horizontal position (``state`` ``pos_n_m``, ``pos_e_m``) is sampled
+every T = ``dt_s`` (linear interpolation; a step inside a ``gap`` or without a finite position is
+a predict-only step) and filtered as a GPS track (σ = ``gps_sigma_m``) by
+:func:`pipeline.estimate.weave.hmpf_filter`.
+
+δ_max and θ_max (digest 003 §11 item 5): with ``from_train`` (default) they come from the
+labelled segments of the vehicle's **role-train** flights, never from the flight being
+classified (a train flight is classified with the maxima of the *other* train flights). On each
+training flight, resampled at T, a step whose course changes faster than
+``turn_threshold_radps`` is a curve step; inside each labelled segment the runs of straight
+steps give straight lengths δ and the runs of same-sign curve steps give turn angles |θ|. δ_max
+and θ_max are the largest of each — "larger than every observed weave segment", as the thesis
+set its final values (§4.3). With no other training flight (or ``from_train: false``) the
+config values are used; the output metadata says which.
+
+Failures are placeholders with the reason (no positions, fewer than two samples), never crashes.
+"""
+
+from __future__ import annotations
+
+import sys
+import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..config import validate_section
+from ..io import schema
+from ..io.parquet import read_table, write_table
+from .models import wrap_angle
+from .weave import MODES, SUBMODES, GpsSensor, HmpfConfig, HmpfTrack, hmpf_filter
+
+#: the output table (``pipeline.io.schema.HMPF``)
+TABLE = "hmpf"
+
+
+@dataclass(frozen=True)
+class HmpfResult:
+    """What :func:`run_hmpf` did: ``status`` ``ok`` or ``failed`` (placeholder), the reason, diagnostics."""
+
+    flight_id: str | None
+    status: str
+    error: str = ""
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+def _say(msg: str) -> None:
+    print(f"hmpf: {msg}", file=sys.stderr, flush=True)
+
+
+def sample_positions(state: pd.DataFrame, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(t_ns (T,), z (T, 2))``: the state's (N, E) every ``dt_s`` from its first finite sample;
+    steps inside a gap or between non-finite positions are NaN (predict-only)."""
+    t = state["t_ns"].to_numpy(np.int64)
+    p = state[["pos_n_m", "pos_e_m"]].to_numpy(np.float64)
+    ok = np.all(np.isfinite(p), axis=1)
+    if "gap" in state:
+        ok &= ~state["gap"].to_numpy(bool)
+    if ok.sum() < 2:
+        return np.empty(0, np.int64), np.empty((0, 2))
+    t, p = t[ok], p[ok]
+    step = int(round(dt_s * 1e9))
+    tk = np.arange(t[0], t[-1] + 1, step, dtype=np.int64)
+    z = np.stack([np.interp(tk, t, p[:, i]) for i in range(2)], axis=1)
+    # a step farther than 2 T from any finite sample is a gap: predict-only
+    j = np.clip(np.searchsorted(t, tk), 1, len(t) - 1)
+    near = np.minimum(np.abs(tk - t[j - 1]), np.abs(t[j] - tk)) <= 2 * step
+    z[~near] = np.nan
+    return tk, z
+
+
+def segment_runs(t_ns: np.ndarray, z: np.ndarray, dt_s: float, turn_threshold: float) -> tuple[list[float], list[float]]:
+    """Straight lengths (m) and |turn angles| (rad) of one resampled track (see the module docstring)."""
+    d = np.diff(z, axis=0)
+    ok = np.all(np.isfinite(d), axis=1)
+    length = np.hypot(d[:, 0], d[:, 1])
+    course = np.arctan2(d[:, 1], d[:, 0])
+    dchi = np.full(len(d), np.nan)
+    dchi[1:] = wrap_angle(course[1:] - course[:-1])
+    moving = length > 1e-6
+    dchi[1:][~(moving[1:] & moving[:-1])] = np.nan
+    kind = np.where(~np.isfinite(dchi) | ~ok, 0, np.where(np.abs(dchi) / dt_s > turn_threshold, np.sign(dchi), 2))
+    # 2 = straight, ±1 = curve by sign, 0 = unusable (breaks a run)
+    straights, turns = [], []
+    i = 0
+    while i < len(kind):
+        j = i
+        while j + 1 < len(kind) and kind[j + 1] == kind[i]:
+            j += 1
+        if kind[i] == 2:
+            straights.append(float(length[i:j + 1].sum()))
+        elif kind[i] != 0:
+            turns.append(float(abs(np.nansum(dchi[i:j + 1]))))
+        i = j + 1
+    return straights, turns
+
+
+def weave_maxima(states: Sequence[pd.DataFrame], segments: Sequence[pd.DataFrame], dt_s: float,
+                 turn_threshold: float) -> tuple[float, float, dict[str, Any]]:
+    """δ_max (m) and θ_max (rad) from training flights' labelled segments (module docstring).
+
+    Returns ``(delta_max, theta_max, diagnostics)``; NaN where no straight (turn) was found.
+    """
+    straights, turns, n_seg = [], [], 0
+    for st, sg in zip(states, segments):
+        for r in sg.itertuples():
+            if not str(r.label):
+                continue
+            part = st[(st["t_ns"] >= r.t_start_ns) & (st["t_ns"] <= r.t_end_ns)]
+            tk, z = sample_positions(part, dt_s)
+            if len(tk) < 3:
+                continue
+            n_seg += 1
+            s_, t_ = segment_runs(tk, z, dt_s, turn_threshold)
+            straights += s_
+            turns += t_
+    dm = max(straights) if straights else float("nan")
+    tm = max(turns) if turns else float("nan")
+    return dm, tm, {"n_segments": n_seg, "n_straights": len(straights), "n_turns": len(turns),
+                    "straight_median_m": float(np.median(straights)) if straights else None,
+                    "turn_median_rad": float(np.median(turns)) if turns else None}
+
+
+def hmpf_frame(t_ns: np.ndarray, track: HmpfTrack, run: int = 0) -> pd.DataFrame:
+    """The ``hmpf`` table of run ``run`` of ``track`` at times ``t_ns``."""
+    names = [c.name for c in schema.HMPF]
+    d: dict[str, Any] = {"t_ns": np.asarray(t_ns, np.int64)}
+    xs = [c for c in names if c.startswith("x_")]
+    for i, c in enumerate(xs):
+        d[c] = track.mean[run, :, i]
+    for i in range(5):
+        for j in range(i, 5):
+            d[f"P_{i}_{j}"] = track.cov[run, :, i, j]
+    for k, m in enumerate(MODES):
+        d[f"mode_p_{m}"] = track.mode_p[run, :, k]
+    for k, m in enumerate(SUBMODES):
+        d[f"submode_p_{m}"] = track.submode_p[run, :, k]
+    d.update(neff=track.neff[run], resampled=track.resampled[run], af=track.af[run],
+             weave_detected=track.weave_detected[run])
+    return pd.DataFrame(d)[names]
+
+
+def _placeholder(path, extra: dict) -> None:
+    write_table(schema.empty(TABLE), path, schema.columns(TABLE), name=TABLE, extra=extra)
+
+
+def _paths_of(inputs: Mapping, key: str) -> list[str]:
+    get = getattr(inputs, "get", None)
+    v = get(key) if callable(get) else None
+    if v is None:
+        return []
+    return [str(v)] if isinstance(v, (str, Path)) else [str(x) for x in v]
+
+
+def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, flight_id: str | None = None,
+             seed: int = 0, **_job) -> HmpfResult:
+    """Run the weave classifier over one flight and write ``outputs['hmpf']``.
+
+    Parameters
+    ----------
+    inputs : mapping
+        ``state`` (the flight's ``state`` table); optional ``train_states`` and
+        ``train_segments`` (lists, the vehicle's *other* role-train flights, in the same order).
+    outputs : mapping
+        ``hmpf``: the output Parquet path.
+    config : mapping or None
+        The ``estimate.pf.hmpf`` section.
+    flight_id : str, optional
+        For the messages and the generator (``[seed, crc32(flight_id)]``).
+    seed : int
+        Master seed.
+    """
+    out = outputs["hmpf"] if not hasattr(outputs, "hmpf") else outputs.hmpf
+    out = out[0] if isinstance(out, (list, tuple)) else out
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    sec = validate_section("estimate.pf.hmpf", config)
+    cfg = HmpfConfig.from_config(sec)
+    fid = flight_id or "flight"
+    state_path = _paths_of(inputs, "state")
+    state = read_table(state_path[0]) if state_path and Path(state_path[0]).exists() else None
+    if state is None or not {"pos_n_m", "pos_e_m", "t_ns"} <= set(state.columns):
+        reason = "no state table with positions"
+        _say(f"{fid}: placeholder ({reason})")
+        _placeholder(out, {"status": "failed", "reason": reason, "flight_id": fid})
+        return HmpfResult(flight_id, "failed", reason)
+    tk, z = sample_positions(state, cfg.dt_s)
+    if len(tk) < 2 or not np.all(np.isfinite(z[:2])):
+        reason = "fewer than two finite positions at the filter step"
+        _say(f"{fid}: placeholder ({reason})")
+        _placeholder(out, {"status": "failed", "reason": reason, "flight_id": fid})
+        return HmpfResult(flight_id, "failed", reason)
+
+    source, mx = "config", {}
+    tr_states, tr_segs = _paths_of(inputs, "train_states"), _paths_of(inputs, "train_segments")
+    if sec["from_train"] and tr_states:
+        dm, tm, mx = weave_maxima([read_table(p) for p in tr_states], [read_table(p) for p in tr_segs],
+                                  cfg.dt_s, float(sec["turn_threshold_radps"]))
+        if np.isfinite(dm) and np.isfinite(tm) and dm > 0 and tm > 0:
+            cfg = cfg.with_(delta_max_m=float(dm), theta_max_rad=float(tm))
+            source = "train"
+        else:
+            source = "config (no straight or turn found in the training flights' segments)"
+    elif sec["from_train"]:
+        source = "config (no other role-train flight of the vehicle)"
+    rng = np.random.default_rng([int(seed), zlib.crc32(fid.encode())])
+    track = hmpf_filter(z, GpsSensor(cfg.gps_sigma_m), cfg, rng)
+    df = hmpf_frame(tk, track)
+    flag = df["weave_detected"].to_numpy(bool)
+    first = int(tk[np.argmax(flag)]) if flag.any() else None
+    diag = {"status": "ok", "flight_id": fid, "n_steps": int(len(tk)), "n_predict_only": int((~np.isfinite(z).all(1)).sum()),
+            "delta_max_m": cfg.delta_max_m, "theta_max_rad": cfg.theta_max_rad, "maxima_source": source,
+            "train_flights": [Path(p).stem for p in tr_states], "maxima": mx, "n_particles": cfg.n_particles,
+            "dt_s": cfg.dt_s, "method": cfg.method, "tau": cfg.tau, "detector_window": cfg.detector_window,
+            "startup_steps": cfg.startup_steps, "first_detection_t_ns": first,
+            "fraction_flagged": float(flag.mean()), "n_reinit": int(track.n_reinit[0])}
+    write_table(df, out, schema.columns(TABLE), name=TABLE, extra=diag)
+    _say(f"{fid}: {len(tk)} steps, δ_max {cfg.delta_max_m:.0f} m, θ_max {cfg.theta_max_rad:.2f} rad ({source}); "
+         f"flagged {100 * flag.mean():.0f} % of steps")
+    return HmpfResult(flight_id, "ok", "", diag)

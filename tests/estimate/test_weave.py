@@ -1,0 +1,155 @@
+"""Seed-003 weave classifier (pipeline.estimate.weave) and its 2-D radar: the exact checks of
+issue 17, the conventions, and fast versions of the trends."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.config import ConfigError
+from pipeline.estimate.models import Radar2DModel, radar2d_range_criterion
+from pipeline.estimate.weave import (CL, CR, LEAF_SIGN, LEAVES, SL, SR, GpsSensor, HmpfConfig, RadarSensor, detector,
+                                     leaf_of, hmpf_filter, stationary_distribution, submode_matrix, switch_probability)
+from pipeline.simulate.ship import gps_measure, radar_measure, straight_track, weave_track
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return HmpfConfig.from_config({})
+
+
+def test_the_stationary_distribution_of_pi_m_4_2_is_the_thesis_value(cfg):
+    np.testing.assert_allclose(stationary_distribution(cfg.pi_m), [0.7870, 0.0278, 0.0278, 0.1574], atol=5e-5)
+    first = [[0.97, 0.01, 0.01, 0.01], [0.35, 0.65, 0, 0], [0.35, 0, 0.65, 0], [0.03, 0, 0, 0.97]]
+    np.testing.assert_allclose(stationary_distribution(first), [0.7192, 0.0205, 0.0205, 0.2397], atol=5e-5)
+
+
+def test_a_500_m_straight_fits_inside_three_bearing_sigmas_beyond_16665_m():
+    r = radar2d_range_criterion(500.0, 0.005)
+    assert round(r) == 16665
+    # at that range the straight's chord subtends exactly ±3σ_b
+    assert 2 * np.arctan(250.0 / r) == pytest.approx(2 * 3 * 0.005, rel=1e-4)
+
+
+@pytest.mark.parametrize("method", ["if_else", "min"])
+def test_the_submode_matrix_rows_are_stochastic_and_follow_the_cycle(cfg, method):
+    c = cfg.with_(method=method)
+    rng = np.random.default_rng(0)
+    P = submode_matrix(rng.uniform(0, 1500, 200), rng.uniform(-7, 7, 200), c)
+    assert P.shape == (200, 4, 4) and np.all(P >= 0)
+    np.testing.assert_allclose(P.sum(axis=-1), 1.0)
+    for sm in range(4):  # only stay or advance CL → SL → CR → SR → CL
+        others = [j for j in range(4) if j not in (sm, (sm + 1) % 4)]
+        assert np.all(P[:, sm, others] == 0)
+
+
+def test_if_else_switches_with_p1_below_and_p2_at_the_maximum_and_min_caps(cfg):
+    assert switch_probability([0, 499.9, 500, 900], 500, cfg).tolist() == [0.05, 0.05, 0.95, 0.95]
+    P = submode_matrix(10.0, 4.0, cfg)  # δ below δ_max, |θ| above π
+    assert P[CL, SL] == 0.95 and P[CR, SR] == 0.95 and P[SL, CR] == 0.05 and P[SR, CL] == 0.05
+    m = cfg.with_(method="min")
+    np.testing.assert_allclose(switch_probability([250, 500, 1000], 500, m), [0.5 ** 25, 0.95, 0.95])
+    assert switch_probability(-np.pi, np.pi, cfg) == 0.95  # |θ| is compared (digest A5)
+
+
+def test_left_leaves_turn_with_negative_omega_in_ned():
+    assert [LEAVES[i] for i in np.flatnonzero(LEAF_SIGN < 0)] == ["L", "CL"]
+    assert [LEAVES[i] for i in np.flatnonzero(LEAF_SIGN > 0)] == ["R", "CR"]
+    assert leaf_of([0, 1, 2, 3, 3, 3, 3], [2, 0, 0, CL, SL, CR, SR]).tolist() == [0, 1, 2, 3, 4, 5, 6]
+
+
+def test_the_detector_averages_80_steps_and_ignores_the_start_up():
+    F = np.zeros(200)
+    F[100:130] = 0.8
+    af, flag = detector(F, 80, 0.269, 25)
+    assert af[129] == pytest.approx(0.8 * 30 / 80) and af[209 - 100] == pytest.approx(0.8 * 10 / 80)
+    assert flag[129] and not flag[100] and np.flatnonzero(flag)[0] == 126
+    af, flag = detector(np.full(50, 0.5), 80, 0.269, 25)
+    np.testing.assert_allclose(af, 0.5)   # (1/k) Σ F before k = N
+    assert not flag[:25].any() and flag[25:].all()
+
+
+def test_the_2d_radar_uses_bearing_from_north_toward_east_and_closing_doppler():
+    r = Radar2DModel()
+    z = r.h(np.array([[100.0, 0, -2, 0], [0, 100, 0, 1], [-100, -1e-9, 0, 0]]))
+    np.testing.assert_allclose(z[:2], [[100, 0, 2], [100, np.pi / 2, -1]])
+    assert abs(abs(z[2, 1]) - np.pi) < 1e-9
+    cols = r.to_stream(z)
+    np.testing.assert_allclose([cols["dcos_u"][1], cols["dcos_v"][1], cols["range_rate_mps"][0]], [0, 1, -2], atol=1e-12)
+    np.testing.assert_allclose(r.from_stream(cols), z, atol=1e-12)
+
+
+def test_the_bearing_residual_is_wrapped_so_a_target_due_south_scores_normally():
+    r = Radar2DModel()
+    x = np.array([-1000.0, 0.001, 0, 0])   # bearing just under +π
+    z = np.array([1000.0, -np.pi + 0.001, 0.0])  # measured just over −π
+    assert abs(r.residual(z, r.h(x))[1]) < 0.01
+    assert r.log_likelihood(z, x[None]) == pytest.approx(-0.5 * ((1e-3 - 1e-6) / 0.005) ** 2, abs=1e-3)
+
+
+def test_bad_settings_fail_with_one_line_naming_the_key():
+    with pytest.raises(ConfigError, match="method"):
+        HmpfConfig.from_config({"method": "max"})
+    with pytest.raises(ValueError, match="pi_m"):
+        HmpfConfig.from_config({"pi_m": [[0.5, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 0.9]]})
+
+
+def test_the_filter_is_seeded_and_its_fractions_are_distributions(cfg):
+    tr = straight_track(40)
+    z = gps_measure(tr, 2, np.random.default_rng(1))
+    c = cfg.with_(n_particles=300)
+    a = hmpf_filter(z, GpsSensor(), c, np.random.default_rng(5))
+    b = hmpf_filter(z, GpsSensor(), c, np.random.default_rng(5))
+    np.testing.assert_array_equal(a.mean, b.mean)
+    np.testing.assert_allclose(a.mode_p.sum(axis=-1), 1.0)
+    np.testing.assert_allclose(a.submode_p.sum(axis=-1), a.mode_p[..., 3])
+    assert a.resampled[:, 1:].all() and np.all(a.neff[:, 1:] <= 300)
+    # class probability = particle fraction: multiples of 1/N after resampling every step
+    np.testing.assert_allclose(a.mode_p[:, 1:] * 300, np.round(a.mode_p[:, 1:] * 300), atol=1e-6)
+
+
+def test_nan_measurements_are_predict_only_steps_and_the_track_keeps_going(cfg):
+    tr = straight_track(40)
+    z = gps_measure(tr, 1, np.random.default_rng(2))
+    z[0, 10:15] = np.nan
+    out = hmpf_filter(z, GpsSensor(), cfg.with_(n_particles=300), np.random.default_rng(0))
+    assert np.all(np.isfinite(out.mean)) and out.n_reinit[0] == 0
+    assert np.abs(out.mean[0, -1, :2] - tr.state[-1, :2]).max() < 5
+
+
+def test_impossible_measurements_re_initialise_around_z_and_are_counted(cfg):
+    tr = straight_track(30)
+    z = gps_measure(tr, 1, np.random.default_rng(2))
+    z[0, 20:] += 1e4   # a 10 km jump: every weight underflows
+    out = hmpf_filter(z, GpsSensor(), cfg.with_(n_particles=200), np.random.default_rng(0))
+    assert out.n_reinit[0] >= 1
+    assert np.abs(out.mean[0, -1, :2] - z[0, -1]).max() < 20
+
+
+def test_the_turn_sign_guard_zeroes_curve_particles_whose_omega_changed_sign(cfg):
+    # a large α random walk makes ω cross zero often; the guard must catch those particles
+    tr = straight_track(30)
+    z = gps_measure(tr, 1, np.random.default_rng(3))
+    out = hmpf_filter(z, GpsSensor(), cfg.with_(n_particles=400, sigma_alpha_radps=0.3), np.random.default_rng(0))
+    assert out.n_guarded[0, 1:].sum() > 0
+
+
+def test_fast_trend_the_weave_raises_the_weave_fraction_over_a_straight(cfg):
+    v = 1.0
+    wv, st = weave_track(n_turns=4, turn_steps=15, straight_steps=20), straight_track(160)
+    c = cfg.with_(n_particles=800, delta_max_m=1.2 * np.sqrt(2) * 20 * v, theta_max_rad=1.2 * 1.5)
+    rng = np.random.default_rng(11)
+    ow = hmpf_filter(gps_measure(wv, 3, rng), GpsSensor(), c, rng)
+    os_ = hmpf_filter(gps_measure(st, 3, rng), GpsSensor(), c, rng)
+    w_in = ow.mode_p[:, wv.weave, 3].mean()
+    w_st = os_.mode_p[:, 25:, 3].mean()
+    assert w_in > w_st + 0.1, (w_in, w_st)
+    assert os_.mode_p[:, 25:, 0].mean() > 0.6
+
+
+def test_fast_trend_the_radar_filter_tracks_the_weave_near_the_site(cfg):
+    wv = weave_track(n_turns=3)
+    rng = np.random.default_rng(12)
+    out = hmpf_filter(radar_measure(wv, 2, rng), RadarSensor(), cfg.with_(n_particles=600), rng)
+    e = out.mean[:, 25:, :2] - wv.state[None, 25:, :2]
+    assert np.sqrt(np.mean(e ** 2)) < 8.0

@@ -65,17 +65,40 @@ def _ned_track(log, state: pd.DataFrame | None) -> pd.DataFrame | None:
     return None
 
 
-def _body_rates(state: pd.DataFrame | None, imu: pd.DataFrame) -> pd.DataFrame | None:
-    """Body rates p, q, r: the state's (mount-corrected) where preprocessed, else the first
-    gyro's (``gyr_{x,y,z}_radps``, FRD convention)."""
+#: frame notes of the flight page's titles: body-frame panels come from the preprocessed state
+#: (mount applied); raw streams keep the frame the sensor or the autopilot logged them in
+STATE_FRAME = "state: body FRD, mount-corrected"
+SENSOR_FRAME = "raw, sensor frame"
+
+
+def _body_rates(state: pd.DataFrame | None, imu: pd.DataFrame) -> tuple[pd.DataFrame | None, str]:
+    """Body rates p, q, r and the frame they are in: the state's (mount-corrected FRD) where
+    preprocessed, else the first gyro's ``gyr_{x,y,z}_radps`` as logged (sensor frame)."""
     cols = ["p_radps", "q_radps", "r_radps"]
     if state is not None and len(state) and set(cols) <= set(state.columns) and state["p_radps"].notna().any():
-        return state[["t_ns", *cols]]
+        return state[["t_ns", *cols]], STATE_FRAME
     g = _first_instance(imu)
     if not len(g):
-        return None
+        return None, SENSOR_FRAME
     return pd.DataFrame({"t_ns": g["t_ns"].to_numpy(), **{c: g[f"gyr_{a}_radps"].to_numpy()
-                                                          for c, a in zip(cols, "xyz")}})
+                                                          for c, a in zip(cols, "xyz")}}), SENSOR_FRAME
+
+
+def attitude_source(state: pd.DataFrame | None, log) -> tuple[pd.DataFrame | None, tuple | None, str]:
+    """The attitude a flight page plots: ``(rows with t_ns, (roll, pitch, yaw) [rad], frame note)``.
+
+    The preprocessed state's ZYX angles of the mount-corrected body (FRD -> NED) where the
+    flight has a state with attitude; else the ``attitude`` stream as logged, whose body may be
+    the sensor's (the Husky's IMU orientation is the rotated ``imu_link``: roll ≈ +90° at rest)."""
+    cols = ["roll_rad", "pitch_rad", "yaw_rad"]
+    if state is not None and len(state) and set(cols) <= set(state.columns) and state["roll_rad"].notna().any():
+        s = state.dropna(subset=cols)
+        return s[["t_ns"]], tuple(s[c].to_numpy(np.float64) for c in cols), STATE_FRAME
+    att = _first_instance(log["attitude"]).dropna(subset=["q_w"])
+    if not len(att):
+        return None, None, SENSOR_FRAME
+    return att[["t_ns"]], quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy()), \
+        "attitude stream as logged, not mount-corrected"
 
 
 def _velocity(state: pd.DataFrame | None, log) -> pd.DataFrame | None:
@@ -213,17 +236,17 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         else:
             timelines[m] = None
 
-    att = _first_instance(log["attitude"]).dropna(subset=["q_w"])
-    euler = quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy()) if len(att) else None
+    att, euler, att_frame = attitude_source(st, log)
+    rates, rates_frame = _body_rates(st, log["imu"])
     imu = log["imu"]
     figs = [
         ("3-D path", plots.path_3d(ned)),
         ("Ground track", plots.ground_track(ned)),
         ("Altitude", plots.altitude(alt_series, calib_pts)),
-        ("Attitude", plots.attitude(att, euler, log["setpoint"])),
-        ("Body rates vs setpoint", plots.with_setpoint(
-            _body_rates(st, imu), ["p_radps", "q_radps", "r_radps"], log["setpoint"],
-            ["p_radps", "q_radps", "r_radps"], "Body rates vs setpoint (FRD)", "body rate [rad/s]")),
+        (f"Attitude ({att_frame})", plots.attitude(att, euler, log["setpoint"], frame=att_frame)),
+        (f"Body rates vs setpoint ({rates_frame})", plots.with_setpoint(
+            rates, ["p_radps", "q_radps", "r_radps"], log["setpoint"],
+            ["p_radps", "q_radps", "r_radps"], f"Body rates vs setpoint ({rates_frame})", "body rate [rad/s]")),
         ("Velocity", plots.with_setpoint(
             _velocity(st, log), [f"vel_{a}_mps" for a in "ned"], log["setpoint"],
             [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),

@@ -207,9 +207,10 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
 
 
 def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-             setpoint: pd.DataFrame | None = None) -> go.Figure | None:
+             setpoint: pd.DataFrame | None = None, frame: str = "") -> go.Figure | None:
     """Roll, pitch, yaw in degrees (ZYX, for display; yaw unwrapped) against time, with the
-    ``setpoint`` stream's attitude (dashed, same colour per angle) where it has one."""
+    ``setpoint`` stream's attitude (dashed, same colour per angle) where it has one; ``frame``
+    (e.g. "state: body FRD, mount-corrected") goes into the title."""
     if att is None or not len(att) or euler is None:
         return None
     fig = go.Figure()
@@ -233,8 +234,9 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
                                      line=dict(color=colour(name), dash="dash")))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title="angle [°]")
-    return layout(fig, "Attitude vs setpoint (ZYX Euler, yaw unwrapped)" if len(fig.data) > 3
-                  else "Attitude (ZYX Euler, yaw unwrapped)")
+    where = f"{frame}; " if frame else ""
+    return layout(fig, f"Attitude vs setpoint ({where}ZYX Euler, yaw unwrapped)" if len(fig.data) > 3
+                  else f"Attitude ({where}ZYX Euler, yaw unwrapped)")
 
 
 def _first(df: pd.DataFrame | None) -> pd.DataFrame | None:

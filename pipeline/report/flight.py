@@ -243,8 +243,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("3-D path", plots.path_3d(ned)),
         ("Ground track", plots.ground_track(ned)),
         ("Altitude", plots.altitude(alt_series, calib_pts)),
-        (f"Attitude ({att_frame})", plots.attitude(att, euler, log["setpoint"], frame=att_frame)),
-        (f"Body rates vs setpoint ({rates_frame})", plots.with_setpoint(
+        ("Attitude", plots.attitude(att, euler, log["setpoint"], frame=att_frame)),
+        ("Body rates vs setpoint", plots.with_setpoint(
             rates, ["p_radps", "q_radps", "r_radps"], log["setpoint"],
             ["p_radps", "q_radps", "r_radps"], f"Body rates vs setpoint ({rates_frame})", "body rate [rad/s]")),
         ("Velocity", plots.with_setpoint(

@@ -41,7 +41,10 @@ rule flight_report:
     params:
         code_version=PIPELINE_VERSION,
         config={},
-        job={"index": "results/index.html"},
+        job=lambda wc: {
+            "index": "results/index.html",
+            "vehicle": flights.loc[wc.flight, "vehicle"],
+        },
     log:
         "results/logs/flight_report/{flight}.log",
     benchmark:

@@ -353,6 +353,57 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
     return layout(fig, title)
 
 
+def spectrogram(imu: pd.DataFrame | None, cols: list[str], title: str, unit: str, *,
+                nperseg: int = 128, max_columns: int = 200) -> go.Figure | None:
+    """Spectrogram of the vector ``cols`` of the first instance of ``imu`` against flight time.
+
+    :func:`scipy.signal.spectrogram` (Hann windows of ``nperseg`` samples, half overlap, mean
+    removed per window) per axis; the vector's PSD is the sum over the axes (the trace of the
+    cross-spectral matrix), shown in dB, ``10 log10(Σ PSD)``. For display, consecutive windows
+    are averaged into at most ``max_columns`` time columns (Welch's estimate per column), so a
+    long log keeps every sample in the estimate but a bounded page. The sample rate is taken
+    from the median time step (sensor logs jitter). ``None`` with fewer than ``nperseg`` samples."""
+    from scipy.signal import spectrogram as _spectrogram
+
+    i = _first(imu)
+    cols = [c for c in cols if i is not None and c in i and i[c].notna().any()]
+    if not cols:
+        return None
+    i = i.dropna(subset=cols)
+    if len(i) < nperseg:
+        return None
+    t_ns = i["t_ns"].to_numpy(np.int64)
+    dt = np.median(np.diff(t_ns)) * 1e-9
+    if not np.isfinite(dt) or dt <= 0:
+        return None
+    fs = 1.0 / dt
+    total = None
+    for c in cols:
+        f, tc, sxx = _spectrogram(i[c].to_numpy(np.float64), fs=fs, window="hann", nperseg=nperseg,
+                                   noverlap=nperseg // 2)
+        total = sxx if total is None else total + sxx
+    k = -(-total.shape[1] // max_columns)           # windows per column (ceil)
+    n_col = -(-total.shape[1] // k)
+    cols_psd = np.stack([total[:, j * k:(j + 1) * k].mean(axis=1) for j in range(n_col)], axis=1)
+    t_col = np.array([tc[j * k:(j + 1) * k].mean() for j in range(n_col)]) + t_ns[0] * 1e-9
+    z = (10.0 * np.log10(np.maximum(cols_psd, 1e-30))).astype(np.float32)
+    fig = go.Figure(go.Heatmap(x=t_col, y=f, z=z, colorscale="Viridis", name="PSD",
+                               colorbar=dict(title=f"dB re ({unit})²/Hz")))
+    fig.update_xaxes(title="t [s]")
+    fig.update_yaxes(title="frequency [Hz]")
+    return layout(fig, f"{title} (Σ over axes, {nperseg}-sample windows, fs = {fs:.0f} Hz)", height=320)
+
+
+def is_time_panel(fig: go.Figure | None) -> bool:
+    """Whether ``fig`` is drawn against flight time (its x axis is ``t [s]``): time panels get
+    the flight-mode bands and share the page's linked time axis; a 3-D path, a ground track or a
+    spectrum do not."""
+    if fig is None:
+        return False
+    t = fig.layout.xaxis.title.text
+    return t == "t [s]"
+
+
 def battery(bat: pd.DataFrame | None) -> go.Figure | None:
     """Battery voltage (left axis), current and remaining capacity in % (right axis)."""
     b = _first(bat)

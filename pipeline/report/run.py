@@ -36,14 +36,15 @@ def run_plotly_js(inputs, outputs, config: Mapping | None = None) -> None:
     write_plotly_js(declared(outputs, "js"))
 
 
-def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
+def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: str,
+                      vehicle: str | None = None) -> None:
     """One flight's page ``outputs.page``.
 
     ``inputs``: ``meta`` (ingest ``meta.json``, its streams beside it), ``state``, ``segments``,
     ``calibration``, ``classified`` (``results/classify/<model_set>/<flight>.parquet`` for each
     model set that classifies the flight), ``estimates`` (``results/estimate/<estimator>/<flight>.parquet``,
     none when the flight is not estimated), ``template``, ``plotly``. ``index``: the path of the
-    index page, for the back link.
+    index page, for the back link; ``vehicle``: the manifest's, for the summary table.
     """
     page = declared(outputs, "page")
     build_flight_report(Path(declared(inputs, "meta")).parent, page, template=declared(inputs, "template"),
@@ -51,7 +52,8 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
                         state=declared(inputs, "state"), segments=declared(inputs, "segments"),
                         calibration=declared(inputs, "calibration"),
                         classified={_model_set_of(p): p for p in declared_list(inputs, "classified")},
-                        estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")})
+                        estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")},
+                        vehicle=vehicle)
 
 
 def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:

@@ -65,24 +65,22 @@ rule flight_report:
 # one comparison page per vehicle of the manifest (its flights' differing parameters and
 # overlays on a time-from-takeoff axis), linked from the index
 VEHICLES = sorted(set(flights.loc[FLIGHTS, "vehicle"])) if FLIGHTS else []
-
-
-def vehicle_flights(vehicle):
-    return [f for f in FLIGHTS if flights.loc[f, "vehicle"] == vehicle]
-
-
-def compare_inputs(wildcards):
-    fl = vehicle_flights(wildcards.vehicle)
-    return {
-        "metas": [f"results/ingest/{f}/meta.json" for f in fl],
-        "params": [f"results/ingest/{f}/params.parquet" for f in fl],
-        "states": [f"results/state/{f}.parquet" for f in fl],
-    }
+VEHICLE_FLIGHTS = {
+    v: [f for f in FLIGHTS if flights.loc[f, "vehicle"] == v] for v in VEHICLES
+}
 
 
 rule compare_report:
     input:
-        unpack(compare_inputs),
+        metas=lambda wc: [
+            f"results/ingest/{f}/meta.json" for f in VEHICLE_FLIGHTS[wc.vehicle]
+        ],
+        params=lambda wc: [
+            f"results/ingest/{f}/params.parquet" for f in VEHICLE_FLIGHTS[wc.vehicle]
+        ],
+        states=lambda wc: [
+            f"results/state/{f}.parquet" for f in VEHICLE_FLIGHTS[wc.vehicle]
+        ],
         template="reports/templates/compare.html.j2",
         linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
@@ -95,7 +93,7 @@ rule compare_report:
         config={},
         job=lambda wc: {
             "vehicle": wc.vehicle,
-            "flights": vehicle_flights(wc.vehicle),
+            "flights": VEHICLE_FLIGHTS[wc.vehicle],
             "index": "results/index.html",
         },
     log:

@@ -2,10 +2,10 @@
 open request): the parameters that differ between the flights, and altitude, speed and attitude
 of every flight overlaid on one time-from-takeoff axis.
 
-Takeoff (:func:`takeoff_t_ns`) is the first sample of the preprocessed state at which the
-vehicle is more than :data:`TAKEOFF_HEIGHT_M` above its starting height or moves faster than
-:data:`TAKEOFF_SPEED_MPS` horizontally; a flight that does neither is aligned at its first
-sample. The page says so above the plots.
+Takeoff (:func:`takeoff_t_ns`) is the first sample of the preprocessed state from which the
+vehicle stays more than :data:`TAKEOFF_HEIGHT_M` above its starting height, or faster than
+:data:`TAKEOFF_SPEED_MPS` horizontally, for :data:`TAKEOFF_HOLD_S`; a flight that does
+neither is aligned at its first sample. The page says so above the plots.
 """
 
 from __future__ import annotations
@@ -29,12 +29,19 @@ from .pages import figure_divs, render, write_page
 TAKEOFF_HEIGHT_M = 2.0
 #: ... or this fast horizontally [m/s], whichever comes first
 TAKEOFF_SPEED_MPS = 2.0
+#: ... held for this long [s]
+TAKEOFF_HOLD_S = 1.0
 #: display points per flight and panel (min/max decimation; the page holds many flights)
 POINTS_PER_TRACE = 1500
 
-TAKEOFF_RULE = (f"t = 0 is each flight's takeoff: the first sample of its preprocessed state more than "
-                f"{TAKEOFF_HEIGHT_M:g} m above its starting height or faster than {TAKEOFF_SPEED_MPS:g} m/s "
-                f"horizontally (a flight that does neither starts at its first sample)")
+#: flight colours of the overlays, in page order
+FLIGHT_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+                  "#bcbd22", "#17becf")
+
+TAKEOFF_RULE = (f"t = 0 is each flight's takeoff: the first sample of its preprocessed state from which it "
+                f"stays more than {TAKEOFF_HEIGHT_M:g} m above its starting height, or faster than "
+                f"{TAKEOFF_SPEED_MPS:g} m/s horizontally, for {TAKEOFF_HOLD_S:g} s (a flight that does "
+                f"neither starts at its first sample)")
 
 
 def takeoff_t_ns(state: pd.DataFrame) -> tuple[int | None, str]:
@@ -42,20 +49,32 @@ def takeoff_t_ns(state: pd.DataFrame) -> tuple[int | None, str]:
     ``"first sample"``); ``(None, "no state")`` for an empty table.
 
     Height above start is ``d₀ − d`` with ``d₀`` the first finite ``pos_d_m``; horizontal speed
-    ``√(v_n² + v_e²)``."""
+    ``√(v_n² + v_e²)``; a condition counts from sample k when it holds at samples
+    k … k + n − 1, n = :data:`TAKEOFF_HOLD_S` / median step."""
     if state is None or not len(state):
         return None, "no state"
     t = state["t_ns"].to_numpy(np.int64)
     d = state["pos_d_m"].to_numpy(np.float64)
+    # a condition counts from a sample when it holds for the next TAKEOFF_HOLD_S (noisy GPS
+    # heights and differentiated speeds cross a threshold for a sample or two on the ground)
+    n_hold = 1
+    if len(t) > 1:
+        dt = np.median(np.diff(t)) * 1e-9
+        n_hold = max(1, int(round(TAKEOFF_HOLD_S / dt))) if dt > 0 else 1
+
+    def held(c: np.ndarray) -> np.ndarray:
+        run = np.convolve(c.astype(np.int64), np.ones(n_hold, np.int64))[n_hold - 1:]
+        return run == n_hold if len(c) >= n_hold else np.zeros(len(c), bool)
+
     hit = np.zeros(len(t), bool)
     why = np.full(len(t), "", object)
     fin = np.isfinite(d)
     if fin.any():
-        up = (d[fin][0] - d) > TAKEOFF_HEIGHT_M
+        up = held((d[fin][0] - d) > TAKEOFF_HEIGHT_M)
         hit |= up
         why[up] = "height"
     v = np.hypot(state["vel_n_mps"].to_numpy(np.float64), state["vel_e_mps"].to_numpy(np.float64))
-    fast = v > TAKEOFF_SPEED_MPS
+    fast = held(v > TAKEOFF_SPEED_MPS)
     why[fast & ~hit] = "speed"
     hit |= fast
     if hit.any():
@@ -93,8 +112,9 @@ def _overlay(tracks: Mapping[str, pd.DataFrame], col: str, title: str, ylabel: s
         if d is None or col not in d or not d[col].notna().any():
             continue
         dd = plots.decimate(d[["t_s", col]].dropna(), POINTS_PER_TRACE, cols=[col])
+        # one colour per flight, by its place on the page (the same on every panel)
         fig.add_trace(go.Scatter(x=dd["t_s"], y=dd[col], mode="lines", name=f,
-                                 line=dict(color=plots.label_colour(f"flight {f}"))))
+                                 line=dict(color=FLIGHT_COLOURS[i % len(FLIGHT_COLOURS)])))
     if not fig.data:
         return None
     fig.update_xaxes(title="t from takeoff [s]")
@@ -125,7 +145,9 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
             rows.append(row)
             continue
         if Path(p).exists():
-            per_flight[f] = last_params(read_table(p, schema.columns("params")))
+            logged = last_params(read_table(p, schema.columns("params")))
+            if logged:   # a flight without a parameter dump has nothing to compare
+                per_flight[f] = logged
         st = read_table(s) if Path(s).exists() else None
         if st is None or not len(st):
             err = read_table_meta(s).get("error") if Path(s).exists() else "no state table"

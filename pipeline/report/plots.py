@@ -145,6 +145,18 @@ def layout(fig: go.Figure, title: str, **kw) -> go.Figure:
     # plain numbers on every axis: no SI-prefixed "−0.38k" ticks on confidence or log axes
     fig.update_xaxes(exponentformat="none")
     fig.update_yaxes(exponentformat="none")
+    return compact(fig)
+
+
+def compact(fig: go.Figure) -> go.Figure:
+    """The time (x) arrays of ``fig``'s traces as float32 (plotly writes arrays as base64 typed
+    arrays): a quarter of a flight page's bytes saved, 7 significant digits (1 ms at t = 10⁴ s)
+    for where a point is drawn; the values (y) keep every digit for the hover. Returns ``fig``."""
+    for tr in fig.data:
+        for a in ("x",):
+            v = getattr(tr, a, None)
+            if isinstance(v, np.ndarray) and v.dtype == np.float64:
+                setattr(tr, a, v.astype(np.float32))
     return fig
 
 
@@ -214,9 +226,11 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
     if att is None or not len(att) or euler is None:
         return None
     fig = go.Figure()
-    t = _t(att)
+    yaw_deg = None
     for name, a in zip(("roll", "pitch", "yaw"), euler):
         v = np.degrees(np.unwrap(a) if name == "yaw" else a)
+        if name == "yaw":
+            yaw_deg = v
         d = decimate(pd.DataFrame({"t_ns": att["t_ns"].to_numpy(), "v": v}))
         fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} [°]",
                                  line=dict(color=colour(name))))
@@ -228,8 +242,12 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
             if not len(ok):
                 continue
             a = ok[c].to_numpy(np.float64)
-            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(),
-                                       "v": np.degrees(np.unwrap(a) if name == "yaw" else a)}))
+            v = np.degrees(np.unwrap(a) if name == "yaw" else a)
+            if name == "yaw" and yaw_deg is not None and len(yaw_deg) and np.isfinite(yaw_deg).any():
+                # both unwrapped on their own: start the setpoint on the measured yaw's turn
+                y0 = np.interp(ok["t_ns"].iloc[0], att["t_ns"].to_numpy(), yaw_deg)
+                v = v + 360.0 * np.round((y0 - v[0]) / 360.0)
+            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(), "v": v}))
             fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} setpoint [°]",
                                      line=dict(color=colour(name), dash="dash")))
     fig.update_xaxes(title="t [s]")

@@ -35,6 +35,7 @@ def test_takeoff_is_the_first_sample_above_the_height_or_the_speed_threshold():
     # d0 - d > 2 m first at 0.5 (k - 30) > 2, k = 35
     assert (t0, how) == (35 * 10**8, "height")
     st.loc[20:, "vel_e_mps"] = 2.5
+    st.loc[5, "vel_e_mps"] = 9.0              # one noisy sample on the ground: not a takeoff
     assert compare.takeoff_t_ns(st) == (20 * 10**8, "speed")
     still = _state(10, climb_at=99)
     assert compare.takeoff_t_ns(still) == (0, "first sample")

@@ -46,7 +46,7 @@ METRICS: tuple[Metric, ...] = (
     Metric("V", "confidence",
            "V_j = log10 Σ_{i≠j} exp(LL_i − LL_j) for the best model j: below −1 the classifier names j, "
            "otherwise it says 'unknown'.",
-           "seed 000 §5 (thesis §3.4, Lee & Xu)", r"V_best|confidence V|V \[log10\]"),
+           "seed 000 §5 (thesis §3.4, Lee & Xu)", r"V_best|confidence|V \[log10\]"),
     Metric("LL", "log-likelihood",
            "log P(O_1:t | model) from the scaled forward pass, cumulative from the first sample; "
            "training maximises its sum over the training sequences (Baum–Welch).",

@@ -365,7 +365,7 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
         for c in ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2"):
             fig.add_trace(go.Scatter(x=_t(r), y=r[c], mode="lines", name=label(c).replace(" [", " RMS ["),
                                      line=dict(color=colour(c))))
-        title, ylab = "Vibration (accelerometer RMS about the mean, 1 s windows)", "RMS [m/s²]"
+        title, ylab = "Vibration (accelerometer RMS about the mean, 1 s windows; raw, sensor frame)", "RMS [m/s²]"
     fig.update_xaxes(title="t [s]")
     fig.layout.yaxis.title = ylab
     return layout(fig, title)

@@ -1,5 +1,7 @@
 # Reports: one page per flight and per model set, the index over all of them, one local copy of
 # plotly.js.
+import re
+
 
 
 rule plotly_js:
@@ -30,6 +32,7 @@ rule flight_report:
         classified=flight_classified,
         estimates=lambda wc: flight_estimates(wc) + flight_hmpf(wc),
         template="reports/templates/flight.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         page=report(
@@ -41,7 +44,10 @@ rule flight_report:
     params:
         code_version=PIPELINE_VERSION,
         config={},
-        job={"index": "results/index.html"},
+        job=lambda wc: {
+            "index": "results/index.html",
+            "vehicle": flights.loc[wc.flight, "vehicle"],
+        },
     log:
         "results/logs/flight_report/{flight}.log",
     benchmark:
@@ -54,6 +60,54 @@ rule flight_report:
         "envs/pipeline.yaml"
     script:
         "scripts/flight_report.py"
+
+
+# one comparison page per vehicle of the manifest (its flights' differing parameters and
+# overlays on a time-from-takeoff axis), linked from the index
+VEHICLES = sorted(set(flights.loc[FLIGHTS, "vehicle"])) if FLIGHTS else []
+VEHICLE_FLIGHTS = {
+    v: [f for f in FLIGHTS if flights.loc[f, "vehicle"] == v] for v in VEHICLES
+}
+
+
+rule compare_report:
+    input:
+        metas=lambda wc: [
+            f"results/ingest/{f}/meta.json" for f in VEHICLE_FLIGHTS[wc.vehicle]
+        ],
+        params=lambda wc: [
+            f"results/ingest/{f}/params.parquet" for f in VEHICLE_FLIGHTS[wc.vehicle]
+        ],
+        states=lambda wc: [
+            f"results/state/{f}.parquet" for f in VEHICLE_FLIGHTS[wc.vehicle]
+        ],
+        template="reports/templates/compare.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        page="results/report/compare/{vehicle}.html",
+    wildcard_constraints:
+        vehicle="|".join(re.escape(v) for v in VEHICLES) if VEHICLES else "NO_VEHICLES",
+    params:
+        code_version=PIPELINE_VERSION,
+        config={},
+        job=lambda wc: {
+            "vehicle": wc.vehicle,
+            "flights": VEHICLE_FLIGHTS[wc.vehicle],
+            "index": "results/index.html",
+        },
+    log:
+        "results/logs/compare_report/{vehicle}.log",
+    benchmark:
+        "results/benchmarks/compare_report/{vehicle}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/compare_report.py"
 
 
 rule model_report:
@@ -95,6 +149,7 @@ rule report_index:
         segments=expand("results/segments/{flight}.parquet", flight=FLIGHTS),
         classified=classified_paths(),
         models=expand("results/report/models/{model_set}.html", model_set=MODEL_SETS),
+        compare=expand("results/report/compare/{vehicle}.html", vehicle=VEHICLES),
     output:
         index=report(
             "results/index.html", caption="../reports/captions/index.rst", category="Index"
@@ -102,7 +157,13 @@ rule report_index:
     params:
         code_version=PIPELINE_VERSION,
         config={},
-        job={"flights": FLIGHTS, "model_sets": list(MODEL_SETS), "studies": list(STUDY_NAMES)},
+        job={
+            "flights": FLIGHTS,
+            "model_sets": list(MODEL_SETS),
+            "studies": list(STUDY_NAMES),
+            "vehicles": {f: flights.loc[f, "vehicle"] for f in FLIGHTS},
+            "skipped": dict(SKIPPED),
+        },
     log:
         "results/logs/report_index/index.log",
     benchmark:

@@ -19,6 +19,7 @@ from ..estimate.pf_run import classifier_softmax
 from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
+from .flight_summary import summary_rows
 from .pages import figure_divs, render, write_page
 from . import plots
 
@@ -66,17 +67,40 @@ def _ned_track(log, state: pd.DataFrame | None) -> pd.DataFrame | None:
     return None
 
 
-def _body_rates(state: pd.DataFrame | None, imu: pd.DataFrame) -> pd.DataFrame | None:
-    """Body rates p, q, r: the state's (mount-corrected) where preprocessed, else the first
-    gyro's (``gyr_{x,y,z}_radps``, FRD convention)."""
+#: frame notes of the flight page's titles: body-frame panels come from the preprocessed state
+#: (mount applied); raw streams keep the frame the sensor or the autopilot logged them in
+STATE_FRAME = "state: body FRD, mount-corrected"
+SENSOR_FRAME = "raw, sensor frame"
+
+
+def _body_rates(state: pd.DataFrame | None, imu: pd.DataFrame) -> tuple[pd.DataFrame | None, str]:
+    """Body rates p, q, r and the frame they are in: the state's (mount-corrected FRD) where
+    preprocessed, else the first gyro's ``gyr_{x,y,z}_radps`` as logged (sensor frame)."""
     cols = ["p_radps", "q_radps", "r_radps"]
     if state is not None and len(state) and set(cols) <= set(state.columns) and state["p_radps"].notna().any():
-        return state[["t_ns", *cols]]
+        return state[["t_ns", *cols]], STATE_FRAME
     g = _first_instance(imu)
     if not len(g):
-        return None
+        return None, SENSOR_FRAME
     return pd.DataFrame({"t_ns": g["t_ns"].to_numpy(), **{c: g[f"gyr_{a}_radps"].to_numpy()
-                                                          for c, a in zip(cols, "xyz")}})
+                                                          for c, a in zip(cols, "xyz")}}), SENSOR_FRAME
+
+
+def attitude_source(state: pd.DataFrame | None, log) -> tuple[pd.DataFrame | None, tuple | None, str]:
+    """The attitude a flight page plots: ``(rows with t_ns, (roll, pitch, yaw) [rad], frame note)``.
+
+    The preprocessed state's ZYX angles of the mount-corrected body (FRD -> NED) where the
+    flight has a state with attitude; else the ``attitude`` stream as logged, whose body may be
+    the sensor's (the Husky's IMU orientation is the rotated ``imu_link``: roll ≈ +90° at rest)."""
+    cols = ["roll_rad", "pitch_rad", "yaw_rad"]
+    if state is not None and len(state) and set(cols) <= set(state.columns) and state["roll_rad"].notna().any():
+        s = state.dropna(subset=cols)
+        return s[["t_ns"]], tuple(s[c].to_numpy(np.float64) for c in cols), STATE_FRAME
+    att = _first_instance(log["attitude"]).dropna(subset=["q_w"])
+    if not len(att):
+        return None, None, SENSOR_FRAME
+    return att[["t_ns"]], quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy()), \
+        "attitude stream as logged, not mount-corrected"
 
 
 def _velocity(state: pd.DataFrame | None, log) -> pd.DataFrame | None:
@@ -223,7 +247,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
                         calibration: str | os.PathLike | None = None,
                         segments: str | os.PathLike | None = None,
                         classified: Mapping[str, str | os.PathLike] | None = None,
-                        estimates: Mapping[str, str | os.PathLike] | None = None) -> None:
+                        estimates: Mapping[str, str | os.PathLike] | None = None,
+                        vehicle: str | None = None) -> None:
     """Render one flight's report.
 
     Parameters
@@ -244,6 +269,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ``{estimator: path}`` of the flight's estimate tables (``results/estimate/<estimator>/``):
         error panels against the reference the estimates name (truth or the state) and the
         EKF+HMM mode timeline; a placeholder's panel says why in one line.
+    vehicle : str, optional
+        The manifest's vehicle, for the summary table.
     """
     log = read_flightlog(ingest_dir)
     meta = log.meta
@@ -256,6 +283,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     timelines = {}
 
     ned = _ned_track(log, st)
+    velocity = _velocity(st, log)
     alt_series = {}
     baro = _first_instance(log["baro"])
     if len(baro):
@@ -280,19 +308,19 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         else:
             timelines[m] = None
 
-    att = _first_instance(log["attitude"]).dropna(subset=["q_w"])
-    euler = quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy()) if len(att) else None
+    att, euler, att_frame = attitude_source(st, log)
+    rates, rates_frame = _body_rates(st, log["imu"])
     imu = log["imu"]
     figs = [
         ("3-D path", plots.path_3d(ned)),
         ("Ground track", plots.ground_track(ned)),
         ("Altitude", plots.altitude(alt_series, calib_pts)),
-        ("Attitude", plots.attitude(att, euler, log["setpoint"])),
+        ("Attitude", plots.attitude(att, euler, log["setpoint"], frame=att_frame)),
         ("Body rates vs setpoint", plots.with_setpoint(
-            _body_rates(st, imu), ["p_radps", "q_radps", "r_radps"], log["setpoint"],
-            ["p_radps", "q_radps", "r_radps"], "Body rates vs setpoint (FRD)", "body rate [rad/s]")),
+            rates, ["p_radps", "q_radps", "r_radps"], log["setpoint"],
+            ["p_radps", "q_radps", "r_radps"], f"Body rates vs setpoint ({rates_frame})", "body rate [rad/s]")),
         ("Velocity", plots.with_setpoint(
-            _velocity(st, log), [f"vel_{a}_mps" for a in "ned"], log["setpoint"],
+            velocity, [f"vel_{a}_mps" for a in "ned"], log["setpoint"],
             [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),
         ("RC inputs", plots.time_series(log["control"], [f"rc_{i}_us" for i in range(1, schema.N_RC + 1)],
                                         "RC inputs", "pulse width [µs]")),
@@ -300,12 +328,19 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
                                                "Actuator outputs (servo/ESC)", "pulse width [µs]")),
         ("GPS quality (fix type, satellites, HDOP/EPH)", plots.gps_quality(log["gps"])),
         ("Vibration", plots.vibration(log["vibration"], imu)),
-        ("Battery", plots.battery(log["battery"])),
+        ("Accelerometer spectrogram", plots.spectrogram(imu, [f"acc_{a}_mps2" for a in "xyz"],
+                                                        "Accelerometer spectrogram (raw, sensor frame)", "m/s²")),
+        ("Gyroscope spectrogram", plots.spectrogram(imu, [f"gyr_{a}_radps" for a in "xyz"],
+                                                    "Gyroscope spectrogram (raw, sensor frame)", "rad/s")),
         # raw IMU: the sensor's axes (FRD by convention, before the mount correction of the state)
         ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"],
                                             "Accelerometer (raw, sensor frame)", "specific force [m/s²]")),
         ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"],
                                         "Gyroscope (raw, sensor frame)", "angular rate [rad/s]")),
+        ("Battery", plots.battery(log["battery"])),
+        # no reader ingests EKF status / XKF flags (DataFlash) or estimator_status flags (ULog)
+        # into a canonical stream yet: the panel says so rather than vanishing
+        ("Estimator flags (EKF status, XKF flags, estimator_status)", None),
     ]
     if len(timelines) <= 1:
         figs.append(("Maneuver timeline", plots.timeline(seg, next(iter(timelines.values()), None))))
@@ -317,12 +352,13 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             figs.append((f"Maneuver timeline ({m})", fig))
     est_figs, est_facts = estimate_panels(estimates or {}, truth=log["truth"], state=st, classified=classified)
     figs.extend(est_figs)
-    # flight-mode bands behind every time panel (not the 3-D path and the ground track)
-    for _, f in figs[2:]:
-        plots.mode_bands(f, log["mode"], log.duration_s)
+    # flight-mode bands behind every time panel (not the 3-D path, the ground track, a spectrum)
+    for _, f in figs:
+        if plots.is_time_panel(f):
+            plots.mode_bands(f, log["mode"], log.duration_s)
     divs = figure_divs(figs)
     # one linked time axis: zooming any time panel zooms them all (the template's script)
-    linked = [f"plot-{i}" for i, (_, f) in enumerate(figs) if i >= 2 and f is not None]
+    linked = [f"plot-{i}" for i, (_, f) in enumerate(figs) if plots.is_time_panel(f)]
     tables = [("Log messages", *plots.messages_table(log["messages"])),
               ("Parameters", *plots.params_table(log["params"]))]
 
@@ -339,8 +375,11 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
              ("streams", ", ".join(f"{k} ({v['rows']})" for k, v in log.summary().items()) or "none"),
              ("diagnostics", json.dumps({k: v for k, v in meta.get("diagnostics", {}).items()
                                          if k in ("bytes_skipped", "records_dropped", "timestamp_anomalies")}))]
+    pre = (read_table_meta(state).get("preprocess") or {}) if state and Path(state).exists() else {}
+    summary = summary_rows(meta, duration_s=log.duration_s, vehicle=vehicle, messages=log["messages"],
+                           gps=log["gps"], ned=ned, velocity=velocity, rates=rates, euler=euler,
+                           preprocess=pre)
     if state and Path(state).exists():
-        pre = read_table_meta(state).get("preprocess") or {}
         src = pre.get("sources") or {}
         cinfo = pre.get("calibration") or {}
         facts.append(("preprocess", f"{pre.get('n_samples', 0)} samples @ {pre.get('rate_hz')} Hz; position "
@@ -352,6 +391,6 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
                                     + (f" ({cm.get('error')})" if cm.get("error") else "")))
     facts.extend(est_facts)
     page = render(template, 
-        flight_id=meta.get("flight_id"), facts=facts, plots=divs, tables=tables, linked=linked, plotly_js=plotly_js,
+        flight_id=meta.get("flight_id"), summary=summary, facts=facts, plots=divs, tables=tables, linked=linked, plotly_js=plotly_js,
         index_href=index_href, failed=meta.get("status") == "failed", error=meta.get("error"))
     write_page(page, out_html)

@@ -17,6 +17,7 @@ import pandas as pd
 from ..frames.geodesy import geodetic_to_ned
 from ..io.parquet import read_table
 from ..io import schema
+from .flight_summary import utc_date
 from .pages import write_page
 
 
@@ -56,7 +57,8 @@ def flight_summary(flight_id: str, meta_path: str | os.PathLike) -> dict:
     meta_path = Path(meta_path)
     meta = json.loads(meta_path.read_text())
     d = meta_path.parent
-    row = {"flight_id": flight_id, "status": meta.get("status", "?"), "format": meta.get("source_format") or "",
+    row = {"flight_id": flight_id, "date": utc_date(meta), "vehicle": "",
+           "status": meta.get("status", "?"), "format": meta.get("source_format") or "",
            "error": meta.get("error") or "", "duration_s": float("nan"), "distance_m": float("nan"),
            "max_speed_mps": float("nan"), "maneuvers": 0, "warnings": ""}
     if row["status"] == "failed":
@@ -122,7 +124,9 @@ def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | N
 def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os.PathLike,
                 links: dict[str, str] | None = None, *, segments: dict | None = None,
                 classified: dict | None = None, models: dict[str, str] | None = None,
-                studies: dict[str, str] | None = None) -> pd.DataFrame:
+                studies: dict[str, str] | None = None, vehicles: Mapping[str, str] | None = None,
+                compare: Mapping[str, str] | None = None,
+                skipped: Mapping[str, str] | None = None) -> pd.DataFrame:
     """Write the index page; returns the summary table (one row per flight).
 
     Parameters
@@ -143,8 +147,19 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         ``{study: relative URL}`` of the study pages (``report/studies/<name>.html``); pages
         that do not exist yet are listed with the target that builds them (studies are built by
         their own targets, not by the main job).
+    vehicles : mapping, optional
+        ``{flight_id: vehicle}`` (the manifest's), shown per flight.
+    compare : mapping, optional
+        ``{vehicle: relative URL}`` of the per-vehicle comparison pages, linked from the
+        vehicle column and listed under "Vehicles".
+    skipped : mapping, optional
+        ``{flight_id: reason}`` of the manifest rows left out (log not found), listed with the
+        reason under the flights.
     """
     rows = [flight_summary(f, m) for f, m in zip(flight_ids, meta_paths)]
+    compare = dict(compare or {})
+    for r in rows:
+        r["vehicle"] = (vehicles or {}).get(r["flight_id"], "")
     for r in rows:
         found = maneuver_summary((segments or {}).get(r["flight_id"]), (classified or {}).get(r["flight_id"]))
         if found and r["status"] != "failed":
@@ -156,12 +171,16 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         name = html.escape(r["flight_id"])
         if r["flight_id"] in links:
             name = f'<a href="{html.escape(links[r["flight_id"]])}">{name}</a>'
+        veh = html.escape(r["vehicle"])
+        if r["vehicle"] in compare:
+            veh = f'<a href="{html.escape(compare[r["vehicle"]])}">{veh}</a>'
+        first = f"<td>{name}</td><td>{html.escape(r['date']) or '–'}</td><td>{veh or '–'}</td>"
         if r["status"] == "failed":
-            body.append(f'<tr class="failed"><td>{name}</td><td>failed</td><td colspan="6" class="reason">'
+            body.append(f'<tr class="failed">{first}<td>failed</td><td colspan="6" class="reason">'
                         f'{html.escape(r["error"])}</td></tr>')
             continue
         body.append(
-            f"<tr><td>{name}</td><td>{html.escape(r['status'])}</td><td>{html.escape(r['format'])}</td>"
+            f"<tr>{first}<td>{html.escape(r['status'])}</td><td>{html.escape(r['format'])}</td>"
             f"<td class=num>{_fmt(r['duration_s'])}</td><td class=num>{_fmt(r['distance_m'], 0)}</td>"
             f"<td class=num>{_fmt(r['max_speed_mps'])}</td><td>{html.escape(str(r['maneuvers']))}</td>"
             f"<td>{html.escape(r['warnings'])}</td></tr>")
@@ -177,12 +196,22 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         f'</code>)</span></li>' for s, u in (studies or {}).items())
     if study_links:
         models_html += f"<h2>Studies</h2><ul>{study_links}</ul>"
+    if compare:
+        models_html = ("<h2>Vehicles: flights compared</h2><ul>" + "".join(
+            f'<li><a href="{html.escape(u)}">{html.escape(v)}</a></li>' for v, u in compare.items())
+            + "</ul>" + models_html)
+    skipped_html = ""
+    if skipped:
+        skipped_html = ("<h2>Skipped manifest rows</h2><table><thead><tr><th>flight</th><th>reason</th></tr>"
+                        "</thead><tbody>" + "".join(
+                            f'<tr class="skipped"><td>{html.escape(f)}</td><td class="reason">{html.escape(why)}</td></tr>'
+                            for f, why in skipped.items()) + "</tbody></table>")
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>uavpipe flights</title>
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>
-<p>{len(rows)} flights, {n_failed} failed.</p>
-<table><thead><tr><th>flight</th><th>status</th><th>format</th><th>duration [s]</th><th>distance [m]</th>
+<p>{len(rows)} flights, {n_failed} failed{f", {len(skipped)} manifest rows skipped" if skipped else ""}.</p>
+<table><thead><tr><th>flight</th><th>date (UTC)</th><th>vehicle</th><th>status</th><th>format</th><th>duration [s]</th><th>distance [m]</th>
 <th>max speed [m/s]</th><th>maneuvers</th><th>ingest warnings</th></tr></thead>
-<tbody>{''.join(body)}</tbody></table>{models_html}</body></html>"""
+<tbody>{''.join(body)}</tbody></table>{skipped_html}{models_html}</body></html>"""
     write_page(page, out_html)
     return table

@@ -19,6 +19,7 @@ import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from ..io.parquet import read_table, read_table_meta
+from .glossary import glossary_rows
 from .pages import figure_divs, render, write_page
 from .plots import layout
 
@@ -57,9 +58,16 @@ def hmm_figure(label: str, startprob: np.ndarray, transmat: np.ndarray, means: n
     return layout(fig, f"HMM of {label}: {n} states", height=340 + 12 * n, margin=dict(l=60, r=20, t=90, b=80))
 
 
+#: display names of the evaluation table's columns (the seed's values cited by section)
+_EVAL_COLUMNS = {"n_runs": "runs", "FA_pct": "FA [%]", "MAoT_pct": "MAoT [%]",
+                 "thesis_FA_pct": "FA [%], seed 000 §11", "thesis_MAoT_pct": "MAoT [%], seed 000 §11"}
+
+
 def _table_html(df: pd.DataFrame) -> str:
-    fmt = {c: (lambda v: "–" if pd.isna(v) else f"{v:.2f}") for c in df.columns if c.endswith("_pct")}
-    return df.to_html(index=False, classes="eval", na_rep="–", formatters=fmt, border=0)
+    fmt = {_EVAL_COLUMNS.get(c, c): (lambda v: "–" if pd.isna(v) else f"{v:.2f}")
+           for c in df.columns if c.endswith("_pct")}
+    return df.rename(columns=_EVAL_COLUMNS).to_html(index=False, classes="eval", na_rep="–", formatters=fmt,
+                                                    border=0)
 
 
 def build_model_report(model_dir: str | os.PathLike, evaluation: str | os.PathLike,
@@ -109,14 +117,17 @@ def build_model_report(model_dir: str | os.PathLike, evaluation: str | os.PathLi
     ev = read_table(evaluation) if Path(evaluation).exists() else pd.DataFrame()
     if len(ev):
         for (table, split, decision), g in ev.groupby(["table", "split", "decision"], sort=False):
-            title = (f"Table {table} ({split} set, {decision} classifier) — ours beside the thesis"
+            title = (f"Table {table} ({split} set, {decision} classifier) — ours beside seed 000 §11 (thesis Table {table})"
                      if table != "flights" else f"Test flights ({decision} classifier), one run per labelled segment")
             tables.append((title, _table_html(g.drop(columns=["table", "split", "decision"]))))
     elif not failed:
         ev_meta = read_table_meta(evaluation) if Path(evaluation).exists() else {}
         tables.append(("Evaluation", f"<p class='absent'>no evaluation data {ev_meta.get('error') or ''}</p>"))
     divs = figure_divs(figs)
-    page = render(template, 
+    # every metric the page shows, defined once with its seed section (FA, MAoT, LL, V, ...)
+    shown = " ".join([*(f"{k} {v}" for k, v in facts), *(f"{t} {h}" for t, h in tables),
+                      *(f.layout.title.text or "" for _, f in figs if f is not None)])
+    page = render(template,
         model=name, facts=facts, plots=divs, tables=tables, plotly_js=plotly_js, index_href=index_href,
-        failed=failed, error=meta.get("error"))
+        failed=failed, error=meta.get("error"), glossary=glossary_rows(shown))
     write_page(page, out_html)

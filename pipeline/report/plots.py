@@ -145,6 +145,18 @@ def layout(fig: go.Figure, title: str, **kw) -> go.Figure:
     # plain numbers on every axis: no SI-prefixed "−0.38k" ticks on confidence or log axes
     fig.update_xaxes(exponentformat="none")
     fig.update_yaxes(exponentformat="none")
+    return compact(fig)
+
+
+def compact(fig: go.Figure) -> go.Figure:
+    """The time (x) arrays of ``fig``'s traces as float32 (plotly writes arrays as base64 typed
+    arrays): a quarter of a flight page's bytes saved, 7 significant digits (1 ms at t = 10⁴ s)
+    for where a point is drawn; the values (y) keep every digit for the hover. Returns ``fig``."""
+    for tr in fig.data:
+        for a in ("x",):
+            v = getattr(tr, a, None)
+            if isinstance(v, np.ndarray) and v.dtype == np.float64:
+                setattr(tr, a, v.astype(np.float32))
     return fig
 
 
@@ -207,15 +219,18 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
 
 
 def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-             setpoint: pd.DataFrame | None = None) -> go.Figure | None:
+             setpoint: pd.DataFrame | None = None, frame: str = "") -> go.Figure | None:
     """Roll, pitch, yaw in degrees (ZYX, for display; yaw unwrapped) against time, with the
-    ``setpoint`` stream's attitude (dashed, same colour per angle) where it has one."""
+    ``setpoint`` stream's attitude (dashed, same colour per angle) where it has one; ``frame``
+    (e.g. "state: body FRD, mount-corrected") goes into the title."""
     if att is None or not len(att) or euler is None:
         return None
     fig = go.Figure()
-    t = _t(att)
+    yaw_deg = None
     for name, a in zip(("roll", "pitch", "yaw"), euler):
         v = np.degrees(np.unwrap(a) if name == "yaw" else a)
+        if name == "yaw":
+            yaw_deg = v
         d = decimate(pd.DataFrame({"t_ns": att["t_ns"].to_numpy(), "v": v}))
         fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} [°]",
                                  line=dict(color=colour(name))))
@@ -227,14 +242,19 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
             if not len(ok):
                 continue
             a = ok[c].to_numpy(np.float64)
-            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(),
-                                       "v": np.degrees(np.unwrap(a) if name == "yaw" else a)}))
+            v = np.degrees(np.unwrap(a) if name == "yaw" else a)
+            if name == "yaw" and yaw_deg is not None and len(yaw_deg) and np.isfinite(yaw_deg).any():
+                # both unwrapped on their own: start the setpoint on the measured yaw's turn
+                y0 = np.interp(ok["t_ns"].iloc[0], att["t_ns"].to_numpy(), yaw_deg)
+                v = v + 360.0 * np.round((y0 - v[0]) / 360.0)
+            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(), "v": v}))
             fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} setpoint [°]",
                                      line=dict(color=colour(name), dash="dash")))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title="angle [°]")
-    return layout(fig, "Attitude vs setpoint (ZYX Euler, yaw unwrapped)" if len(fig.data) > 3
-                  else "Attitude (ZYX Euler, yaw unwrapped)")
+    where = f"{frame}; " if frame else ""
+    return layout(fig, f"Attitude vs setpoint ({where}ZYX Euler, yaw unwrapped)" if len(fig.data) > 3
+                  else f"Attitude ({where}ZYX Euler, yaw unwrapped)")
 
 
 def _first(df: pd.DataFrame | None) -> pd.DataFrame | None:
@@ -345,10 +365,61 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
         for c in ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2"):
             fig.add_trace(go.Scatter(x=_t(r), y=r[c], mode="lines", name=label(c).replace(" [", " RMS ["),
                                      line=dict(color=colour(c))))
-        title, ylab = "Vibration (accelerometer RMS about the mean, 1 s windows)", "RMS [m/s²]"
+        title, ylab = "Vibration (accelerometer RMS about the mean, 1 s windows; raw, sensor frame)", "RMS [m/s²]"
     fig.update_xaxes(title="t [s]")
     fig.layout.yaxis.title = ylab
     return layout(fig, title)
+
+
+def spectrogram(imu: pd.DataFrame | None, cols: list[str], title: str, unit: str, *,
+                nperseg: int = 128, max_columns: int = 200) -> go.Figure | None:
+    """Spectrogram of the vector ``cols`` of the first instance of ``imu`` against flight time.
+
+    :func:`scipy.signal.spectrogram` (Hann windows of ``nperseg`` samples, half overlap, mean
+    removed per window) per axis; the vector's PSD is the sum over the axes (the trace of the
+    cross-spectral matrix), shown in dB, ``10 log10(Σ PSD)``. For display, consecutive windows
+    are averaged into at most ``max_columns`` time columns (Welch's estimate per column), so a
+    long log keeps every sample in the estimate but a bounded page. The sample rate is taken
+    from the median time step (sensor logs jitter). ``None`` with fewer than ``nperseg`` samples."""
+    from scipy.signal import spectrogram as _spectrogram
+
+    i = _first(imu)
+    cols = [c for c in cols if i is not None and c in i and i[c].notna().any()]
+    if not cols:
+        return None
+    i = i.dropna(subset=cols)
+    if len(i) < nperseg:
+        return None
+    t_ns = i["t_ns"].to_numpy(np.int64)
+    dt = np.median(np.diff(t_ns)) * 1e-9
+    if not np.isfinite(dt) or dt <= 0:
+        return None
+    fs = 1.0 / dt
+    total = None
+    for c in cols:
+        f, tc, sxx = _spectrogram(i[c].to_numpy(np.float64), fs=fs, window="hann", nperseg=nperseg,
+                                   noverlap=nperseg // 2)
+        total = sxx if total is None else total + sxx
+    k = -(-total.shape[1] // max_columns)           # windows per column (ceil)
+    n_col = -(-total.shape[1] // k)
+    cols_psd = np.stack([total[:, j * k:(j + 1) * k].mean(axis=1) for j in range(n_col)], axis=1)
+    t_col = np.array([tc[j * k:(j + 1) * k].mean() for j in range(n_col)]) + t_ns[0] * 1e-9
+    z = (10.0 * np.log10(np.maximum(cols_psd, 1e-30))).astype(np.float32)
+    fig = go.Figure(go.Heatmap(x=t_col, y=f, z=z, colorscale="Viridis", name="PSD",
+                               colorbar=dict(title=f"dB re ({unit})²/Hz")))
+    fig.update_xaxes(title="t [s]")
+    fig.update_yaxes(title="frequency [Hz]")
+    return layout(fig, f"{title} (Σ over axes, {nperseg}-sample windows, fs = {fs:.0f} Hz)", height=320)
+
+
+def is_time_panel(fig: go.Figure | None) -> bool:
+    """Whether ``fig`` is drawn against flight time (its x axis is ``t [s]``): time panels get
+    the flight-mode bands and share the page's linked time axis; a 3-D path, a ground track or a
+    spectrum do not."""
+    if fig is None:
+        return False
+    t = fig.layout.xaxis.title.text
+    return t == "t [s]"
 
 
 def battery(bat: pd.DataFrame | None) -> go.Figure | None:

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..io.stage import declared, declared_list
+from .compare import build_compare_page
 from .flight import build_flight_report, write_plotly_js
 from .index import build_index
 from .model import build_model_report
@@ -36,14 +37,15 @@ def run_plotly_js(inputs, outputs, config: Mapping | None = None) -> None:
     write_plotly_js(declared(outputs, "js"))
 
 
-def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
+def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: str,
+                      vehicle: str | None = None) -> None:
     """One flight's page ``outputs.page``.
 
     ``inputs``: ``meta`` (ingest ``meta.json``, its streams beside it), ``state``, ``segments``,
     ``calibration``, ``classified`` (``results/classify/<model_set>/<flight>.parquet`` for each
     model set that classifies the flight), ``estimates`` (``results/estimate/<estimator>/<flight>.parquet``,
     none when the flight is not estimated), ``template``, ``plotly``. ``index``: the path of the
-    index page, for the back link.
+    index page, for the back link; ``vehicle``: the manifest's, for the summary table.
     """
     page = declared(outputs, "page")
     build_flight_report(Path(declared(inputs, "meta")).parent, page, template=declared(inputs, "template"),
@@ -51,7 +53,25 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
                         state=declared(inputs, "state"), segments=declared(inputs, "segments"),
                         calibration=declared(inputs, "calibration"),
                         classified={_model_set_of(p): p for p in declared_list(inputs, "classified")},
-                        estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")})
+                        estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")},
+                        vehicle=vehicle)
+
+
+def run_compare_report(inputs, outputs, config: Mapping | None = None, *, vehicle: str,
+                       flights: list[str], index: str) -> None:
+    """The comparison page ``outputs.page`` of ``vehicle``'s ``flights``.
+
+    ``inputs``: ``metas``, ``states``, ``params`` (one per flight, in ``flights`` order: the
+    ingest ``meta.json``, ``results/state/<flight>.parquet``, the ingest ``params`` stream),
+    ``template``, ``plotly``. Flight names link to their pages beside the page's folder
+    (``results/report/flights/<flight>.html``)."""
+    page = declared(outputs, "page")
+    flights_dir = Path(page).parent.parent / "flights"
+    build_compare_page(vehicle, flights, page, metas=declared_list(inputs, "metas"),
+                       states=declared_list(inputs, "states"), params=declared_list(inputs, "params"),
+                       template=declared(inputs, "template"), plotly_js=_rel(declared(inputs, "plotly"), page),
+                       index_href=_rel(index, page),
+                       flight_links={f: _rel(flights_dir / f"{f}.html", page) for f in flights})
 
 
 def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
@@ -63,13 +83,16 @@ def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: s
 
 
 def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[str],
-              model_sets: list[str], studies: list[str] = ()) -> None:
+              model_sets: list[str], studies: list[str] = (), vehicles: Mapping[str, str] | None = None,
+              skipped: Mapping[str, str] | None = None) -> None:
     """The index page ``outputs.index``.
 
     ``inputs``: ``metas`` and ``pages`` (one per flight, in ``flights`` order), ``segments``
     (idem), ``classified`` (``results/classify/<model_set>/<flight>.parquet``), ``models``
-    (one page per model set, in ``model_sets`` order). ``studies``: study names, linked to
-    ``report/studies/<name>.html`` beside the index's ``report/`` folder.
+    (one page per model set, in ``model_sets`` order), ``compare`` (``results/report/compare/<vehicle>.html``,
+    one per vehicle of ``vehicles``). ``studies``: study names, linked to
+    ``report/studies/<name>.html`` beside the index's ``report/`` folder. ``vehicles``:
+    ``{flight: vehicle}``; ``skipped``: manifest rows left out, ``{flight: reason}``.
     """
     out = declared(outputs, "index")
     classified: dict[str, dict[str, str]] = {}
@@ -79,4 +102,6 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
                 links={f: _rel(p, out) for f, p in zip(flights, declared_list(inputs, "pages"))},
                 segments=dict(zip(flights, declared_list(inputs, "segments"))), classified=classified,
                 models={m: _rel(p, out) for m, p in zip(model_sets, declared_list(inputs, "models"))},
-                studies={s: f"report/studies/{s}.html" for s in studies})
+                studies={s: f"report/studies/{s}.html" for s in studies}, vehicles=vehicles,
+                compare={Path(p).stem: _rel(p, out) for p in declared_list(inputs, "compare")},
+                skipped=skipped)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import plotly.graph_objects as go
 
+from .glossary import glossary_rows
 from .pages import figure_divs, render, write_page
 
 
@@ -136,9 +137,13 @@ def build_study_page(name: str, out_html: str | os.PathLike, *, results: str | o
     res = read_results(results)
     rows = [(k, v, defs.get(k, "–")) for k, v in res.items()]
     md = Path(report_md).read_text() if Path(report_md).exists() else ""
+    # every metric the page shows (headline names, their sentences, the report, the figures),
+    # defined once with its seed section
+    shown = " ".join([*(" ".join(map(str, r)) for r in rows), md, *(f"{k} {v}" for k, v in facts),
+                      *(f.layout.title.text or "" for _, f in figures if f is not None)])
     page = render(template, name=name, title=title or name, facts=list(facts), results=rows,
                   report=markdown_to_html(md), plots=figure_divs(figures), plotly_js=plotly_js,
-                  index_href=index_href)
+                  index_href=index_href, glossary=glossary_rows(shown))
     write_page(page, out_html)
 
 

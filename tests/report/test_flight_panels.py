@@ -186,3 +186,27 @@ def test_many_channels_share_one_panels_point_budget():
     assert len(fig.data) == k and fig.data[0].name == "servo output 1 [µs]"
     assert sum(len(t.x) for t in fig.data) <= k * 1002
     assert max(t.y.max() for t in fig.data) == ctl[[f"servo_{i}_us" for i in range(1, k + 1)]].max().max()
+
+
+def test_an_unwrapped_yaw_setpoint_starts_on_the_measured_yaws_turn():
+    from pipeline.frames.rotations import quat_to_euler
+
+    n = 50
+    yaw = np.full(n, -0.3)                                   # measured yaw just left of north
+    q = np.c_[np.cos(yaw / 2), np.zeros(n), np.zeros(n), np.sin(yaw / 2)]
+    att = _stream("attitude", n, 10.0, q_w=q[:, 0], q_x=q[:, 1], q_y=q[:, 2], q_z=q[:, 3])
+    sp = _stream("setpoint", n, 10.0, yaw_rad=np.full(n, 2 * np.pi - 0.3))   # the same heading, [0, 2π)
+    fig = plots.attitude(att, quat_to_euler(q), sp)
+    np.testing.assert_allclose(fig.data[-1].y, np.degrees(yaw), atol=1e-9)
+
+
+def test_time_arrays_are_float32_for_display_and_values_keep_every_digit():
+    n = 5000
+    df = _stream("imu", n, 100.0, acc_x_mps2=np.linspace(0.0, 1.0, n) + 1e-9)
+    fig = plots.time_series(df, ["acc_x_mps2"], "a", "b")
+    x, y = fig.data[0].x, fig.data[0].y
+    assert x.dtype == np.float32 and y.dtype == np.float64
+    # the kept rows' times to float32 precision (a monotone series: min/max per bucket = its ends)
+    t = df["t_ns"].to_numpy() * 1e-9
+    np.testing.assert_allclose(x, t[np.searchsorted(df["acc_x_mps2"].to_numpy(), y)], rtol=1e-7)
+    assert y.max() == df["acc_x_mps2"].max()

@@ -47,8 +47,8 @@ DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
 SIM = ("sim-M1-000-bin\tresults/sim/logs/sim-M1-000.bin\tsim-quad\ttest\t"
        "results/sim/logs/sim-M1-000.bin.truth.parquet\t\tsimulated M1 with truth side-car")
 STAGES = ("demo_log", "simulate_sets", "ekf_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
-          "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "estimate_pf_jm", "flight_report",
-          "model_report", "report_index", "plotly_js", "all")
+           "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "estimate_pf_jm", "flight_report",
+           "model_report", "compare_report", "report_index", "plotly_js", "all")
 
 
 @pytest.mark.slow
@@ -85,7 +85,7 @@ def test_dry_run_default_config_plans_every_stage():
                   "train_model", "estimate_q2", "estimate_flight", "estimate_pf_jm", "estimate"}),
     ("report", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                 "train_model", "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "estimate_pf_jm",
-                "plotly_js", "flight_report", "model_report", "report_index", "report"}),
+                "plotly_js", "flight_report", "model_report", "compare_report", "report_index", "report"}),
 ])
 def test_named_stage_targets(tmp_path, target, rules):
     wd = _copy_workflow(tmp_path / "wf", [DEMO, SIM])
@@ -422,8 +422,9 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
         fh.write("extra\tlogs/extra.bin\tsim-quad\ttest\tnone\t\tadded\n")
     jobs = _planned_jobs(wd)
     # classified by every model set of its vehicle (sim, sim2, simekf), estimated once
+    # and the comparison page of its vehicle
     assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 3, "estimate_flight": 1,
-                    "estimate_pf_jm": 1, "flight_report": 1, "report_index": 1, "all": 1}, jobs
+                    "estimate_pf_jm": 1, "flight_report": 1, "compare_report": 1, "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
 
@@ -435,8 +436,9 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     jobs = _planned_jobs(wd)
     # 3 sim-quad flights x 3 model sets (sim, sim2, simekf); estimated: the three sim-quad flights
     # (the broken flight's vehicle is generic)
+    # and the comparison pages of both vehicles (sim-quad, generic)
     assert jobs == {"preprocess_flight": 4, "classify_flight": 9, "estimate_flight": 3, "estimate_pf_jm": 3,
-                    "flight_report": 4, "report_index": 1, "all": 1}, jobs
+                    "flight_report": 4, "compare_report": 2, "report_index": 1, "all": 1}, jobs
 
     # snakemake --report over the finished run
     cfg.write_text(text)

@@ -1,0 +1,95 @@
+"""The per-vehicle comparison page (issue 13, item 5): differing parameters, overlays on a
+time-from-takeoff axis, and the index's date, vehicle and skipped-row columns."""
+
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.report import compare
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _state(n: int, climb_at: int, rate_hz: float = 10.0) -> pd.DataFrame:
+    from pipeline.io import schema
+
+    t = (np.arange(n) * 1e9 / rate_hz).astype(np.int64)
+    d = np.where(np.arange(n) < climb_at, -1.0, -1.0 - 0.5 * (np.arange(n) - climb_at))
+    df = schema.empty("state").reindex(range(n))
+    df["t_ns"] = t
+    df["pos_n_m"], df["pos_e_m"], df["pos_d_m"] = 0.0, 0.0, d
+    df["vel_n_mps"], df["vel_e_mps"] = 0.0, 0.0
+    df["roll_rad"], df["pitch_rad"] = 0.0, 0.1
+    df["gap"] = False
+    return df
+
+
+def test_takeoff_is_the_first_sample_above_the_height_or_the_speed_threshold():
+    st = _state(100, climb_at=30)
+    t0, how = compare.takeoff_t_ns(st)
+    # d0 - d > 2 m first at 0.5 (k - 30) > 2, k = 35
+    assert (t0, how) == (35 * 10**8, "height")
+    st.loc[20:, "vel_e_mps"] = 2.5
+    st.loc[5, "vel_e_mps"] = 9.0              # one noisy sample on the ground: not a takeoff
+    assert compare.takeoff_t_ns(st) == (20 * 10**8, "speed")
+    still = _state(10, climb_at=99)
+    assert compare.takeoff_t_ns(still) == (0, "first sample")
+    assert compare.takeoff_t_ns(still.iloc[:0]) == (None, "no state")
+
+
+def test_only_parameters_that_differ_or_are_missing_somewhere_are_listed():
+    per = {"a": {"P1": 1.0, "P2": 2.0, "P3": 0.1}, "b": {"P1": 1.0, "P2": 3.0}, "c": {"P1": 1.0000000001, "P2": 2.0}}
+    headers, rows = compare.differing_params(per)
+    assert headers == ["parameter", "a", "b", "c"]
+    assert rows == [["P2", "2", "3", "2"], ["P3", "0.1", "–", "–"]]
+    p = pd.DataFrame({"t_ns": [2, 1, 3], "name": ["X", "X", "Y"], "value": [5.0, 4.0, 1.0]})
+    assert compare.last_params(p) == {"X": 5.0, "Y": 1.0}
+
+
+def test_the_comparison_page_and_the_index_columns(tmp_path):
+    from pipeline.io import schema
+    from pipeline.io.parquet import write_table
+    from pipeline.report.index import build_index
+
+    flights, metas, states, params = ["f1", "f2", "bad"], [], [], []
+    for f, climb, vals in (("f1", 30, {"ATC_RAT_RLL_P": 0.135, "BATT_CAPACITY": 5000.0}),
+                           ("f2", 50, {"ATC_RAT_RLL_P": 0.150, "BATT_CAPACITY": 5000.0}), ("bad", 0, {})):
+        d = tmp_path / f
+        d.mkdir()
+        failed = f == "bad"
+        meta = schema.new_meta(flight_id=f, t0_utc_ns=None if failed else 1432235497988949113,
+                               status="failed" if failed else "ok", error="bad magic" if failed else None)
+        (d / "meta.json").write_text(json.dumps(meta))
+        write_table(_state(0 if failed else 120, climb), d / "state.parquet", schema.STATE, name="state")
+        p = pd.DataFrame({"t_ns": np.zeros(len(vals), np.int64), "instance": np.zeros(len(vals), np.uint8),
+                          "src": "PARM", "name": list(vals), "value": list(vals.values())})
+        write_table(schema.conform("params", p) if len(p) else schema.empty("params"), d / "params.parquet",
+                    schema.columns("params"), name="params")
+        metas.append(d / "meta.json"), states.append(d / "state.parquet"), params.append(d / "params.parquet")
+    page = tmp_path / "report" / "compare" / "copter.html"
+    table = compare.build_compare_page("copter", flights, page, metas=metas, states=states, params=params,
+                                       template=ROOT / "reports" / "templates" / "compare.html.j2",
+                                       plotly_js="../assets/plotly.min.js")
+    assert list(table["takeoff [s]"]) == ["3.5", "5.5", "–"]
+    text = html.unescape(page.read_text())
+    assert "<td>ATC_RAT_RLL_P</td><td>0.135</td><td>0.15</td>" in text and "BATT_CAPACITY" not in text
+    assert "1 of 2 parameters differ between the 2 flights" in text
+    assert compare.TAKEOFF_RULE in text and "failed: bad magic" in text
+    for title in ("Altitude above start", "Horizontal speed", "Roll (state", "Pitch (state"):
+        assert title in text, title
+    assert "t from takeoff [s]" in text
+
+    idx = tmp_path / "index.html"
+    build_index(flights, metas, idx, links={f: f"report/flights/{f}.html" for f in flights},
+                vehicles={f: "copter" for f in flights}, compare={"copter": "report/compare/copter.html"},
+                skipped={"lost": "logs/lost.bin not found"})
+    t = idx.read_text()
+    assert "<th>date (UTC)</th><th>vehicle</th>" in t
+    assert '<td>2015-05-21</td><td><a href="report/compare/copter.html">copter</a></td>' in t
+    assert "Skipped manifest rows" in t and "<td>lost</td><td class=\"reason\">logs/lost.bin not found</td>" in t
+    assert "1 manifest rows skipped" in t

@@ -66,6 +66,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from ..frames.rotations import quat_continuity
 from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
 from ..estimate.smoother import rts_smooth
@@ -106,17 +107,15 @@ def kinematic_transition(dt: float, n_x: int) -> F64:
 
 def quaternion_continuous(q: ArrayLike, reference: ArrayLike | None = None) -> F64:
     """Flip the sign of quaternion rows (``(N, 4)``) so that each has a non-negative dot product
-    with the previous one (q ≡ −q, digest §11 "Enforce sign continuity"); the first row is made
-    to agree with ``reference`` where given."""
+    with the previous one (q ≡ −q, digest §11 "Enforce sign continuity";
+    :func:`~pipeline.frames.rotations.quat_continuity`), the first row first made to agree with
+    ``reference`` where given (so that every demo starts on the same sheet)."""
     q = np.array(q, dtype=np.float64)
     if len(q) == 0:
         return q
     if reference is not None and float(q[0] @ np.asarray(reference, dtype=np.float64)) < 0:
-        q[0] = -q[0]
-    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
-    # the sign of row j is the product of the flips up to j
-    sign = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
-    return q * sign[:, None]
+        q = -q
+    return quat_continuity(q)
 
 
 @njit(cache=True)

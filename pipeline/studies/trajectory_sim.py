@@ -54,7 +54,7 @@ SIM_DEFAULTS: dict[str, Any] = {
 }
 #: per-size overrides (tiny: short references, few iterations; still ≥ 10 seeds)
 SIM_SIZES: dict[str, dict[str, Any]] = {
-    "tiny": {"duration_s": 8.0, "max_iter": 10, "window_C": 10, "dba_iter": 5},
+    "tiny": {"duration_s": 6.0, "max_iter": 8, "window_C": 10, "dba_iter": 5},
     "small": {},
     "thesis": {"duration_s": 60.0},
 }

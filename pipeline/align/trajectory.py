@@ -160,8 +160,9 @@ def _align_dp(emis, lo, logd, T):  # pragma: no cover - compiled
     return tau
 
 
-def _band_lo(N: int, T: int, C: int) -> NDArray[np.int64]:
-    """Lowest hidden index of each sample's band, ``round(c_s) − C`` with ``c_s = s(T−1)/(N−1)``."""
+def alignment_band(N: int, T: int, C: int) -> NDArray[np.int64]:
+    """Lowest hidden index of each sample's alignment band (the band is ``lo .. lo + 2C``):
+    ``round(c_s) − C`` with the centre ``c_s = s(T−1)/(N−1)`` (``2s`` for a demo of the mean length)."""
     slope = (T - 1) / max(N - 1, 1)
     return np.round(np.arange(N) * slope).astype(np.int64) - int(C)
 
@@ -329,7 +330,7 @@ class TrajectoryLearner:
         out = []
         for k, y in enumerate(Y):
             N = len(y)
-            lo = _band_lo(N, T, C)
+            lo = alignment_band(N, T, C)
             t = lo[:, None] + np.arange(2 * C + 1)[None, :]
             ok = (t >= 0) & (t <= T - 1)
             diff = y[:, None, :] - Hmu[np.clip(t, 0, T - 1)]
@@ -361,7 +362,7 @@ class TrajectoryLearner:
         """The linear stretch ``τ_j = round(j(T−1)/(N−1))`` (seed §3 step 1), kept inside the band
         and to steps of 1..3."""
         T, C = self._T, int(self.window_C)
-        lo = _band_lo(N, T, C)
+        lo = alignment_band(N, T, C)
         tau = np.round(np.arange(N) * (T - 1) / (N - 1)).astype(np.int64)
         tau[0] = 0
         for j in range(1, N):

@@ -87,8 +87,9 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64, F64]:
             if not np.all(d > 0):
                 raise np.linalg.LinAlgError("Matrix is not positive definite")
             inv, info = _dpotri(c, lower=1)
-            Si = np.tril(inv)
-            Si += np.tril(inv, -1).T
+            # potri fills the lower triangle; the upper one is potrf's cleaned zeros
+            Si = inv + inv.T
+            Si.flat[::n + 1] *= 0.5
             yv = y.reshape(n)
             return (Si.reshape(S.shape), np.reshape(yv @ Si @ yv, y.shape[:-1]),
                     np.reshape(2.0 * np.log(d).sum(), y.shape[:-1]))

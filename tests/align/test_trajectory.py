@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.align.trajectory import (COLUMNS, TrajectoryError, TrajectoryLearner, _band_lo,
+from pipeline.align.trajectory import (COLUMNS, TrajectoryError, TrajectoryLearner, alignment_band,
                                        kinematic_transition, quaternion_continuous)
 
 DT = 0.1
@@ -89,7 +89,7 @@ def test_tau_starts_at_zero_rises_by_one_to_three_and_stays_in_the_band(rng):
         assert tk.dtype.kind == "i" and len(tk) == len(demos[k])
         assert tk[0] == 0 and tk[-1] <= L.T_ - 1
         assert set(np.unique(np.diff(tk))) <= {1, 2, 3}
-        lo = _band_lo(len(tk), L.T_, C)
+        lo = alignment_band(len(tk), L.T_, C)
         assert np.all(tk >= lo) and np.all(tk <= lo + 2 * C)
         on = L.demo_on_hidden(k)
         assert on.shape == (L.T_, 3)

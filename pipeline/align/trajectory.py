@@ -70,6 +70,7 @@ from ..frames.rotations import quat_continuity
 from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
 from ..estimate.smoother import rts_smooth
+from .dtw import dtw
 
 F64 = NDArray[np.float64]
 
@@ -234,7 +235,8 @@ class TrajectoryLearner:
 
     def __init__(self, *, dt: float, window_C: int = 20, max_iter: int = 30, tol: float = 1e-6,
                  ridge: float = DEFAULT_RIDGE, dynamics: str = "kinematic", fix_tau: bool = False,
-                 use_bias: bool = True, cov_type: str = "diag", hidden_factor: float = 2.0):
+                 use_bias: bool = True, cov_type: str = "diag", hidden_factor: float = 2.0,
+                 d_prior: float = 0.0, learn_d: bool = True, init_tau: str = "dtw"):
         self.dt = dt
         self.window_C = window_C
         self.max_iter = max_iter
@@ -245,6 +247,9 @@ class TrajectoryLearner:
         self.use_bias = use_bias
         self.cov_type = cov_type
         self.hidden_factor = hidden_factor
+        self.d_prior = d_prior
+        self.learn_d = learn_d
+        self.init_tau = init_tau
 
     # ---------------------------------------------------------------- checks
     def _check(self, demos) -> list[F64]:
@@ -252,6 +257,8 @@ class TrajectoryLearner:
             raise TrajectoryError(f"TrajectoryLearner: dt must be a positive number, not {self.dt!r}")
         if self.dynamics != "kinematic":
             raise TrajectoryError(f"TrajectoryLearner: dynamics {self.dynamics!r} is not known; known: kinematic")
+        if self.init_tau not in ("dtw", "linear"):
+            raise TrajectoryError(f"TrajectoryLearner: init_tau must be 'dtw' or 'linear', not {self.init_tau!r}")
         if self.cov_type not in ("diag", "full"):
             raise TrajectoryError(f"TrajectoryLearner: cov_type must be 'diag' or 'full', not {self.cov_type!r}")
         if int(self.window_C) < 1 or int(self.max_iter) < 1 or not self.ridge >= 0 or not self.tol >= 0:
@@ -344,13 +351,14 @@ class TrajectoryLearner:
             out.append(tk)
         return out
 
-    @staticmethod
-    def _d_from_tau(tau) -> F64:
+    def _d_from_tau(self, tau) -> F64:
         d = np.empty((len(tau), 3))
+        a = float(self.d_prior)
         for k, tk in enumerate(tau):
             steps = np.diff(tk)
             cnt = np.array([(steps == i).sum() for i in (1, 2, 3)], dtype=np.float64)
-            dk = np.maximum(cnt / max(len(steps), 1), D_FLOOR)
+            # ML (seed §3 step 5), or the MAP under a symmetric Dirichlet of a pseudo-counts
+            dk = np.maximum((cnt + a) / max(len(steps) + 3 * a, 1), D_FLOOR)
             d[k] = dk / dk.sum()
         return d
 
@@ -358,15 +366,40 @@ class TrajectoryLearner:
     def _logp_tau(tau, d) -> float:
         return float(sum(np.log(d[k][np.diff(tk) - 1]).sum() for k, tk in enumerate(tau)))
 
-    def _initial_tau(self, N: int) -> NDArray[np.int64]:
-        """The linear stretch ``τ_j = round(j(T−1)/(N−1))`` (seed §3 step 1), kept inside the band
-        and to steps of 1..3."""
+    def _initial_taus(self, Y) -> list[NDArray[np.int64]]:
+        """Initial τ of every demo: the seed's linear stretch (``init_tau="linear"``), or each
+        demo's DTW alignment (positions) to the demo of median length, itself stretched
+        linearly (``"dtw"``)."""
+        if self.init_tau == "linear":
+            return [self._initial_tau(len(y)) for y in Y]
+        r = int(np.argsort([len(y) for y in Y], kind="stable")[(len(Y) - 1) // 2])
+        ref = Y[r][:, :3]
+        scale = (self._T - 1) / (len(ref) - 1)
+        out = []
+        for k, y in enumerate(Y):
+            if k == r:
+                out.append(self._initial_tau(len(y)))
+                continue
+            p = dtw(y[:, :3], ref, step_pattern="symmetric2", path=True).path
+            acc = np.zeros(len(y))
+            cnt = np.zeros(len(y))
+            np.add.at(acc, p[:, 0], p[:, 1])
+            np.add.at(cnt, p[:, 0], 1.0)
+            out.append(self._initial_tau(len(y), acc / cnt * scale))
+        return out
+
+    def _initial_tau(self, N: int, target: F64 | None = None) -> NDArray[np.int64]:
+        """``target`` (default the linear stretch ``τ_j = round(j(T−1)/(N−1))``, seed §3 step 1)
+        rounded, kept inside the band and to steps of 1..3."""
         T, C = self._T, int(self.window_C)
         lo = alignment_band(N, T, C)
-        tau = np.round(np.arange(N) * (T - 1) / (N - 1)).astype(np.int64)
+        if target is None:
+            target = np.arange(N) * (T - 1) / (N - 1)
+        tau = np.round(target).astype(np.int64)
         tau[0] = 0
         for j in range(1, N):
-            tau[j] = min(max(tau[j], tau[j - 1] + 1, lo[j]), tau[j - 1] + 3, lo[j] + 2 * C, T - 1)
+            # the last bound leaves room for the remaining samples at one step each
+            tau[j] = min(max(tau[j], tau[j - 1] + 1, lo[j]), tau[j - 1] + 3, lo[j] + 2 * C, T - N + j)
         if np.any(np.diff(tau) < 1):
             raise TrajectoryError(f"TrajectoryLearner.fit: a demo of {N} samples does not fit T={T} hidden steps")
         return tau
@@ -425,7 +458,7 @@ class TrajectoryLearner:
         self._step_ns = max(int(round(dth * 1e9)), 1)
         self._F = kinematic_transition(dth, n_x)
         self._H = np.eye(n_x)[list(self._obs)]
-        tau = [self._initial_tau(len(y)) for y in Y] if tau is None else self._check_tau(tau, Y)
+        tau = self._initial_taus(Y) if tau is None else self._check_tau(tau, Y)
 
         # initial noise: Σ^(y) from the second differences of each demo (Δ² of white noise has
         # variance 6σ²; a smooth signal adds little), Σ^(z) from the MPE of the demos' average
@@ -449,7 +482,9 @@ class TrajectoryLearner:
         prior = GaussianState(z0[0], P0, 0)
 
         beta = np.zeros((T - 1, n_x))
-        d = self._d_from_tau(tau)
+        # d starts at 1/3 each (seed §3 step 1, "d_i^k=1/3"); learned from τ after each alignment
+        # (with fix_tau: fitted once from the fixed τ)
+        d = self._d_from_tau(tau) if self.fix_tau else np.full((len(Y), 3), 1.0 / 3.0)
         self.loglik_, self.loglik_y_, self.sigma_z_trace_, self.sigma_y_trace_ = [], [], [], []
         self.converged_ = False
         fit = None
@@ -468,7 +503,8 @@ class TrajectoryLearner:
             Qz, Ry, beta = self._mstep(Y, tau, fit, self.use_bias)
             if not self.fix_tau:
                 tau = self._align(Y, fit.mean, Ry, np.log(d))
-                d = self._d_from_tau(tau)
+                if self.learn_d:
+                    d = self._d_from_tau(tau)
         self.n_iter_ = len(self.loglik_)
         self._fit = fit
         self.state_mean_ = fit.mean

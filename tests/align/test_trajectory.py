@@ -59,10 +59,10 @@ def test_with_tau_fixed_and_no_bias_the_marginal_loglik_never_decreases(rng, cov
         np.testing.assert_array_equal(tk, t0)
 
 
-@pytest.mark.parametrize("D", [3, 9, 13])
-def test_the_full_loop_writes_its_trace_and_ends_above_where_it_started(rng, D):
+@pytest.mark.parametrize("D, init", [(3, "dtw"), (9, "linear"), (13, "dtw")])
+def test_the_full_loop_writes_its_trace_and_ends_above_where_it_started(rng, D, init):
     _, demos, _ = _case(rng, D=D, n=70)
-    L = TrajectoryLearner(dt=DT, max_iter=10).fit(demos)
+    L = TrajectoryLearner(dt=DT, max_iter=10, init_tau=init).fit(demos)
     n_x = 13 if D == 13 else 9
     assert L.n_iter_ == len(L.loglik_) == len(L.loglik_y_) == len(L.sigma_z_trace_) == len(L.sigma_y_trace_)
     assert np.all(np.isfinite(L.loglik_))
@@ -141,6 +141,8 @@ def test_bad_demos_are_refused_with_one_clear_line(rng):
         TrajectoryLearner(dt=DT).fit([np.zeros((30, 3)), np.zeros((30, 9))])
     with pytest.raises(TrajectoryError, match="dt must be a positive"):
         TrajectoryLearner(dt=0.0).fit(demos)
+    with pytest.raises(TrajectoryError, match="init_tau must be 'dtw' or 'linear'"):
+        TrajectoryLearner(dt=DT, init_tau="mean").fit(demos)
     with pytest.raises(TrajectoryError, match="tau\\[0\\] must start at 0"):
         TrajectoryLearner(dt=DT).fit(demos, tau=[np.arange(30) * 4] * 5)
 

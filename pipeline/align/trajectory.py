@@ -48,6 +48,11 @@ One EM iteration (§3, steps 2–5):
    band.
 5. **d** by ML (§3, step 5): ``d^k_i = #{j: τ_{j+1} − τ_j = i}/(N^k − 1)``, floored.
 
+Initialisation (step 1): ``Σ^(y)`` from the demos' second differences, ``Σ^(z)`` from the
+model-prediction error of the demos' average on the hidden axis, ``d_i = 1/3`` ("d_i^k=1/3"),
+τ from DTW to the median-length demo (or the seed's linear stretch, ``init_tau="linear"``);
+``z_0 ~ N(μ_0, Σ_0)`` from the demos' first samples, held fixed.
+
 Stops at a relative change of the objective ``log p(y | τ) + log P(τ | d)`` below ``tol`` or
 after ``max_iter`` E-steps.
 
@@ -196,7 +201,7 @@ class TrajectoryLearner:
     dynamics : {"kinematic"}
         The generic kinematic model (9-D hidden state for 3/9-D demos, 13-D for 13-D demos).
     fix_tau : bool
-        Keep τ at its initial value (the linear stretch, or ``fit(..., tau=)``), d fitted once.
+        Keep τ at its initial value (``init_tau``, or ``fit(..., tau=)``), d fitted once from it.
     use_bias : bool
         Estimate the bias terms β (False: β ≡ 0).
     cov_type : {"diag", "full"}
@@ -204,6 +209,17 @@ class TrajectoryLearner:
         quaternions) or full; shared by the demos.
     hidden_factor : float
         T = round(hidden_factor × mean N) (seed: 2).
+    d_prior : float
+        Symmetric Dirichlet pseudo-count on each d_i (0: the seed's ML update).
+    learn_d : bool
+        Update d from τ after each alignment (False: d stays at its initial 1/3).
+    init_tau : {"dtw", "linear"}
+        Initial τ: each demo's DTW alignment (positions, symmetric2) to the demo of median
+        length, that demo linearly stretched (default), or the seed's linear stretch
+        ``τ_j = j(T−1)/(N−1)`` for every demo. The hard-EM alignment moves τ only a few hidden
+        steps per iteration, so from the linear stretch 30 iterations leave demos whose timing
+        drifts by more than that misaligned (simulated level flight, 30 s: position RMSE 1.6 m
+        from the stretch, 1.1 m from DTW, 0.9 m with the true τ).
 
     Attributes
     ----------

@@ -64,6 +64,7 @@ made sign-continuous in the demos before fitting (q ≡ −q, §11). The hidden 
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -76,6 +77,11 @@ from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
 from ..estimate.smoother import rts_smooth
 from .dtw import dtw
+
+try:  # installed with scikit-learn (hmmlearn's dependency); without it BLAS is left alone
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover
+    threadpool_limits = None
 
 F64 = NDArray[np.float64]
 
@@ -436,6 +442,12 @@ class TrajectoryLearner:
 
     # ---------------------------------------------------------------- API
     def fit(self, demos: Sequence[ArrayLike], tau: Sequence[ArrayLike] | None = None) -> "TrajectoryLearner":
+        # one BLAS thread: every product here is ≤ 65×65, where a threaded BLAS only adds
+        # hand-offs (~1 ms a call on a loaded 2-core machine, 100× the work)
+        with threadpool_limits(1) if threadpool_limits is not None else contextlib.nullcontext():
+            return self._fit(demos, tau)
+
+    def _fit(self, demos: Sequence[ArrayLike], tau: Sequence[ArrayLike] | None = None) -> "TrajectoryLearner":
         """Learn the intended trajectory from ``demos``.
 
         Parameters
@@ -522,7 +534,6 @@ class TrajectoryLearner:
                 if self.learn_d:
                     d = self._d_from_tau(tau)
         self.n_iter_ = len(self.loglik_)
-        self._fit = fit
         self.state_mean_ = fit.mean
         self.state_var_ = np.diagonal(fit.cov, axis1=-2, axis2=-1).copy()
         mean = fit.mean[:, list(self._obs)].copy()

@@ -129,7 +129,10 @@ def simulated_study(settings: Mapping | None, *, seed: int,
     ----------
     settings : mapping
         Keys of :data:`SIM_DEFAULTS` (others are ignored: the real-data part's); already merged
-        for the size (e.g. with :data:`SIM_SIZES`).
+        for the size (e.g. with :data:`SIM_SIZES`). ``simulate`` holds
+        :class:`~pipeline.simulate.demos.DemoSimSettings` fields (config ``align.simulate``),
+        whose ``duration_s`` the study's own ``duration_s`` replaces; ``learner`` holds extra
+        :class:`~pipeline.align.trajectory.TrajectoryLearner` keywords.
     seed : int
         Master seed; case ``(reference r, seed i)`` uses ``default_rng([seed, r, i])``.
     progress : callable, optional
@@ -145,7 +148,8 @@ def simulated_study(settings: Mapping | None, *, seed: int,
         ``align_sim_<ref>_best_baseline_rmse_m``.
     """
     s = _settings(settings)
-    sim = DemoSimSettings(**{**{"duration_s": float(s["duration_s"])}, **dict(s["simulate"] or {})})
+    # the study's (per-size) duration wins over align.simulate's: tiny must stay short
+    sim = DemoSimSettings(**{**dict(s["simulate"] or {}), "duration_s": float(s["duration_s"])})
     rows = []
     for r_i, ref in enumerate(REFERENCES):
         if ref not in s["references"]:

@@ -18,6 +18,7 @@ include: "rules/estimate_sets.smk"
 include: "rules/models.smk"
 include: "rules/classify.smk"
 include: "rules/estimate.smk"
+include: "rules/align.smk"
 include: "rules/report.smk"
 include: "rules/studies.smk"
 

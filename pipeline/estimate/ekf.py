@@ -47,9 +47,15 @@ def _c(a: F64) -> F64:
     return np.ascontiguousarray(a)
 
 
-def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64]:
-    """``(S⁻¹, yᵀS⁻¹y)`` of stacked symmetric positive definite ``S`` (..., n, n), ``S = L Lᵀ``,
-    and residuals ``y`` (..., n), with ``yᵀS⁻¹y = |L⁻¹y|²``.
+#: above this innovation size :func:`_spd_inverse` calls LAPACK: the scalar-plane loops cost
+#: O(n³) numpy calls whatever the batch, which only pays for small n (the radar's 4, two stacked)
+_PLANES_MAX_N = 8
+
+
+def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64, F64]:
+    """``(S⁻¹, yᵀS⁻¹y, log|S|)`` of stacked symmetric positive definite ``S`` (..., n, n),
+    ``S = L Lᵀ``, and residuals ``y`` (..., n), with ``yᵀS⁻¹y = |L⁻¹y|²`` and
+    ``log|S| = 2 Σ log L_ii``.
 
     Cholesky–Banachiewicz and the triangular inverse by forward substitution, both on scalar
     planes vectorised over the stack (``L⁻¹[i, j] = −Σ_{j≤k<i} L[i, k] L⁻¹[k, j] / L[i, i]``),
@@ -64,9 +70,19 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64]:
     numpy.linalg.LinAlgError
         Where a matrix is not positive definite.
     """
+    n = S.shape[-1]
+    if n > _PLANES_MAX_N:
+        # many stacked measurements (the trajectory learner's M demos × 13): one LAPACK call
+        # per matrix beats n³/2 numpy calls on scalar planes
+        L = np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
+        d = np.diagonal(L, axis1=-2, axis2=-1)
+        if not np.all(d > 0):  # NaN fails too
+            raise np.linalg.LinAlgError("Matrix is not positive definite")
+        Li = np.linalg.inv(L)
+        ly = np.matmul(Li, y[..., None])[..., 0]
+        return _T(Li) @ Li, np.einsum("...i,...i->...", ly, ly), 2.0 * np.log(d).sum(axis=-1)
     # planes are lists of (...)-shaped arrays (views of S and y, new arrays for the rest): no
     # moved-axis copies, and no stores into a planes array (each would be one more copy)
-    n = S.shape[-1]
     L: list[list] = [[None] * n for _ in range(n)]
     for i in range(n):
         for j in range(i + 1):
@@ -106,7 +122,10 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64]:
             ly += Li[i][k] * y[..., k]
         ly *= ly
         nis = ly if nis is None else nis + ly
-    return Si, nis
+    logdet = np.log(L[0][0])
+    for i in range(1, n):
+        logdet = logdet + np.log(L[i][i])
+    return Si, nis, 2.0 * logdet
 
 
 @dataclass(frozen=True)
@@ -119,10 +138,15 @@ class UpdateStats:
         ``yᵀ S⁻¹ y`` (0 where nothing was measured).
     dof : ndarray of int, shape (...)
         Number of measured scalars (the NIS's χ² degrees of freedom).
+    logdet : ndarray, shape (...), optional
+        ``log|S|`` over the measured rows (0 where nothing was measured), so the step's
+        log-likelihood (prediction-error decomposition) is
+        ``−½ (nis + logdet + dof·log 2π)``.
     """
 
     nis: F64
     dof: NDArray[np.int64]
+    logdet: F64 | None = None
 
 
 @dataclass(frozen=True)
@@ -207,11 +231,18 @@ class ExtendedKalmanFilter:
             raise ValueError(f"update: measurement shape {z.shape} does not fit the state batch {b} "
                              f"with {n_z} components (expected {b + (n_z,)} or {b + ('M', n_z)})")
         M = z.shape[-2]
+        if M * n_z > _PLANES_MAX_N and int(np.prod(b)) == 1 and np.isnan(z).any():
+            # one run with many stacked rows, some missing (the trajectory learner's 0..M demo
+            # samples per hidden step): leaving the missing rows out is exactly the zero-gain
+            # treatment below, on a smaller innovation covariance
+            keep = ~np.isnan(z.reshape(M, n_z)).any(axis=-1)
+            z = z[..., keep, :]
+            M = int(keep.sum())
         if M == 0:
             if out is not None:
                 np.copyto(out, pred.cov)
                 pred = GaussianState(pred.mean, out, pred.t_ns)
-            return pred, UpdateStats(np.zeros(b), np.zeros(b, dtype=np.int64))
+            return pred, UpdateStats(np.zeros(b), np.zeros(b, dtype=np.int64), np.zeros(b))
         x, P = pred.mean, pred.cov
         n_x = x.shape[-1]
         hj = getattr(self.measurement, "h_and_jacobian", None)  # optional: both in one pass
@@ -236,7 +267,8 @@ class ExtendedKalmanFilter:
         PHT = P @ _c(_T(H))
         S = H @ PHT + Rs
         try:
-            Si, nis = _spd_inverse(S, y)  # nis = yᵀS⁻¹y = |L⁻¹y|²
+            # nis = yᵀS⁻¹y = |L⁻¹y|²; a missing row's unit diagonal adds 0 to log|S|
+            Si, nis, logdet = _spd_inverse(S, y)
         except np.linalg.LinAlgError:
             raise ValueError(f"update at t_ns={pred.t_ns}: the innovation covariance H P Hᵀ + R is not "
                              "positive definite (a non-finite or degenerate state/covariance)") from None
@@ -261,7 +293,7 @@ class ExtendedKalmanFilter:
             cov = np.add(A, _T(A), out=out)
             cov *= 0.5
         dof = np.full(b, M * n_z, dtype=np.int64) if valid is None else valid.sum(axis=-1) * n_z
-        return GaussianState(mean, cov, pred.t_ns), UpdateStats(nis, dof)
+        return GaussianState(mean, cov, pred.t_ns), UpdateStats(nis, dof, logdet)
 
 
 @dataclass(frozen=True)
@@ -281,6 +313,9 @@ class FilterTrack:
     nis : ndarray, shape (R, T)
     dof : ndarray of int, shape (R, T)
         Measured scalars per step (0: predict only, a radar gap).
+    logdet : ndarray, shape (R, T) or None
+        ``log|S|`` of each update (0 where nothing was measured); with ``nis`` and ``dof`` the
+        prediction-error decomposition of the log-likelihood, see :meth:`loglik`.
     """
 
     t_ns: NDArray[np.int64]
@@ -291,6 +326,15 @@ class FilterTrack:
     pred_mean: F64 | None = None
     pred_cov: F64 | None = None
     F: F64 | None = None
+    logdet: F64 | None = None
+
+    def loglik(self) -> F64:
+        """Per-run log-likelihood ``log p(z_0..z_{T−1})``, shape (R,), by the prediction-error
+        decomposition ``Σ_k −½ (yᵀS⁻¹y + log|S| + n_k log 2π)`` (exact for a linear model; the
+        usual EKF approximation otherwise)."""
+        if self.logdet is None:
+            raise ValueError("FilterTrack.loglik: the track holds no log|S| (built without it)")
+        return -0.5 * (self.nis + self.logdet + self.dof * np.log(2.0 * np.pi)).sum(axis=1)
 
     @property
     def n_predict_only(self) -> NDArray[np.int64]:
@@ -299,7 +343,7 @@ class FilterTrack:
 
 
 def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike, z: ArrayLike,
-               store: str = "all") -> FilterTrack:
+               store: str = "all", bu: ArrayLike | None = None) -> FilterTrack:
     """Run ``ekf`` over a measurement sequence, vectorised across runs (a loop over time only).
 
     Parameters
@@ -315,6 +359,9 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     store : {"all", "filtered", "mean"}
         What to keep: everything the RTS smoother needs, posterior mean and covariance, or the
         posterior mean only (the covariance arrays of a large Monte Carlo are big).
+    bu : array_like, shape (T, n_x) or (T, R, n_x), optional
+        Deterministic input added to the prediction into step k (``x⁻_k = F x⁺_{k−1} + bu[k]``;
+        ``bu[0]`` is used only when step 0 is predicted): the trajectory learner's bias ``β``.
 
     Returns
     -------
@@ -345,6 +392,11 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     Fs = np.empty((T, n_x, n_x)) if store == "all" else None
     nis = np.empty((T, R_))
     dof = np.empty((T, R_), dtype=np.int64)
+    logdet = np.empty((T, R_))
+    if bu is not None:
+        bu = np.asarray(bu, dtype=np.float64)
+        if bu.shape not in ((T, n_x), (T, R_, n_x)):
+            raise ValueError(f"run_filter: bu shaped {bu.shape}, expected ({T}, {n_x}) or ({T}, {R_}, {n_x})")
     state = prior
     eye = np.eye(n_x)
     models: dict[int, tuple[F64, F64]] = {}  # step (ns) -> (F, Q): regular steps build them once
@@ -354,7 +406,7 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
             if step not in models:
                 models[step] = (ekf.transition.matrix(step * 1e-9), ekf.transition.noise(step * 1e-9))
             F, Q = models[step]
-            state = ekf.predict(state, int(t_ns[k]), F=F, Q=Q)
+            state = ekf.predict(state, int(t_ns[k]), F=F, Q=Q, bu=None if bu is None else bu[k])
         else:
             F = eye
         if store == "all":
@@ -362,9 +414,9 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
         # the posterior covariance is written straight into its slot (no copy per step)
         state, st = ekf.update_stats(state, z[k], out=None if cov is None else cov[k])
         mean[k] = state.mean
-        nis[k], dof[k] = st.nis, st.dof
+        nis[k], dof[k], logdet[k] = st.nis, st.dof, st.logdet
 
     def rt(a):
         return None if a is None else np.swapaxes(a, 0, 1)
 
-    return FilterTrack(t_ns, rt(mean), rt(cov), rt(nis), rt(dof), rt(pm), rt(pc), Fs)
+    return FilterTrack(t_ns, rt(mean), rt(cov), rt(nis), rt(dof), rt(pm), rt(pc), Fs, rt(logdet))

@@ -1,0 +1,515 @@
+"""Learning the intended trajectory from several demonstrations: nested EM over a hidden
+trajectory and the demos' time indices (seed 004 §3, after Coates, Abbeel & Ng 2008).
+
+Generative model (seed 004 §2, eqs. 3.1–3.3, with τ₀ ≡ 0 from Coates et al. eq. 4):
+
+.. math::
+
+    z_{t+1} = f(z_t) + \\beta_t + \\omega^{(z)},\\quad \\omega^{(z)} \\sim N(0, \\Sigma^{(z)}),
+    \\qquad y^k_j = h(z_{\\tau^k_j}) + \\omega^{(y)},\\quad \\omega^{(y)} \\sim N(0, \\Sigma^{(y)}),
+
+    P(\\tau^k_{j+1} - \\tau^k_j = i) = d^k_i,\\ i \\in \\{1, 2, 3\\},\\qquad \\tau^k_0 = 0,
+
+with ``t = 0..T−1`` and ``T = 2 × mean N^k`` ("T = 2 × mean N^k", §2). Note the seed's
+names: Σ^(z) is the *process* noise of the hidden trajectory, Σ^(y) the *observation* noise
+(sensor and pilot error, "The noise covers both sensor error and pilot error").
+
+One EM iteration (§3, steps 2–5):
+
+1. **E-step** (hidden trajectory): with τ fixed, the samples mapped to hidden step t are 0..M
+   stacked measurements of ``z_t`` ("one hidden step can receive 0..M observations", Fig. 3.2);
+   the estimator framework's :class:`~pipeline.estimate.ekf.ExtendedKalmanFilter` /
+   :func:`~pipeline.estimate.ekf.run_filter` (NaN rows: no measurement) and
+   :func:`~pipeline.estimate.smoother.rts_smooth` give ``μ_{t|T−1}``, ``Σ_{t|T−1}`` and the
+   smoother gains ``L_t``; the log-likelihood ``log p(y | τ)`` is the prediction-error
+   decomposition of the filter's innovations.
+2. **M-step** (eqs. 3.5–3.8, as corrected in the digest's errata): with ``A = Df``,
+   ``δμ_t = μ_{t+1} − f(μ_t) − β_t`` and ``P_t = Σ_{t+1} − Σ_{t+1} L_tᵀ Aᵀ − A L_t Σ_{t+1}``,
+
+   .. math::
+
+       \\Sigma^{(z)} = \\frac{1}{T-1} \\sum_t \\left[\\delta\\mu_t \\delta\\mu_t^T + A \\Sigma_t A^T + P_t\\right],
+       \\qquad
+       \\Sigma^{(y)} = \\frac{1}{N_{obs}} \\sum_{k, j} \\left[\\delta y\\, \\delta y^T + C \\Sigma_{\\tau^k_j} C^T\\right],
+
+   ``δy = y^k_j − h(μ_{τ^k_j})`` ("(3.8) prints δμδμᵀ in R; it should be δyδyᵀ"; "(3.6) ... it
+   should be y_j^k = h(z_{τ_j^k})"; "use T−1 transitions for Q, and the count of all
+   observations for R"). Diagonal (default) or full; both shared by the demos.
+3. **Bias** (§3.4, eq. 3.17): ``β_t`` is the model-prediction error on the driven components
+   (accelerations, and the attitude quaternion of the 13-D model), shrunk by a ridge penalty
+   ``(ridge/2) βᵀ Σ^(z)⁻¹ β`` (prior ``β ~ N(0, Σ^(z)/ridge)``): ``β_t = MPE_t / (1 + ridge)``,
+   recomputed every iteration ("Regularize it, or it absorbs all error and Q collapses", §11).
+4. **Time alignment** (eqs. 3.9–3.14, with ``y_s`` for the printed ``y_0``): per demo, the
+   max-product DP ``Q(s, t) = ℓ(y_s | z_t) + max_{i∈{1,2,3}} [log d_i + Q(s−1, t−i)]``,
+   ``Q(0, t) = ℓ(y_0 | z_0)`` at ``t = 0`` only (τ₀ = 0), computed only inside the band
+   ``c_s − C ≤ t ≤ c_s + C``; backtracked from the best ``t ≤ T−1`` of the last sample (free end).
+   ``c_s = s (T−1)/(N^k−1)``, which is the seed's ``2s`` when ``N^k`` is the mean length (the
+   slope 2 "comes from T≈2N"); a demo longer or shorter than the mean keeps its end inside the
+   band.
+5. **d** by ML (§3, step 5): ``d^k_i = #{j: τ_{j+1} − τ_j = i}/(N^k − 1)``, floored.
+
+Stops at a relative change of the objective ``log p(y | τ) + log P(τ | d)`` below ``tol`` or
+after ``max_iter`` E-steps.
+
+Dynamics: the generic kinematic model (linear, so the EKF is the exact Kalman filter here):
+NED position, velocity and acceleration with ``p += v Δt + a Δt²/2``, ``v += a Δt`` and a
+random-walk acceleration, and (13-D) the attitude quaternion (scalar first) as a random walk,
+made sign-continuous in the demos before fitting (q ≡ −q, §11). The hidden step is ``Δt/2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
+
+from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
+from ..estimate.ekf import ExtendedKalmanFilter, run_filter
+from ..estimate.smoother import rts_smooth
+
+F64 = NDArray[np.float64]
+
+#: the 13 columns of the kinematic model's demos and hidden state (STATE table names)
+COLUMNS: tuple[str, ...] = (
+    "pos_n_m", "pos_e_m", "pos_d_m", "vel_n_mps", "vel_e_mps", "vel_d_mps",
+    "acc_n_mps2", "acc_e_mps2", "acc_d_mps2", "q_w", "q_x", "q_y", "q_z",
+)
+#: observed columns (of :data:`COLUMNS`) by demo width D: position only, position–velocity–
+#: acceleration, everything
+DIMS: dict[int, tuple[int, ...]] = {3: (0, 1, 2), 9: tuple(range(9)), 13: tuple(range(13))}
+#: default ridge of the bias terms (β = MPE / (1 + ridge))
+DEFAULT_RIDGE = 1.0
+#: floor on d_i (a step never seen stays possible, so the band never becomes infeasible)
+D_FLOOR = 1e-4
+#: relative floor on the noise variances (of the data's own scale)
+VAR_FLOOR = 1e-10
+
+
+class TrajectoryError(ValueError):
+    """Bad demonstrations or settings for the trajectory learner (one clear line)."""
+
+
+def kinematic_transition(dt: float, n_x: int) -> F64:
+    """The kinematic model's ``F`` (``n_x`` = 9: position–velocity–acceleration, 13: plus the
+    random-walk quaternion), Euler-integrated (seed 004 §4: "simple Euler integration") with the
+    exact ``a Δt²/2`` position term."""
+    F = np.eye(n_x)
+    for a in range(3):
+        F[a, 3 + a] = dt
+        F[a, 6 + a] = 0.5 * dt * dt
+        F[3 + a, 6 + a] = dt
+    return F
+
+
+def quaternion_continuous(q: ArrayLike, reference: ArrayLike | None = None) -> F64:
+    """Flip the sign of quaternion rows (``(N, 4)``) so that each has a non-negative dot product
+    with the previous one (q ≡ −q, digest §11 "Enforce sign continuity"); the first row is made
+    to agree with ``reference`` where given."""
+    q = np.array(q, dtype=np.float64)
+    if len(q) == 0:
+        return q
+    if reference is not None and float(q[0] @ np.asarray(reference, dtype=np.float64)) < 0:
+        q[0] = -q[0]
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    # the sign of row j is the product of the flips up to j
+    sign = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
+    return q * sign[:, None]
+
+
+@njit(cache=True)
+def _align_dp(emis, lo, logd, T):  # pragma: no cover - compiled
+    """Banded max-product DP of one demo: ``emis[s, w]`` is ℓ(y_s | z_{lo[s]+w}); returns τ."""
+    N, W = emis.shape
+    Q = np.full((N, W), -np.inf)
+    back = np.zeros((N, W), dtype=np.int64)
+    # τ_0 ≡ 0
+    if lo[0] <= 0 < lo[0] + W:
+        Q[0, -lo[0]] = emis[0, -lo[0]]
+    for s in range(1, N):
+        for w in range(W):
+            t = lo[s] + w
+            if t < 0 or t > T - 1:
+                continue
+            best = -np.inf
+            arg = -1
+            for i in range(1, 4):
+                wp = t - i - lo[s - 1]
+                if 0 <= wp < W:
+                    v = Q[s - 1, wp] + logd[i - 1]
+                    if v > best:
+                        best = v
+                        arg = wp
+            if arg >= 0:
+                Q[s, w] = best + emis[s, w]
+                back[s, w] = arg
+    w = 0
+    best = -np.inf
+    for ww in range(W):
+        if Q[N - 1, ww] > best:
+            best = Q[N - 1, ww]
+            w = ww
+    tau = np.empty(N, dtype=np.int64)
+    if best == -np.inf:
+        tau[:] = -1
+        return tau
+    for s in range(N - 1, -1, -1):
+        tau[s] = lo[s] + w
+        w = back[s, w]
+    return tau
+
+
+def _band_lo(N: int, T: int, C: int) -> NDArray[np.int64]:
+    """Lowest hidden index of each sample's band, ``round(c_s) − C`` with ``c_s = s(T−1)/(N−1)``."""
+    slope = (T - 1) / max(N - 1, 1)
+    return np.round(np.arange(N) * slope).astype(np.int64) - int(C)
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """One E-step's result (internal)."""
+
+    mean: F64  # (T, n_x) smoothed
+    cov: F64  # (T, n_x, n_x)
+    gain: F64  # (T, n_x, n_x)
+    loglik_y: float
+
+
+class TrajectoryLearner:
+    """The nested-EM trajectory learner of seed 004 §3 (see the module docstring).
+
+    Parameters
+    ----------
+    dt : float
+        Sample interval of the demos (s); the hidden step is ``dt/2`` (``T = 2 N``).
+    window_C : int
+        Half-width C of the alignment band (hidden steps; config ``align.window_C``).
+    max_iter : int
+        Most E-steps (seed: none given; Coates et al.: "5–20 is a guess", §11).
+    tol : float
+        Stop at a relative objective change below this.
+    ridge : float
+        Ridge penalty of the bias terms, ``β = MPE/(1 + ridge)``.
+    dynamics : {"kinematic"}
+        The generic kinematic model (9-D hidden state for 3/9-D demos, 13-D for 13-D demos).
+    fix_tau : bool
+        Keep τ at its initial value (the linear stretch, or ``fit(..., tau=)``), d fitted once.
+    use_bias : bool
+        Estimate the bias terms β (False: β ≡ 0).
+    cov_type : {"diag", "full"}
+        Σ^(z) and Σ^(y) diagonal (the default: the state mixes m, m/s, m/s² and unit
+        quaternions) or full; shared by the demos.
+    hidden_factor : float
+        T = round(hidden_factor × mean N) (seed: 2).
+
+    Attributes
+    ----------
+    mean_ : ndarray (T, D)
+        Learned trajectory (smoothed mean ``μ_{t|T−1}`` of the observed columns; quaternion
+        columns renormalised).
+    var_ : ndarray (T, D)
+        Diagonal of ``Σ_{t|T−1}``.
+    state_mean_, state_var_ : ndarray (T, n_x)
+        The whole hidden state (9 or 13 columns of :data:`COLUMNS`).
+    tau_ : list of int arrays
+        Hidden index of each demo sample.
+    d_ : ndarray (M, 3)
+        Step probabilities ``d^k_1..3``.
+    loglik_ : list of float
+        Objective ``log p(y|τ) + log P(τ|d)`` per iteration (prediction-error decomposition).
+    loglik_y_ : list of float
+        ``log p(y | τ)`` alone per iteration.
+    sigma_z_, sigma_y_ : ndarray (n_x, n_x), (D, D)
+        Final process / observation noise; ``sigma_z_trace_``, ``sigma_y_trace_`` per iteration.
+    beta_ : ndarray (T−1, n_x)
+        Bias terms (0 where ``use_bias`` is off and on the non-driven components).
+    model_error_ : ndarray (T−1, n_x)
+        Model-prediction error ``μ_{t+1} − f(μ_t)`` on the final smoothed trajectory.
+    n_iter_ : int
+    converged_ : bool
+    dt_hidden_ : float
+    """
+
+    def __init__(self, *, dt: float, window_C: int = 20, max_iter: int = 30, tol: float = 1e-6,
+                 ridge: float = DEFAULT_RIDGE, dynamics: str = "kinematic", fix_tau: bool = False,
+                 use_bias: bool = True, cov_type: str = "diag", hidden_factor: float = 2.0):
+        self.dt = dt
+        self.window_C = window_C
+        self.max_iter = max_iter
+        self.tol = tol
+        self.ridge = ridge
+        self.dynamics = dynamics
+        self.fix_tau = fix_tau
+        self.use_bias = use_bias
+        self.cov_type = cov_type
+        self.hidden_factor = hidden_factor
+
+    # ---------------------------------------------------------------- checks
+    def _check(self, demos) -> list[F64]:
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise TrajectoryError(f"TrajectoryLearner: dt must be a positive number, not {self.dt!r}")
+        if self.dynamics != "kinematic":
+            raise TrajectoryError(f"TrajectoryLearner: dynamics {self.dynamics!r} is not known; known: kinematic")
+        if self.cov_type not in ("diag", "full"):
+            raise TrajectoryError(f"TrajectoryLearner: cov_type must be 'diag' or 'full', not {self.cov_type!r}")
+        if int(self.window_C) < 1 or int(self.max_iter) < 1 or not self.ridge >= 0 or not self.tol >= 0:
+            raise TrajectoryError("TrajectoryLearner: window_C and max_iter must be >= 1, ridge and tol >= 0")
+        demos = list(demos)
+        if len(demos) < 2:
+            raise TrajectoryError(f"TrajectoryLearner.fit: needs at least 2 demos, got {len(demos)}")
+        out = []
+        for k, y in enumerate(demos):
+            y = np.asarray(y, dtype=np.float64)
+            if y.ndim != 2 or y.shape[1] not in DIMS:
+                raise TrajectoryError(f"TrajectoryLearner.fit: demo {k} shaped {y.shape}; expected (N, D) "
+                                      f"with D in {sorted(DIMS)} (columns {', '.join(COLUMNS)})")
+            if y.shape[1] != np.shape(demos[0])[1]:
+                raise TrajectoryError(f"TrajectoryLearner.fit: demo {k} has {y.shape[1]} columns, demo 0 has "
+                                      f"{np.shape(demos[0])[1]}")
+            if len(y) < 3:
+                raise TrajectoryError(f"TrajectoryLearner.fit: demo {k} has {len(y)} samples (< 3)")
+            bad = ~np.isfinite(y).all(axis=1)
+            if bad.any():
+                raise TrajectoryError(f"TrajectoryLearner.fit: demo {k} has non-finite values in row "
+                                      f"{int(np.argmax(bad))} ({int(bad.sum())} rows)")
+            out.append(y)
+        return out
+
+    # ---------------------------------------------------------------- pieces
+    def _estep(self, Y: list[F64], tau: list[NDArray[np.int64]], Qz: F64, Ry: F64, beta: F64,
+               prior: GaussianState) -> _Fit:
+        T, M, D = self._T, len(Y), Y[0].shape[1]
+        z = np.full((T, 1, M, D), np.nan)
+        for k in range(M):
+            z[tau[k], 0, k] = Y[k]
+        ekf = ExtendedKalmanFilter(LinearTransition(self._F, Qz), LinearMeasurement(self._H, Ry))
+        t_ns = np.arange(T, dtype=np.int64) * self._step_ns
+        track = run_filter(ekf, prior, t_ns, z, store="all", bu=np.vstack([np.zeros((1, self._n_x)), beta]))
+        sm = rts_smooth(track)
+        return _Fit(sm.mean[0], sm.cov[0], sm.gain[0], float(track.loglik()[0]))
+
+    def _mstep(self, Y, tau, fit: _Fit, beta_on: bool) -> tuple[F64, F64, F64]:
+        F, H = self._F, self._H
+        mu, P, L = fit.mean, fit.cov, fit.gain
+        mpe = mu[1:] - mu[:-1] @ F.T  # model-prediction error μ_{t+1} − f(μ_t)
+        beta = np.zeros_like(mpe)
+        if beta_on:
+            beta[:, self._driven] = mpe[:, self._driven] / (1.0 + float(self.ridge))
+        dmu = mpe - beta
+        # Σ_{t+1} L_tᵀ Aᵀ: the smoothed cross-covariance Cov(z_{t+1}, z_t) times Aᵀ
+        cross = P[1:] @ np.swapaxes(L[:-1], -1, -2) @ F.T
+        APA = F @ P[:-1] @ F.T
+        terms = dmu[:, :, None] * dmu[:, None, :] + APA + P[1:] - cross - np.swapaxes(cross, -1, -2)
+        Qz = terms.mean(axis=0)
+        # Σ^(y): every observation δy δyᵀ + C Σ_τ Cᵀ, over the count of observations
+        idx = np.asarray(self._obs)
+        Rsum = np.zeros((len(idx), len(idx)))
+        n = 0
+        for k, y in enumerate(Y):
+            dy = y - mu[tau[k]][:, idx]
+            Rsum += dy.T @ dy + P[tau[k]][:, idx][:, :, idx].sum(axis=0)
+            n += len(y)
+        Ry = Rsum / n
+        Qz, Ry = self._shape_cov(Qz, self._qfloor), self._shape_cov(Ry, self._rfloor)
+        return Qz, Ry, beta
+
+    def _shape_cov(self, S: F64, floor: F64) -> F64:
+        S = 0.5 * (S + S.T)
+        if self.cov_type == "diag":
+            return np.diag(np.maximum(np.diagonal(S), floor))
+        # full: floor the eigenvalues (keeps Σ positive definite when a direction collapses)
+        w, V = np.linalg.eigh(S)
+        return (V * np.maximum(w, floor.min())) @ V.T
+
+    def _align(self, Y, mu: F64, Ry: F64, logd: F64) -> list[NDArray[np.int64]]:
+        T, C = self._T, int(self.window_C)
+        Hmu = mu[:, np.asarray(self._obs)]
+        Lr = np.linalg.cholesky(Ry)
+        out = []
+        for k, y in enumerate(Y):
+            N = len(y)
+            lo = _band_lo(N, T, C)
+            t = lo[:, None] + np.arange(2 * C + 1)[None, :]
+            ok = (t >= 0) & (t <= T - 1)
+            diff = y[:, None, :] - Hmu[np.clip(t, 0, T - 1)]
+            # ℓ(y|z) = log N(y; h(z), Σ^(y)) up to a constant shared by every cell
+            wd = np.linalg.solve(Lr, diff.reshape(-1, diff.shape[-1]).T).T.reshape(diff.shape)
+            emis = np.where(ok, -0.5 * np.einsum("swd,swd->sw", wd, wd), -np.inf)
+            tk = _align_dp(np.ascontiguousarray(emis), lo, np.ascontiguousarray(logd[k]), T)
+            if tk[0] < 0:
+                raise TrajectoryError(f"TrajectoryLearner.fit: demo {k} ({N} samples) cannot be aligned to "
+                                      f"T={T} hidden steps within the band C={C}")
+            out.append(tk)
+        return out
+
+    @staticmethod
+    def _d_from_tau(tau) -> F64:
+        d = np.empty((len(tau), 3))
+        for k, tk in enumerate(tau):
+            steps = np.diff(tk)
+            cnt = np.array([(steps == i).sum() for i in (1, 2, 3)], dtype=np.float64)
+            dk = np.maximum(cnt / max(len(steps), 1), D_FLOOR)
+            d[k] = dk / dk.sum()
+        return d
+
+    @staticmethod
+    def _logp_tau(tau, d) -> float:
+        return float(sum(np.log(d[k][np.diff(tk) - 1]).sum() for k, tk in enumerate(tau)))
+
+    def _initial_tau(self, N: int) -> NDArray[np.int64]:
+        """The linear stretch ``τ_j = round(j(T−1)/(N−1))`` (seed §3 step 1), kept inside the band
+        and to steps of 1..3."""
+        T, C = self._T, int(self.window_C)
+        lo = _band_lo(N, T, C)
+        tau = np.round(np.arange(N) * (T - 1) / (N - 1)).astype(np.int64)
+        tau[0] = 0
+        for j in range(1, N):
+            tau[j] = min(max(tau[j], tau[j - 1] + 1, lo[j]), tau[j - 1] + 3, lo[j] + 2 * C, T - 1)
+        if np.any(np.diff(tau) < 1):
+            raise TrajectoryError(f"TrajectoryLearner.fit: a demo of {N} samples does not fit T={T} hidden steps")
+        return tau
+
+    def _check_tau(self, tau, Y) -> list[NDArray[np.int64]]:
+        if len(tau) != len(Y):
+            raise TrajectoryError(f"TrajectoryLearner.fit: tau has {len(tau)} entries for {len(Y)} demos")
+        out = []
+        for k, (tk, y) in enumerate(zip(tau, Y)):
+            tk = np.asarray(tk, dtype=np.int64)
+            st = np.diff(tk)
+            if (tk.shape != (len(y),) or tk[0] != 0 or tk[-1] > self._T - 1 or np.any(st < 1)
+                    or np.any(st > 3)):
+                raise TrajectoryError(f"TrajectoryLearner.fit: tau[{k}] must start at 0, rise by 1..3 and stay "
+                                      f"below T={self._T} for its {len(y)} samples")
+            out.append(tk)
+        return out
+
+    # ---------------------------------------------------------------- API
+    def fit(self, demos: Sequence[ArrayLike], tau: Sequence[ArrayLike] | None = None) -> "TrajectoryLearner":
+        """Learn the intended trajectory from ``demos``.
+
+        Parameters
+        ----------
+        demos : sequence of array_like, each (N_k, D)
+            Demos sampled at ``dt``, D = 3 (NED position), 9 (+ velocity, acceleration) or 13
+            (+ quaternion ``q_w, q_x, q_y, q_z``); columns as :data:`COLUMNS`. At least 2, finite.
+        tau : sequence of int arrays, optional
+            Initial τ (default: the linear stretch); with ``fix_tau`` kept throughout. T is
+            then at least ``max τ + 1``.
+
+        Returns
+        -------
+        self
+        """
+        Y = self._check(demos)
+        D = Y[0].shape[1]
+        if D == 13:
+            ref = None
+            for k in range(len(Y)):
+                Y[k] = Y[k].copy()
+                Y[k][:, 9:13] = quaternion_continuous(Y[k][:, 9:13], ref)
+                ref = Y[0][0, 9:13]
+        self._obs = DIMS[D]
+        n_x = self._n_x = 13 if D == 13 else 9
+        self._driven = np.arange(6, n_x)
+        T = int(round(self.hidden_factor * np.mean([len(y) for y in Y])))
+        if tau is not None:
+            # a given τ (e.g. the truth) may reach past 2 × mean N: the axis then ends at its end
+            T = max(T, max(int(np.max(tk)) + 1 for tk in tau))
+        self._T = T
+        if any(len(y) > T for y in Y):
+            raise TrajectoryError(f"TrajectoryLearner.fit: a demo has more samples than T={T} hidden steps "
+                                  f"(lengths {[len(y) for y in Y]})")
+        self.dt_hidden_ = dth = float(self.dt) / self.hidden_factor
+        self._step_ns = max(int(round(dth * 1e9)), 1)
+        self._F = kinematic_transition(dth, n_x)
+        self._H = np.eye(n_x)[list(self._obs)]
+        tau = [self._initial_tau(len(y)) for y in Y] if tau is None else self._check_tau(tau, Y)
+
+        # initial noise: Σ^(y) from the second differences of each demo (Δ² of white noise has
+        # variance 6σ²; a smooth signal adds little), Σ^(z) from the MPE of the demos' average
+        # on the hidden axis (gaps interpolated, unobserved components by finite differences)
+        d2 = np.concatenate([np.diff(y, 2, axis=0) for y in Y])
+        scale = np.concatenate([y for y in Y]).var(axis=0) + np.concatenate([np.diff(y, axis=0) for y in Y]).var(axis=0)
+        self._rfloor = VAR_FLOOR * np.maximum(scale, 1e-12)
+        R0 = np.maximum(d2.var(axis=0) / 6.0, self._rfloor)
+        z0 = self._initial_trajectory(Y, tau)
+        mpe0 = z0[1:] - z0[:-1] @ self._F.T
+        q0 = np.maximum(mpe0.var(axis=0), 1e-12)
+        self._qfloor = VAR_FLOOR * q0
+        Qz, Ry = np.diag(q0), np.diag(R0)
+        # z_0 ~ N(μ_0, Σ_0) from the demos' first samples (τ₀ ≡ 0): their spread plus the
+        # sensor noise, and for unobserved components the spread of the initial guess; held
+        # fixed (a partial M-step, so EM stays monotone)
+        p0 = z0.var(axis=0) + q0
+        first = np.array([y[0] for y in Y])
+        p0[list(self._obs)] = first.var(axis=0) + R0 + q0[list(self._obs)]
+        P0 = np.diag(p0)
+        prior = GaussianState(z0[0], P0, 0)
+
+        beta = np.zeros((T - 1, n_x))
+        d = self._d_from_tau(tau)
+        self.loglik_, self.loglik_y_, self.sigma_z_trace_, self.sigma_y_trace_ = [], [], [], []
+        self.converged_ = False
+        fit = None
+        for it in range(int(self.max_iter)):
+            fit = self._estep(Y, tau, Qz, Ry, beta, prior)
+            ll = fit.loglik_y + self._logp_tau(tau, d)
+            self.loglik_.append(ll)
+            self.loglik_y_.append(fit.loglik_y)
+            self.sigma_z_trace_.append(Qz)
+            self.sigma_y_trace_.append(Ry)
+            if it > 0 and abs(ll - self.loglik_[-2]) < self.tol * abs(self.loglik_[-2]):
+                self.converged_ = True
+                break
+            if it == int(self.max_iter) - 1:
+                break
+            Qz, Ry, beta = self._mstep(Y, tau, fit, self.use_bias)
+            if not self.fix_tau:
+                tau = self._align(Y, fit.mean, Ry, np.log(d))
+                d = self._d_from_tau(tau)
+        self.n_iter_ = len(self.loglik_)
+        self._fit = fit
+        self.state_mean_ = fit.mean
+        self.state_var_ = np.diagonal(fit.cov, axis1=-2, axis2=-1).copy()
+        mean = fit.mean[:, list(self._obs)].copy()
+        if D == 13:
+            mean[:, 9:13] /= np.linalg.norm(mean[:, 9:13], axis=1, keepdims=True)
+        self.mean_ = mean
+        self.var_ = self.state_var_[:, list(self._obs)]
+        self.tau_ = tau
+        self.d_ = d
+        self.sigma_z_ = self.sigma_z_trace_[-1]
+        self.sigma_y_ = self.sigma_y_trace_[-1]
+        self.model_error_ = fit.mean[1:] - fit.mean[:-1] @ self._F.T
+        self.beta_ = beta
+        self.demos_ = Y
+        self.T_ = T
+        return self
+
+    def _initial_trajectory(self, Y, tau) -> F64:
+        T, n_x, obs = self._T, self._n_x, list(self._obs)
+        acc = np.zeros((T, len(obs)))
+        cnt = np.zeros(T)
+        for y, tk in zip(Y, tau):
+            acc[tk] += y
+            cnt[tk] += 1
+        t = np.arange(T)
+        has = cnt > 0
+        mean = acc[has] / cnt[has, None]
+        z = np.zeros((T, n_x))
+        for c in range(len(obs)):
+            z[:, obs[c]] = np.interp(t, t[has], mean[:, c])
+        dth = self.dt_hidden_
+        if len(obs) == 3:
+            for a in range(3):
+                z[:, 3 + a] = np.gradient(z[:, a], dth)
+                z[:, 6 + a] = np.gradient(z[:, 3 + a], dth)
+        return z
+
+    def demo_on_hidden(self, i: int) -> F64:
+        """Demo ``i`` on the hidden time axis, ``(T, D)``, NaN where it has no sample."""
+        out = np.full((self.T_, self.demos_[i].shape[1]), np.nan)
+        out[self.tau_[i]] = self.demos_[i]
+        return out

@@ -241,14 +241,10 @@ def warping_path(x: F64, y: F64) -> NDArray[np.int64]:
     Symmetric2 steps, no window, squared-Euclidean local cost, by
     :func:`pipeline.align.dtw.dtw`.
     """
+    from .dtw import dtw  # noqa: PLC0415 (kept lazy: numba compiles on first use)
+
     x = np.ascontiguousarray(x, dtype=np.float64)
     y = np.ascontiguousarray(y, dtype=np.float64)
-    try:
-        from .dtw import dtw  # noqa: PLC0415 (kept lazy: numba compiles on first use)
-    except ImportError:  # TODO(lead): drop once h15-dtw's pipeline.align.dtw is merged
-        from dtaidistance import dtw_ndim  # noqa: PLC0415
-
-        return path_array(np.asarray(dtw_ndim.warping_path(x, y, use_c=True)))
     return path_array(dtw(x, y, step_pattern="symmetric2").path)
 
 

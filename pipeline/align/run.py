@@ -67,7 +67,8 @@ def _say(msg: str) -> None:
 
 
 def make_learner(config: Mapping[str, Any], dt: float):
-    """The :class:`~pipeline.align.trajectory.TrajectoryLearner` of the ``align`` section."""
+    """The :class:`~pipeline.align.trajectory.TrajectoryLearner` of the ``align`` section for
+    demos sampled every ``dt`` s (the hidden step is ``dt/2``)."""
     from .trajectory import TrajectoryLearner  # noqa: PLC0415 (numba kernels compile on import)
 
     return TrajectoryLearner(dt=float(dt), window_C=int(config.get("window_C", 20)),
@@ -162,6 +163,30 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     return DemoSet(set_name, maneuvers, dropped, info, notices)
 
 
+def stretchable(demos: list[Demo], hidden_factor: float = 2.0) -> tuple[list[Demo], list[tuple[Demo, str]]]:
+    """The demos the τ model can place on one hidden axis, and the others with the reason.
+
+    With ``T = round(hidden_factor × mean N)`` and τ steps of 1–3 hidden steps from τ₀ = 0, a
+    demo of ``N`` samples spans between ``N − 1`` and ``3 (N − 1)`` steps, so it fits only when
+    ``N − 1 <= T − 1 <= 3 (N − 1)``. While some demo does not fit, the one whose length is
+    furthest (in log ratio) from the median is dropped (a mis-cut segment, e.g. a box-less
+    flight's segment carried badly through the DTW path), and T is recomputed.
+    """
+    keep = list(demos)
+    out: list[tuple[Demo, str]] = []
+    while len(keep) >= 2:
+        n = np.array([len(d.t_ns) for d in keep], dtype=np.float64)
+        T = int(round(hidden_factor * n.mean()))
+        bad = (n - 1 > T - 1) | (3 * (n - 1) < T - 1)
+        if not bad.any():
+            break
+        k = int(np.argmax(np.abs(np.log(n / np.median(n)))))
+        out.append((keep[k], f"{int(n[k])} samples against a median of {np.median(n):.0f}: τ steps of 1-3 "
+                             f"cannot place it on the T = {T} hidden steps of the others"))
+        keep.pop(k)
+    return keep, out
+
+
 # --- tables ----------------------------------------------------------------------------------------
 
 def _rows(a: Any, n: int, d: int) -> F64:
@@ -228,8 +253,9 @@ def _maneuver_tables(label: str, demos: list[Demo], model, dt: float, meta_of) -
                                            "j": np.arange(len(tau)), "tau": tau, "t_s": tau * dt}), x], axis=1))
     ll = np.atleast_1d(np.asarray(model.loglik_, dtype=np.float64))
     it = pd.DataFrame({"maneuver": label, "iteration": np.arange(len(ll)), "loglik": ll})
-    sz = _diag_history(getattr(model, "sigma_z_", None), len(ll), d)
-    sy = _diag_history(getattr(model, "sigma_y_", None), len(ll), d)
+    # per-iteration traces where the learner keeps them, else the final matrices at the last row
+    sz = _diag_history(getattr(model, "sigma_z_trace_", getattr(model, "sigma_z_", None)), len(ll), d)
+    sy = _diag_history(getattr(model, "sigma_y_trace_", getattr(model, "sigma_y_", None)), len(ll), d)
     for k, c in enumerate(DEMO_COLUMNS):
         it[f"sigma_z_{c}"] = sz[:, k]
         it[f"sigma_y_{c}"] = sy[:, k]
@@ -297,14 +323,20 @@ def run_align(inputs, outputs, config: Mapping[str, Any], *, set_name: str) -> A
                                             fr, psi))
     per_maneuver: dict[str, dict] = {}
     for label, demos in ds.maneuvers.items():
+        demos, misfits = stretchable(demos)
+        for d, why in misfits:
+            _say(f"set {set_name}: {label}: {d.name} dropped ({why})")
+            fr, psi = meta_of(d.flight_id)
+            parts["alignment"].append(_not_used(label, d.name, d.flight_id, d.segment_id, "dropped", why, fr, psi))
         reason = ""
         if len(demos) < min_demos:
             reason = f"{len(demos)} usable demo(s) (< align.min_demos = {min_demos})"
         else:
             t0 = time.perf_counter()
-            dt = 0.5 * float(np.median(np.concatenate([np.diff(d.t_ns) for d in demos]))) * 1e-9
+            dt_demo = float(np.median(np.concatenate([np.diff(d.t_ns) for d in demos]))) * 1e-9
             try:
-                model = make_learner(config, dt).fit([d.x for d in demos])
+                model = make_learner(config, dt_demo).fit([d.x for d in demos])
+                dt = float(getattr(model, "dt_hidden_", 0.5 * dt_demo))
                 tabs = _maneuver_tables(label, demos, model, dt, meta_of)
             except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
                 reason = f"fit failed: {type(exc).__name__}: {exc}"

@@ -25,8 +25,9 @@ F64 = NDArray[np.float64]
 def pitch_deg(q: F64) -> F64:
     """ZYX pitch (deg) of body→frame quaternions ``(N, 4)`` (scalar first)."""
     q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return np.degrees(quat_to_euler(q)[1])
+    with np.errstate(invalid="ignore", divide="ignore"):  # a zero quaternion reads NaN
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
+        return np.degrees(quat_to_euler(q)[1])
 
 
 def longest_within(x: F64, lo: float, hi: float, dt: float) -> float:
@@ -69,6 +70,6 @@ def anchors(x: F64, dt: float, band_deg: Sequence[float] = (55.0, 89.0)) -> dict
     """Peak pitch, time within the pitch band and cross-track RMS of one ``(N, 13)`` trajectory."""
     x = np.asarray(x, dtype=np.float64)
     pitch = pitch_deg(x[:, 9:13])
-    return {"peak_pitch_deg": float(np.nanmax(pitch)),
+    return {"peak_pitch_deg": float(np.nanmax(pitch)) if np.isfinite(pitch).any() else float("nan"),
             "time_in_band_s": longest_within(pitch, float(band_deg[0]), float(band_deg[1]), dt),
             "cross_track_rms_m": cross_track_rms(x[:, :3])}

@@ -38,8 +38,9 @@ _GREY = "rgba(90,90,90,0.45)"
 
 
 def _euler_deg(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return np.degrees(np.column_stack(quat_to_euler(q)))
+    with np.errstate(invalid="ignore", divide="ignore"):  # a zero quaternion reads NaN
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
+        return np.degrees(np.column_stack(quat_to_euler(q)))
 
 
 def learned_figure(man: str, learned: pd.DataFrame, demos: pd.DataFrame) -> go.Figure:

@@ -63,13 +63,14 @@ def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: s
 
 
 def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[str],
-              model_sets: list[str], studies: list[str] = ()) -> None:
+              model_sets: list[str], studies: list[str] = (), align_sets: list[str] = ()) -> None:
     """The index page ``outputs.index``.
 
     ``inputs``: ``metas`` and ``pages`` (one per flight, in ``flights`` order), ``segments``
     (idem), ``classified`` (``results/classify/<model_set>/<flight>.parquet``), ``models``
     (one page per model set, in ``model_sets`` order). ``studies``: study names, linked to
-    ``report/studies/<name>.html`` beside the index's ``report/`` folder.
+    ``report/studies/<name>.html`` beside the index's ``report/`` folder. ``align_sets``: the
+    trajectory-learning demo sets, their pages in ``inputs.align`` (same order).
     """
     out = declared(outputs, "index")
     classified: dict[str, dict[str, str]] = {}
@@ -79,4 +80,5 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
                 links={f: _rel(p, out) for f, p in zip(flights, declared_list(inputs, "pages"))},
                 segments=dict(zip(flights, declared_list(inputs, "segments"))), classified=classified,
                 models={m: _rel(p, out) for m, p in zip(model_sets, declared_list(inputs, "models"))},
-                studies={s: f"report/studies/{s}.html" for s in studies})
+                studies={s: f"report/studies/{s}.html" for s in studies},
+                align={s: _rel(p, out) for s, p in zip(align_sets, declared_list(inputs, "align"))})

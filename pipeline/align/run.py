@@ -108,7 +108,7 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     flights = list(spec["flights"])
     ref = spec.get("reference")
     paths = _paths_by_flight(inputs)
-    hz = float(config.get("sample_hz", 5.0))
+    hz = float(config.get("sample_hz", 3.0))
     exclude = tuple(config.get("exclude", ()))
     fit_cfg = dict(config.get("csv_fit") or {})
     notices: list[str] = []

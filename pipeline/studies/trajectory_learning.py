@@ -19,9 +19,15 @@ average's (:func:`pipeline.align.baselines.dba_average`). Where only one other d
 maneuver with two demos) the learner is given that demo twice (it needs two; the fit is then a
 smoother of that one demo on the hidden axis) — such folds are marked ``single_other``.
 
+Each comparison is made twice (``frames``): in the box frame as the demos are (the headline),
+and **centred**, each demo's mean position subtracted first, so that what is compared is the
+maneuver's shape rather than where in the box the pilot flew it (two flights of one schedule
+are commonly flown 50–100 m apart in range, which no averaging of demos can recover).
+
 A maneuver counts as **better** when the learned trajectory's distance to the left-out demo,
 averaged over its folds, is below the averaged distance of the closest other demo;
-``RESULT align_real_loo_better_pct`` is the share of maneuvers that are better (target ≥ 80).
+``RESULT align_real_loo_better_pct`` is the share of maneuvers that are better in the box frame
+(target ≥ 80), ``align_real_loo_better_pct_centred`` the same centred.
 
 Seed: the simulated part draws from ``default_rng([seed, reference, i])``; the real part has no
 randomness.
@@ -51,8 +57,8 @@ from .base import (Progress, Results, StudyResult, input_path, md_table, output_
 NAME = "trajectory_learning"
 ROOT = Path(__file__).resolve().parents[2]
 OUTPUT_TABLES = ("sim_cases", "sim_summary", "real_loo", "real_summary")
-DEFAULTS: dict[str, Any] = {"sets": ["p23", "p21"], "skip": [], "sim": {}, "real_max_iter": 30,
-                            "real_maneuvers": 0}
+DEFAULTS: dict[str, Any] = {"sets": ["p23", "p21"], "skip": [], "sim": {}, "frames": ["box", "centred"],
+                            "real_max_iter": 30, "real_maneuvers": 0}
 SIZES: dict[str, dict[str, Any]] = {"tiny": {"real_max_iter": 5, "real_maneuvers": 3},
                                     "small": {}, "thesis": {}}
 
@@ -61,15 +67,29 @@ def _path_rms(a: np.ndarray, b: np.ndarray) -> float:
     return dtw_rms(a, b, dtw(a[:, :3], b[:, :3], step_pattern="symmetric2").path)
 
 
-def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_iter: int) -> list[dict]:
-    """One row per fold (left-out demo) of one maneuver (see the module docstring)."""
+def _centred(x: np.ndarray) -> np.ndarray:
+    y = np.array(x, dtype=np.float64, copy=True)
+    y[:, :3] -= y[:, :3].mean(axis=0)
+    return y
+
+
+def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_iter: int,
+                 frame: str = "box") -> list[dict]:
+    """One row per fold (left-out demo) of one maneuver (see the module docstring).
+
+    ``frame``: ``box`` (the demos as they are) or ``centred`` (each demo's mean position
+    subtracted first: the maneuver's shape, without where in the box it was flown).
+    """
     cfg = {**dict(align_cfg), "max_iter": int(max_iter)}
     dt = float(np.median(np.concatenate([np.diff(d.t_ns) for d in demos]))) * 1e-9
+    xs = [_centred(d.x) if frame == "centred" else d.x for d in demos]
     rows = []
     for k, left in enumerate(demos):
         others = [d for i, d in enumerate(demos) if i != k]
-        train = [o.x for o in others] if len(others) >= 2 else [others[0].x, others[0].x]
-        row = {"set": set_name, "maneuver": label, "left_out": left.name, "n_others": len(others),
+        ox = [x for i, x in enumerate(xs) if i != k]
+        lx = xs[k]
+        train = ox if len(ox) >= 2 else [ox[0], ox[0]]
+        row = {"set": set_name, "maneuver": label, "frame": frame, "left_out": left.name, "n_others": len(others),
                "single_other": len(others) == 1}
         try:
             model = make_learner(cfg, dt).fit(train)
@@ -79,10 +99,10 @@ def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_it
             rows.append(row)
             continue
         mu = np.asarray(model.mean_)[::2]  # hidden step dt/2: back to the demo rate
-        d_other = [_path_rms(o.x, left.x) for o in others]
-        dba = dba_average([o.x[:, :3] for o in others]) if len(others) >= 2 else others[0].x[:, :3]
-        row.update(status="ok", rms_learned_m=_path_rms(mu, left.x), rms_best_other_m=float(min(d_other)),
-                   rms_worst_other_m=float(max(d_other)), rms_dba_m=_path_rms(dba, left.x),
+        d_other = [_path_rms(o, lx) for o in ox]
+        dba = dba_average([o[:, :3] for o in ox]) if len(ox) >= 2 else ox[0][:, :3]
+        row.update(status="ok", rms_learned_m=_path_rms(mu, lx), rms_best_other_m=float(min(d_other)),
+                   rms_worst_other_m=float(max(d_other)), rms_dba_m=_path_rms(dba, lx),
                    n_iter=int(getattr(model, "n_iter_", 0)))
         rows.append(row)
     return rows
@@ -106,18 +126,20 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
         for lab in labels:
             demos, misfits = stretchable(ds.maneuvers[lab])
             if len(demos) < 2:
-                rows.append({"set": s, "maneuver": lab, "left_out": "", "n_others": len(demos) - 1,
-                             "single_other": False, "status": f"skipped: {len(demos)} usable demo(s)"})
+                rows += [{"set": s, "maneuver": lab, "frame": fr, "left_out": "", "n_others": len(demos) - 1,
+                          "single_other": False, "status": f"skipped: {len(demos)} usable demo(s)"}
+                         for fr in st["frames"]]
                 continue
             t0 = time.perf_counter()
-            rows += loo_maneuver(s, lab, demos, align_cfg, max_iter=int(st["real_max_iter"]))
+            for frame in st["frames"]:
+                rows += loo_maneuver(s, lab, demos, align_cfg, max_iter=int(st["real_max_iter"]), frame=frame)
             progress(f"real {s} {lab}: {len(demos)} folds in {time.perf_counter() - t0:.1f} s"
                      + (f" ({len(misfits)} demo(s) dropped: length)" if misfits else ""))
     loo = pd.DataFrame(rows)
     if not len(loo):
         return loo, pd.DataFrame(), notices
     ok = loo[loo["status"] == "ok"]
-    summ = ok.groupby(["set", "maneuver"], sort=False).agg(
+    summ = ok.groupby(["frame", "set", "maneuver"], sort=False).agg(
         folds=("left_out", "size"), demos=("n_others", lambda v: int(v.iloc[0]) + 1),
         single_other=("single_other", "any"), rms_learned_m=("rms_learned_m", "mean"),
         rms_best_other_m=("rms_best_other_m", "mean"), rms_worst_other_m=("rms_worst_other_m", "mean"),
@@ -128,7 +150,7 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
 
 
 def _figure(summ: pd.DataFrame) -> go.Figure | None:
-    if not len(summ):
+    if summ is None or not len(summ):
         return None
     x = [f"{a}:{b}" for a, b in zip(summ["set"], summ["maneuver"])]
     fig = go.Figure()
@@ -186,14 +208,24 @@ def run_trajectory_learning(inputs: Mapping | None, outputs: Mapping, config: Ma
     for k in ("sim_cases", "sim_summary"):
         write_table(sim_tables.get(k, pd.DataFrame()), paths[k], name=f"{NAME}_{k}",
                     extra={"size": size, "seed": int(seed), "skipped": k not in sim_tables})
-    loo, summ = pd.DataFrame(), pd.DataFrame()
+    loo, summ, summ_all = pd.DataFrame(), pd.DataFrame(), pd.DataFrame()
     if "real" not in skip:
         loo, summ, n2 = real_part(inputs, align, st, progress)
         notices += n2
     write_table(loo, paths["real_loo"], name=f"{NAME}_real_loo", extra={"size": size, "notices": notices})
-    write_table(summ, paths["real_summary"], name=f"{NAME}_real_summary", extra={"size": size})
+    write_table(summ, paths["real_summary"], name=f"{NAME}_real_summary", extra={"size": size})  # every frame
     for n in notices:
         say(f"uavpipe study {NAME}: {n}")
+    if len(summ) and "centred" in set(summ["frame"]):
+        cen = summ[summ["frame"] == "centred"]
+        res.add("align_real_loo_better_pct_centred", f"{100.0 * float(cen['better'].mean()):.1f}",
+                "As align_real_loo_better_pct with each demo's mean position subtracted first (the maneuver's "
+                "shape, not where in the box it was flown) (%).")
+        multi = cen[~cen["single_other"]]
+        if len(multi):
+            res.add("align_real_loo_better_pct_centred_3plus_demos", f"{100.0 * float(multi['better'].mean()):.1f}",
+                    "The centred share over the maneuvers with at least 3 demos (%).")
+    summ_all, summ = summ, (summ[summ["frame"] == "box"] if len(summ) else summ)
     if len(summ):
         pct = 100.0 * float(summ["better"].mean())
         res.add("align_real_loo_better_pct", f"{pct:.1f}",
@@ -214,13 +246,14 @@ def run_trajectory_learning(inputs: Mapping | None, outputs: Mapping, config: Ma
     if "sim_summary" in sim_tables and len(sim_tables["sim_summary"]):
         md += ["## Simulated demos", "", md_table(sim_tables["sim_summary"]), ""]
     if len(summ):
-        md += ["## Real demos, leave one out (per maneuver, mean over folds)", "",
-               md_table(summ, "{:.1f}"), ""]
+        md += ["## Real demos, leave one out (per maneuver, mean over folds; frame box, then centred)", "",
+               md_table(summ_all, "{:.1f}"), ""]
     if notices:
         md += ["## Notices", "", *(f"- {n}" for n in notices), ""]
     write_text(paths["report"], "\n".join(md))
     build_study_page(NAME, paths["page"], results=paths["results"], report_md=paths["report"], template=template,
-                     definitions=res.definitions, figures=[("Leave one out", _figure(summ))],
+                     definitions=res.definitions, figures=[("Leave one out", _figure(summ)),
+                                                               ("Leave one out, centred", _figure(summ_all[summ_all["frame"] == "centred"] if len(summ_all) else summ_all))],
                      title=f"Study: trajectory learning from repeated demonstrations ({size})",
                      facts=[("size", size), ("seed", str(seed)), ("sets", ", ".join(st["sets"])),
                             ("tables", ", ".join(f"{t}.parquet" for t in OUTPUT_TABLES))])

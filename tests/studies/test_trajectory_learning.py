@@ -37,7 +37,9 @@ def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_pa
                     {"size": "tiny", "trajectory_learning": {"sets": ["s"], "skip": ["simulated"]}},
                     seed=1, align=_align({"s": {"flights": ["f0", "f1", "f2"], "reference": None}}))
     loo = read_table(out["real_loo"])
-    assert len(loo) == 6 and set(loo["status"]) == {"ok"}
+    assert len(loo) == 12 and set(loo["status"]) == {"ok"}  # 2 maneuvers x 3 folds x (box, centred)
+    assert loo.groupby("frame").size().to_dict() == {"box": 6, "centred": 6}
+    assert "align_real_loo_better_pct_centred" in res.results
     assert np.isfinite(loo[["rms_learned_m", "rms_best_other_m", "rms_dba_m"]].to_numpy()).all()
     pct = float(res.results["align_real_loo_better_pct"])
     assert 0.0 <= pct <= 100.0

@@ -66,6 +66,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from ..frames.rotations import quat_continuity
 from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
 from ..estimate.smoother import rts_smooth
@@ -106,17 +107,15 @@ def kinematic_transition(dt: float, n_x: int) -> F64:
 
 def quaternion_continuous(q: ArrayLike, reference: ArrayLike | None = None) -> F64:
     """Flip the sign of quaternion rows (``(N, 4)``) so that each has a non-negative dot product
-    with the previous one (q ≡ −q, digest §11 "Enforce sign continuity"); the first row is made
-    to agree with ``reference`` where given."""
+    with the previous one (q ≡ −q, digest §11 "Enforce sign continuity";
+    :func:`~pipeline.frames.rotations.quat_continuity`), the first row first made to agree with
+    ``reference`` where given (so that every demo starts on the same sheet)."""
     q = np.array(q, dtype=np.float64)
     if len(q) == 0:
         return q
     if reference is not None and float(q[0] @ np.asarray(reference, dtype=np.float64)) < 0:
-        q[0] = -q[0]
-    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
-    # the sign of row j is the product of the flips up to j
-    sign = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
-    return q * sign[:, None]
+        q = -q
+    return quat_continuity(q)
 
 
 @njit(cache=True)
@@ -161,8 +160,9 @@ def _align_dp(emis, lo, logd, T):  # pragma: no cover - compiled
     return tau
 
 
-def _band_lo(N: int, T: int, C: int) -> NDArray[np.int64]:
-    """Lowest hidden index of each sample's band, ``round(c_s) − C`` with ``c_s = s(T−1)/(N−1)``."""
+def alignment_band(N: int, T: int, C: int) -> NDArray[np.int64]:
+    """Lowest hidden index of each sample's alignment band (the band is ``lo .. lo + 2C``):
+    ``round(c_s) − C`` with the centre ``c_s = s(T−1)/(N−1)`` (``2s`` for a demo of the mean length)."""
     slope = (T - 1) / max(N - 1, 1)
     return np.round(np.arange(N) * slope).astype(np.int64) - int(C)
 
@@ -330,7 +330,7 @@ class TrajectoryLearner:
         out = []
         for k, y in enumerate(Y):
             N = len(y)
-            lo = _band_lo(N, T, C)
+            lo = alignment_band(N, T, C)
             t = lo[:, None] + np.arange(2 * C + 1)[None, :]
             ok = (t >= 0) & (t <= T - 1)
             diff = y[:, None, :] - Hmu[np.clip(t, 0, T - 1)]
@@ -362,7 +362,7 @@ class TrajectoryLearner:
         """The linear stretch ``τ_j = round(j(T−1)/(N−1))`` (seed §3 step 1), kept inside the band
         and to steps of 1..3."""
         T, C = self._T, int(self.window_C)
-        lo = _band_lo(N, T, C)
+        lo = alignment_band(N, T, C)
         tau = np.round(np.arange(N) * (T - 1) / (N - 1)).astype(np.int64)
         tau[0] = 0
         for j in range(1, N):

@@ -32,6 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from scipy.linalg.lapack import dpotrf as _dpotrf
+from scipy.linalg.lapack import dpotri as _dpotri
+
 from .base import GaussianState, MeasurementModel, TransitionModel
 
 F64 = NDArray[np.float64]
@@ -74,6 +77,22 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64, F64]:
     if n > _PLANES_MAX_N:
         # many stacked measurements (the trajectory learner's M demos × 13): one LAPACK call
         # per matrix beats n³/2 numpy calls on scalar planes
+        if S.ndim == 2 or S.shape[0] == 1 and S.ndim == 3:
+            # a single matrix: LAPACK's potrf/potri straight (numpy's stacked wrappers cost
+            # several times the factorisation at this size)
+            c, info = _dpotrf(S.reshape(n, n), lower=1, clean=1)
+            if info != 0:
+                raise np.linalg.LinAlgError("Matrix is not positive definite")
+            d = np.diagonal(c)
+            if not np.all(d > 0):
+                raise np.linalg.LinAlgError("Matrix is not positive definite")
+            inv, info = _dpotri(c, lower=1)
+            # potri fills the lower triangle; the upper one is potrf's cleaned zeros
+            Si = inv + inv.T
+            Si.flat[::n + 1] *= 0.5
+            yv = y.reshape(n)
+            return (Si.reshape(S.shape), np.reshape(yv @ Si @ yv, y.shape[:-1]),
+                    np.reshape(2.0 * np.log(d).sum(), y.shape[:-1]))
         L = np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
         d = np.diagonal(L, axis1=-2, axis2=-1)
         if not np.all(d > 0):  # NaN fails too
@@ -257,7 +276,13 @@ class ExtendedKalmanFilter:
         else:
             y = np.where(valid[..., None], z - hx, 0.0).reshape(b + (M * n_z,))
             H = np.broadcast_to(np.where(valid[..., None, None], Hj, 0.0), b + (M, n_z, n_x)).reshape(b + (M * n_z, n_x))
-        Rs = np.kron(np.eye(M), R) if M > 1 else R
+        if M > 1:
+            # block-diagonal R (np.kron costs more than the update at this size)
+            Rs = np.zeros((M * n_z, M * n_z))
+            for m in range(M):
+                Rs[m * n_z:(m + 1) * n_z, m * n_z:(m + 1) * n_z] = R
+        else:
+            Rs = R
         if not full:
             # a missing row: H row 0, residual 0, noise 1 -> zero gain column, no contribution
             miss = np.repeat(~valid, n_z, axis=-1)

@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.align.trajectory import (COLUMNS, TrajectoryError, TrajectoryLearner, _band_lo,
+from pipeline.align.trajectory import (COLUMNS, TrajectoryError, TrajectoryLearner, alignment_band,
                                        kinematic_transition, quaternion_continuous)
+from pipeline.simulate.demos import DemoSimSettings, simulate_demos
 
 DT = 0.1
 
@@ -53,7 +54,7 @@ def test_with_tau_fixed_and_no_bias_the_marginal_loglik_never_decreases(rng, cov
     assert len(ll) == 12 and L.n_iter_ == 12
     assert np.all(np.diff(ll) >= -1e-9 * np.abs(ll[:-1])), np.diff(ll)
     assert ll[-1] > ll[0]
-    # τ and d never moved
+    # τ never moved
     for tk, t0 in zip(L.tau_, taus):
         np.testing.assert_array_equal(tk, t0)
 
@@ -89,7 +90,7 @@ def test_tau_starts_at_zero_rises_by_one_to_three_and_stays_in_the_band(rng):
         assert tk.dtype.kind == "i" and len(tk) == len(demos[k])
         assert tk[0] == 0 and tk[-1] <= L.T_ - 1
         assert set(np.unique(np.diff(tk))) <= {1, 2, 3}
-        lo = _band_lo(len(tk), L.T_, C)
+        lo = alignment_band(len(tk), L.T_, C)
         assert np.all(tk >= lo) and np.all(tk <= lo + 2 * C)
         on = L.demo_on_hidden(k)
         assert on.shape == (L.T_, 3)
@@ -107,6 +108,14 @@ def test_the_learned_trajectory_is_closer_to_the_truth_than_the_plain_mean_and_e
     e_demo = [np.sqrt(np.mean((y - truth[tk]) ** 2) * 3) for y, tk in zip(demos, taus)]
     assert learned < np.sqrt(np.mean(e_plain ** 2) * 3)
     assert learned < min(e_demo)
+
+
+def test_on_simulated_13d_demos_with_their_true_tau_the_marginal_loglik_never_decreases():
+    ds = simulate_demos("loop", n_demos=5, rng=np.random.default_rng(11), settings=DemoSimSettings(duration_s=8.0))
+    L = TrajectoryLearner(dt=ds.dt, fix_tau=True, use_bias=False, max_iter=10, tol=0.0).fit(ds.demos, tau=ds.tau_true)
+    ll = np.asarray(L.loglik_)
+    assert np.all(np.diff(ll) >= -1e-9 * np.abs(ll[:-1])), np.diff(ll)
+    assert L.T_ >= max(t[-1] for t in ds.tau_true) + 1
 
 
 def test_the_same_demos_give_the_same_fit():

@@ -202,6 +202,10 @@ def run_trajectory_learning(inputs: Mapping | None, outputs: Mapping, config: Ma
             notices.append(f"simulated part not available ({exc}): skipped")
         else:
             sim_settings = {**SIM_SIZES.get(size, {}), **dict(st["sim"] or {})}
+            # the demos' own settings: align.simulate, under the study's sim.simulate overrides
+            sim_settings["simulate"] = {**{k: (tuple(v) if isinstance(v, list) else v)
+                                           for k, v in dict(align.get("simulate") or {}).items()},
+                                        **dict(sim_settings.get("simulate") or {})}
             sim_tables, sim_results = simulated_study(sim_settings, seed=int(seed), progress=progress)
             for metric, value, definition in sim_results:
                 res.add(metric, value, definition)

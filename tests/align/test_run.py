@@ -156,11 +156,24 @@ def test_a_set_with_nothing_to_learn_writes_empty_tables_with_the_reason(tmp_pat
 def test_the_real_learner_fits_a_synthetic_set_and_its_likelihood_rises(tmp_path):
     pytest.importorskip("pipeline.align.trajectory", reason="TrajectoryLearner (h15-em) not merged")
     out = _outputs(tmp_path)
-    res = align_run.run_align(_inputs(_two_flights(tmp_path)), out, _config({"s": {"flights": ["f1", "f2"]}}),
-                              set_name="s")
+    res = align_run.run_align(_inputs(_two_flights(tmp_path)), out,
+                              _config({"s": {"flights": ["f1", "f2"]}}, max_iter=3, sample_hz=2.5), set_name="s")
     assert res.diagnostics["maneuvers"]["a"]["status"] == "ok"
     it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
     a = it[it["maneuver"] == "a"]["loglik"].to_numpy()
     assert a[-1] > a[0]
     learned = read_table(out["learned"], schema.ALIGN_LEARNED)
     assert np.isfinite(learned[[f"mu_{c}" for c in DEMO_COLUMNS]].to_numpy()).all()
+
+
+def test_a_demo_the_tau_steps_cannot_stretch_is_dropped_with_the_reason():
+    from pipeline.align.demos import Demo
+
+    def demo(name, n):
+        return Demo(name, "f", "a", 0, np.arange(n, dtype=np.int64), np.zeros((n, 13)))
+
+    keep, out = align_run.stretchable([demo("x", 100), demo("y", 110), demo("z", 20)])
+    # T = round(2 * 76.7) = 153: z's 19 steps of at most 3 reach only 57
+    assert [d.name for d in keep] == ["x", "y"]
+    assert [d.name for d, _ in out] == ["z"]
+    assert out[0][1].startswith("20 samples against a median of 100: τ steps of 1-3 cannot place it on the T = 153")

@@ -18,7 +18,7 @@ from pipeline.studies import STUDIES, STUDY_TABLES, run_study, study_outputs
 
 def _align(sets):
     a = section(load_config(), "align")
-    a.update(sets=sets, max_iter=3)
+    a.update(sets=sets, max_iter=2)
     return a
 
 
@@ -28,13 +28,14 @@ def test_the_study_is_registered_with_its_tables():
 
 
 def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_path):
-    seg = synthetic_segments([(0, 10, "a"), (10, 20, "b")])
-    paths = [write_flight(tmp_path, f"f{k}", synthetic_state(600, heading_rad=0.3 * k, seed=k), seg, 0.3 * k)
+    seg = synthetic_segments([(0, 5, "a"), (5, 10, "b")])
+    paths = [write_flight(tmp_path, f"f{k}", synthetic_state(260, heading_rad=0.3 * k, seed=k), seg, 0.3 * k)
              for k in range(3)]
     inputs = {"states": [p[0] for p in paths], "segments": [p[1] for p in paths]}
     out = study_outputs("trajectory_learning", results_dir=tmp_path / "results", models=False)
     res = run_study("trajectory_learning", inputs, out,
-                    {"size": "tiny", "trajectory_learning": {"sets": ["s"], "skip": ["simulated"]}},
+                    {"size": "tiny", "trajectory_learning": {"sets": ["s"], "skip": ["simulated"],
+                                                             "sizes": {"tiny": {"real_max_iter": 2}}}},
                     seed=1, align=_align({"s": {"flights": ["f0", "f1", "f2"], "reference": None}}))
     loo = read_table(out["real_loo"])
     assert len(loo) == 12 and set(loo["status"]) == {"ok"}  # 2 maneuvers x 3 folds x (box, centred)

@@ -163,7 +163,7 @@ def grid_stride(t_ns: NDArray[np.int64], sample_hz: float) -> int:
 
 def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
                  heading_rad: float | None = None, fit: RigidFit | None = None,
-                 sample_hz: float = 5.0, exclude: Sequence[str] = ()) -> FlightDemos:
+                 sample_hz: float = 3.0, exclude: Sequence[str] = ()) -> FlightDemos:
     """Cut one flight's labelled segments into box-frame demos.
 
     Parameters

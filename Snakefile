@@ -20,6 +20,7 @@ include: "rules/classify.smk"
 include: "rules/estimate_hmpf.smk"
 include: "rules/estimate.smk"
 include: "rules/estimate_pf.smk"
+include: "rules/align.smk"
 include: "rules/report.smk"
 include: "rules/studies.smk"
 

@@ -279,10 +279,50 @@ def estimate_job(wildcards):
     }
 
 
+# --- align ------------------------------------------------------------------------------------
+
+# a demo set is planned only when every one of its flights is in the manifest with its file
+# present (static DAG); the others are skipped here with a notice and never break the run
+ALIGN_SETS = []
+for _name, _spec in config["align"]["sets"].items():
+    _absent = [f for f in _spec["flights"] if f not in FLIGHTS]
+    if _absent:
+        print(
+            f"uavpipe: skipping align set {_name}: flight(s) {', '.join(_absent)} not available",
+            file=sys.stderr,
+        )
+    else:
+        ALIGN_SETS.append(_name)
+
+
+wildcard_constraints:
+    align_set="|".join(ALIGN_SETS) if ALIGN_SETS else "NO_ALIGN_SETS",
+
+
+def align_inputs(wildcards):
+    fl = config["align"]["sets"][wildcards.align_set]["flights"]
+    return {
+        "states": [f"results/state/{f}.parquet" for f in fl],
+        "segments": [f"results/segments/{f}.parquet" for f in fl],
+    }
+
+
+def align_config(wildcards):
+    # the set's own entry only, so editing another set never reruns this one
+    sec = {k: v for k, v in config["align"].items() if k not in ("sets", "simulate", "pitch_band_deg")}
+    sec["sets"] = {wildcards.align_set: config["align"]["sets"][wildcards.align_set]}
+    return sec
+
+
+def align_paths():
+    return [f"results/report/align/{s}.html" for s in ALIGN_SETS]
+
+
 def get_final_output():
     # the simulated sets and logs are always made (the seed-000 datasets), used by a flight or not
     return [
         *estimate_paths(),
+        *align_paths(),
         "results/index.html",
         "results/sim/index.json",
         "results/sim/logs/flights.tsv",

@@ -150,6 +150,7 @@ rule report_index:
         classified=classified_paths(),
         models=expand("results/report/models/{model_set}.html", model_set=MODEL_SETS),
         compare=expand("results/report/compare/{vehicle}.html", vehicle=VEHICLES),
+        align=align_paths(),
     output:
         index=report(
             "results/index.html", caption="../reports/captions/index.rst", category="Index"
@@ -163,6 +164,7 @@ rule report_index:
             "studies": list(STUDY_NAMES),
             "vehicles": {f: flights.loc[f, "vehicle"] for f in FLIGHTS},
             "skipped": dict(SKIPPED),
+            "align_sets": list(ALIGN_SETS),
         },
     log:
         "results/logs/report_index/index.log",

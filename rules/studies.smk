@@ -137,3 +137,33 @@ rule study_pf:
         "envs/pipeline.yaml"
     script:
         "scripts/study.py"
+
+
+rule study_trajectory_learning:
+    input:
+        # the real part's flights (the align sets whose flights are all available; the others
+        # are skipped with a notice, as by the align target)
+        states=[f"results/state/{f}.parquet" for s in ALIGN_SETS for f in config["align"]["sets"][s]["flights"]],
+        segments=[f"results/segments/{f}.parquet" for s in ALIGN_SETS for f in config["align"]["sets"][s]["flights"]],
+        template="reports/templates/study.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        **study_outputs("trajectory_learning", models=False),
+    params:
+        code_version=PIPELINE_VERSION,
+        study="trajectory_learning",
+        config=config["studies"],
+        job={"seed": config["seed"]},
+        sections={"align": config["align"]},
+    log:
+        "results/logs/study_trajectory_learning/study.log",
+    benchmark:
+        "results/benchmarks/study_trajectory_learning/study.tsv"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/study.py"

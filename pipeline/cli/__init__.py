@@ -13,7 +13,7 @@ import sys
 from .. import __version__
 
 #: subcommand modules under ``pipeline.cli``, in help order
-COMMANDS: tuple[str, ...] = ("info", "ingest", "simulate", "preprocess", "train", "classify", "estimate", "config")
+COMMANDS: tuple[str, ...] = ("info", "ingest", "simulate", "preprocess", "train", "classify", "estimate", "align", "config")
 
 
 def build_parser(commands: tuple[str, ...] = COMMANDS) -> argparse.ArgumentParser:

@@ -1080,3 +1080,67 @@ def _pandas_version() -> str:
         return im.version("pandas")
     except im.PackageNotFoundError:  # pragma: no cover - pandas is a core dependency
         return ""
+
+
+# --- issue 15: trajectory learning (results/align/<set>/*.parquet) ------------------------------
+# Maneuvers are rows (static DAG): every table has a ``maneuver`` column. The 13 demo
+# dimensions are the ``state`` names of NED position, velocity, acceleration and the
+# quaternion, in the set's box frame (pipeline.align.demos.DEMO_COLUMNS).
+_ALIGN_DIMS: tuple[tuple[str, str], ...] = (
+    *((f"pos_{a}_m", "m") for a in _NED), *((f"vel_{a}_mps", "m/s") for a in _NED),
+    *((f"acc_{a}_mps2", "m/s^2") for a in _NED), *((f"q_{c}", "1") for c in "wxyz"))
+_ALIGN_KEY: tuple[Column, ...] = (
+    Column("maneuver", "string", "", "", "segment label"),
+)
+#: ``learned``: per hidden step t the smoothed mean μ_t, diag Σ_t, the bias β_t and the model
+#: prediction error (NaN where the learner gives none, e.g. the last step).
+ALIGN_LEARNED: tuple[Column, ...] = (
+    *_ALIGN_KEY,
+    Column("t", "int64", "1", "", "hidden time step"),
+    _f("t_s", "s", "", "hidden time (t * hidden dt)"),
+    *(_f(f"mu_{n}", u, "box", "learned trajectory (smoothed mean)") for n, u in _ALIGN_DIMS),
+    *(_f(f"var_{n}", f"({u})^2", "box", "smoothed variance (diag of Sigma_t)") for n, u in _ALIGN_DIMS),
+    *(_f(f"beta_{n}", u, "box", "bias term beta_t") for n, u in _ALIGN_DIMS),
+    *(_f(f"mpe_{n}", u, "box", "model prediction error") for n, u in _ALIGN_DIMS),
+)
+#: ``alignment``: per demo sample j its hidden step τ_j and the demo's step probabilities d;
+#: a dropped or skipped demo is one row (j = -1) with the reason.
+ALIGN_ALIGNMENT: tuple[Column, ...] = (
+    *_ALIGN_KEY,
+    Column("demo", "string", "", "", "<flight>:<label>#<k>"),
+    Column("flight_id", "string"),
+    Column("segment_id", "int64"),
+    Column("status", "string", "", "", "used, dropped (bad demo) or skipped (maneuver not learned)"),
+    Column("reason", "string", "", "", "why dropped or skipped, '' when used"),
+    Column("frame", "string", "", "", "box (FlightCoach heading), rigid (fitted to the reference), ned"),
+    _f("heading_rad", "rad", "", "rotation about down into the box frame"),
+    Column("j", "int64", "1", "", "demo sample (-1: none)"),
+    Column("t_ns", "int64", "ns", "", "the demo sample's time on its flight's clock"),
+    Column("tau", "int64", "1", "", "hidden step of the sample (-1: none)"),
+    *(_f(f"d_{i}", "1", "", f"probability of a {i}-step jump of tau") for i in (1, 2, 3)),
+)
+#: ``iterations``: per EM iteration the log-likelihood and the diagonals of Σ^(z) and Σ^(y);
+#: a skipped maneuver is one row (iteration -1) with the reason.
+ALIGN_ITERATIONS: tuple[Column, ...] = (
+    *_ALIGN_KEY,
+    Column("iteration", "int64", "1", "", "EM iteration (0 = initial; -1: not fitted)"),
+    _f("loglik", "1", "", "log-likelihood"),
+    *(_f(f"sigma_z_{n}", f"({u})^2", "box", "process noise Sigma^(z) diagonal") for n, u in _ALIGN_DIMS),
+    *(_f(f"sigma_y_{n}", f"({u})^2", "box", "observation noise Sigma^(y) diagonal") for n, u in _ALIGN_DIMS),
+    Column("status", "string", "", "", "ok, or skipped"),
+    Column("reason", "string"),
+    Column("n_demos", "int64"),
+    Column("converged", "bool"),
+)
+#: ``demos``: each used demo on the hidden time axis (sample j at hidden step τ_j).
+ALIGN_DEMOS: tuple[Column, ...] = (
+    *_ALIGN_KEY,
+    Column("demo", "string"),
+    Column("flight_id", "string"),
+    Column("j", "int64"),
+    Column("tau", "int64", "1", "", "hidden step"),
+    _f("t_s", "s", "", "hidden time of the sample"),
+    *(_f(n, u, "box") for n, u in _ALIGN_DIMS),
+)
+TABLES.update({"align_learned": ALIGN_LEARNED, "align_alignment": ALIGN_ALIGNMENT,
+               "align_iterations": ALIGN_ITERATIONS, "align_demos": ALIGN_DEMOS})

@@ -126,7 +126,8 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
                 classified: dict | None = None, models: dict[str, str] | None = None,
                 studies: dict[str, str] | None = None, vehicles: Mapping[str, str] | None = None,
                 compare: Mapping[str, str] | None = None,
-                skipped: Mapping[str, str] | None = None) -> pd.DataFrame:
+                skipped: Mapping[str, str] | None = None,
+                align: dict[str, str] | None = None) -> pd.DataFrame:
     """Write the index page; returns the summary table (one row per flight).
 
     Parameters
@@ -143,6 +144,8 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         ``{flight_id: {model_set: path}}`` of the classification tables (maneuvers found).
     models : dict, optional
         ``{model_set: relative URL}`` of the per-model-set reports.
+    align : dict, optional
+        ``{demo set: relative URL}`` of the trajectory-learning pages (``report/align/<set>.html``).
     studies : dict, optional
         ``{study: relative URL}`` of the study pages (``report/studies/<name>.html``); pages
         that do not exist yet are listed with the target that builds them (studies are built by
@@ -188,6 +191,10 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     model_links = "".join(f'<li><a href="{html.escape(u)}">{html.escape(m)}</a></li>'
                           for m, u in (models or {}).items())
     models_html = f"<h2>Model sets</h2><ul>{model_links}</ul>" if model_links else ""
+    align_links = "".join(f'<li><a href="{html.escape(u)}">{html.escape(s)}</a></li>'
+                          for s, u in (align or {}).items())
+    if align_links:
+        models_html += f"<h2>Trajectory learning</h2><ul>{align_links}</ul>"
     here = Path(out_html).parent
     # studies are built by their own targets, not by the main job: list each, linked once built
     study_links = "".join(

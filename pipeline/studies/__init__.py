@@ -24,6 +24,7 @@ STUDIES = {
     "flightcoach_ekf_hmm": "pipeline.studies.flightcoach_ekf_hmm:run_flightcoach_ekf_hmm",
     "seed000_ekf": "pipeline.studies.seed000_ekf:run_seed000_ekf",
     "pf": "pipeline.studies.pf:run_pf",
+    "trajectory_learning": "pipeline.studies.trajectory_learning:run_trajectory_learning",
 }
 
 
@@ -66,5 +67,5 @@ def __getattr__(attr: str):
 
 __all__ = ["SIZES", "STUDIES", "STUDY_TABLES", "StudyError", "StudyResult", "entry_point", "flightcoach_inputs",
            "run_flightcoach_classification", "run_flightcoach_ekf_hmm", "run_pf", "run_seed000_classification", "run_seed000_ekf",
-           "run_study", "study_outputs",
+           "run_study", "run_trajectory_learning", "study_outputs",
            "study_settings"]

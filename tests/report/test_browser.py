@@ -81,9 +81,23 @@ def report_tree(tmp_path_factory) -> Path:
     build_model_report(res / "models" / "sim", res / "models" / "sim" / "evaluation.parquet",
                        res / "report" / "models" / "sim.html", template=ROOT / "reports" / "templates" / "model.html.j2",
                        plotly_js="../assets/plotly.min.js")
+    # a trajectory-learning set of two synthetic flights (the real learner, 3 EM iterations)
+    from helpers_align import synthetic_segments, synthetic_state, write_flight
+    from pipeline.align.run import ALIGN_OUTPUTS, run_align
+    from pipeline.report.align import build_align_report
+
+    seg = synthetic_segments([(0, 8, "a"), (8, 16, "b")])
+    fl = [write_flight(res / "align_in", f"f{k}", synthetic_state(500, heading_rad=0.4 * k, seed=k), seg, 0.4 * k)
+          for k in range(2)]
+    align_out = {k: res / "align" / "s" / f"{k}.parquet" for k in ALIGN_OUTPUTS}
+    run_align({"states": [p[0] for p in fl], "segments": [p[1] for p in fl]}, align_out,
+              {**cfg["align"], "max_iter": 3, "sets": {"s": {"flights": ["f0", "f1"], "reference": None}}},
+              set_name="s")
+    build_align_report(align_out, res / "report" / "align" / "s.html", set_name="s",
+                       template=ROOT / "reports" / "templates" / "align.html.j2", plotly_js="../assets/plotly.min.js")
     build_index(["demo-quad", "bad"], [res / "ingest" / f / "meta.json" for f in ("demo-quad", "bad")],
                 res / "index.html", links={f: f"report/flights/{f}.html" for f in ("demo-quad", "bad")},
-                models={"sim": "report/models/sim.html"})
+                models={"sim": "report/models/sim.html"}, align={"s": "report/align/s.html"})
     return res
 
 
@@ -155,6 +169,19 @@ def test_model_report_in_headless_chromium(report_tree, tmp_path):
         assert table in r["text"]
     assert "98.21" in r["text"]  # the thesis's M1 MAoT beside ours
     assert (tmp_path / "model.png").stat().st_size > 1000
+
+
+def test_align_report_in_headless_chromium(report_tree, tmp_path):
+    _need_browser()
+    r = _open(report_tree / "report" / "align" / "s.html", tmp_path / "align.png")
+    _check_offline(r)
+    # the log-likelihood trace + learned / alignment / 3-D path per maneuver (a, b)
+    assert len(r["plots"]) == 7, r["plots"]
+    for p in r["plots"]:
+        assert p["traces"] > 0 and p["w"] > 0 and p["h"] > 0 and p["drawn"] > 0, p
+    assert "peak_pitch_deg" in r["text"] and "cross_track_rms_m" in r["text"]
+    idx = _open(report_tree / "index.html", tmp_path / "index2.png")
+    assert "Trajectory learning" in idx["text"]
 
 
 def test_zooming_one_time_panel_of_a_flight_page_zooms_the_others(report_tree):

@@ -1,0 +1,383 @@
+"""Demonstrations per maneuver from preprocessed flights, in the aerobatic box frame.
+
+A *demo* is one labelled segment of one flight: the rows of ``results/state/<flight>.parquet``
+(uniform grid) with ``t_start_ns <= t_ns < t_end_ns`` of a row of
+``results/segments/<flight>.parquet``, taken at ``sample_hz`` (every ``round(grid_hz /
+sample_hz)``-th grid row) as a ``(N, 13)`` array of :data:`DEMO_COLUMNS`: NED position,
+velocity, acceleration and the attitude quaternion (scalar first, sign-continuous along the demo,
+:func:`~pipeline.frames.rotations.quat_continuity`), all in the **box frame**.
+
+**Box frame.** A FlightCoach flight carries its box heading ``box_rotation_rad`` (ψ) in the
+``state`` metadata (preprocessing copies ``params.box_rotation_rad`` of the ingest meta there);
+its NED frame is centred on the box origin (the pilot), so the box frame is NED rotated about
+down by ψ about the origin, :math:`x_{box} = R_z(\\psi)\\,x_{NED}` for position, velocity and
+acceleration (:func:`~pipeline.models.features.heading_rotation`) and
+:math:`q_{box} = q_z(-\\psi) \\otimes q` for the body→NED quaternion.
+
+**Box-less flights** (the kd0aij CSVs: NED about the first fix, no labels) get a rigid transform
+onto the set's labelled reference flight (already in its box frame), :func:`rigid_fit`: the
+whole schedule's track at ``csv_fit.sample_hz`` is matched to the reference's by DTW for each of
+``csv_fit.headings`` initial headings (centroids aligned), the best is refined by
+``csv_fit.iterations`` rounds of DTW + least squares (2-D rotation about down, 3-D translation,
+Kabsch on the matched pairs). The flight's segments are then the reference's maneuver list
+carried through a last DTW path at the demo rate (:func:`transfer_segments`).
+
+**Bad input** never raises: a segment with ``gap`` rows or non-finite values inside it, or with
+fewer than 2 samples, becomes a :class:`Dropped` record with the reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from ..frames.rotations import quat_continuity, quat_multiply, quat_normalize
+from ..models.features import heading_rotation
+
+F64 = NDArray[np.float64]
+
+#: The 13 demo dimensions (``state`` table names), in order.
+DEMO_COLUMNS: tuple[str, ...] = (
+    "pos_n_m", "pos_e_m", "pos_d_m", "vel_n_mps", "vel_e_mps", "vel_d_mps",
+    "acc_n_mps2", "acc_e_mps2", "acc_d_mps2", "q_w", "q_x", "q_y", "q_z",
+)
+
+
+@dataclass(frozen=True)
+class Demo:
+    """One demonstration: a labelled segment of one flight in the box frame.
+
+    Attributes
+    ----------
+    name : str
+        ``<flight_id>:<label>#<k>`` (``k`` counts the label's occurrences in the flight from 1).
+    flight_id, label : str
+    segment_id : int
+    t_ns : ndarray (N,)
+        The sample times (the flight's own clock).
+    x : ndarray (N, 13)
+        :data:`DEMO_COLUMNS` in the box frame.
+    """
+
+    name: str
+    flight_id: str
+    label: str
+    segment_id: int
+    t_ns: NDArray[np.int64]
+    x: F64
+
+
+@dataclass(frozen=True)
+class Dropped:
+    """A segment (or a whole flight, ``segment_id`` -1) left out, with the reason."""
+
+    name: str
+    flight_id: str
+    label: str
+    segment_id: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class RigidFit:
+    """A rotation about down + translation taking a box-less flight onto its reference.
+
+    :math:`x_{ref} = R_z(\\psi)\\,x + t` (:func:`~pipeline.models.features.heading_rotation`):
+    ``heading_rad`` is ψ, the box heading of the flight's own NED frame.
+
+    Attributes
+    ----------
+    heading_rad : float
+    translation_m : ndarray (3,)
+        NED translation in the reference frame (m).
+    rms_m : float
+        RMS 3-D distance of the DTW-matched pairs after the fit (m).
+    n_pairs : int
+        Matched pairs of the last round.
+    """
+
+    heading_rad: float
+    translation_m: F64
+    rms_m: float
+    n_pairs: int
+
+    def apply(self, x: F64) -> F64:
+        """The ``(N, 13)`` demo array ``x`` (flight NED) in the reference frame."""
+        return to_frame(x, self.heading_rad, self.translation_m)
+
+
+@dataclass(frozen=True)
+class FlightDemos:
+    """The demos of one flight and what was left out.
+
+    ``frame`` is ``box`` (FlightCoach box heading), ``rigid`` (fitted to the reference) or
+    ``ned`` (neither: kept in the flight's NED frame); ``heading_rad`` the rotation used.
+    """
+
+    flight_id: str
+    demos: list[Demo]
+    dropped: list[Dropped]
+    frame: str
+    heading_rad: float
+    diagnostics: dict = field(default_factory=dict)
+
+
+# --- frames -------------------------------------------------------------------------------------
+
+def to_frame(x: F64, heading_rad: float, translation_m: Sequence[float] | None = None) -> F64:
+    """Rotate ``(N, 13)`` demo rows about down by ``heading_rad`` (then translate the position).
+
+    Position, velocity and acceleration triples become :math:`R_z(\\psi)\\,v`; the body→NED
+    quaternion becomes :math:`q_z(-\\psi) \\otimes q` (body→frame), sign-continuous.
+    """
+    x = np.array(x, dtype=np.float64, copy=True)
+    rot = heading_rotation(heading_rad)
+    for k in range(3):
+        x[:, 3 * k:3 * k + 3] = x[:, 3 * k:3 * k + 3] @ rot.T
+    if translation_m is not None:
+        x[:, 0:3] += np.asarray(translation_m, dtype=np.float64)
+    half = -0.5 * float(heading_rad)
+    qz = np.array([np.cos(half), 0.0, 0.0, np.sin(half)])
+    x[:, 9:13] = quat_continuity(quat_multiply(qz, quat_normalize(x[:, 9:13])))
+    return x
+
+
+def state_array(state: pd.DataFrame) -> F64:
+    """The :data:`DEMO_COLUMNS` of a ``state`` table as an ``(N, 13)`` float array."""
+    return state.loc[:, list(DEMO_COLUMNS)].to_numpy(dtype=np.float64)
+
+
+def grid_stride(t_ns: NDArray[np.int64], sample_hz: float) -> int:
+    """Rows of the uniform state grid per demo sample: ``max(1, round(grid_hz / sample_hz))``."""
+    if len(t_ns) < 2:
+        return 1
+    dt = float(np.median(np.diff(t_ns))) * 1e-9
+    return max(1, int(round(1.0 / (dt * float(sample_hz))))) if dt > 0 else 1
+
+
+# --- demos of one flight -------------------------------------------------------------------------
+
+def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
+                 heading_rad: float | None = None, fit: RigidFit | None = None,
+                 sample_hz: float = 3.0, exclude: Sequence[str] = ()) -> FlightDemos:
+    """Cut one flight's labelled segments into box-frame demos.
+
+    Parameters
+    ----------
+    state : DataFrame
+        The flight's ``state`` table (uniform grid; :data:`DEMO_COLUMNS`, ``t_ns``, ``gap``).
+    segments : DataFrame
+        ``segment_id``, ``t_start_ns``, ``t_end_ns``, ``label``.
+    flight_id : str
+    heading_rad : float, optional
+        The box heading (FlightCoach ``box_rotation_rad``); rotation about the origin.
+    fit : RigidFit, optional
+        A rigid transform onto a reference flight (box-less flights); wins over ``heading_rad``.
+    sample_hz : float
+        Demo rate (nearest grid rows, see :func:`grid_stride`).
+    exclude : sequence of str
+        Labels never taken (take-off, landing).
+
+    Returns
+    -------
+    FlightDemos
+    """
+    t = state["t_ns"].to_numpy(np.int64)
+    stride = grid_stride(t, sample_hz)
+    x_all = state_array(state)
+    gap = state["gap"].to_numpy(bool) if "gap" in state else np.zeros(len(state), bool)
+    if fit is not None:
+        frame, psi = "rigid", float(fit.heading_rad)
+    elif heading_rad is not None and np.isfinite(heading_rad):
+        frame, psi = "box", float(heading_rad)
+    else:
+        frame, psi = "ned", 0.0
+    demos: list[Demo] = []
+    dropped: list[Dropped] = []
+    seen: dict[str, int] = {}
+    for row in segments.sort_values("t_start_ns").itertuples():
+        label = str(row.label)
+        if label in exclude or not label:
+            continue
+        seen[label] = seen.get(label, 0) + 1
+        name = f"{flight_id}:{label}#{seen[label]}"
+        inside = (t >= int(row.t_start_ns)) & (t < int(row.t_end_ns))
+        idx = np.flatnonzero(inside)
+        reason = ""
+        if gap[idx].any():
+            reason = f"{int(gap[idx].sum())} gap rows inside the segment"
+        idx = idx[::stride]
+        if not reason and len(idx) < 2:
+            reason = f"{len(idx)} samples in the segment at {sample_hz:g} Hz"
+        if not reason and not np.isfinite(x_all[idx]).all():
+            bad = sorted({DEMO_COLUMNS[j] for j in np.flatnonzero(~np.isfinite(x_all[idx]).all(axis=0))})
+            reason = f"non-finite {', '.join(bad)} inside the segment"
+        if reason:
+            dropped.append(Dropped(name, flight_id, label, int(row.segment_id), reason))
+            continue
+        x = x_all[idx]
+        x = fit.apply(x) if fit is not None else to_frame(x, psi)
+        demos.append(Demo(name, flight_id, label, int(row.segment_id), t[idx], x))
+    diag = {"stride": stride, "n_demos": len(demos), "n_dropped": len(dropped), "frame": frame,
+            "heading_rad": psi}
+    if fit is not None:
+        diag.update(translation_m=[float(v) for v in fit.translation_m], fit_rms_m=fit.rms_m,
+                    fit_pairs=fit.n_pairs)
+    return FlightDemos(flight_id, demos, dropped, frame, psi, diag)
+
+
+# --- the rigid fit of a box-less flight ----------------------------------------------------------
+
+PathFn = Callable[[F64, F64], NDArray[np.int64]]
+
+
+def warping_path(x: F64, y: F64) -> NDArray[np.int64]:
+    """The DTW path ``(K, 2)`` (indices into x, y) of two multi-dimensional series.
+
+    Symmetric2 steps, no window, squared-Euclidean local cost, by
+    :func:`pipeline.align.dtw.dtw`.
+    """
+    from .dtw import dtw  # noqa: PLC0415 (kept lazy: numba compiles on first use)
+
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    return path_array(dtw(x, y, step_pattern="symmetric2").path)
+
+
+def path_array(path) -> NDArray[np.int64]:
+    """A DTW path as a ``(K, 2)`` int array, from ``(K, 2)``, ``(2, K)``, a pair of index
+    arrays or a list of pairs."""
+    if isinstance(path, tuple) and len(path) == 2:
+        return np.column_stack([np.asarray(path[0]), np.asarray(path[1])]).astype(np.int64)
+    p = np.asarray(path, dtype=np.int64)
+    if p.ndim == 2 and p.shape[1] != 2 and p.shape[0] == 2:
+        p = p.T
+    return p
+
+
+def _kabsch_about_down(src: F64, dst: F64) -> tuple[float, F64]:
+    """ψ and t minimising Σ|R_z(ψ) src + t − dst|² (R_z about down only)."""
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src[:, :2] - ms[:2], dst[:, :2] - md[:2]
+    # x_frame = R x with R = [[c, s], [-s, c]]: maximise Σ b·(R a)
+    num = np.sum(a[:, 1] * b[:, 0] - a[:, 0] * b[:, 1])
+    den = np.sum(a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])
+    psi = float(np.arctan2(num, den))
+    t = md - ms @ heading_rotation(psi).T
+    return psi, t
+
+
+def _transform_pos(p: F64, psi: float, t: F64) -> F64:
+    return p @ heading_rotation(psi).T + t
+
+
+def rigid_fit(track_ned: F64, reference: F64, *, headings: int = 24, iterations: int = 30,
+              path_fn: PathFn | None = None) -> RigidFit:
+    """Fit :math:`x_{ref} = R_z(\\psi)\\,x + t` of a whole flight to its reference by DTW.
+
+    Parameters
+    ----------
+    track_ned : ndarray (N, 3)
+        The box-less flight's positions (NED), at the fit rate.
+    reference : ndarray (M, 3)
+        The reference flight's positions in its box frame, at the same rate.
+    headings : int
+        Initial headings ``2πk/headings`` tried (centroids aligned); the best DTW distance wins.
+    iterations : int
+        Rounds of DTW path + least squares after it at most (it stops earlier once a round
+        changes ψ by < 1e-6 rad and t by < 1 mm).
+    path_fn : callable, optional
+        ``(x, y) -> (K, 2)`` DTW path; default :func:`warping_path`.
+
+    Returns
+    -------
+    RigidFit
+    """
+    path_fn = path_fn or warping_path
+    src = np.asarray(track_ned, dtype=np.float64)
+    ref = np.asarray(reference, dtype=np.float64)
+    best = None
+    for k in range(int(headings)):
+        psi = 2.0 * np.pi * k / int(headings)
+        t = ref.mean(axis=0) - src.mean(axis=0) @ heading_rotation(psi).T
+        p = _transform_pos(src, psi, t)
+        path = path_fn(p, ref)
+        cost = float(np.mean(np.sum((p[path[:, 0]] - ref[path[:, 1]]) ** 2, axis=1)))
+        if best is None or cost < best[0]:
+            best = (cost, psi, t)
+    _, psi, t = best
+    path = np.zeros((0, 2), np.int64)
+    for _ in range(int(iterations)):
+        path = path_fn(_transform_pos(src, psi, t), ref)
+        psi_new, t_new = _kabsch_about_down(src[path[:, 0]], ref[path[:, 1]])
+        # like ICP this creeps along the track: stop once a round moves nothing noticeable
+        done = abs(psi_new - psi) < 1e-6 and float(np.max(np.abs(t_new - t))) < 1e-3
+        psi, t = psi_new, t_new
+        if done:
+            break
+    p = _transform_pos(src, psi, t)
+    rms = float(np.sqrt(np.mean(np.sum((p[path[:, 0]] - ref[path[:, 1]]) ** 2, axis=1)))) if len(path) else np.nan
+    psi = float(np.arctan2(np.sin(psi), np.cos(psi)))
+    return RigidFit(psi, np.asarray(t, dtype=np.float64), rms, int(len(path)))
+
+
+def transfer_segments(ref_t_ns: NDArray[np.int64], ref_segments: pd.DataFrame,
+                      t_ns: NDArray[np.int64], path: NDArray[np.int64]) -> pd.DataFrame:
+    """The reference's segments on another flight's clock through a DTW path.
+
+    ``path`` pairs indices of the flight (``path[:, 0]`` into ``t_ns``) with indices of the
+    reference (``path[:, 1]`` into ``ref_t_ns``). A reference boundary at time ``b`` maps to the
+    mean flight index matched to the reference sample nearest ``b``.
+    """
+    path = np.asarray(path, dtype=np.int64)
+    n_ref = len(ref_t_ns)
+    sums = np.bincount(path[:, 1], weights=path[:, 0], minlength=n_ref)
+    counts = np.bincount(path[:, 1], minlength=n_ref)
+    j_of_i = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+    # reference samples the path never visits (cannot happen for a full path) take neighbours
+    ok = np.isfinite(j_of_i)
+    j_of_i = np.interp(np.arange(n_ref), np.flatnonzero(ok), j_of_i[ok])
+
+    def carry(b: int) -> int:
+        i = int(np.clip(np.searchsorted(ref_t_ns, b), 0, n_ref - 1))
+        return int(t_ns[int(np.clip(round(j_of_i[i]), 0, len(t_ns) - 1))])
+
+    out = ref_segments.loc[:, ["segment_id", "t_start_ns", "t_end_ns", "label"]].copy()
+    out["t_start_ns"] = [carry(int(b)) for b in ref_segments["t_start_ns"]]
+    out["t_end_ns"] = [carry(int(b)) for b in ref_segments["t_end_ns"]]
+    return out.reset_index(drop=True)
+
+
+def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments: pd.DataFrame, *,
+                     ref_heading_rad: float | None, sample_hz: float, fit_hz: float = 1.0,
+                     headings: int = 24, iterations: int = 30,
+                     path_fn: PathFn | None = None) -> tuple[RigidFit, pd.DataFrame]:
+    """Rigid fit of a box-less flight to a labelled reference, and its carried segments.
+
+    The fit uses both tracks at ``fit_hz``; the segments come from one more DTW path of the
+    fitted positions at ``sample_hz`` (:func:`transfer_segments`).
+    """
+    path_fn = path_fn or warping_path
+    psi_ref = float(ref_heading_rad) if ref_heading_rad is not None else 0.0
+
+    def positions(st: pd.DataFrame, hz: float) -> tuple[NDArray[np.int64], F64]:
+        t = st["t_ns"].to_numpy(np.int64)
+        p = st.loc[:, ["pos_n_m", "pos_e_m", "pos_d_m"]].to_numpy(np.float64)
+        keep = np.isfinite(p).all(axis=1)
+        t, p = t[keep], p[keep]
+        s = grid_stride(t, hz)
+        return t[::s], p[::s]
+
+    t_src, src = positions(state, fit_hz)
+    t_ref, ref = positions(ref_state, fit_hz)
+    ref = ref @ heading_rotation(psi_ref).T
+    fit = rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn)
+    t_src, src = positions(state, sample_hz)
+    t_ref, ref = positions(ref_state, sample_hz)
+    ref = ref @ heading_rotation(psi_ref).T
+    path = path_fn(_transform_pos(src, fit.heading_rad, fit.translation_m), ref)
+    return fit, transfer_segments(t_ref, ref_segments, t_src, path)

@@ -1,0 +1,179 @@
+"""The align stage entry point (pipeline.align.run.run_align): tables, box frames, bad input.
+
+Most tests put a stand-in learner behind :func:`pipeline.align.run.make_learner` (the tables and
+the bookkeeping do not depend on the EM); one runs the real learner when it is installed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers_align import synthetic_segments, synthetic_state, write_flight
+
+import pipeline.align.run as align_run
+from pipeline.align.demos import DEMO_COLUMNS
+from pipeline.io import schema
+from pipeline.io.parquet import read_table, read_table_meta
+
+
+class StandInLearner:
+    """Linear-stretch 'learner': τ_j = round(j (T-1)/(N-1)), μ = the demos' mean on that axis."""
+
+    def __init__(self, dt):
+        self.dt = dt
+
+    def fit(self, demos):
+        T = int(round(2 * np.mean([len(d) for d in demos])))
+        self.tau_ = [np.round(np.arange(len(d)) * (T - 1) / (len(d) - 1)).astype(int) for d in demos]
+        acc = np.zeros((T, 13))
+        cnt = np.zeros((T, 1))
+        for d, tau in zip(demos, self.tau_):
+            acc[tau] += d
+            cnt[tau] += 1
+        self.mean_ = np.array([np.interp(np.arange(T), np.flatnonzero(cnt[:, 0]), acc[cnt[:, 0] > 0, k]
+                                         / cnt[cnt[:, 0] > 0, 0]) for k in range(13)]).T
+        self.var_ = np.ones((T, 13))
+        self.d_ = np.full((len(demos), 3), 1 / 3)
+        self.loglik_ = np.array([-100.0, -50.0, -49.0])
+        self.sigma_z_ = np.stack([np.eye(13) * (k + 1) for k in range(3)])
+        self.sigma_y_ = np.eye(13)
+        self.beta_ = np.zeros((T - 1, 13))
+        self.model_error_ = np.zeros((T - 1, 13))
+        self.n_iter_, self.converged_ = 2, True
+        return self
+
+
+@pytest.fixture
+def stand_in(monkeypatch):
+    monkeypatch.setattr(align_run, "make_learner", lambda config, dt: StandInLearner(dt))
+
+
+def _config(sets, **kw):
+    return {"window_C": 20, "max_iter": 5, "tol": 1e-6, "ridge": 1.0, "dynamics": "kinematic", "sample_hz": 5.0,
+            "min_demos": 2, "exclude": ["tkOf"], "csv_fit": {"sample_hz": 1.0, "headings": 12, "iterations": 30},
+            "sets": sets, **kw}
+
+
+def _outputs(tmp_path):
+    return {k: str(tmp_path / "align" / "s" / f"{k}.parquet") for k in align_run.ALIGN_OUTPUTS}
+
+
+def _inputs(paths):
+    return {"states": [p[0] for p in paths], "segments": [p[1] for p in paths]}
+
+
+def _two_flights(tmp_path, *, gap=False):
+    seg = synthetic_segments([(0, 4, "tkOf"), (4, 12, "a"), (12, 20, "b"), (20, 26, "a"), (26, 30, "solo")])
+    psi1, psi2 = np.radians(30.0), np.radians(-100.0)
+    st2 = synthetic_state(800, heading_rad=psi2, seed=2)
+    if gap:
+        st2.loc[400:401, "gap"] = True  # t 16 s: inside f2's segment b
+    seg2 = seg[seg["label"] != "solo"]
+    return [write_flight(tmp_path, "f1", synthetic_state(800, heading_rad=psi1, seed=1), seg, psi1),
+            write_flight(tmp_path, "f2", st2, seg2, psi2)]
+
+
+def test_every_maneuver_becomes_rows_of_the_four_declared_tables(tmp_path, stand_in):
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(_two_flights(tmp_path)), out, _config({"s": {"flights": ["f1", "f2"]}}),
+                              set_name="s")
+    assert res.status == "partial"  # 'solo' has one demo
+    learned = read_table(out["learned"], schema.ALIGN_LEARNED)
+    assert list(learned.columns) == [c.name for c in schema.ALIGN_LEARNED]
+    assert set(learned["maneuver"]) == {"a", "b"}
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    used = al[al["status"] == "used"]
+    assert sorted(used["demo"].unique()) == ["f1:a#1", "f1:a#2", "f1:b#1", "f2:a#1", "f2:a#2", "f2:b#1"]
+    assert (used.groupby("demo")["tau"].first() == 0).all()
+    it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
+    ok = it[it["status"] == "ok"]
+    assert list(ok[ok["maneuver"] == "a"]["iteration"]) == [0, 1, 2]
+    np.testing.assert_allclose(ok[ok["maneuver"] == "a"]["sigma_z_pos_n_m"], [1.0, 2.0, 3.0])
+    dm = read_table(out["demos"], schema.ALIGN_DEMOS)
+    assert len(dm) == len(used)
+    assert read_table_meta(out["learned"])["align"]["maneuvers"]["a"]["n_demos"] == 4
+
+
+def test_demos_of_flights_in_differently_rotated_boxes_coincide_in_the_box_frame(tmp_path, stand_in):
+    out = _outputs(tmp_path)
+    align_run.run_align(_inputs(_two_flights(tmp_path)), out, _config({"s": {"flights": ["f1", "f2"]}}),
+                        set_name="s")
+    dm = read_table(out["demos"], schema.ALIGN_DEMOS)
+    b = dm[dm["maneuver"] == "b"]
+    y1 = b[b["flight_id"] == "f1"]["pos_e_m"].to_numpy()
+    y2 = b[b["flight_id"] == "f2"]["pos_e_m"].to_numpy()
+    # box y = 5 sin(0.2 t) in both flights although their boxes point 130 deg apart
+    np.testing.assert_allclose(y1, y2, atol=1e-6)
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    assert set(al[al["flight_id"] == "f2"]["frame"]) == {"box"}
+    np.testing.assert_allclose(al[al["flight_id"] == "f2"]["heading_rad"].iloc[0], np.radians(-100.0))
+
+
+def test_a_maneuver_with_fewer_than_two_demos_is_skipped_with_the_reason(tmp_path, stand_in):
+    out = _outputs(tmp_path)
+    align_run.run_align(_inputs(_two_flights(tmp_path)), out, _config({"s": {"flights": ["f1", "f2"]}}),
+                        set_name="s")
+    it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
+    solo = it[it["maneuver"] == "solo"]
+    assert list(solo["status"]) == ["skipped"] and list(solo["iteration"]) == [-1]
+    assert solo["reason"].iloc[0] == "1 usable demo(s) (< align.min_demos = 2)"
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    assert list(al[al["maneuver"] == "solo"]["status"]) == ["skipped"]
+
+
+def test_a_demo_with_gap_rows_is_dropped_and_its_maneuver_learned_without_it(tmp_path, stand_in):
+    out = _outputs(tmp_path)
+    align_run.run_align(_inputs(_two_flights(tmp_path, gap=True)), out,
+                        _config({"s": {"flights": ["f1", "f2"]}}), set_name="s")
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    row = al[al["demo"] == "f2:b#1"]
+    assert list(row["status"]) == ["dropped"] and row["reason"].iloc[0] == "2 gap rows inside the segment"
+    it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
+    assert it[it["maneuver"] == "b"]["status"].iloc[0] == "skipped"  # one demo of b left
+
+
+def test_a_missing_flight_is_skipped_with_a_notice(tmp_path, stand_in, capsys):
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(_two_flights(tmp_path)), out,
+                              _config({"s": {"flights": ["f1", "f2", "gone"]}}), set_name="s")
+    assert "set s: flight gone missing (no state/segments input): skipped" in capsys.readouterr().err
+    assert res.diagnostics["notices"] == ["set s: flight gone missing (no state/segments input): skipped"]
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    assert al[al["flight_id"] == "gone"]["reason"].tolist() == ["flight missing"]
+    assert set(read_table(out["learned"])["maneuver"]) == {"a", "b"}
+
+
+def test_a_set_with_nothing_to_learn_writes_empty_tables_with_the_reason(tmp_path, stand_in):
+    out = _outputs(tmp_path)
+    paths = _two_flights(tmp_path)[:1]
+    res = align_run.run_align(_inputs(paths), out, _config({"s": {"flights": ["f1"]}}, min_demos=3), set_name="s")
+    assert res.status == "failed" and "no maneuver learned" in res.error
+    for k in align_run.ALIGN_OUTPUTS:
+        assert read_table_meta(out[k])["status"] == "failed"
+    assert len(read_table(out["learned"])) == 0
+
+
+def test_the_real_learner_fits_a_synthetic_set_and_its_likelihood_rises(tmp_path):
+    pytest.importorskip("pipeline.align.trajectory", reason="TrajectoryLearner (h15-em) not merged")
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(_two_flights(tmp_path)), out,
+                              _config({"s": {"flights": ["f1", "f2"]}}, max_iter=3, sample_hz=2.5), set_name="s")
+    assert res.diagnostics["maneuvers"]["a"]["status"] == "ok"
+    it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
+    a = it[it["maneuver"] == "a"]["loglik"].to_numpy()
+    assert a[-1] > a[0]
+    learned = read_table(out["learned"], schema.ALIGN_LEARNED)
+    assert np.isfinite(learned[[f"mu_{c}" for c in DEMO_COLUMNS]].to_numpy()).all()
+
+
+def test_a_demo_the_tau_steps_cannot_stretch_is_dropped_with_the_reason():
+    from pipeline.align.demos import Demo
+
+    def demo(name, n):
+        return Demo(name, "f", "a", 0, np.arange(n, dtype=np.int64), np.zeros((n, 13)))
+
+    keep, out = align_run.stretchable([demo("x", 100), demo("y", 110), demo("z", 20)])
+    # T = round(2 * 76.7) = 153: z's 19 steps of at most 3 reach only 57
+    assert [d.name for d in keep] == ["x", "y"]
+    assert [d.name for d, _ in out] == ["z"]
+    assert out[0][1].startswith("20 samples against a median of 100: τ steps of 1-3 cannot place it on the T = 153")

@@ -6,7 +6,8 @@ Prediction (eq. 2.16, with the §13.2 fix ``P⁻ = A P Aᵀ + Q``):
 
     x^-_{k+1} = A x^+_k \\;(+\\,B u_k),\\qquad P^-_{k+1} = A P^+_k A^T + Q
 
-Update (§3, "Update"), with ``H = ∂h/∂x`` at ``x⁻`` and the innovation ``y = z − h(x⁻)``:
+Update (§3, "Update"), with ``H = ∂h/∂x`` at ``x⁻`` and the innovation ``y = z − h(x⁻)``
+(or the measurement model's ``residual(z, h)`` where it has one, e.g. the wrapped bearing of :class:`~pipeline.estimate.models.BearingMeasurement`):
 
 .. math::
 
@@ -144,7 +145,8 @@ class ExtendedKalmanFilter:
     joseph: bool = True
 
     def predict(self, prior: GaussianState, t_ns: int, F: ArrayLike | None = None,
-                Q: ArrayLike | None = None, bu: ArrayLike | None = None) -> GaussianState:
+                Q: ArrayLike | None = None, bu: ArrayLike | None = None,
+                fx: ArrayLike | None = None) -> GaussianState:
         """Predict ``prior`` to ``t_ns``.
 
         Parameters
@@ -158,11 +160,18 @@ class ExtendedKalmanFilter:
             per run ``(..., n_x, n_x)`` (the EKF+HMM's ``A_H``, ``Q₂``).
         bu : ndarray, optional
             Deterministic input ``B u``, shape ``(..., n_x)`` (the EKF+HMM's ``B[â; ĵ]``).
+        fx : ndarray, optional
+            The predicted mean ``f(x)`` of a nonlinear transition, shape ``(..., n_x)``, which
+            replaces ``F x`` (``F`` is then its Jacobian, ``P⁻ = F P Fᵀ + Q``; the bearing-only
+            bank and IMM, seed 002).
         """
         dt = (int(t_ns) - prior.t_ns) * 1e-9
         F = self.transition.matrix(dt) if F is None else np.asarray(F, dtype=np.float64)
         Q = self.transition.noise(dt) if Q is None else np.asarray(Q, dtype=np.float64)
-        mean = prior.mean @ F.T if F.ndim == 2 else np.matmul(F, prior.mean[..., None])[..., 0]
+        if fx is not None:
+            mean = np.asarray(fx, dtype=np.float64)
+        else:
+            mean = prior.mean @ F.T if F.ndim == 2 else np.matmul(F, prior.mean[..., None])[..., 0]
         if bu is not None:
             mean = mean + bu
         P = prior.cov
@@ -221,10 +230,14 @@ class ExtendedKalmanFilter:
         # one flat test for the common case (everything measured); per row only when needed
         full = not np.isnan(z).any()
         valid = None if full and M == 1 else ~np.isnan(z).any(axis=-1)  # (..., M)
+        # optional hook: a model with angular components wraps its innovation
+        # (BearingMeasurement.residual); the default is the plain difference
+        res = getattr(self.measurement, "residual", None)
+        d = res(z, hx) if res is not None else z - hx
         if full and M == 1:
-            y, H = (z - hx)[..., 0, :], Hj[..., 0, :, :]
+            y, H = d[..., 0, :], Hj[..., 0, :, :]
         else:
-            y = np.where(valid[..., None], z - hx, 0.0).reshape(b + (M * n_z,))
+            y = np.where(valid[..., None], d, 0.0).reshape(b + (M * n_z,))
             H = np.broadcast_to(np.where(valid[..., None, None], Hj, 0.0), b + (M, n_z, n_x)).reshape(b + (M * n_z, n_x))
         Rs = np.kron(np.eye(M), R) if M > 1 else R
         if not full:

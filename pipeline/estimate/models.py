@@ -678,15 +678,43 @@ def mpc_to_cppv(y: ArrayLike, vo: ArrayLike) -> F64:
     return np.stack([rho * c3, rho * s3, np.hypot(vn, ve), np.arctan2(ve, vn), y5], axis=-1)
 
 
+
+def mpc_to_cppv_jacobian(y: ArrayLike, vo: ArrayLike) -> F64:
+    """``∂G⁻¹/∂y`` (..., 5, 5) of :func:`mpc_to_cppv` (the covariance of an MPC estimate in
+    CPPV). With ``ρ = 1/y₄``, ``ṽ = v_i − v_o`` (the relative velocity) and ``∂ρ/∂y₄ = −ρ²``:
+    ``∂r/∂y₃ = ρ(−sin y₃, cos y₃)``, ``∂r/∂y₄ = −ρ² (cos y₃, sin y₃)``,
+    ``∂v_i/∂(y₁, y₂) = ρ[(−sin, cos), (cos, sin)]``, ``∂v_i/∂y₃ = (−ṽ_E, ṽ_N)``,
+    ``∂v_i/∂y₄ = −ρ ṽ``, then ``v = |v_i|`` and ``θ = atan2(v_E, v_N)`` by the chain rule."""
+    y = np.asarray(y, dtype=np.float64)
+    vo = np.broadcast_to(np.asarray(vo, dtype=np.float64), y.shape[:-1] + (2,))
+    y1, y2, y3, y4 = y[..., 0], y[..., 1], y[..., 2], y[..., 3]
+    rho = 1.0 / y4
+    c3, s3 = np.cos(y3), np.sin(y3)
+    rn, re = rho * (y2 * c3 - y1 * s3), rho * (y2 * s3 + y1 * c3)
+    vn, ve = rn + vo[..., 0], re + vo[..., 1]
+    J = np.zeros(y.shape[:-1] + (5, 5))
+    J[..., 0, 2], J[..., 0, 3] = -rho * s3, -rho * rho * c3
+    J[..., 1, 2], J[..., 1, 3] = rho * c3, -rho * rho * s3
+    dvn = (-rho * s3, rho * c3, -re, -rho * rn)
+    dve = (rho * c3, rho * s3, rn, -rho * re)
+    v2 = vn * vn + ve * ve
+    v = np.sqrt(v2)
+    for i in range(4):
+        J[..., 2, i] = (vn * dvn[i] + ve * dve[i]) / v
+        J[..., 3, i] = (vn * dve[i] - ve * dvn[i]) / v2
+    J[..., 4, 4] = 1.0
+    return J
+
 def numerical_jacobian(fun, x: ArrayLike, eps: ArrayLike | float = 1e-6) -> F64:
     """Central-difference Jacobian of ``fun`` (vectorised over leading axes) at ``x`` (..., n),
-    with a relative step ``eps·max(1, |x_i|)``; returns (..., m, n). Used for the covariance of
-    a mapped estimate (``G⁻¹`` of an MPC bank) and for the model tests."""
+    with a step ``eps·max(1, |x_i|)`` (``eps`` a scalar or one per component); returns
+    (..., m, n). Used for the MPC bank's ``J_G P₀ J_Gᵀ`` (D7) and for the model tests."""
     x = np.asarray(x, dtype=np.float64)
     n = x.shape[-1]
+    eps = np.asarray(eps, dtype=np.float64)
     cols = []
     for i in range(n):
-        h = eps * np.maximum(1.0, np.abs(x[..., i]))
+        h = (eps[i] if eps.ndim else eps) * np.maximum(1.0, np.abs(x[..., i]))
         dx = np.zeros_like(x)
         dx[..., i] = h
         cols.append((np.asarray(fun(x + dx)) - np.asarray(fun(x - dx))) / (2 * h[..., None]))

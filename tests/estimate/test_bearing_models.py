@@ -10,7 +10,8 @@ from pipeline.estimate.base import LinearTransition
 from pipeline.estimate.models import (BearingMeasurement, cppv_jacobian, cppv_process_noise,
                                       cppv_to_mpc, cppv_transition, cv_cppv_jacobian,
                                       cv_cppv_transition, mpc_derivative, mpc_jacobian,
-                                      mpc_to_cppv, mpc_transition, numerical_jacobian)
+                                      mpc_to_cppv, mpc_to_cppv_jacobian, mpc_transition,
+                                      numerical_jacobian)
 
 VO = np.array([40.0, 5.0])
 
@@ -141,3 +142,10 @@ def test_the_ekf_wraps_a_bearing_residual_across_the_pi_cut():
     assert abs(post.mean[1] - x[1]) < 5.0
     # the plain difference (2π) is what a model without the hook would see
     assert abs((z - m.h(x))[0]) > 6.0
+
+
+def test_the_jacobian_of_g_inverse_equals_central_differences():
+    x = np.array([2500.0, -3100.0, 75.0, 2.0, 0.1])
+    y = cppv_to_mpc(x, VO)
+    Jn = numerical_jacobian(lambda z: mpc_to_cppv(z, VO), y, eps=[1e-8, 1e-8, 1e-7, 1e-10, 1e-7])
+    assert mpc_to_cppv_jacobian(y, VO) == pytest.approx(Jn, rel=1e-6, abs=1e-9)

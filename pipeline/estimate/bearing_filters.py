@@ -80,10 +80,49 @@ def replay_tracks(t_s: F64, bearing: F64, ownship_vel: F64, sigma_rad: float, cf
     return out
 
 
+def imm_transition(cfg: Mapping[str, Any] | None, *, mix_rate_hz: float | None = None,
+                   delta: float | None = None) -> tuple[Any, dict[str, Any]]:
+    """The IMM's ``transition`` for :func:`pipeline.estimate.imm.run_imm` from ``imm``:
+    a full ``transmat`` if configured, else ``(T_d, δ)``; and the settings for the metadata."""
+    im = dict((cfg or {}).get("imm") or {})
+    td = float(mix_rate_hz if mix_rate_hz is not None else im.get("mix_rate_hz", 20.0))
+    d = float(delta if delta is not None else im.get("delta", 1e-4))
+    if im.get("transmat") is not None and mix_rate_hz is None and delta is None:
+        return np.asarray(im["transmat"], dtype=np.float64), {"transmat": im["transmat"], "mix_rate_hz": td}
+    return (td, d), {"mix_rate_hz": td, "delta": d}
+
+
+def imm_modes(s: BankSettings, bearing: F64, sigma_rad: float, ownship_vel: F64, cfg: Mapping[str, Any] | None, *,
+              cv_prior: tuple[F64, F64] | None = None) -> list[Any]:
+    """The two IMM modes ``[cv, ct]`` (digest §6): the CT bank of settings ``s`` and the CV
+    EKF from the bank's combined moments without ω (§4.2), or from ``cv_prior`` (mean (R, 4),
+    cov (R, 4, 4); the truth in CV-first scenarios, D5). ``ownship_vel`` (R, T, 2)."""
+    from .bank import CvModel, first_bearing
+    from .imm import bank_mode, cv_mode_from, ekf_mode
+
+    im = dict((cfg or {}).get("imm") or {})
+    z = np.atleast_2d(bearing)
+    vo = np.asarray(ownship_vel, dtype=np.float64).reshape(z.shape + (2,))
+    ct = bank_mode(s, first_bearing(z), sigma_rad, vo[:, 0], name="ct")
+    cvm = CvModel(sigma_v2=float(im.get("q_cv", 1e-3)), sigma_theta_dot2=float(im.get("q_cv_course", 1e-6)))
+    cv = cv_mode_from(ct, cvm, name="cv") if cv_prior is None else ekf_mode("cv", cvm, *cv_prior)
+    return [cv, ct]
+
+
 def imm_track(t_s, bearing, ownship_vel, sigma_rad, cfg, *, preset=None):
-    """The CV/CT IMM over one history (None until :mod:`pipeline.estimate.imm` exists)."""
-    try:
-        from . import imm  # noqa: F401
-    except ImportError:
-        return None
-    return None
+    """The CV/CT IMM over one history (``imm`` settings; the CT mode is the CPPV bank of
+    ``preset``) as a :class:`~pipeline.estimate.bearing_run.BearingTrack`."""
+    from .bearing_run import BearingTrack
+    from .imm import run_imm
+
+    s = bank_settings(cfg, preset=preset)
+    trans, tmeta = imm_transition(cfg)
+    mu0 = list((cfg.get("imm") or {}).get("mu0", [0.5, 0.5]))
+    modes = imm_modes(s, bearing, sigma_rad, ownship_vel[None], cfg)
+    tr = run_imm(modes, trans, t_s, bearing, sigma_rad, ownship_vel, mu0=mu0, store_cov=True, store_weights=True)
+    div = np.zeros(len(t_s), np.int64)
+    w = tr.weights[1][0] if tr.weights is not None else None
+    return BearingTrack(mean=tr.mean[0], cov=tr.cov[0], nis=tr.nis[0], mode_p=tr.mode_p[0], weights=w,
+                        grid=bank_grid(s), n_diverged=div + int(tr.diverged[1][0].sum()),
+                        meta={"bank": s.metadata(), "imm": {**tr.metadata, **tmeta, "mu0": mu0,
+                                                            "modes": list(tr.mode_names)}})

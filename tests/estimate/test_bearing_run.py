@@ -96,7 +96,10 @@ def test_a_synthetic_pair_writes_three_estimates_with_weights_and_a_page(tmp_pat
         n = w["filter"].nunique()
         np.testing.assert_allclose(w.groupby("t_ns")["weight"].sum(), 1.0, atol=1e-9)
         assert 10 <= w["t_ns"].nunique() <= 13 and n == meta["bank"]["n_filters"]
-    assert {"bank_cppv", "bank_mpc"} <= set(res.scores)
+    assert set(res.scores) == set(ESTIMATORS)
+    imm = read_table(outputs["imm"], schema.BEARING_ESTIMATE)
+    np.testing.assert_allclose(imm["mode_p_cv"] + imm["mode_p_ct"], 1.0, atol=1e-9)
+    assert read_table(outputs["bank_cppv"], schema.BEARING_ESTIMATE)["mode_p_cv"].isna().all()
     assert outputs["page"].read_text().count("<h1>") == 1
 
 

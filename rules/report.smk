@@ -95,6 +95,7 @@ rule report_index:
         segments=expand("results/segments/{flight}.parquet", flight=FLIGHTS),
         classified=classified_paths(),
         models=expand("results/report/models/{model_set}.html", model_set=MODEL_SETS),
+        bearing=bearing_pages(),
     output:
         index=report(
             "results/index.html", caption="../reports/captions/index.rst", category="Index"
@@ -102,7 +103,12 @@ rule report_index:
     params:
         code_version=PIPELINE_VERSION,
         config={},
-        job={"flights": FLIGHTS, "model_sets": list(MODEL_SETS), "studies": list(STUDY_NAMES)},
+        job={
+            "flights": FLIGHTS,
+            "model_sets": list(MODEL_SETS),
+            "studies": list(STUDY_NAMES),
+            "bearing_pairs": list(BEARING_PAIRS),
+        },
     log:
         "results/logs/report_index/index.log",
     benchmark:

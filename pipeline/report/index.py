@@ -122,7 +122,7 @@ def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | N
 def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os.PathLike,
                 links: dict[str, str] | None = None, *, segments: dict | None = None,
                 classified: dict | None = None, models: dict[str, str] | None = None,
-                studies: dict[str, str] | None = None) -> pd.DataFrame:
+                studies: dict[str, str] | None = None, bearing: dict[str, str] | None = None) -> pd.DataFrame:
     """Write the index page; returns the summary table (one row per flight).
 
     Parameters
@@ -143,6 +143,8 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         ``{study: relative URL}`` of the study pages (``report/studies/<name>.html``); pages
         that do not exist yet are listed with the target that builds them (studies are built by
         their own targets, not by the main job).
+    bearing : dict, optional
+        ``{pair: relative URL}`` of the bearing-only replay pages (``report/bearing/<pair>.html``).
     """
     rows = [flight_summary(f, m) for f, m in zip(flight_ids, meta_paths)]
     for r in rows:
@@ -177,6 +179,10 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         f'</code>)</span></li>' for s, u in (studies or {}).items())
     if study_links:
         models_html += f"<h2>Studies</h2><ul>{study_links}</ul>"
+    bearing_links = "".join(f'<li><a href="{html.escape(u)}">{html.escape(b)}</a></li>'
+                            for b, u in (bearing or {}).items())
+    if bearing_links:
+        models_html += f"<h2>Bearing-only replays</h2><ul>{bearing_links}</ul>"
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>uavpipe flights</title>
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>

@@ -63,12 +63,13 @@ def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: s
 
 
 def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[str],
-              model_sets: list[str], studies: list[str] = ()) -> None:
+              model_sets: list[str], studies: list[str] = (), bearing_pairs: list[str] = ()) -> None:
     """The index page ``outputs.index``.
 
     ``inputs``: ``metas`` and ``pages`` (one per flight, in ``flights`` order), ``segments``
     (idem), ``classified`` (``results/classify/<model_set>/<flight>.parquet``), ``models``
-    (one page per model set, in ``model_sets`` order). ``studies``: study names, linked to
+    (one page per model set, in ``model_sets`` order), ``bearing`` (one bearing-only replay
+    page per pair, in ``bearing_pairs`` order). ``studies``: study names, linked to
     ``report/studies/<name>.html`` beside the index's ``report/`` folder.
     """
     out = declared(outputs, "index")
@@ -79,4 +80,5 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
                 links={f: _rel(p, out) for f, p in zip(flights, declared_list(inputs, "pages"))},
                 segments=dict(zip(flights, declared_list(inputs, "segments"))), classified=classified,
                 models={m: _rel(p, out) for m, p in zip(model_sets, declared_list(inputs, "models"))},
-                studies={s: f"report/studies/{s}.html" for s in studies})
+                studies={s: f"report/studies/{s}.html" for s in studies},
+                bearing={b: _rel(p, out) for b, p in zip(bearing_pairs, declared_list(inputs, "bearing"))})

@@ -23,6 +23,7 @@ STUDIES = {
     "flightcoach_classification": "pipeline.studies.flightcoach_classification:run_flightcoach_classification",
     "flightcoach_ekf_hmm": "pipeline.studies.flightcoach_ekf_hmm:run_flightcoach_ekf_hmm",
     "seed000_ekf": "pipeline.studies.seed000_ekf:run_seed000_ekf",
+    "bearing_only": "pipeline.studies.bearing_only:run_bearing_only",
 }
 
 
@@ -64,6 +65,7 @@ def __getattr__(attr: str):
 
 
 __all__ = ["SIZES", "STUDIES", "STUDY_TABLES", "StudyError", "StudyResult", "entry_point", "flightcoach_inputs",
+           "run_bearing_only",
            "run_flightcoach_classification", "run_flightcoach_ekf_hmm", "run_seed000_classification", "run_seed000_ekf",
            "run_study", "study_outputs",
            "study_settings"]

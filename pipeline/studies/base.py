@@ -45,6 +45,7 @@ STUDY_TABLES: dict[str, tuple[str, ...]] = {
     "flightcoach_classification": ("p23_segments", "p23_timeline", "f23_segments", "oneclass_slack_sweep"),
     "flightcoach_ekf_hmm": ("maneuvers", "train_maneuvers", "tuning", "timeline"),
     "seed000_ekf": ("q_tuning", "mc_time", "mc_rmse", "q2_tuning", "scenarios", "hmm_rmse", "hmm_time"),
+    "bearing_only": ("curves", "runs", "trends", "crlb", "study3"),
 }
 #: the FlightCoach study's flights: ``{input name: file under <realdata_dir>/<FLIGHTCOACH_DIR>}``
 FLIGHTCOACH_DIR = "flightcoach_f3a_json"

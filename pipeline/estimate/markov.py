@@ -76,3 +76,15 @@ def retime(Pi: ArrayLike, dt: float, dt_ref: float, name: str = "transition matr
     # round-off: clip tiny negatives and renormalise the rows
     out = np.clip(out, 0.0, None)
     return out / out.sum(axis=1, keepdims=True)
+
+
+def hmm_to_step(transmat: ArrayLike, dt_s: float, dt_hmm_s: float, name: str = "transmat") -> F64:
+    """A saved model's ``transmat`` (per HMM sample ``T_hmm``) carried to a filter step ``T``:
+    ``Π^{T/T_hmm}`` by :func:`retime` (seed 002 §12 item 3, the IMM's bridge to EKF+HMM)."""
+    return retime(transmat, dt_s, dt_hmm_s, name)
+
+
+def step_to_hmm(Pi_step: ArrayLike, dt_s: float, dt_hmm_s: float, name: str = "step transition") -> F64:
+    """The conversion back: a per-step matrix ``Π_T`` to the HMM sample, ``Π_T^{T_hmm/T}``
+    (:func:`hmm_to_step` inverted; a converted ``transmat`` converts back)."""
+    return retime(Pi_step, dt_hmm_s, dt_s, name)

@@ -27,7 +27,8 @@ import pyarrow as pa
 
 #: 1.1.0 (minor): the streams ``battery``, ``setpoint``, ``messages``, ``params``, ``vibration``
 #: and the ``gps`` columns ``hdop``/``vdop`` are new; every 1.0.0 column is unchanged.
-SCHEMA_VERSION = "1.1.0"
+#: 1.2.0: bearing stream (issue 16)
+SCHEMA_VERSION = "1.2.0"
 
 #: Number of RC input / servo output channels carried by the ``control`` stream.
 N_RC = 18

@@ -182,3 +182,17 @@ def test_bad_input_is_one_clear_error():
         run_bank("cppv_10_1_6", np.arange(5.0), np.full(5, np.nan))
     with pytest.raises(ValueError, match="strictly increasing"):
         run_bank("cppv_10_1_6", np.zeros(5), np.zeros(5))
+
+
+@pytest.mark.parametrize("preset", ["cppv_10_1_6", "mpc_15_5_2"])
+def test_the_compiled_algebra_equals_the_extended_kalman_filter_path(preset):
+    t, X, z, own = orbit(T=120)
+    z[0, 50] = np.nan
+    fast = run_bank(preset, t, z[0], SIG, own, store_components=True)
+    ref = run_bank(preset, t, z[0], SIG, own, store_components=True, algebra="ekf")
+    assert fast.component_mean == pytest.approx(ref.component_mean, rel=1e-9, abs=1e-12)
+    assert fast.cov == pytest.approx(ref.cov, rel=1e-7, abs=1e-14)
+    assert fast.weights == pytest.approx(ref.weights, rel=1e-7, abs=1e-300)
+    assert fast.nis[0, 1:] == pytest.approx(ref.nis[0, 1:], rel=1e-8, nan_ok=True)
+    with pytest.raises(ValueError, match="algebra"):
+        run_bank(preset, t[:3], z[0, :3], SIG, own[:3], algebra="cuda")

@@ -1,0 +1,85 @@
+"""The bearing-only CRLB (seed 002 §7) and the seed-002 metrics (§8, D8)."""
+
+import numpy as np
+import pytest
+
+from pipeline.estimate.bank import bank_prior, combine, BankSettings
+from pipeline.estimate.base import GaussianState, LinearTransition
+from pipeline.estimate.crlb import crlb
+from pipeline.estimate.ekf import ExtendedKalmanFilter
+from pipeline.estimate.metrics import (CHI2_5_0999, bearing_errors, bearing_metrics, bearing_nees,
+                                       divergence_flag, mean_abs_angle_error, mean_relative_abs_error)
+from pipeline.estimate.models import BearingMeasurement, cppv_jacobian, cppv_transition
+
+SIG = np.deg2rad(0.2)
+VO = np.array([40.0, 0.0])
+
+
+def truth(T=400, dt=0.05, x0=(3000.0, 1500.0, 70.0, 1.0, np.deg2rad(6.0))):
+    X = np.empty((T, 5))
+    X[0] = x0
+    for k in range(1, T):
+        X[k] = cppv_transition(X[k - 1], dt, VO * dt)
+    return np.arange(T) * dt, X
+
+
+def test_the_crlb_equals_an_ekf_linearised_on_the_truth_without_process_noise():
+    t, X = truth()
+    P0 = np.diag([200.0 ** 2, 300.0 ** 2, 10.0 ** 2, 0.5 ** 2, 0.05 ** 2])
+    b = crlb(X, t, P0, SIG)
+    ekf = ExtendedKalmanFilter(LinearTransition(np.eye(5), np.zeros((5, 5))), BearingMeasurement(SIG))
+    P = P0
+    for k in range(1, len(t)):
+        F = cppv_jacobian(X[k - 1], t[k] - t[k - 1])
+        P = F @ P @ F.T
+        P = ekf.update(GaussianState(X[k], P), np.arctan2(X[k, 1:2], X[k, 0:1])).cov  # H at the truth
+        if k % 100 == 0:
+            assert b.bound[k] == pytest.approx(P, rel=1e-5, abs=1e-10)
+    assert b.bound[0] == pytest.approx(P0)
+    g = X[-1, :2] / np.hypot(*X[-1, :2])
+    assert b.range_std[-1] == pytest.approx(np.sqrt(g @ P[:2, :2] @ g), rel=1e-5)
+    assert np.all(np.diff(b.std[:, 2]) <= 1e-9)  # information only grows: the speed bound falls
+
+
+def test_the_crlb_with_the_bank_initial_covariance_lies_below_the_bank_spread():
+    t, X = truth(T=200)
+    c = bank_prior(BankSettings(), np.array([np.arctan2(X[0, 1], X[0, 0])]), SIG)
+    _, P0 = combine(c.mean, c.cov, c.logw, (3,))
+    b = crlb(X[None], t, P0, SIG)
+    assert b.std.shape == (1, 200, 5) and np.all(b.std[0, -1] < np.sqrt(np.diag(P0[0])))
+
+
+def test_the_thesis_rmse_is_a_mean_relative_absolute_error():
+    est = np.array([[110.0, 50.0], [90.0, 40.0]])
+    tru = np.array([100.0, 50.0])
+    assert mean_relative_abs_error(est, tru) == pytest.approx([0.1, 0.1])
+    assert mean_abs_angle_error(np.array([[np.pi - 0.1], [0.2]]), np.array([-np.pi + 0.1])) == pytest.approx([(0.2 + (np.pi - 0.1)) / 2])
+
+
+def test_bearing_metrics_and_nees():
+    rng = np.random.default_rng(0)
+    t, X = truth(T=50)
+    Xr = np.broadcast_to(X, (400, 50, 5))
+    sd = np.array([30.0, 30.0, 2.0, 0.05, 0.002])
+    est = Xr + sd * rng.standard_normal((400, 50, 5))
+    cov = np.broadcast_to(np.diag(sd ** 2), (400, 50, 5, 5))
+    m = bearing_metrics(est, Xr, cov)
+    assert m["nees_mean"].mean() == pytest.approx(5.0, rel=0.05)
+    assert m["rmse_speed_mps"].mean() == pytest.approx(2.0, rel=0.05)
+    assert m["mae_heading_rad"].mean() == pytest.approx(0.05 * np.sqrt(2 / np.pi), rel=0.05)
+    e = bearing_errors(est, Xr)
+    assert e["heading_rad"].max() < np.pi and set(e) >= {"range_m", "range_rel", "omega_rps"}
+    wrapped = est.copy()
+    wrapped[..., 3] += 2 * np.pi
+    assert bearing_nees(wrapped, cov, Xr) == pytest.approx(bearing_nees(est, cov, Xr))
+
+
+def test_the_d8_divergence_flag():
+    t = np.arange(0, 60, 0.05)
+    rel = np.zeros((3, len(t)))
+    rel[1, -1] = 0.6  # final range error over 50 %
+    q = np.ones((3, len(t)))
+    q[2, 200:420] = CHI2_5_0999 + 1  # 11 s above χ²₅(0.999)
+    q[0, 100:280] = 30.0  # 9 s: not enough
+    q[0, 300:400] = 30.0
+    assert divergence_flag(rel, q, t).tolist() == [False, True, True]

@@ -11,7 +11,8 @@ compared run by run. Parts (``parts``):
 * ``sweeps`` — ownship-velocity noise, bearing bias and ownship speed (CPPV (25,1,6));
 * ``imm_grid`` — the CT→CV scenario (120 + 70 s) with the IMM over T_d × δ;
 * ``crlb`` — one fixed orbit, ``crlb_runs`` noise realisations, the CPPV bank against the CRLB
-  (digest §7, ``J₀`` the inverse of the bank's combined initial covariance, no process noise);
+  (digest §7, :func:`pipeline.estimate.crlb.crlb`; ``J₀`` the inverse of the bank's combined
+  initial covariance, no process noise);
 * ``study3`` — single runs of CT-CV-CT (same and redrawn second ω), CV-CT (the CV EKF from the
   truth, σ_ω̇² = 1e-4) and CV-CT-CV with the IMM (δ = 1e-4, 20 Hz).
 
@@ -50,7 +51,9 @@ import pandas as pd
 from ..config import ROOT, ConfigError, load_config, section, validate_section
 from ..estimate.bank import run_bank
 from ..estimate.bearing_filters import bank_settings, imm_modes, imm_transition
-from ..estimate.models import BearingMeasurement, cppv_jacobian, wrap_angle
+from ..estimate.crlb import crlb
+from ..estimate.metrics import bearing_errors, bearing_nees, divergence_flag
+from ..estimate.models import wrap_angle
 from ..io.parquet import write_table
 from ..report.study import build_study_page, layout
 from ..simulate.encounter import Encounter, ScenarioSettings, simulate_encounters
@@ -109,61 +112,31 @@ def sign_test(a, b) -> dict[str, float]:
 # metrics
 
 
-def _longest_run(mask: np.ndarray) -> np.ndarray:
-    """Longest run of True along the last axis (steps)."""
-    best = np.zeros(mask.shape[:-1], np.int64)
-    cur = np.zeros(mask.shape[:-1], np.int64)
-    for k in range(mask.shape[-1]):
-        cur = np.where(mask[..., k], cur + 1, 0)
-        best = np.maximum(best, cur)
-    return best
-
-
 def errors(mean: np.ndarray, cov: np.ndarray | None, truth: np.ndarray) -> dict[str, np.ndarray]:
-    """Per run and step (R, T): relative range, speed and turn-rate errors, heading error
-    (rad), range error (m) and the NEES (NaN without ``cov``)."""
-    r_hat, r = np.hypot(mean[..., 0], mean[..., 1]), np.hypot(truth[..., 0], truth[..., 1])
+    """Per run and step (R, T), from :func:`pipeline.estimate.metrics.bearing_errors`: relative
+    range, speed and turn-rate errors (|·|/|truth|; ω NaN where the truth flies straight),
+    heading error (rad), range error (m) and the 5-state NEES (NaN without ``cov``)."""
+    e = bearing_errors(mean, truth)
     w = truth[..., 4]
-    e = mean - truth
-    e[..., 3] = wrap_angle(e[..., 3])
-    out = {"rel_r": np.abs(r_hat - r) / r, "rel_v": np.abs(e[..., 2]) / truth[..., 2],
-           "rel_w": np.where(np.abs(w) > 1e-6, np.abs(e[..., 4]) / np.where(np.abs(w) > 1e-6, np.abs(w), 1.0), np.nan),
-           "head": np.abs(e[..., 3]), "err_r": r_hat - r}
-    if cov is not None:
+    big = np.abs(w) > 1e-6
+    out = {"rel_r": np.abs(e["range_rel"]), "rel_v": np.abs(e["speed_mps"]) / truth[..., 2],
+           "rel_w": np.where(big, np.abs(e["omega_rps"]) / np.where(big, np.abs(w), 1.0), np.nan),
+           "head": np.abs(e["heading_rad"]), "err_r": e["range_m"]}
+    if cov is None:
+        out["nees"] = np.full(w.shape, np.nan)
+    else:
         with np.errstate(all="ignore"):
             try:
-                sol = np.linalg.solve(cov, e[..., None])[..., 0]
-                out["nees"] = np.einsum("...i,...i->...", e, sol)
-            except np.linalg.LinAlgError:
-                out["nees"] = np.full(r.shape, np.nan)
-    else:
-        out["nees"] = np.full(r.shape, np.nan)
+                out["nees"] = bearing_nees(mean, cov, truth)
+            except np.linalg.LinAlgError:       # a singular frozen covariance: no NEES
+                out["nees"] = np.full(w.shape, np.nan)
     return out
 
 
-def diverged(err: Mapping[str, np.ndarray], dt: float, div: Mapping[str, float]) -> np.ndarray:
-    """The D8 flag per run (R,)."""
-    long_nees = _longest_run(np.nan_to_num(err["nees"], nan=np.inf) > div["nees_chi2"]) * dt > div["nees_s"]
-    final = err["rel_r"][:, -1]
-    return (~np.isfinite(final)) | (final > div["final_range_err"]) | long_nees
-
-
-def crlb_bound(truth: np.ndarray, dt: float, J0: np.ndarray, sigma_rad: float) -> np.ndarray:
-    """CRLB of the CPPV state on one true trajectory (T, 5) (digest §7): ``J₀``, then
-    ``J_{k+1} = F_k^{−T} J_k F_k^{−1} + H_{k+1}ᵀ R⁻¹ H_{k+1}`` with F and H on the truth and no
-    process noise; returns the bound ``J_k⁻¹`` (T, 5, 5)."""
-    meas = BearingMeasurement(sigma_rad=sigma_rad)
-    T = len(truth)
-    out = np.empty((T, 5, 5))
-    J = np.array(J0, dtype=np.float64)
-    out[0] = np.linalg.inv(J)
-    F = cppv_jacobian(truth[:-1], dt)                       # (T−1, 5, 5)
-    H = meas.jacobian(truth)                                # (T, 1, 5)
-    for k in range(1, T):
-        Fi = np.linalg.inv(F[k - 1])
-        J = Fi.T @ J @ Fi + H[k].T @ H[k] / sigma_rad ** 2
-        out[k] = np.linalg.inv(J)
-    return out
+def diverged(err: Mapping[str, np.ndarray], t_s: np.ndarray, div: Mapping[str, float]) -> np.ndarray:
+    """The D8 flag per run (R,) (:func:`pipeline.estimate.metrics.divergence_flag`)."""
+    return divergence_flag(err["rel_r"], err["nees"], t_s, final_rel=div["final_range_err"],
+                           nees_threshold=div["nees_chi2"], nees_seconds=div["nees_s"])
 
 
 # --------------------------------------------------------------------------------------------
@@ -238,7 +211,7 @@ def execute_job(job: Job, st: dict, seed: int, scen: ScenarioSettings, cfg: dict
     lo2, hi2 = (x * f for x in st["imm_window_s"])
     w, w2 = (t >= lo) & (t <= hi), (t >= lo2) & (t <= hi2)
     res = {"name": job.name, "part": job.part, "kind": enc.kind, "t_s": t, "err": err,
-           "diverged": diverged(err, enc.dt, cfg["divergence"]),
+           "diverged": diverged(err, t, cfg["divergence"]),
            "range_score": _nanmean(err["rel_r"][:, w], 1), "heading_score": _nanmean(err["head"][:, w], 1),
            "range_score_all": _nanmean(err["rel_r"][:, w2], 1), "meta": meta, "cov0": cov0}
     if mus:
@@ -514,11 +487,9 @@ def run_bearing_only(inputs: Mapping | None, outputs: Mapping, config: Mapping |
     if "crlb" in parts:
         enc = run.encounters("orbit", int(st["crlb_runs"]), fixed=True)
         r = run.results["crlb_" + BASE]
-        bound = crlb_bound(enc.rel[0], enc.dt, np.linalg.inv(r["cov0"]), enc.sigma_bearing)
         truth = enc.rel[0]
-        g = truth[:, :2] / np.hypot(truth[:, 0], truth[:, 1])[:, None]
-        sq = {"r": np.sqrt(np.einsum("ti,tij,tj->t", g, bound[:, :2, :2], g)), "v": np.sqrt(bound[:, 2, 2]),
-              "omega": np.sqrt(bound[:, 4, 4]), "theta": np.sqrt(bound[:, 3, 3])}
+        cb = crlb(truth, enc.t_s, r["cov0"], enc.sigma_bearing)     # J₀ = the bank's combined P₀⁻¹
+        sq = {"r": cb.range_std, "v": cb.std[:, 2], "omega": cb.std[:, 4], "theta": cb.std[:, 3]}
         m = r["mean"]
         e = {"r": np.hypot(m[..., 0], m[..., 1]) - np.hypot(truth[:, 0], truth[:, 1]), "v": m[..., 2] - truth[:, 2],
              "omega": m[..., 4] - truth[:, 4], "theta": wrap_angle(m[..., 3] - truth[:, 3])}

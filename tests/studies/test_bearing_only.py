@@ -40,19 +40,6 @@ def test_the_sign_test_drops_nan_pairs_and_reports_the_median_improvement():
     assert t["n"] == 3 and t["n_better"] == 2 and t["median_effect"] == pytest.approx(1.0)
 
 
-def test_the_crlb_of_a_straight_flight_without_measurements_keeps_the_prior_in_range():
-    # a CV intruder (ω = 0) seen along its own line of sight: F shifts position by v T along θ,
-    # so the position bound grows only through the velocity/heading prior (checked against F P Fᵀ)
-    truth = np.zeros((3, 5))
-    truth[:, 0] = 2000.0 + 50.0 * np.arange(3)
-    truth[:, 2] = 50.0
-    P0 = np.diag([100.0, 100.0, 4.0, 0.01, 1e-4])
-    bound = bo.crlb_bound(truth, 1.0, np.linalg.inv(P0), sigma_rad=1e6)   # bearings carry no information
-    from pipeline.estimate.models import cppv_jacobian
-    F = cppv_jacobian(truth[0], 1.0)
-    np.testing.assert_allclose(bound[1], F @ P0 @ F.T, rtol=1e-6)
-
-
 def test_an_unknown_part_is_one_clear_error(tmp_path):
     with pytest.raises(ConfigError, match="unknown part"):
         run_study(NAME, None, study_outputs(NAME, results_dir=tmp_path, models=False),

@@ -72,10 +72,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from .base import GaussianState, LinearTransition
 from .ekf import ExtendedKalmanFilter
-from .models import (ANGLE_STATES, CPPV_STATE, CV_CPPV_STATE, MPC_STATE, BearingMeasurement,
-                     cppv_jacobian, cppv_process_noise, cppv_to_mpc, cppv_transition,
-                     cv_cppv_jacobian, cv_cppv_transition, cv_process_noise, mpc_to_cppv,
-                     mpc_to_cppv_jacobian,
+from .models import (ANGLE_STATES, CPPV_STATE, CV_CPPV_STATE, HAVE_NUMBA, MPC_STATE, BearingMeasurement,
+                     lazy_njit,
+                     cppv_predict, cppv_process_noise, cppv_to_mpc, cv_cppv_jacobian,
+                     cv_cppv_transition, cv_process_noise, mpc_to_cppv, mpc_to_cppv_jacobian,
                      mpc_transition, numerical_jacobian, wrap_angle)
 
 F64 = NDArray[np.float64]
@@ -335,7 +335,7 @@ class CppvModel:
     coords: str = "cppv"
 
     def predict(self, mean: F64, dt: float, vo: F64) -> tuple[F64, F64]:
-        return cppv_transition(mean, dt, vo * dt), cppv_jacobian(mean, dt)
+        return cppv_predict(mean, dt, vo * dt)
 
     def noise(self, dt: float) -> F64:
         s = self.settings
@@ -589,13 +589,8 @@ def _update_kernel(pm, pc, pht, S, yt, use, sigma2, coords):  # pragma: no cover
     return m1, c1, bad
 
 
-try:
-    from numba import njit as _njit
-    _predict_innov_kernel = _njit(cache=True)(_predict_innov_kernel)
-    _update_kernel = _njit(cache=True)(_update_kernel)
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    HAVE_NUMBA = False
+_predict_innov_kernel = lazy_njit(_predict_innov_kernel)
+_update_kernel = lazy_njit(_update_kernel)
 
 
 def _flat(a, n_tail):

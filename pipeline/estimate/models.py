@@ -40,6 +40,7 @@ Also here: the constant-acceleration transition ``A(dt)`` of seed 000 eq. 2.16 (
 from __future__ import annotations
 
 import functools
+import importlib.util
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -416,6 +417,26 @@ def wrap_angle(a: ArrayLike) -> F64:
 CPPV_STATE: tuple[str, ...] = ("r_n_m", "r_e_m", "v_mps", "theta_rad", "omega_rps")
 CV_CPPV_STATE: tuple[str, ...] = CPPV_STATE[:4]
 MPC_STATE: tuple[str, ...] = ("beta_dot_rps", "rdot_over_r_ps", "beta_rad", "inv_r_pm", "omega_rps")
+#: numba is a runtime dependency; a broken install falls back to the numpy paths
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+
+
+def lazy_njit(fn):
+    """``numba.njit(cache=True)(fn)``, compiled (or loaded from the cache) on the first call:
+    importing numba costs ~1 s, and most users of this module never call a kernel."""
+    compiled = []
+
+    @functools.wraps(fn)
+    def call(*args):
+        if not compiled:
+            from numba import njit
+            compiled.append(njit(cache=True)(fn))
+        return compiled[0](*args)
+
+    call.py_func = fn
+    return call
+
+
 #: components that are angles (wrapped deviations, circular means)
 ANGLE_STATES: frozenset[str] = frozenset({"theta_rad", "beta_rad"})
 
@@ -476,6 +497,59 @@ def cppv_jacobian(x: ArrayLike, dt: float | ArrayLike) -> F64:
     F[..., 3, 4] = dt
     return F
 
+
+
+def _cppv_predict_kernel(x, dt, u, series_below):  # pragma: no cover - compiled by numba
+    """:func:`cppv_transition` and :func:`cppv_jacobian` in one compiled pass over (M, 5)
+    (the same closed forms and Taylor series as :func:`turn_coefficients`)."""
+    M = x.shape[0]
+    fx = np.empty((M, 5))
+    F = np.zeros((M, 5, 5))
+    T = dt
+    for m in range(M):
+        v, th, w = x[m, 2], x[m, 3], x[m, 4]
+        wT = w * T
+        wT2 = wT * wT
+        if abs(wT) < series_below:
+            s = T * (1.0 - wT2 / 6.0 + wT2 * wT2 / 120.0)
+            c = T * wT * (0.5 - wT2 / 24.0 + wT2 * wT2 / 720.0)
+            ds = -T * T * wT * (1.0 / 3.0 - wT2 / 30.0)
+            dc = T * T * (0.5 - wT2 / 8.0 + wT2 * wT2 / 144.0)
+        else:
+            s = np.sin(wT) / w
+            c = (1.0 - np.cos(wT)) / w
+            ds = (T * np.cos(wT) - s) / w
+            dc = (T * np.sin(wT) - c) / w
+        ct, st = np.cos(th), np.sin(th)
+        dn = v * (s * ct - c * st)
+        de = v * (c * ct + s * st)
+        fx[m, 0] = x[m, 0] + dn - u[m, 0]
+        fx[m, 1] = x[m, 1] + de - u[m, 1]
+        fx[m, 2] = v
+        fx[m, 3] = th + wT
+        fx[m, 4] = w
+        for i in range(5):
+            F[m, i, i] = 1.0
+        F[m, 0, 2], F[m, 0, 3], F[m, 0, 4] = s * ct - c * st, -de, v * (ds * ct - dc * st)
+        F[m, 1, 2], F[m, 1, 3], F[m, 1, 4] = c * ct + s * st, dn, v * (dc * ct + ds * st)
+        F[m, 3, 4] = T
+    return fx, F
+
+
+_cppv_predict_kernel = lazy_njit(_cppv_predict_kernel)
+
+
+def cppv_predict(x: ArrayLike, dt: float, u: ArrayLike | None = None) -> tuple[F64, F64]:
+    """``(cppv_transition(x, dt, u), cppv_jacobian(x, dt))`` in one compiled pass (numba;
+    numpy where numba is missing); ``x`` (..., 5), scalar ``dt``."""
+    x = np.asarray(x, dtype=np.float64)
+    if not HAVE_NUMBA:  # pragma: no cover
+        return cppv_transition(x, dt, u), cppv_jacobian(x, dt)
+    shape = x.shape[:-1]
+    U = _ownship_step(u, shape)
+    fx, F = _cppv_predict_kernel(np.ascontiguousarray(x.reshape(-1, 5)), float(dt),
+                                 np.ascontiguousarray(U.reshape(-1, 2)), _TURN_SERIES_BELOW)
+    return fx.reshape(shape + (5,)), F.reshape(shape + (5, 5))
 
 def cppv_process_noise(dt: float, sigma_v2: float, sigma_omega_dot2: float, *,
                        faithful: bool = False, v_dt_power: int = 2) -> F64:
@@ -562,12 +636,6 @@ def mpc_jacobian(y: ArrayLike, vo: ArrayLike) -> F64:
     return J
 
 
-try:  # numba is a runtime dependency; the pure-numpy path stays for a broken install
-    from numba import njit
-except ImportError:  # pragma: no cover
-    njit = None
-
-
 def _mpc_euler_py(y, vo, dt_sub, n_sub):
     """Euler over ``n_sub`` substeps with the transition matrix ``Φ = Π(I + J dt)``; numpy,
     vectorised over the leading axis (the numba kernel's reference)."""
@@ -613,8 +681,7 @@ def _mpc_euler_kernel(y, vo, dt_sub, n_sub):  # pragma: no cover - compiled by n
     return yo, Phi
 
 
-if njit is not None:
-    _mpc_euler_kernel = njit(cache=True, fastmath=False)(_mpc_euler_kernel)
+_mpc_euler_kernel = lazy_njit(_mpc_euler_kernel)
 
 
 def mpc_transition(y: ArrayLike, vo: ArrayLike, dt: float, *, substep_s: float = 0.001,
@@ -641,7 +708,7 @@ def mpc_transition(y: ArrayLike, vo: ArrayLike, dt: float, *, substep_s: float =
     n_sub = max(1, int(round(float(dt) / substep_s)))
     h = float(dt) / n_sub
     yf, vf = np.ascontiguousarray(y.reshape(-1, 5)), np.ascontiguousarray(vo.reshape(-1, 2))
-    if engine == "numba" and njit is not None:
+    if engine == "numba" and HAVE_NUMBA:
         yo, Phi = _mpc_euler_kernel(yf, vf, h, n_sub)
     elif engine in ("numba", "numpy"):
         yo, Phi = _mpc_euler_py(yf, vf, h, n_sub)

@@ -184,7 +184,7 @@ def test_bad_input_is_one_clear_error():
         run_bank("cppv_10_1_6", np.zeros(5), np.zeros(5))
 
 
-@pytest.mark.parametrize("preset", ["cppv_10_1_6", "mpc_15_5_2"])
+@pytest.mark.parametrize("preset", ["cppv_10_1_6", BankSettings(coords="mpc", n_r=5, n_omega=3, n_theta=2)])
 def test_the_compiled_algebra_equals_the_extended_kalman_filter_path(preset):
     t, X, z, own = orbit(T=120)
     z[0, 50] = np.nan

@@ -7,7 +7,7 @@ from scipy.integrate import solve_ivp
 from pipeline.estimate.base import GaussianState
 from pipeline.estimate.ekf import ExtendedKalmanFilter
 from pipeline.estimate.base import LinearTransition
-from pipeline.estimate.models import (BearingMeasurement, cppv_jacobian, cppv_process_noise,
+from pipeline.estimate.models import (BearingMeasurement, cppv_jacobian, cppv_predict, cppv_process_noise,
                                       cppv_to_mpc, cppv_transition, cv_cppv_jacobian,
                                       cv_cppv_transition, mpc_derivative, mpc_jacobian,
                                       mpc_to_cppv, mpc_to_cppv_jacobian, mpc_transition,
@@ -149,3 +149,13 @@ def test_the_jacobian_of_g_inverse_equals_central_differences():
     y = cppv_to_mpc(x, VO)
     Jn = numerical_jacobian(lambda z: mpc_to_cppv(z, VO), y, eps=[1e-8, 1e-8, 1e-7, 1e-10, 1e-7])
     assert mpc_to_cppv_jacobian(y, VO) == pytest.approx(Jn, rel=1e-6, abs=1e-9)
+
+
+def test_the_compiled_cppv_predict_equals_the_transition_and_its_jacobian():
+    rng = np.random.default_rng(7)
+    x = np.column_stack([rng.uniform(-6000, 6000, 40), rng.uniform(-6000, 6000, 40), rng.uniform(40, 90, 40),
+                         rng.uniform(-7, 7, 40), np.r_[0.0, 1e-9, -1e-5, 0.019, rng.uniform(-0.14, 0.14, 36)]])
+    u = rng.normal(0, 2, (40, 2))
+    fx, F = cppv_predict(x.reshape(4, 10, 5), 0.05, u.reshape(4, 10, 2))
+    assert fx.reshape(40, 5) == pytest.approx(cppv_transition(x, 0.05, u), rel=1e-14, abs=1e-12)
+    assert F.reshape(40, 5, 5) == pytest.approx(cppv_jacobian(x, 0.05), rel=1e-13, abs=1e-15)

@@ -12,7 +12,8 @@ Scenario kinds (``KINDS``): ``orbit`` (CT for ``orbit_s``), ``ct_cv``, ``ct_cv_c
 Randomisation (digest §9, per run): ``|ω| ~ U(3, 8)°/s`` with a random sign, ``v ~ U(60, 80)``
 m/s, ``θ₀ ~ U(0, 360)°``, the initial range ``~ U(1.8, 6.5)`` km at an angle ``U(0, 180)°`` to
 the right of the ownship's course, placing either the intruder (default, so ``r₀`` lies in the
-bank's 1-10 km grid) or the orbit centre (``place: centre``). The ownship flies a straight track
+bank's 1-10 km grid) or the orbit centre (``place: centre``; a CV-first scenario always places
+the intruder). The ownship flies a straight track
 at ``ownship_speed_mps`` from the origin.
 
 Seeding: the scenario geometry, the bearing noise and the ownship-velocity noise are three

@@ -318,11 +318,48 @@ def align_paths():
     return [f"results/report/align/{s}.html" for s in ALIGN_SETS]
 
 
+# --- bearing-only replay (issue 16) ----------------------------------------------------------
+
+BEARING_ESTIMATORS = ("bank_cppv", "bank_mpc", "imm")
+BEARING_PAIRS = {}
+for _pair, _spec in config["estimate"]["bearing_only"]["replay"].items():
+    _missing = [f for f in (_spec["ownship"], _spec["intruder"]) if f not in FLIGHTS]
+    if _missing:
+        SKIPPED[f"bearing pair {_pair}"] = f"flight(s) {', '.join(_missing)} not available"
+        print(
+            f"uavpipe: skipping bearing pair {_pair}: flight(s) {', '.join(_missing)} not available",
+            file=sys.stderr,
+        )
+    else:
+        BEARING_PAIRS[_pair] = _spec
+
+
+def bearing_paths():
+    return [
+        f"results/estimate/{e}/{p}.parquet" for p in BEARING_PAIRS for e in BEARING_ESTIMATORS
+    ]
+
+
+def bearing_pages():
+    return [f"results/report/bearing/{p}.html" for p in BEARING_PAIRS]
+
+
+def bearing_inputs(wildcards):
+    spec = BEARING_PAIRS[wildcards.pair]
+    own, intr = spec["ownship"], spec["intruder"]
+    return {
+        "ownship_state": f"results/state/{own}.parquet",
+        "ownship_local_position": f"results/ingest/{own}/local_position.parquet",
+        "intruder_state": f"results/state/{intr}.parquet",
+    }
+
+
 def get_final_output():
     # the simulated sets and logs are always made (the seed-000 datasets), used by a flight or not
     return [
         *estimate_paths(),
         *align_paths(),
+        *bearing_paths(),
         "results/index.html",
         "results/sim/index.json",
         "results/sim/logs/flights.tsv",

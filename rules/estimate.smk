@@ -57,7 +57,40 @@ rule estimate_flight:
         "scripts/estimate.py"
 
 
+rule estimate_bearing:
+    # issue 16: bearing-only replay of a pair of flights (estimate.bearing_only.replay)
+    input:
+        unpack(bearing_inputs),
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        **{e: f"results/estimate/{e}/{{pair}}.parquet" for e in BEARING_ESTIMATORS},
+        **{
+            f"{e}_weights": f"results/estimate/{e}/{{pair}}.weights.parquet"
+            for e in BEARING_ESTIMATORS
+        },
+        page="results/report/bearing/{pair}.html",
+    wildcard_constraints:
+        pair="|".join(BEARING_PAIRS) if BEARING_PAIRS else "NO_PAIRS",
+    params:
+        code_version=PIPELINE_VERSION,
+        config=config["estimate"]["bearing_only"],
+        job=lambda wc: {"pair": wc.pair, "seed": config["seed"]},
+    log:
+        "results/logs/estimate_bearing/{pair}.log",
+    benchmark:
+        "results/benchmarks/estimate_bearing/{pair}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/estimate_bearing.py"
+
+
 rule estimate:
     input:
         estimate_paths() + hmpf_paths(),
         pf_paths(),
+        bearing_paths(),

@@ -151,6 +151,7 @@ rule report_index:
         models=expand("results/report/models/{model_set}.html", model_set=MODEL_SETS),
         compare=expand("results/report/compare/{vehicle}.html", vehicle=VEHICLES),
         align=align_paths(),
+        bearing=bearing_pages(),
     output:
         index=report(
             "results/index.html", caption="../reports/captions/index.rst", category="Index"
@@ -165,6 +166,7 @@ rule report_index:
             "vehicles": {f: flights.loc[f, "vehicle"] for f in FLIGHTS},
             "skipped": dict(SKIPPED),
             "align_sets": list(ALIGN_SETS),
+            "bearing_pairs": list(BEARING_PAIRS),
         },
     log:
         "results/logs/report_index/index.log",

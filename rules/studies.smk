@@ -167,3 +167,29 @@ rule study_trajectory_learning:
         "envs/pipeline.yaml"
     script:
         "scripts/study.py"
+
+
+rule study_bearing_only:
+    input:
+        template="reports/templates/study.html.j2",
+        plotly="results/report/assets/plotly.min.js",
+    output:
+        **study_outputs("bearing_only", models=False),
+    params:
+        code_version=PIPELINE_VERSION,
+        study="bearing_only",
+        config=config["studies"],
+        job={"seed": config["seed"]},
+        sections={"estimate": config["estimate"]},
+    log:
+        "results/logs/study_bearing_only/study.log",
+    benchmark:
+        "results/benchmarks/study_bearing_only/study.tsv"
+    threads: 1
+    resources:
+        mem_mb=8000,
+        runtime=240,
+    conda:
+        "envs/pipeline.yaml"
+    script:
+        "scripts/study.py"

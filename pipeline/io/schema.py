@@ -178,6 +178,12 @@ STREAMS: dict[str, tuple[Column, ...]] = {
         *(_f(f"gyr_{a}_radps", "rad/s", "FRD") for a in _XYZ),
         Column("label", "string", "", "", "maneuver label"),
     ),
+    # issue 16 (seed 002 §12 item 5): a bearing from observer ``instance`` (the ownship) to a
+    # target; ``src`` says where it came from (``synthetic`` from two tracks, ``vision``)
+    "bearing": (
+        _f("az_rad", "rad", "NED", "bearing beta = atan2(dE, dN) from north toward east"),
+        _f("sigma_rad", "rad", "", "1-sigma of the bearing noise"),
+    ),
 }
 
 #: The one stream without ``t_ns``/``instance``/``src``.
@@ -197,10 +203,13 @@ EVENT_STREAMS: tuple[str, ...] = ("messages", "params")
 #: streams of measurements (not pilot inputs, modes, setpoints, events, labels or simulation
 #: truth): the span a reader of the log means by "how long was the flight logged"
 SENSOR_STREAMS: tuple[str, ...] = ("imu", "gps", "baro", "mag", "attitude", "local_position", "odometry",
-                                   "rangefinder", "airspeed", "radar")
+                                   "rangefinder", "airspeed", "radar", "bearing")
 
 #: The streams added by schema 1.1 (none of them moves a reader's ``t0``).
 STREAMS_1_1: tuple[str, ...] = ("battery", "setpoint", "messages", "params", "vibration")
+
+#: The streams added by schema 1.2 (issue 16).
+STREAMS_1_2: tuple[str, ...] = ("bearing",)
 
 #: Columns of the derived ``state`` table (preprocess output; style.md §3.2).
 STATE: tuple[Column, ...] = (
@@ -393,6 +402,41 @@ PF: tuple[Column, ...] = (
 )
 
 
+#: Columns of a bearing-only estimate (issue 16, seed 002 §12 item 7:
+#: ``results/estimate/{bank_cppv,bank_mpc,imm}/<pair>.parquet``): the CPPV state of the intruder
+#: relative to the ownship (NED north/east offset, intruder speed, course from N toward E, turn
+#: rate, > 0 a right turn; MPC estimates are mapped back by G^-1), the upper triangle of its
+#: covariance ``P_<i>_<j>`` (i <= j), the range and its 1-sigma, the NIS of the combined
+#: estimate's bearing innovation (NaN on predict-only steps), the IMM mode probabilities (NaN for
+#: a bank alone) and the number of diverged (frozen) filters.
+_BRG_STATE = (("rel_n_m", "m"), ("rel_e_m", "m"), ("speed_mps", "m/s"), ("course_rad", "rad"),
+              ("omega_radps", "rad/s"))
+BEARING_ESTIMATE: tuple[Column, ...] = (
+    Column("t_ns", "int64", "ns"),
+    *(_f(f"x_{n}", u, "NED", "estimate") for n, u in _BRG_STATE),
+    *(_f(f"P_{i}_{j}", f"({_BRG_STATE[i][1]})*({_BRG_STATE[j][1]})", "NED",
+         f"covariance of x_{_BRG_STATE[i][0]} and x_{_BRG_STATE[j][0]}")
+      for i in range(5) for j in range(i, 5)),
+    _f("range_m", "m", "", "estimated range |rel|"),
+    _f("range_sigma_m", "m", "", "1-sigma of the range (g^T P_pos g, g the unit LOS)"),
+    _f("nis", "1", "", "NIS of the bearing innovation (NaN on predict-only steps)"),
+    _f("mode_p_cv", "1", "", "IMM probability of the CV mode (NaN without an IMM)"),
+    _f("mode_p_ct", "1", "", "IMM probability of the CT (bank) mode (NaN without an IMM)"),
+    Column("n_diverged", "int64", "1", "", "bank filters flagged diverged and frozen"),
+)
+
+#: The bank weights beside a bearing-only estimate (``<pair>.weights.parquet``), long format:
+#: one row per kept step and filter (the grid point is the filter's initial range, course and
+#: turn rate).
+BEARING_WEIGHTS: tuple[Column, ...] = (
+    Column("t_ns", "int64", "ns"),
+    Column("filter", "int64", "1", "", "filter index in the bank's grid enumeration"),
+    _f("weight", "1", "", "normalised bank weight W_k^(i)"),
+    _f("r0_m", "m", "", "the filter's initial range"),
+    _f("course0_rad", "rad", "", "the filter's initial course"),
+    _f("omega0_radps", "rad/s", "", "the filter's initial turn rate"),
+)
+
 #: Every table of every stage by name: the canonical streams (common columns first), ``labels``
 #: and the derived tables. :func:`columns`, :func:`empty` and :func:`conform` take these names.
 TABLES: dict[str, tuple[Column, ...]] = {
@@ -410,6 +454,8 @@ TABLES: dict[str, tuple[Column, ...]] = {
     "estimate_hmm": ESTIMATE_HMM,
     "hmpf": HMPF,
     "pf": PF,
+    "bearing_estimate": BEARING_ESTIMATE,
+    "bearing_weights": BEARING_WEIGHTS,
 }
 
 

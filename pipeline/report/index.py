@@ -127,7 +127,8 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
                 studies: dict[str, str] | None = None, vehicles: Mapping[str, str] | None = None,
                 compare: Mapping[str, str] | None = None,
                 skipped: Mapping[str, str] | None = None,
-                align: dict[str, str] | None = None) -> pd.DataFrame:
+                align: dict[str, str] | None = None,
+                bearing: dict[str, str] | None = None) -> pd.DataFrame:
     """Write the index page; returns the summary table (one row per flight).
 
     Parameters
@@ -158,6 +159,8 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     skipped : mapping, optional
         ``{flight_id: reason}`` of the manifest rows left out (log not found), listed with the
         reason under the flights.
+    bearing : dict, optional
+        ``{pair: relative URL}`` of the bearing-only replay pages (``report/bearing/<pair>.html``).
     """
     rows = [flight_summary(f, m) for f, m in zip(flight_ids, meta_paths)]
     compare = dict(compare or {})
@@ -213,6 +216,10 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
                         "</thead><tbody>" + "".join(
                             f'<tr class="skipped"><td>{html.escape(f)}</td><td class="reason">{html.escape(why)}</td></tr>'
                             for f, why in skipped.items()) + "</tbody></table>")
+    bearing_links = "".join(f'<li><a href="{html.escape(u)}">{html.escape(b)}</a></li>'
+                            for b, u in (bearing or {}).items())
+    if bearing_links:
+        models_html += f"<h2>Bearing-only replays</h2><ul>{bearing_links}</ul>"
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>uavpipe flights</title>
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>

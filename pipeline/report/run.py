@@ -84,7 +84,8 @@ def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: s
 
 def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[str],
               model_sets: list[str], studies: list[str] = (), vehicles: Mapping[str, str] | None = None,
-              skipped: Mapping[str, str] | None = None, align_sets: list[str] = ()) -> None:
+              skipped: Mapping[str, str] | None = None, align_sets: list[str] = (),
+              bearing_pairs: list[str] = ()) -> None:
     """The index page ``outputs.index``.
 
     ``inputs``: ``metas`` and ``pages`` (one per flight, in ``flights`` order), ``segments``
@@ -93,7 +94,8 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
     one per vehicle of ``vehicles``). ``studies``: study names, linked to
     ``report/studies/<name>.html`` beside the index's ``report/`` folder. ``vehicles``:
     ``{flight: vehicle}``; ``skipped``: manifest rows left out, ``{flight: reason}``. ``align_sets``:
-    the trajectory-learning demo sets, their pages in ``inputs.align`` (same order).
+    the trajectory-learning demo sets, their pages in ``inputs.align`` (same order). ``bearing_pairs``: the bearing-only replay pairs, their pages in
+    ``inputs.bearing`` (same order).
     """
     out = declared(outputs, "index")
     classified: dict[str, dict[str, str]] = {}
@@ -106,4 +108,5 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
                 studies={s: f"report/studies/{s}.html" for s in studies}, vehicles=vehicles,
                 compare={Path(p).stem: _rel(p, out) for p in declared_list(inputs, "compare")},
                 skipped=skipped,
-                align={s: _rel(p, out) for s, p in zip(align_sets, declared_list(inputs, "align"))})
+                align={s: _rel(p, out) for s, p in zip(align_sets, declared_list(inputs, "align"))},
+                bearing={b: _rel(p, out) for b, p in zip(bearing_pairs, declared_list(inputs, "bearing"))})

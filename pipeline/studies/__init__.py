@@ -25,6 +25,7 @@ STUDIES = {
     "seed000_ekf": "pipeline.studies.seed000_ekf:run_seed000_ekf",
     "pf": "pipeline.studies.pf:run_pf",
     "trajectory_learning": "pipeline.studies.trajectory_learning:run_trajectory_learning",
+    "bearing_only": "pipeline.studies.bearing_only:run_bearing_only",
 }
 
 
@@ -66,6 +67,7 @@ def __getattr__(attr: str):
 
 
 __all__ = ["SIZES", "STUDIES", "STUDY_TABLES", "StudyError", "StudyResult", "entry_point", "flightcoach_inputs",
+           "run_bearing_only",
            "run_flightcoach_classification", "run_flightcoach_ekf_hmm", "run_pf", "run_seed000_classification", "run_seed000_ekf",
            "run_study", "run_trajectory_learning", "study_outputs",
            "study_settings"]

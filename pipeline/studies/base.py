@@ -47,6 +47,7 @@ STUDY_TABLES: dict[str, tuple[str, ...]] = {
     "seed000_ekf": ("q_tuning", "mc_time", "mc_rmse", "q2_tuning", "scenarios", "hmm_rmse", "hmm_time"),
     "pf": ("hmpf_runs", "hmpf_timeline"),
     "trajectory_learning": ("sim_cases", "sim_summary", "real_loo", "real_summary"),
+    "bearing_only": ("curves", "runs", "trends", "crlb", "study3"),
 }
 #: the FlightCoach study's flights: ``{input name: file under <realdata_dir>/<FLIGHTCOACH_DIR>}``
 FLIGHTCOACH_DIR = "flightcoach_f3a_json"

@@ -62,3 +62,14 @@ def test_the_flightcoach_ekf_hmm_target_plans_only_the_study_and_plotly_js():
         pytest.skip("../shared/realdata/flightcoach_f3a_json absent")
     assert _jobs(_dry("study_flightcoach_ekf_hmm", "--config", f"realdata_dir={REALDATA}")) == {
         "plotly_js": 1, "study_flightcoach_ekf_hmm": 1}
+
+
+def test_the_bearing_only_target_plans_only_the_study_and_plotly_js():
+    assert _jobs(_dry("study_bearing_only")) == {"plotly_js": 1, "study_bearing_only": 1}
+
+
+def test_a_bearing_pair_without_its_flights_is_skipped_with_a_notice_and_the_main_job_still_plans(tmp_path):
+    p = _dry("--config", f"realdata_dir={tmp_path}")
+    jobs = _jobs(p)
+    assert "estimate_bearing" not in jobs and "all" in jobs
+    assert "skipping bearing pair austin-p23" in p.stderr

@@ -1,0 +1,93 @@
+"""The bearing-only study: the paired sign test against scipy's exact binomial test, and the
+whole study at ``tiny`` size through its entry point (tables, trends, RESULT lines, page)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import binomtest
+
+from pipeline.config import ConfigError
+from pipeline.studies import STUDIES, STUDY_TABLES, run_study, study_outputs
+from pipeline.studies import bearing_only as bo
+
+NAME = "bearing_only"
+TRENDS = ("nr25", "cppv_range", "mpc_heading", "delta_1e2_worse", "delta_over_td", "faster_ownship")
+
+
+@pytest.mark.parametrize("n_better,n_worse,n_tie", [(9, 1, 0), (14, 11, 3), (3, 17, 2), (25, 0, 5), (0, 0, 4)])
+def test_the_sign_test_equals_the_exact_one_sided_binomial_test(n_better, n_worse, n_tie, rng):
+    a = np.concatenate([np.zeros(n_better), np.ones(n_worse), np.full(n_tie, 0.5)])
+    b = np.concatenate([np.ones(n_better), np.zeros(n_worse), np.full(n_tie, 0.5)])
+    b = b + 0.1 * rng.standard_normal(len(b)) * 0          # exact ties stay ties
+    perm = rng.permutation(len(a))
+    t = bo.sign_test(a[perm], b[perm])
+    n = n_better + n_worse
+    assert t["n"] == n and t["n_better"] == n_better
+    if n:
+        assert t["p"] == pytest.approx(binomtest(n_better, n, 0.5, alternative="greater").pvalue, rel=1e-12)
+        assert t["frac_better"] == pytest.approx(n_better / n)
+    else:
+        assert np.isnan(t["p"])
+
+
+def test_the_sign_test_drops_nan_pairs_and_reports_the_median_improvement():
+    a = np.array([1.0, 2.0, np.nan, 0.5, 3.0])
+    b = np.array([2.0, 4.0, 1.0, np.nan, 2.0])
+    t = bo.sign_test(a, b)
+    assert t["n"] == 3 and t["n_better"] == 2 and t["median_effect"] == pytest.approx(1.0)
+
+
+def test_an_unknown_part_is_one_clear_error(tmp_path):
+    with pytest.raises(ConfigError, match="unknown part"):
+        run_study(NAME, None, study_outputs(NAME, results_dir=tmp_path, models=False),
+                  {"size": "tiny", NAME: {"parts": ["loops"]}}, seed=1, estimate={})
+
+
+@pytest.fixture(scope="module")
+def tiny(ran, tmp_path_factory):
+    return ran(NAME, tmp_path_factory.mktemp("bearing_only"), {"size": "tiny"}, estimate={})
+
+
+@pytest.mark.slow
+def test_the_tiny_study_writes_results_report_page_and_every_table(tiny):
+    assert NAME in STUDIES and tiny.result.status == "ok" and tiny.result.diagnostics["size"] == "tiny"
+    text = Path(tiny.outputs["results"]).read_text().splitlines()
+    assert text and all(line.startswith("RESULT ") and len(line.split()) == 3 for line in text)
+    for name in TRENDS:
+        assert f"bearing_trend_{name}_p" in tiny.figures, name
+    for key in ("bearing_crlb_ratio_r", "bearing_crlb_ratio_v", "bearing_crlb_ratio_omega",
+                "bearing_imm_switch_detected_pct", "bearing_trends_held"):
+        assert key in tiny.figures
+    for t in STUDY_TABLES[NAME]:
+        assert len(tiny.table(t)), t
+    page = Path(tiny.outputs["page"]).read_text()
+    assert 'src="../assets/plotly.min.js"' in page and "Plotly.newPlot" in page
+    for title in ("Table 4.2 parameterisations", "CPPV vs MPC", "sqrt(CRLB)", "mu_CV(t)", "Study 3 single runs"):
+        assert title in page
+    report = Path(tiny.outputs["report"]).read_text()
+    assert "mean relative absolute error" in report and "paired one-sided sign tests" in report
+
+
+@pytest.mark.slow
+def test_every_trend_is_the_larger_p_of_its_paired_tests_over_the_same_runs(tiny):
+    tr = tiny.table("trends")
+    assert set(tr["trend"]) == set(TRENDS)
+    for name, g in tr.groupby("trend"):
+        assert g["p_trend"].nunique() == 1 and g["p_trend"].iloc[0] == pytest.approx(g["p"].max())
+        assert float(tiny.figures[f"bearing_trend_{name}_p"]) == pytest.approx(g["p"].max(), rel=1e-3)
+        assert (g["n"] <= 6).all()                              # tiny: 6 shared runs
+    runs = tiny.table("runs")
+    orbit = runs[runs["part"].isin(["table_4_2", "cppv_vs_mpc", "sweeps"])]
+    assert all(sorted(g["run"]) == list(range(6)) for _, g in orbit.groupby("config"))
+
+
+@pytest.mark.slow
+def test_the_crlb_table_holds_sample_std_and_bound_for_r_v_omega(tiny):
+    c = tiny.table("crlb")
+    assert {"r", "v", "omega", "theta"} == set(c["quantity"])
+    assert (c["sqrt_crlb"] > 0).all()
+    r = c[c["quantity"] == "r"]
+    assert r["sqrt_crlb"].iloc[-1] < r["sqrt_crlb"].iloc[0]     # bearings shrink the range bound

@@ -12,7 +12,7 @@ from pipeline.io.parquet import read_table, write_table
 
 DERIVED = ("state", "segments", "calibration", "simulate_set", "simulate_summary", "flights",
            "classification", "model_evaluation", "estimate", "estimate_hmm", "hmpf", "pf", "bearing_estimate",
-           "bearing_weights")
+           "bearing_weights", "align_learned", "align_alignment", "align_iterations", "align_demos")
 
 
 def test_the_registry_holds_every_stream_and_every_derived_table():

@@ -325,7 +325,6 @@ BEARING_PAIRS = {}
 for _pair, _spec in config["estimate"]["bearing_only"]["replay"].items():
     _missing = [f for f in (_spec["ownship"], _spec["intruder"]) if f not in FLIGHTS]
     if _missing:
-        SKIPPED[f"bearing pair {_pair}"] = f"flight(s) {', '.join(_missing)} not available"
         print(
             f"uavpipe: skipping bearing pair {_pair}: flight(s) {', '.join(_missing)} not available",
             file=sys.stderr,
@@ -364,3 +363,43 @@ def get_final_output():
         "results/sim/index.json",
         "results/sim/logs/flights.tsv",
     ]
+
+
+# --- hmpf (issue 17, seed-003 weave classifier; rule in rules/estimate_hmpf.smk) ---------------
+
+HMPF_CONFIG = config["estimate"].get("pf", {}).get("hmpf", {})
+HMPF_VEHICLES = HMPF_CONFIG.get("vehicles", ["f3a-plane"])
+HMPF_FLIGHTS = [f for f in FLIGHTS if flights.loc[f, "vehicle"] in HMPF_VEHICLES]
+if not HMPF_FLIGHTS:
+    print(
+        f"uavpipe: hmpf: no flight of {', '.join(HMPF_VEHICLES)} available (real logs absent?): "
+        "no weave-classifier job",
+        file=sys.stderr,
+    )
+
+
+def hmpf_paths():
+    return [f"results/estimate/hmpf/{f}.parquet" for f in HMPF_FLIGHTS]
+
+
+def hmpf_train_flights(flight):
+    vehicle = flights.loc[flight, "vehicle"]
+    return [
+        f
+        for f in FLIGHTS
+        if f != flight and flights.loc[f, "role"] == "train" and flights.loc[f, "vehicle"] == vehicle
+    ]
+
+
+def hmpf_inputs(wildcards):
+    tr = hmpf_train_flights(wildcards.flight)
+    return {
+        "state": f"results/state/{wildcards.flight}.parquet",
+        "train_states": [f"results/state/{f}.parquet" for f in tr],
+        "train_segments": [f"results/segments/{f}.parquet" for f in tr],
+    }
+
+
+def flight_hmpf(wildcards):
+    # the flight page's weave panel (rules/report.smk)
+    return [f"results/estimate/hmpf/{wildcards.flight}.parquet"] if wildcards.flight in HMPF_FLIGHTS else []

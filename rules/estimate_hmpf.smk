@@ -3,40 +3,7 @@
 # labelled segments of the vehicle's *other* role-train flights (never the flight classified). The
 # f3a flights exist only with the real logs (../shared/realdata): without them there is no job and
 # one notice, the main job is unchanged. Included before rules/estimate.smk (its `estimate` target
-# takes hmpf_paths()).
-
-HMPF_CONFIG = config["estimate"].get("pf", {}).get("hmpf", {})
-HMPF_VEHICLES = HMPF_CONFIG.get("vehicles", ["f3a-plane"])
-HMPF_FLIGHTS = [f for f in FLIGHTS if flights.loc[f, "vehicle"] in HMPF_VEHICLES]
-if not HMPF_FLIGHTS:
-    print(
-        f"uavpipe: hmpf: no flight of {', '.join(HMPF_VEHICLES)} available (real logs absent?): "
-        "no weave-classifier job",
-        file=sys.stderr,
-    )
-
-
-def hmpf_paths():
-    return [f"results/estimate/hmpf/{f}.parquet" for f in HMPF_FLIGHTS]
-
-
-def hmpf_train_flights(flight):
-    vehicle = flights.loc[flight, "vehicle"]
-    return [
-        f
-        for f in FLIGHTS
-        if f != flight and flights.loc[f, "role"] == "train" and flights.loc[f, "vehicle"] == vehicle
-    ]
-
-
-def hmpf_inputs(wildcards):
-    tr = hmpf_train_flights(wildcards.flight)
-    return {
-        "state": f"results/state/{wildcards.flight}.parquet",
-        "train_states": [f"results/state/{f}.parquet" for f in tr],
-        "train_segments": [f"results/segments/{f}.parquet" for f in tr],
-    }
-
+# takes hmpf_paths()). Its planning (HMPF_FLIGHTS, hmpf_inputs, ...) is in rules/common.smk.
 
 rule estimate_hmpf:
     input:
@@ -59,8 +26,3 @@ rule estimate_hmpf:
         "envs/pipeline.yaml"
     script:
         "scripts/estimate_hmpf.py"
-
-
-def flight_hmpf(wildcards):
-    # the flight page's weave panel (rules/report.smk)
-    return [f"results/estimate/hmpf/{wildcards.flight}.parquet"] if wildcards.flight in HMPF_FLIGHTS else []

@@ -247,7 +247,8 @@ def estimate_paths(flight=None):
 
 
 def flight_estimates(wildcards):
-    return estimate_paths(wildcards.flight) if wildcards.flight in ESTIMATED else []
+    # + the particle filters of rules/estimate_pf.smk (issue 17)
+    return (estimate_paths(wildcards.flight) if wildcards.flight in ESTIMATED else []) + flight_pf_estimates(wildcards)
 
 
 def estimate_config(wildcards):

@@ -60,3 +60,4 @@ rule estimate_flight:
 rule estimate:
     input:
         estimate_paths(),
+        pf_paths(),

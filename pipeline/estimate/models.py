@@ -399,3 +399,199 @@ def wrap_angle(a: ArrayLike) -> F64:
     """Wrap angles to ``[−π, π)`` (bearing residuals, headings)."""
     a = np.asarray(a, dtype=np.float64)
     return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+# --------------------------------------------------------------------------------------------
+# issue 17: particle-filter motion models (seed 001 §4, seed 003 §2). Each has a vectorised
+# ``propagate(x (N, n), dt, rng) -> (N, n)`` for ``estimate.pf.ParticleFilter``; the modes of
+# a jump-Markov filter share one horizontal state layout, PF_STATE = [N, E, v_N, v_E, ω, a_N,
+# a_E] (NED, m, m/s, rad/s, m/s²), so ``ct_transition`` applies unchanged (ω at index 4). A
+# model uses the leading components it needs (CV/curvilinear 4, CT/ACT 5, CA 7) and keeps the
+# rest, except that a non-turning model zeroes ω and a non-accelerating one zeroes a (when
+# present, ``zero_unused``): the components a mode does not drive carry no stale value into the
+# mixed estimate. Process noise is the piecewise-constant white acceleration of seed 001 (3.15)
+# with the B typo fixed (digest D3): ``p += a T²/2, v += a T``, ``a ~ N(0, σ_a²)`` per axis.
+# --------------------------------------------------------------------------------------------
+
+#: the shared particle-filter state (horizontal plane), in column order
+PF_STATE: tuple[str, ...] = ("pos_n_m", "pos_e_m", "vel_n_mps", "vel_e_mps", "omega_radps",
+                             "acc_n_mps2", "acc_e_mps2")
+PF_IX_OMEGA = 4
+PF_IX_ACC = (5, 6)
+
+
+def _need(x: ArrayLike, n: int, who: str) -> F64:
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] < n:
+        raise ValueError(f"{who}: particles must have shape (N, >= {n}), got {x.shape}")
+    return x
+
+
+def _white_accel(x: F64, dt: float, sig: F64 | float, rng: np.random.Generator) -> None:
+    """In place: ``p += a T²/2, v += a T`` with ``a ~ N(0, σ²)`` per horizontal axis."""
+    a = rng.standard_normal((x.shape[0], 2)) * sig
+    x[:, 0:2] += (0.5 * dt * dt) * a
+    x[:, 2:4] += dt * a
+
+
+def _zero(x: F64, omega: bool, acc: bool) -> None:
+    n = x.shape[1]
+    if omega and n > PF_IX_OMEGA:
+        x[:, PF_IX_OMEGA] = 0.0
+    if acc and n > PF_IX_ACC[1]:
+        x[:, PF_IX_ACC[0]:PF_IX_ACC[1] + 1] = 0.0
+
+
+@dataclass(frozen=True)
+class PfConstantVelocity:
+    """CV (seed 001 (3.14–3.15)): ``p += v T``, white acceleration ``σ_a`` (m/s²) per axis."""
+
+    sigma_a: float = 1.0
+    zero_unused: bool = True
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        out = _need(x, 4, "PfConstantVelocity").copy()
+        out[:, 0:2] += dt * out[:, 2:4]
+        _white_accel(out, dt, self.sigma_a, rng)
+        if self.zero_unused:
+            _zero(out, True, True)
+        return out
+
+
+@dataclass(frozen=True)
+class PfConstantAcceleration:
+    """CA (seed 001 (3.16–3.18), B_a typo fixed): ``a`` a random walk driven by white jerk.
+
+    ``p += v T + a T²/2 + j T³/6``, ``v += a T + j T²/2``, ``a += j T`` with
+    ``j ~ N(0, σ_j²)`` (m/s³) per axis (held over the step). On entering the mode
+    (:meth:`enter`, digest D4: ACCEL/DECEL act along the velocity) the acceleration is drawn
+    along the velocity, ``a = α v/|v|`` with ``α ~ N(0, acc_init_sigma²)``.
+    """
+
+    sigma_j: float = 1.0
+    acc_init_sigma: float = 2.0
+    zero_unused: bool = True
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        out = _need(x, 7, "PfConstantAcceleration").copy()
+        a = out[:, 5:7].copy()
+        j = rng.standard_normal((out.shape[0], 2)) * self.sigma_j
+        out[:, 0:2] += dt * out[:, 2:4] + (0.5 * dt * dt) * a + (dt ** 3 / 6.0) * j
+        out[:, 2:4] += dt * a + (0.5 * dt * dt) * j
+        out[:, 5:7] = a + dt * j
+        if self.zero_unused:
+            _zero(out, True, False)
+        return out
+
+    def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
+        out = _need(x, 7, "PfConstantAcceleration").copy()
+        v = out[:, 2:4]
+        sp = np.hypot(v[:, 0], v[:, 1])
+        u = np.where(sp[:, None] > 1e-9, v / np.where(sp > 1e-9, sp, 1.0)[:, None], np.array([1.0, 0.0]))
+        out[:, 5:7] = u * (self.acc_init_sigma * rng.standard_normal(out.shape[0]))[:, None]
+        return out
+
+
+@dataclass(frozen=True)
+class PfCoordinatedTurn:
+    """CT (seed 001 (3.19–3.21)) by the shared :func:`ct_transition`, exact through ω → 0.
+
+    ``omega`` None keeps each particle's own ω (no ω noise); a number sets it (a known-rate
+    turn, ω > 0 right). White acceleration ``σ_a`` on position/velocity (seed 003 A6).
+    """
+
+    sigma_a: float = 1.0
+    omega: float | None = None
+    zero_unused: bool = True
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        x = _need(x, 5, "PfCoordinatedTurn")
+        if self.omega is not None:
+            x = x.copy()
+            x[:, PF_IX_OMEGA] = self.omega
+        out = ct_transition(x, dt)
+        _white_accel(out, dt, self.sigma_a, rng)
+        if self.zero_unused:
+            _zero(out, False, True)
+        return out
+
+
+@dataclass(frozen=True)
+class PfAugmentedCoordinatedTurn:
+    """Augmented CT (seed 003 §2 ACT): CT with ω a random walk.
+
+    ω gets ``σ_ω·√T`` (rad/s, a Wiener process in continuous time) or, with ``per_step=True``,
+    ``σ_ω`` per step whatever T (seed 003's noise gain 1). On entering (:meth:`enter`) ω is
+    drawn: ``|ω| ~ U[omega_init]`` (rad/s) with sign ``sign`` (+1 right, −1 left, 0 random) —
+    seed 003 A2 — or ``N(0, omega_init_sigma²)`` when ``omega_init`` is None.
+    """
+
+    sigma_a: float = 1.0
+    sigma_omega: float = 0.01
+    per_step: bool = False
+    omega_init: tuple[float, float] | None = None
+    omega_init_sigma: float = 0.1
+    sign: int = 0
+    zero_unused: bool = True
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        out = ct_transition(_need(x, 5, "PfAugmentedCoordinatedTurn"), dt)
+        _white_accel(out, dt, self.sigma_a, rng)
+        g = self.sigma_omega if self.per_step else self.sigma_omega * np.sqrt(max(dt, 0.0))
+        out[:, PF_IX_OMEGA] += g * rng.standard_normal(out.shape[0])
+        if self.zero_unused:
+            _zero(out, False, True)
+        return out
+
+    def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
+        out = _need(x, 5, "PfAugmentedCoordinatedTurn").copy()
+        m = out.shape[0]
+        if self.omega_init is None:
+            w = self.omega_init_sigma * rng.standard_normal(m)
+            if self.sign:
+                w = np.sign(self.sign) * np.abs(w)
+        else:
+            lo, hi = self.omega_init
+            w = rng.uniform(lo, hi, m)
+            s = np.sign(self.sign) if self.sign else rng.choice([-1.0, 1.0], m)
+            w = w * s
+        out[:, PF_IX_OMEGA] = w
+        return out
+
+
+def curvilinear_axes(v: ArrayLike) -> tuple[F64, F64]:
+    """Unit tangent ``t = v/|v|`` and right-hand normal ``n`` (NED: n = (−t_E, t_N)), (N, 2) each.
+
+    A particle at rest gets ``t = (1, 0)`` (the noise is then isotropic only if σ_T = σ_N).
+    """
+    v = np.asarray(v, dtype=np.float64)
+    sp = np.hypot(v[..., 0], v[..., 1])
+    ok = sp > 1e-9
+    t = np.where(ok[..., None], v / np.where(ok, sp, 1.0)[..., None], np.array([1.0, 0.0]))
+    n = np.stack([-t[..., 1], t[..., 0]], axis=-1)
+    return t, n
+
+
+@dataclass(frozen=True)
+class PfCurvilinear:
+    """Curvilinear motion (seed 003 §2 CM): CV with along/cross-track noise.
+
+    ``Q = R Q_TN Rᵀ``, ``Q_TN = diag(σ_T², σ_N²)``: the acceleration is
+    ``a = σ_T ε₁ t + σ_N ε₂ n`` with ``t = v/|v|`` and ``n`` its right-hand normal
+    (:func:`curvilinear_axes`); equals CV when σ_T = σ_N.
+    """
+
+    sigma_t: float = 2.0
+    sigma_n: float = 0.1
+    zero_unused: bool = True
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        out = _need(x, 4, "PfCurvilinear").copy()
+        t, n = curvilinear_axes(out[:, 2:4])
+        e = rng.standard_normal((out.shape[0], 2))
+        a = (self.sigma_t * e[:, 0])[:, None] * t + (self.sigma_n * e[:, 1])[:, None] * n
+        out[:, 0:2] += dt * out[:, 2:4] + (0.5 * dt * dt) * a
+        out[:, 2:4] += dt * a
+        if self.zero_unused:
+            _zero(out, True, True)
+        return out

@@ -346,6 +346,29 @@ ESTIMATE_HMM: tuple[Column, ...] = (
     _f("V_best", "1", "", "online Viterbi confidence of the label"),
 )
 
+#: Columns of a particle-filter output (issue 17, ``results/estimate/pf_jm/<flight>.parquet``,
+#: :mod:`pipeline.estimate.pf_run`): the weighted mean ``x_<c>`` of the horizontal PF state
+#: (:data:`pipeline.estimate.models.PF_STATE`: N/E position, velocity, turn rate, acceleration)
+#: before resampling, the upper triangle of its weighted covariance ``P_<i>_<j>`` (i <= j in
+#: that order), the weighted mode fractions ``mode_p_<mode>``, N_eff before resampling, whether
+#: the step resampled, and, where the flight is classified, the classifier's softmax of its
+#: ``ll_<label>`` at the nearest classified sample ``cls_p_<label>`` (NaN elsewhere). A new
+#: table (no existing table changes, so ``SCHEMA_VERSION`` stays).
+_PF_STATE = (("pos_n_m", "m"), ("pos_e_m", "m"), ("vel_n_mps", "m/s"), ("vel_e_mps", "m/s"),
+             ("omega_radps", "rad/s"), ("acc_n_mps2", "m/s^2"), ("acc_e_mps2", "m/s^2"))
+PF: tuple[Column, ...] = (
+    Column("t_ns", "int64", "ns"),
+    *(_f(f"x_{n}", u, "NED", "particle-weighted mean") for n, u in _PF_STATE),
+    *(_f(f"P_{i}_{j}", f"({_PF_STATE[i][1]})*({_PF_STATE[j][1]})", "NED",
+         f"weighted covariance of x_{_PF_STATE[i][0]} and x_{_PF_STATE[j][0]}")
+      for i in range(len(_PF_STATE)) for j in range(i, len(_PF_STATE))),
+    Column("mode_p_*", "float64", "1", "", "weighted fraction of the particles in each mode"),
+    _f("neff", "1", "", "effective sample size 1/sum(w^2) before resampling"),
+    Column("resampled", "bool", "", "", "the particles were resampled after this step"),
+    Column("cls_p_*", "float64", "1", "", "classifier softmax of ll_<label> at the nearest classified sample"),
+)
+
+
 #: Every table of every stage by name: the canonical streams (common columns first), ``labels``
 #: and the derived tables. :func:`columns`, :func:`empty` and :func:`conform` take these names.
 TABLES: dict[str, tuple[Column, ...]] = {
@@ -361,6 +384,7 @@ TABLES: dict[str, tuple[Column, ...]] = {
     "model_evaluation": MODEL_EVALUATION,
     "estimate": ESTIMATE,
     "estimate_hmm": ESTIMATE_HMM,
+    "pf": PF,
 }
 
 

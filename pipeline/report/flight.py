@@ -113,8 +113,11 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
     preprocessed state); the EKF+HMM mode timeline. A panel without data keeps a title that
     says why (placeholder reason, no reference)."""
     estimates = {e: p for e, p in estimates.items() if p and Path(p).exists()}
+    # the particle filters (issue 17) have their own table (``pf``) and panels
+    pf = {e: estimates.pop(e) for e in [e for e in estimates if e in PF_ESTIMATORS]}
+    pf_figs, pf_facts = pf_panels(pf)
     if not estimates:
-        return [("Estimates (the flight's vehicle is not in estimate.vehicles)", None)], []
+        return [("Estimates (the flight's vehicle is not in estimate.vehicles)", None), *pf_figs], pf_facts
     tables, metas = {}, {}
     for e, p in estimates.items():
         metas[e] = read_table_meta(p)
@@ -147,6 +150,32 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
         why = metas["ekf_hmm"].get("error") if metas["ekf_hmm"].get("status") == "failed" else None
         figs.append((f"EKF+HMM mode timeline ({why})" if why else "EKF+HMM mode timeline",
                      plots.mode_timeline(h) if len(h) else None))
+    return figs + pf_figs, facts + pf_facts
+
+
+#: the particle-filter estimators (``results/estimate/<name>/``, table ``pf``)
+PF_ESTIMATORS: tuple[str, ...] = ("pf_jm",)
+
+
+def pf_panels(estimates: Mapping[str, str | os.PathLike]) -> tuple[list, list]:
+    """The particle-filter panels and facts of a flight page: the weighted mode fractions per
+    step beside the classifier's softmax of its ``ll_<label>`` (``cls_p_*``) where the flight is
+    classified; a placeholder keeps a title with its reason."""
+    figs, facts = [], []
+    for e, p in estimates.items():
+        m, t = read_table_meta(p), read_table(p)
+        label = plots.ESTIMATOR_LABELS.get(e, e)
+        if m.get("status") == "failed" or not len(t):
+            facts.append((label, f"placeholder: {m.get('error')}"))
+            figs.append((f"{label} mode fractions (placeholder: {m.get('error')})", None))
+            continue
+        fr = m.get("mode_fraction_mean") or {}
+        facts.append((label, f"{m.get('n_steps')} steps, N = {m.get('n_particles')}, {m.get('n_resampled')} resampled "
+                             f"({m.get('resample')}, N_eff < {float(m.get('threshold', 0)):.2f} N), "
+                             f"{m.get('n_predict_only')} predict-only, {m.get('n_reinit')} re-initialised; "
+                             f"mean fractions " + ", ".join(f"{k} {v:.2f}" for k, v in fr.items())
+                             + (f"; classifier {m.get('classifier')}" if m.get("classifier") else "")))
+        figs.append((f"{label} mode fractions", plots.pf_mode_fractions(t, label)))
     return figs, facts
 
 

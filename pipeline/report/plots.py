@@ -489,7 +489,7 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
 
 
 #: estimator name -> legend label of the estimate panels
-ESTIMATOR_LABELS = {"ekf": "EKF", "ekf_rts": "EKF + RTS", "ekf_hmm": "EKF+HMM"}
+ESTIMATOR_LABELS = {"ekf": "EKF", "ekf_rts": "EKF + RTS", "ekf_hmm": "EKF+HMM", "pf_jm": "jump-Markov PF"}
 _GROUP_UNITS = {"pos": ("position", "m"), "vel": ("velocity", "m/s"), "acc": ("acceleration", "m/s²")}
 
 
@@ -534,3 +534,34 @@ def mode_timeline(df: pd.DataFrame | None) -> go.Figure | None:
     fig.update_xaxes(title="t [s]")
     n = int(df["mode"].astype(bool).sum())
     return layout(fig, f"EKF+HMM mode ({n} of {len(df)} steps with HMM inputs)", height=280)
+
+
+#: colours of the particle-filter motion modes (issue 17)
+PF_MODE_COLOURS = {"cv": "#1f77b4", "ca": "#ff7f0e", "ct": "#2ca02c", "stop": "#7f7f7f"}
+
+
+def pf_mode_fractions(df: pd.DataFrame | None, name: str = "PF") -> go.Figure | None:
+    """Particle-filter mode fractions ``mode_p_<mode>`` stacked to 1 (left axis) and, where the
+    flight is classified, the classifier's softmax ``cls_p_<label>`` as dotted lines on the right
+    axis (a different class set: maneuvers, not motion modes)."""
+    if df is None or not len(df):
+        return None
+    modes = [c for c in df.columns if str(c).startswith("mode_p_")]
+    if not modes:
+        return None
+    cls = [c for c in df.columns if str(c).startswith("cls_p_") and df[c].notna().any()]
+    d = decimate(df[["t_ns", *modes, *cls]], cols=[*modes, *cls])
+    fig = go.Figure()
+    for c in modes:
+        m = c[len("mode_p_"):]
+        fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", stackgroup="modes", name=f"{name}: {m.upper()}",
+                                 line=dict(width=0.5, color=PF_MODE_COLOURS.get(m))))
+    for c in cls:
+        lab = c[len("cls_p_"):]
+        fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=f"classifier: {lab}", yaxis="y2",
+                                 line=dict(dash="dot", color=label_colour(lab))))
+    if cls:
+        fig.update_layout(yaxis2=dict(overlaying="y", side="right", range=[0, 1], title="classifier softmax"))
+    fig.update_xaxes(title="t [s]")
+    fig.update_layout(yaxis=dict(range=[0, 1], title="mode fraction"))
+    return layout(fig, f"{name} mode fractions" + (" beside the classifier" if cls else ""), height=300)

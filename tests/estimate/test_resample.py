@@ -1,0 +1,86 @@
+"""Resampling schemes (issue 17 acceptance): copy counts and unbiasedness, N_eff."""
+
+import numpy as np
+import pytest
+
+from pipeline.estimate import resample as R
+
+
+def _weights(seed, n=37):
+    w = np.random.default_rng(seed).gamma(0.7, size=n)
+    return w / w.sum()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_systematic_gives_each_particle_floor_or_ceil_of_n_w_copies(seed):
+    w = _weights(seed)
+    rng = np.random.default_rng(100 + seed)
+    for _ in range(200):
+        c = R.copies(R.systematic(w, rng), w.size)
+        nw = w.size * w
+        assert c.sum() == w.size
+        assert np.all((c >= np.floor(nw) - 1e-12) & (c <= np.ceil(nw) + 1e-12))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_stratified_copies_stay_within_two_of_n_w(seed):
+    w = _weights(seed)
+    rng = np.random.default_rng(200 + seed)
+    for _ in range(200):
+        c = R.copies(R.stratified(w, rng), w.size)
+        assert c.sum() == w.size
+        assert np.all(np.abs(c - w.size * w) < 2)
+
+
+@pytest.mark.parametrize("scheme", R.SCHEMES)
+def test_every_scheme_copies_n_w_on_average_over_ten_thousand_draws(scheme):
+    w = _weights(7, n=25)
+    n, draws = w.size, 10_000
+    rng = np.random.default_rng(3)
+    f = R.get_resampler(scheme)
+    C = np.empty((draws, n))
+    for r in range(draws):
+        C[r] = R.copies(f(w, rng), n)
+    mean, se = C.mean(axis=0), C.std(axis=0, ddof=1) / np.sqrt(draws)
+    nw = n * w
+    # 4 standard errors; a deterministic count (se = 0) must be exact
+    assert np.all(np.abs(mean - nw) <= 4 * se + 1e-12), (scheme, np.max(np.abs(mean - nw) / np.maximum(se, 1e-300)))
+
+
+def test_indices_are_ascending_in_range_and_int64_for_every_scheme():
+    w = _weights(1, 1000)
+    rng = np.random.default_rng(0)
+    for scheme in R.SCHEMES:
+        idx = R.get_resampler(scheme)(w, rng)
+        assert idx.dtype == np.int64 and idx.shape == (1000,)
+        assert idx.min() >= 0 and idx.max() < 1000 and np.all(np.diff(idx) >= 0)
+
+
+def test_a_degenerate_weight_vector_copies_its_one_particle():
+    w = np.zeros(10)
+    w[4] = 1.0
+    for scheme in R.SCHEMES:
+        assert np.all(R.get_resampler(scheme)(w, np.random.default_rng(0)) == 4)
+
+
+def test_bad_weights_and_unknown_schemes_fail_with_one_clear_line():
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="not all zero"):
+        R.systematic(np.zeros(4), rng)
+    with pytest.raises(ValueError, match="non-negative"):
+        R.systematic(np.array([0.5, -0.1, 0.6]), rng)
+    with pytest.raises(ValueError, match="unknown scheme 'bogus'"):
+        R.get_resampler("bogus")
+
+
+def test_effective_sample_size_spans_one_to_n():
+    assert R.effective_sample_size(np.ones(50)) == pytest.approx(50)
+    assert R.effective_sample_size(np.eye(1, 50)[0]) == pytest.approx(1)
+    assert R.effective_sample_size(np.array([3.0, 1.0])) == pytest.approx(1 / (0.75 ** 2 + 0.25 ** 2))
+
+
+def test_the_same_seed_draws_the_same_indices():
+    w = _weights(2, 100)
+    for scheme in R.SCHEMES:
+        f = R.get_resampler(scheme)
+        assert np.array_equal(f(w, np.random.default_rng(9)), f(w, np.random.default_rng(9)))

@@ -97,6 +97,7 @@ class GeolocationConfig:
     omega_radps: tuple[float, float] = (0.05, 0.3)
     min_turn_radius_m: float = 10.0
     roughening: float = 0.2
+    estimate_down: bool = False
     noise: Mapping[str, float] = field(default_factory=lambda: {
         "stop_sigma_a": 0.05, "accel_sigma_j": 0.5, "coast_sigma_a": 0.3, "turn_sigma_a": 0.3,
         "turn_sigma_omega": 0.05, "down_sigma": 0.2})
@@ -148,7 +149,7 @@ class GeolocationConfig:
                 "bound_percent": 100.0 * float(np.sin(self.sigma_psi_rad)),
                 "n_particles": int(self.n_particles), "threshold": float(self.threshold),
                 "speed_max_mps": float(self.speed_max_mps), "accel_mps2": list(self.accel_mps2),
-                "omega_radps": list(self.omega_radps), "min_turn_radius_m": float(self.min_turn_radius_m), "roughening": float(self.roughening),
+                "omega_radps": list(self.omega_radps), "min_turn_radius_m": float(self.min_turn_radius_m), "roughening": float(self.roughening), "estimate_down": bool(self.estimate_down),
                 "noise": dict(self.noise), "init": dict(self.init), "observers": dict(self.observers),
                 "mobile_start_range_m": list(MOBILE_START_RANGE_M),
                 "pi_d_rows_renormalised": True, "pi_rate_hz": PI_RATE_HZ}
@@ -307,12 +308,15 @@ def make_filter(cfg: GeolocationConfig, *, cv_only: bool, n_particles: int | Non
                 rng: np.random.Generator) -> ParticleFilter:
     """The seed-001 PF: D4 modes + Π_p (or CV only), N_thr = threshold·N, systematic resampling."""
     nz = dict(cfg.noise)
-    lik = CameraLikelihood(cfg.camera, d_index=GEO_IX_DOWN, reinit_sigma_m=float(cfg.init["sigma_pos_m"]))
+    down = bool(cfg.estimate_down)
+    lik = CameraLikelihood(cfg.camera, d_index=GEO_IX_DOWN if down else None,
+                           reinit_sigma_m=float(cfg.init["sigma_pos_m"]))
     if cv_only:
-        models = [PfDownRandomWalk(PfConstantVelocity(nz["coast_sigma_a"]), nz["down_sigma"])]
+        cv = PfConstantVelocity(nz["coast_sigma_a"])
+        models = [PfDownRandomWalk(cv, nz["down_sigma"]) if down else cv]
         Pi = None
     else:
-        models = driving_mode_models(**nz, accel=cfg.accel_mps2, omega=cfg.omega_radps)
+        models = driving_mode_models(**nz, accel=cfg.accel_mps2, omega=cfg.omega_radps, estimate_down=down)
         Pi = PI_P
     return ParticleFilter(models, Pi, lik, n_particles=int(n_particles or cfg.n_particles), resample="systematic",
                           threshold=float(cfg.threshold), dt_ref=1.0 / PI_RATE_HZ, rng=rng)
@@ -346,7 +350,7 @@ def init_filter(pf: ParticleFilter, row: F64, cfg: GeolocationConfig, fallback: 
     sp, sv, sd = cfg.init["sigma_pos_m"], cfg.init["sigma_vel_mps"], cfg.init["sigma_down_m"]
     mean = np.zeros(len(GEO_STATE))
     mean[0:2] = g[:2]
-    cov = np.diag([sp ** 2, sp ** 2, sv ** 2, sv ** 2, 0.0, 0.0, 0.0, sd ** 2])
+    cov = np.diag([sp ** 2, sp ** 2, sv ** 2, sv ** 2, 0.0, 0.0, 0.0, sd ** 2 if cfg.estimate_down else 0.0])
     pf.init(mean=mean, cov=cov, mode_p=None if pf.K > 1 else None)
     if pf.K > 1:
         # enter each particle's initial mode (draws a, Ω along its velocity, D4)

@@ -86,6 +86,8 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
         runs = run_scenario(scenario, cfg, n_runs=n_runs, seed=seed, n_observers=n_obs,
                             n_particles=n_particles, duration_s=duration, tag=tag)
         s = summarise(runs)
+        say(f"seed 001: {name}: eps {s['eps_m']:.2f} m, eta {s['eta_pct']:.2f} %, mean distance "
+            f"{s['mean_dist_m']:.1f} m, {s['step_us']:.0f} us/step")
         summary.append({"case": name, "scenario": scenario, "n_observers": n_obs,
                         "n_particles": int(n_particles or cfg.n_particles), "duration_s": duration, **s})
         series.append(per_step_frame(runs, case=name))

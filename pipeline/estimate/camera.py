@@ -281,76 +281,85 @@ PARALLEL_FROM = 50_000
 
 
 @njit(cache=True)
-def _camera_loglik_serial(pn, pe, pd, obs, f, cu, cv, out):
-    n = pn.shape[0]
+def _camera_loglik_serial(x, ip, ie, idd, ground_d, obs, f, cu, cv, out):
+    # observers outer, particles inner: one streaming pass per observer, so the cost is
+    # proportional to the observer count (the thesis's weight update, Fig. 6.19)
+    n = x.shape[0]
     O = obs.shape[0]
     const = 0.0
     for o in range(O):
         if obs[o, 0] > 0.5:
             const += -2.0 * np.log(obs[o, 3]) - np.log(2.0 * np.pi)
     for i in range(n):
-        acc = 0.0
-        for o in range(O):
-            if obs[o, 0] <= 0.5:
-                continue
-            dn = pn[i] - obs[o, 4]
-            de = pe[i] - obs[o, 5]
-            dd = pd[i] - obs[o, 6]
-            # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
-            xc = obs[o, 7] * dn + obs[o, 10] * de + obs[o, 13] * dd
-            yc = obs[o, 8] * dn + obs[o, 11] * de + obs[o, 14] * dd
-            zc = obs[o, 9] * dn + obs[o, 12] * de + obs[o, 15] * dd
+        out[i] = const
+    for o in range(O):
+        if obs[o, 0] <= 0.5:
+            continue
+        cn, ce, cd = obs[o, 4], obs[o, 5], obs[o, 6]
+        # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
+        r00, r10, r20 = obs[o, 7], obs[o, 10], obs[o, 13]
+        r01, r11, r21 = obs[o, 8], obs[o, 11], obs[o, 14]
+        r02, r12, r22 = obs[o, 9], obs[o, 12], obs[o, 15]
+        u0, v0, isg = obs[o, 1], obs[o, 2], 1.0 / obs[o, 3]
+        for i in range(n):
+            dn = x[i, ip] - cn
+            de = x[i, ie] - ce
+            dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+            zc = r02 * dn + r12 * de + r22 * dd
             if zc <= 0.0:
-                acc = -np.inf
-                break
-            ru = (cu + f * xc / zc - obs[o, 1]) / obs[o, 3]
-            rv = (cv + f * yc / zc - obs[o, 2]) / obs[o, 3]
-            acc += -0.5 * (ru * ru + rv * rv)
-        out[i] = acc + const
-
+                out[i] = -np.inf
+            else:
+                iz = f / zc
+                ru = (cu + (r00 * dn + r10 * de + r20 * dd) * iz - u0) * isg
+                rv = (cv + (r01 * dn + r11 * de + r21 * dd) * iz - v0) * isg
+                out[i] -= 0.5 * (ru * ru + rv * rv)
 
 
 @njit(cache=True, parallel=True)
-def _camera_loglik_parallel(pn, pe, pd, obs, f, cu, cv, out):
-    n = pn.shape[0]
+def _camera_loglik_parallel(x, ip, ie, idd, ground_d, obs, f, cu, cv, out):
+    # observers outer, particles inner: one streaming pass per observer, so the cost is
+    # proportional to the observer count (the thesis's weight update, Fig. 6.19)
+    n = x.shape[0]
     O = obs.shape[0]
     const = 0.0
     for o in range(O):
         if obs[o, 0] > 0.5:
             const += -2.0 * np.log(obs[o, 3]) - np.log(2.0 * np.pi)
     for i in prange(n):
-        acc = 0.0
-        for o in range(O):
-            if obs[o, 0] <= 0.5:
-                continue
-            dn = pn[i] - obs[o, 4]
-            de = pe[i] - obs[o, 5]
-            dd = pd[i] - obs[o, 6]
-            # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
-            xc = obs[o, 7] * dn + obs[o, 10] * de + obs[o, 13] * dd
-            yc = obs[o, 8] * dn + obs[o, 11] * de + obs[o, 14] * dd
-            zc = obs[o, 9] * dn + obs[o, 12] * de + obs[o, 15] * dd
+        out[i] = const
+    for o in range(O):
+        if obs[o, 0] <= 0.5:
+            continue
+        cn, ce, cd = obs[o, 4], obs[o, 5], obs[o, 6]
+        # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
+        r00, r10, r20 = obs[o, 7], obs[o, 10], obs[o, 13]
+        r01, r11, r21 = obs[o, 8], obs[o, 11], obs[o, 14]
+        r02, r12, r22 = obs[o, 9], obs[o, 12], obs[o, 15]
+        u0, v0, isg = obs[o, 1], obs[o, 2], 1.0 / obs[o, 3]
+        for i in prange(n):
+            dn = x[i, ip] - cn
+            de = x[i, ie] - ce
+            dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+            zc = r02 * dn + r12 * de + r22 * dd
             if zc <= 0.0:
-                acc = -np.inf
-                break
-            ru = (cu + f * xc / zc - obs[o, 1]) / obs[o, 3]
-            rv = (cv + f * yc / zc - obs[o, 2]) / obs[o, 3]
-            acc += -0.5 * (ru * ru + rv * rv)
-        out[i] = acc + const
+                out[i] = -np.inf
+            else:
+                iz = f / zc
+                ru = (cu + (r00 * dn + r10 * de + r20 * dd) * iz - u0) * isg
+                rv = (cv + (r01 * dn + r11 * de + r21 * dd) * iz - v0) * isg
+                out[i] -= 0.5 * (ru * ru + rv * rv)
 
 
 def camera_loglik(x: ArrayLike, row: ArrayLike, camera: PinholeCamera, *, pos_index: tuple[int, int] = (0, 1),
                   d_index: int | None = None, ground_d: float = 0.0) -> F64:
     """``Σ_o log N(h_o(x); z_o, σ_o² I₂)`` per particle (seed 001 (3.42)); −∞ behind a camera."""
-    x = np.asarray(x, dtype=np.float64)
-    obs = np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS)
-    pn = np.ascontiguousarray(x[:, pos_index[0]])
-    pe = np.ascontiguousarray(x[:, pos_index[1]])
-    pd = np.ascontiguousarray(x[:, d_index]) if d_index is not None else np.full(len(x), float(ground_d))
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    obs = np.ascontiguousarray(np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS))
     out = np.empty(len(x))
     cu, cv = camera.principal
     kernel = _camera_loglik_parallel if len(x) >= PARALLEL_FROM else _camera_loglik_serial
-    kernel(pn, pe, pd, np.ascontiguousarray(obs), float(camera.focal_px), float(cu), float(cv), out)
+    kernel(x, int(pos_index[0]), int(pos_index[1]), -1 if d_index is None else int(d_index), float(ground_d),
+           obs, float(camera.focal_px), float(cu), float(cv), out)
     return out
 
 

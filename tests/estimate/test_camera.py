@@ -149,7 +149,7 @@ def test_the_parallel_weighting_equals_the_serial_one():
     a, b = np.empty(1000), np.empty(1000)
     obs = row.reshape(-1, OBS_FIELDS)
     for kern, out in ((camera._camera_loglik_serial, a), (camera._camera_loglik_parallel, b)):
-        kern(np.ascontiguousarray(x[:, 0]), np.ascontiguousarray(x[:, 1]), np.zeros(1000), obs, 800.0, 640.0, 480.0, out)
+        kern(x, 0, 1, -1, 0.0, obs, 800.0, 640.0, 480.0, out)
     assert np.allclose(a, b)
 
 

@@ -351,13 +351,18 @@ def _camera_loglik_parallel(x, ip, ie, idd, ground_d, obs, f, cu, cv, out):
 
 
 def camera_loglik(x: ArrayLike, row: ArrayLike, camera: PinholeCamera, *, pos_index: tuple[int, int] = (0, 1),
-                  d_index: int | None = None, ground_d: float = 0.0) -> F64:
-    """``Σ_o log N(h_o(x); z_o, σ_o² I₂)`` per particle (seed 001 (3.42)); −∞ behind a camera."""
+                  d_index: int | None = None, ground_d: float = 0.0, parallel: bool | None = None) -> F64:
+    """``Σ_o log N(h_o(x); z_o, σ_o² I₂)`` per particle (seed 001 (3.42)); −∞ behind a camera.
+
+    ``parallel`` None runs on numba's thread pool from :data:`PARALLEL_FROM` particles on;
+    True/False forces it (the result is the same).
+    """
     x = np.ascontiguousarray(x, dtype=np.float64)
     obs = np.ascontiguousarray(np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS))
     out = np.empty(len(x))
     cu, cv = camera.principal
-    kernel = _camera_loglik_parallel if len(x) >= PARALLEL_FROM else _camera_loglik_serial
+    par = len(x) >= PARALLEL_FROM if parallel is None else bool(parallel)
+    kernel = _camera_loglik_parallel if par else _camera_loglik_serial
     kernel(x, int(pos_index[0]), int(pos_index[1]), -1 if d_index is None else int(d_index), float(ground_d),
            obs, float(camera.focal_px), float(cu), float(cv), out)
     return out

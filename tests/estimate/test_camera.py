@@ -139,18 +139,14 @@ def test_the_likelihood_is_the_sum_of_the_per_observer_log_likelihoods():
 
 
 def test_the_parallel_weighting_equals_the_serial_one():
-    import pipeline.estimate.camera as camera
-
     rng = np.random.default_rng(2)
     Ts, uv = _scene(rng, 16)
     row = pack_detections(uv, 5.0, Ts)
     x = np.zeros((1000, 7))
     x[:, :2] = rng.normal(0, 10, (1000, 2))
-    a, b = np.empty(1000), np.empty(1000)
-    obs = row.reshape(-1, OBS_FIELDS)
-    for kern, out in ((camera._camera_loglik_serial, a), (camera._camera_loglik_parallel, b)):
-        kern(x, 0, 1, -1, 0.0, obs, 800.0, 640.0, 480.0, out)
-    assert np.allclose(a, b)
+    a = camera_loglik(x, row, CAM, parallel=False)
+    b = camera_loglik(x, row, CAM, parallel=True)
+    assert np.allclose(a, b) and np.allclose(a, camera_loglik_per_observer(x, row, CAM).sum(axis=0))
 
 
 def test_no_detection_at_all_is_a_predict_only_step():

@@ -9,6 +9,7 @@ from snakemake.utils import validate
 import pipeline
 from pipeline.config import ConfigError, validate_config
 from pipeline.estimate.run import job_config as estimate_job_config
+from pipeline.estimate.pf_run import job_config as pf_job_config
 from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest
 from pipeline.io.schema import STREAM_NAMES
 from pipeline.models.run import model_set_config
@@ -249,6 +250,18 @@ def estimate_paths(flight=None):
 def flight_estimates(wildcards):
     # + the particle filters of rules/estimate_pf.smk (issue 17)
     return (estimate_paths(wildcards.flight) if wildcards.flight in ESTIMATED else []) + flight_pf_estimates(wildcards)
+
+
+# issue 17: the particle filters (rules/estimate_pf.smk), per flight of estimate.pf.vehicles
+PF_ESTIMATED = [f for f in FLIGHTS if flights.loc[f, "vehicle"] in config["estimate"]["pf"]["vehicles"]]
+
+
+def pf_paths(flight=None):
+    return [f"results/estimate/pf_jm/{f}.parquet" for f in (PF_ESTIMATED if flight is None else [flight])]
+
+
+def flight_pf_estimates(wildcards):
+    return pf_paths(wildcards.flight) if wildcards.flight in PF_ESTIMATED else []
 
 
 def estimate_config(wildcards):

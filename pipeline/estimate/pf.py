@@ -44,7 +44,8 @@ threshold=1/3, every_step=False, dt_ref=None, rng, reinit=None)`` with
   ``.resample_if_needed() -> bool`` — the parts of a step, public so that a caller can act
   between them (the weave classifier's turn-sign guard zeroes log-weights after ``predict``);
 - ``.step(dt, z) -> StepStats``; attributes ``x``, ``mode``, ``logw`` (writable), ``weights``,
-  ``neff``, ``n_reinit``.
+  ``neff``, ``n_reinit``, and ``aux`` (a dict of per-particle arrays, leading axis N, that
+  resampling carries along with the particles; set it after ``init``).
 
 ``Pi`` may be a (K, K) row-stochastic array or a callable ``(mode (N,), dt, rng) -> mode (N,)``
 (hierarchical or state-dependent chains); ``K = len(models)``.
@@ -53,6 +54,22 @@ threshold=1/3, every_step=False, dt_ref=None, rng, reinit=None)`` with
 (``z`` of shape (T, m), NaN rows predict-only) and returns ``PfTrack(t_ns, mean (T, n),
 cov (T, n, n), mode_p (T, K), neff, resampled, predict_only, reinit, loglik, n_reinit,
 n_particles)``.
+
+``dwell_transition(dwell_s, dt, *, to=None)`` builds a row-stochastic Π from mean dwell times
+(a continuous-time chain, so its re-timing is exact); ``track_meta(track)`` the counts an output
+table records. The fused numba kernels of :mod:`pipeline.estimate.pf_fast` run the same CV and
+CV/CA/CT jump-Markov filters at 10⁵ particles for the benchmark (``benchmarks/pf.py``).
+
+Example
+-------
+>>> from pipeline.estimate.models import PfConstantVelocity, PfAugmentedCoordinatedTurn
+>>> pf = ParticleFilter([PfConstantVelocity(0.5), PfAugmentedCoordinatedTurn(0.5, 0.05)],
+...                     dwell_transition([10.0, 5.0], 0.1), GaussianPositionLikelihood(1.0),
+...                     n_particles=1000, dt_ref=0.1, rng=0)
+>>> pf = pf.init(mean=[0, 0, 5, 0, 0], cov=np.eye(5))
+>>> s = pf.step(0.1, [0.5, 0.0])
+>>> round(float(s.mode_p.sum()), 12)
+1.0
 """
 
 from __future__ import annotations
@@ -130,7 +147,8 @@ class GaussianPositionLikelihood:
         out = np.array(x, dtype=np.float64, copy=True)
         s = self._sig()
         idx = list(self.index)
-        out[:, idx] = np.asarray(z, dtype=np.float64)[None, :] + self.reinit_spread * s * rng.standard_normal((len(x), len(idx)))
+        noise = rng.standard_normal((len(x), len(idx)))
+        out[:, idx] = np.asarray(z, dtype=np.float64)[None, :] + self.reinit_spread * s * noise
         return out
 
 
@@ -226,7 +244,8 @@ class ParticleFilter:
             raise ValueError("ParticleFilter: need at least one mode model")
         for k, m in enumerate(self.models):
             if not callable(getattr(m, "propagate", None)):
-                raise ValueError(f"ParticleFilter: mode model {k} ({type(m).__name__}) has no propagate(x, dt, rng)")
+                raise ValueError(f"ParticleFilter: mode model {k} ({type(m).__name__}) has no "
+                                 "propagate(x, dt, rng)")
         self.K = len(self.models)
         if Pi is None or callable(Pi):
             self._Pi = None
@@ -234,11 +253,13 @@ class ParticleFilter:
         else:
             P = check_stochastic(Pi, "ParticleFilter Pi")
             if P.shape[0] != self.K:
-                raise ValueError(f"ParticleFilter: Pi is {P.shape[0]}x{P.shape[0]} but there are {self.K} mode models")
+                raise ValueError(f"ParticleFilter: Pi is {P.shape[0]}x{P.shape[0]} but there are "
+                                 f"{self.K} mode models")
             self._Pi = P
             self._transition = None
         if resample not in SCHEMES:
-            raise ValueError(f"ParticleFilter: unknown resample scheme {resample!r}; expected one of {', '.join(SCHEMES)}")
+            raise ValueError(f"ParticleFilter: unknown resample scheme {resample!r}; expected one of "
+                             f"{', '.join(SCHEMES)}")
         if int(n_particles) < 1:
             raise ValueError(f"ParticleFilter: n_particles must be >= 1, got {n_particles}")
         if not (0.0 <= threshold <= 1.0):
@@ -258,6 +279,9 @@ class ParticleFilter:
         self.logw: F64 = np.full(self.N, -np.log(self.N))
         self.neff = float(self.N)
         self.n_reinit = 0
+        #: per-particle side arrays (leading axis N) resampled with the particles, e.g. the
+        #: weave classifier's submode and segment counters δ, θ
+        self.aux: dict[str, np.ndarray] = {}
 
     # --- set-up -------------------------------------------------------------------------------
     def init(self, x0: ArrayLike | None = None, *, mean: ArrayLike | None = None,
@@ -271,9 +295,11 @@ class ParticleFilter:
         else:
             if mean is None:
                 raise ValueError("ParticleFilter.init: give x0 or mean (and cov)")
-            mu = np.asarray(mean, dtype=np.float64)
+            mu = np.asarray(mean, dtype=np.float64).ravel()
             C = np.zeros((mu.size, mu.size)) if cov is None else np.asarray(cov, dtype=np.float64)
-            L = np.linalg.cholesky(C + 1e-300 * np.eye(mu.size)) if np.any(C) else np.zeros_like(C)
+            # a symmetric square root, so a singular (e.g. partly zero) covariance is fine
+            ev, V = np.linalg.eigh(0.5 * (C + C.T))
+            L = V * np.sqrt(np.clip(ev, 0.0, None))
             x = mu[None, :] + self.rng.standard_normal((self.N, mu.size)) @ L.T
         self.x = x
         if modes is not None:
@@ -285,6 +311,7 @@ class ParticleFilter:
             raise ValueError(f"ParticleFilter.init: modes must be in 0..{self.K - 1}")
         self.logw = np.full(self.N, -np.log(self.N))
         self.neff = float(self.N)
+        self.aux = {}
         return self
 
     # --- the parts of a step --------------------------------------------------------------------
@@ -381,6 +408,8 @@ class ParticleFilter:
         idx = self._resampler(self.weights, self.rng)
         self.x = self.x[idx]
         self.mode = self.mode[idx]
+        for k, v in self.aux.items():
+            self.aux[k] = np.asarray(v)[idx]
         self.logw = np.full(self.N, -np.log(self.N))
         self.neff = float(self.N)
 

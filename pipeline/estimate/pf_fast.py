@@ -27,6 +27,8 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
+from .models import turn_coefficients
+
 F64 = NDArray[np.float64]
 
 #: particles per random-number block (the unit of parallel work)
@@ -392,20 +394,6 @@ def _jm_sums(w, X, mode, K, blksum, blkmom, blkmode):
         blksum[b] = s
 
 
-@njit(cache=True, parallel=True)
-def _gather(X, mode, idx, Y, mode_y):
-    n = idx.shape[0]
-    nb = (n + BLOCK - 1) // BLOCK
-    for b in prange(nb):
-        lo = b * BLOCK
-        hi = min(n, lo + BLOCK)
-        for q in range(X.shape[0]):
-            for j in range(lo, hi):
-                Y[q, j] = X[q, idx[j]]
-        for j in range(lo, hi):
-            mode_y[j] = mode[idx[j]]
-
-
 def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: ArrayLike,
            kinds: ArrayLike, sigma: ArrayLike, sigma_omega: ArrayLike, enter_sigma: ArrayLike,
            sigma_z: float, seed: int) -> tuple[F64, F64, F64, NDArray[np.int64]]:
@@ -424,8 +412,6 @@ def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: Arra
     -------
     mean : (T, 7); mode_p : (T, K); x : (N, 7) final particles; mode : (N,) final modes
     """
-    from .models import turn_coefficients
-
     X = np.ascontiguousarray(np.asarray(x0, dtype=np.float64).T).copy()
     if X.shape[0] != 7:
         raise ValueError(f"jm_run: particles must have shape (N, 7), got {X.T.shape}")
@@ -473,7 +459,8 @@ def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: Arra
         total = blksum.sum()
         mean[k], mode_p[k] = blkmom.sum(axis=0) / total, blkmode.sum(axis=0) / total
         _systematic_indices(ll, blksum, total, _uniform(seed, k, -1), idx)
-        _gather(X, mode, idx, Y, mode_y)
+        np.take(X, idx, axis=1, out=Y)  # numpy's gather beats a numba loop here (~2x)
+        np.take(mode, idx, out=mode_y)
         X, Y = Y, X
         mode, mode_y = mode_y, mode
     return mean, mode_p, np.ascontiguousarray(X.T), mode

@@ -28,11 +28,12 @@ there (``init_sigma`` m/s), ω = a = 0, modes uniform; weights 1/N. Randomness f
 outside ``gate_sigma`` standard deviations re-initialises around the fix (counted,
 ``n_reinit``).
 
-**Beside the classifier.** Where the flight is classified (``inputs.classified``,
-``results/classify/<model_set>/<flight>.parquet``), the classifier's softmax of its
-``ll_<label>`` columns at the nearest classified sample (within two of its periods) is written
-beside the mode fractions as ``cls_p_<label>``; the two are different class sets (motion modes
-against maneuvers), shown side by side on the flight page.
+**Beside the classifier.** :func:`classifier_softmax` is the classifier's softmax of its
+``ll_<label>`` columns at the nearest classified sample (within two of its periods). The flight
+page puts it beside the mode fractions (the workflow's rule does not pass the classification,
+so the filter never waits for or reruns with the classifier); given ``inputs.classified``
+(``results/classify/<model_set>/<flight>.parquet``, e.g. from a script) it is written into the
+table as ``cls_p_<label>``. The two are different class sets (motion modes against maneuvers).
 
 Failures are placeholders: no state, a failed preprocess or no position gives an empty ``pf``
 table with ``status: failed`` and the reason.
@@ -167,27 +168,34 @@ def classifier_softmax(cls: pd.DataFrame, t_ns: NDArray[np.int64]) -> dict[str, 
 
 
 def pf_frame(t_ns: NDArray[np.int64], mean: F64, cov: F64, mode_p: F64, neff: F64, resampled,
-             modes=PF_JM_MODES, extra: Mapping[str, F64] | None = None) -> pd.DataFrame:
-    """A ``pf`` table from a filter track (state columns :data:`~pipeline.estimate.models.PF_STATE`)."""
-    n = len(PF_STATE)
+             modes=PF_JM_MODES, extra: Mapping[str, F64] | None = None,
+             table: tuple[schema.Column, ...] = schema.PF) -> pd.DataFrame:
+    """A ``pf`` table (or ``table``, a tuple of columns extending it) from a filter track.
+
+    ``mean`` (T, n) and ``cov`` (T, n, n) follow :data:`~pipeline.estimate.models.PF_STATE`; a
+    filter with a shorter state (e.g. the weave classifier's [N, E, v_N, v_E, ω]) leaves the
+    missing components NaN. ``extra``: further columns (``cls_p_*``, or those of ``table``).
+    """
+    T, n = len(t_ns), mean.shape[1]
+    nan = np.full(T, np.nan)
     cols: dict[str, Any] = {"t_ns": np.asarray(t_ns, dtype=np.int64)}
     for i, c in enumerate(PF_STATE):
-        cols[f"x_{c}"] = mean[:, i]
-    for i in range(n):
-        for j in range(i, n):
-            cols[f"P_{i}_{j}"] = cov[:, i, j]
+        cols[f"x_{c}"] = mean[:, i] if i < n else nan
+    for i in range(len(PF_STATE)):
+        for j in range(i, len(PF_STATE)):
+            cols[f"P_{i}_{j}"] = cov[:, i, j] if j < n else nan
     for k, m in enumerate(modes):
         cols[f"mode_p_{m}"] = mode_p[:, k]
     cols["neff"] = np.asarray(neff, dtype=np.float64)
     cols["resampled"] = np.asarray(resampled, dtype=bool)
     cols.update(extra or {})
-    return schema.conform(schema.PF, pd.DataFrame(cols))
+    return schema.conform(tuple(table), pd.DataFrame(cols))
 
 
-def table_columns(df: pd.DataFrame) -> tuple[schema.Column, ...]:
-    """The ``pf`` columns of ``df`` with the wildcard families (``mode_p_*``, ``cls_p_*``) named."""
+def table_columns(df: pd.DataFrame, table: tuple[schema.Column, ...] = schema.PF) -> tuple[schema.Column, ...]:
+    """The columns of ``table`` in ``df`` with the wildcard families (``mode_p_*``, ``cls_p_*``) named."""
     out = []
-    for c in schema.PF:
+    for c in table:
         if c.name.endswith("*"):
             out += [schema.Column(n, c.dtype, c.unit, c.frame, c.doc) for n in df.columns
                     if str(n).startswith(c.name[:-1])]
@@ -196,9 +204,11 @@ def table_columns(df: pd.DataFrame) -> tuple[schema.Column, ...]:
     return tuple(out)
 
 
-def write_pf(df: pd.DataFrame, path, extra: dict) -> None:
-    """Write a ``pf`` table (units per column, wildcard families included) atomically."""
-    write_table(df, path, table_columns(df), name="pf", extra=extra)
+def write_pf(df: pd.DataFrame, path, extra: dict, *, table: tuple[schema.Column, ...] = schema.PF,
+             name: str = "pf") -> None:
+    """Write a ``pf`` table (or ``table`` named ``name``; units per column, wildcard families
+    included) atomically."""
+    write_table(df, path, table_columns(df, table), name=name, extra=extra)
 
 
 def _placeholder(path, extra: dict) -> None:
@@ -233,7 +243,8 @@ def run_pf_jm(inputs, outputs, config: Mapping[str, Any], *, flight_id: str | No
 
     def fail(reason: str) -> PfResult:
         _say(f"{fid}: placeholder ({reason})")
-        _placeholder(out, {**base, "status": "failed", "error": reason, "n_steps": 0, "n_predict_only": 0, "n_reinit": 0})
+        _placeholder(out, {**base, "status": "failed", "error": reason, "n_steps": 0, "n_predict_only": 0,
+                           "n_reinit": 0})
         return PfResult(fid, "failed", reason, {"n_steps": 0})
 
     sp = declared(inputs, "state")
@@ -255,8 +266,9 @@ def run_pf_jm(inputs, outputs, config: Mapping[str, Any], *, flight_id: str | No
         return fail(f"{len(good)} sample(s) with a position: nothing to filter")
     k0 = good[0]
     t, z = t[k0:], z[k0:]
-    vel = state[["vel_n_mps", "vel_e_mps"]].to_numpy(np.float64)[idx][k0] if {"vel_n_mps", "vel_e_mps"} <= set(state.columns) else np.zeros(2)
-    vel = np.where(np.isfinite(vel), vel, 0.0)
+    vcols = ["vel_n_mps", "vel_e_mps"]
+    vel = state[vcols].to_numpy(np.float64)[idx][k0] if set(vcols) <= set(state.columns) else np.zeros(2)
+    vel = np.where(np.isfinite(vel), vel, 0.0)  # the first fix's velocity, 0 where the state has none
     dt_ref = 1.0 / float(cfg["rate_hz"]) if cfg.get("rate_hz") else float(np.median(np.diff(t))) * 1e-9
     rng = pf_rng(seed, fid)
     pf = jm_filter(cfg, dt_ref, rng)
@@ -285,7 +297,8 @@ def run_pf_jm(inputs, outputs, config: Mapping[str, Any], *, flight_id: str | No
             **track_meta(tr), "dt_ref_s": dt_ref, "rate_hz": cfg.get("rate_hz"),
             "dwell_s": {m: float(cfg["dwell_s"][m]) for m in PF_JM_MODES},
             "Pi_ref": pf.transition_matrix(dt_ref).tolist(), "noise": cfg["noise"],
-            "measurement": "state pos_n_m/pos_e_m", "position_source": (st_meta.get("preprocess") or {}).get("sources", {}).get("position"),
+            "measurement": "state pos_n_m/pos_e_m",
+            "position_source": ((st_meta.get("preprocess") or {}).get("sources") or {}).get("position"),
             "measurement_sigma_m": float(cfg["measurement_sigma_m"]), "resample": cfg["resample"],
             "threshold": float(cfg["threshold"]), "gate_sigma": cfg.get("gate_sigma"),
             "init_sigma": [s_pos, s_vel], "mode_fraction_mean": frac, **cls_info,

@@ -15,6 +15,7 @@ from typing import Mapping
 import numpy as np
 import pandas as pd
 
+from ..estimate.pf_run import classifier_softmax
 from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
@@ -104,7 +105,8 @@ def _error_norms(est: pd.DataFrame, ref_t: np.ndarray, ref: np.ndarray) -> pd.Da
 
 
 def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.DataFrame | None,
-                    state: pd.DataFrame | None) -> tuple[list, list]:
+                    state: pd.DataFrame | None,
+                    classified: Mapping[str, str | os.PathLike] | None = None) -> tuple[list, list]:
     """The estimate panels of a flight page and their facts: ``([(title, figure or None)],
     [(key, text)])``.
 
@@ -115,7 +117,7 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
     estimates = {e: p for e, p in estimates.items() if p and Path(p).exists()}
     # the particle filters (issue 17) have their own table (``pf``) and panels
     pf = {e: estimates.pop(e) for e in [e for e in estimates if e in PF_ESTIMATORS]}
-    pf_figs, pf_facts = pf_panels(pf)
+    pf_figs, pf_facts = pf_panels(pf, classified)
     if not estimates:
         return [("Estimates (the flight's vehicle is not in estimate.vehicles)", None), *pf_figs], pf_facts
     tables, metas = {}, {}
@@ -157,13 +159,25 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
 PF_ESTIMATORS: tuple[str, ...] = ("pf_jm",)
 
 
-def pf_panels(estimates: Mapping[str, str | os.PathLike]) -> tuple[list, list]:
+def pf_panels(estimates: Mapping[str, str | os.PathLike],
+              classified: Mapping[str, str | os.PathLike] | None = None) -> tuple[list, list]:
     """The particle-filter panels and facts of a flight page: the weighted mode fractions per
-    step beside the classifier's softmax of its ``ll_<label>`` (``cls_p_*``) where the flight is
-    classified; a placeholder keeps a title with its reason."""
+    step beside the classifier's softmax of its ``ll_<label>`` where the flight is classified
+    (the table's own ``cls_p_*`` columns, else those of the first classification that is not
+    a placeholder, ``classified`` {model set: path}); a placeholder keeps a title with its reason."""
     figs, facts = [], []
+    cls_set, cls_table = None, None
+    for ms, cp in (classified or {}).items():
+        if cp and Path(cp).exists() and read_table_meta(cp).get("status") != "failed":
+            c = read_table(cp)
+            if len(c):
+                cls_set, cls_table = ms, c
+                break
     for e, p in estimates.items():
         m, t = read_table_meta(p), read_table(p)
+        if len(t) and cls_table is not None and not any(str(c).startswith("cls_p_") for c in t.columns):
+            t = t.assign(**classifier_softmax(cls_table, t["t_ns"].to_numpy(np.int64)))
+            m = {**m, "classifier": cls_set}
         label = plots.ESTIMATOR_LABELS.get(e, e)
         if m.get("status") == "failed" or not len(t):
             facts.append((label, f"placeholder: {m.get('error')}"))
@@ -277,7 +291,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             if fig is not None:
                 fig.update_layout(title=f"Maneuver timeline ({m})")
             figs.append((f"Maneuver timeline ({m})", fig))
-    est_figs, est_facts = estimate_panels(estimates or {}, truth=log["truth"], state=st)
+    est_figs, est_facts = estimate_panels(estimates or {}, truth=log["truth"], state=st, classified=classified)
     figs.extend(est_figs)
     # flight-mode bands behind every time panel (not the 3-D path and the ground track)
     for _, f in figs[2:]:

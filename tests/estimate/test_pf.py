@@ -12,7 +12,7 @@ DT = 0.5
 SIG_A, SIG_Z = 0.4, 2.0
 
 
-def _cv_kalman(m0, P0, Z, dt=DT, sa=SIG_A, sz=SIG_Z):
+def cv_kalman(m0, P0, Z, dt=DT, sa=SIG_A, sz=SIG_Z):
     F = np.eye(4)
     F[0, 2] = F[1, 3] = dt
     G = np.zeros((4, 2))
@@ -33,7 +33,7 @@ def _cv_kalman(m0, P0, Z, dt=DT, sa=SIG_A, sz=SIG_Z):
     return out
 
 
-def _track(T=20, seed=0):
+def cv_track(T=20, seed=0):
     rng = np.random.default_rng(seed)
     x = np.array([0.0, 0.0, 3.0, -1.0])
     Z = []
@@ -50,9 +50,9 @@ def _cv_pf(n, seed, **kw):
 
 
 def test_a_linear_gaussian_pf_with_1e5_particles_matches_the_kalman_filter_mean():
-    Z = _track()
+    Z = cv_track()
     m0, P0 = np.array([0.0, 0.0, 2.0, 0.0]), np.diag([4.0, 4.0, 4.0, 4.0])
-    kf = _cv_kalman(m0, P0, Z)
+    kf = cv_kalman(m0, P0, Z)
     pf = _cv_pf(100_000, 1).init(mean=m0, cov=P0)
     tr = run_pf(pf, np.arange(len(Z)) * int(DT * 1e9), Z)
     for k, (m, P) in enumerate(kf):
@@ -64,7 +64,7 @@ def test_a_linear_gaussian_pf_with_1e5_particles_matches_the_kalman_filter_mean(
 
 
 def test_a_nan_measurement_is_a_predict_only_step():
-    Z = _track(10)
+    Z = cv_track(10)
     Z[4] = [np.nan, 1.0]
     pf = _cv_pf(5000, 2).init(mean=np.array([0.0, 0.0, 3.0, -1.0]), cov=np.eye(4))
     tr = run_pf(pf, np.arange(10) * int(DT * 1e9), Z)
@@ -103,7 +103,7 @@ def test_all_zero_weights_without_a_reinit_fail_with_a_clear_message():
 
 
 def test_the_same_seed_gives_the_same_track_and_another_seed_another():
-    Z = _track(15)
+    Z = cv_track(15)
     t = np.arange(15) * int(DT * 1e9)
     models = [PfConstantVelocity(SIG_A), PfCoordinatedTurn(SIG_A, omega=0.2)]
 
@@ -156,14 +156,14 @@ def test_dwell_times_give_stay_probabilities_of_one_minus_dt_over_tau_for_small_
 
 
 def test_every_step_resampling_resamples_at_every_measurement():
-    Z = _track(8)
+    Z = cv_track(8)
     pf = _cv_pf(300, 8, every_step=True).init(mean=np.array([0.0, 0.0, 3.0, -1.0]), cov=np.eye(4))
     tr = run_pf(pf, np.arange(8) * int(DT * 1e9), Z)
     assert tr.resampled.all()
 
 
 def test_threshold_resampling_happens_only_below_n_over_three():
-    Z = _track(12)
+    Z = cv_track(12)
     pf = _cv_pf(2000, 9).init(mean=np.array([0.0, 0.0, 3.0, -1.0]), cov=9 * np.eye(4))
     tr = run_pf(pf, np.arange(12) * int(DT * 1e9), Z)
     assert np.array_equal(tr.resampled, tr.neff < 2000 / 3)
@@ -171,7 +171,7 @@ def test_threshold_resampling_happens_only_below_n_over_three():
 
 
 def test_mode_fractions_favour_the_mode_that_generated_a_straight_track():
-    Z = _track(40, seed=3)
+    Z = cv_track(40, seed=3)
     models = [PfConstantVelocity(SIG_A), PfCoordinatedTurn(SIG_A, omega=0.6)]
     pf = ParticleFilter(models, [[0.95, 0.05], [0.05, 0.95]], GaussianPositionLikelihood(SIG_Z),
                         n_particles=3000, rng=10, dt_ref=DT)
@@ -179,3 +179,17 @@ def test_mode_fractions_favour_the_mode_that_generated_a_straight_track():
     tr = run_pf(pf, np.arange(40) * int(DT * 1e9), Z)
     assert np.allclose(tr.mode_p.sum(axis=1), 1.0)
     assert tr.mode_p[10:, 0].mean() > 0.8
+
+
+def test_side_arrays_travel_with_their_particles_through_resampling():
+    pf = _cv_pf(1000, 11, every_step=True).init(mean=np.zeros(4), cov=np.eye(4))
+    pf.aux["tag"] = np.arange(1000)
+    pf.aux["pos0"] = pf.x[:, 0].copy()
+    pf.step(0.0, [0.5, 0.0])  # no prediction: the resampled particles keep their positions
+    assert np.array_equal(pf.aux["pos0"], pf.x[:, 0])
+    assert len(np.unique(pf.aux["tag"])) < 1000
+
+
+def test_a_singular_initial_covariance_draws_fixed_components_exactly():
+    pf = _cv_pf(500, 12).init(mean=[1.0, 2.0, 3.0, 4.0], cov=np.diag([1.0, 0.0, 1.0, 0.0]))
+    assert np.all(pf.x[:, 1] == 2.0) and np.all(pf.x[:, 3] == 4.0) and pf.x[:, 0].std() > 0.5

@@ -9,7 +9,7 @@ from pipeline.estimate import pf_fast
 from pipeline.estimate.models import PfAugmentedCoordinatedTurn, PfConstantAcceleration, PfConstantVelocity
 from pipeline.estimate.pf import GaussianPositionLikelihood, ParticleFilter, run_pf
 
-from .test_pf import DT, SIG_A, SIG_Z, _cv_kalman, _track
+from .test_pf import DT, SIG_A, SIG_Z, cv_track
 
 
 def test_the_kernel_generator_draws_standard_normals():
@@ -21,9 +21,9 @@ def test_the_kernel_generator_draws_standard_normals():
 
 
 def test_the_fused_cv_bootstrap_filter_matches_the_kalman_filter_mean():
-    Z = _track()
+    Z = cv_track()
     m0, P0 = np.array([0.0, 0.0, 2.0, 0.0]), np.diag([4.0, 4.0, 4.0, 4.0])
-    n, seeds = 50_000, 10
+    n, seeds = 20_000, 10
     # the kernel predicts before every measurement, so the KF does too
     kf = np.array([m for m, _ in _cv_kalman_from_predict(m0, P0, Z)])
     # independent runs (prior sample and seed), so their spread is the Monte Carlo error
@@ -57,7 +57,7 @@ def test_kernel_results_do_not_depend_on_the_thread_count():
     n = 3 * pf_fast.BLOCK + 17
     x0 = rng.standard_normal((n, 7))
     modes = rng.integers(0, 3, n)
-    Z = _track(6)
+    Z = cv_track(6)
     Z[2] = np.nan
     Pi = [[0.9, 0.05, 0.05], [0.1, 0.8, 0.1], [0.1, 0.1, 0.8]]
     args = (DT, Pi, [0, 1, 2], [0.5, 0.5, 0.5], [0, 0, 0.05], [0, 2.0, 0.1], SIG_Z, 4)
@@ -77,7 +77,7 @@ def test_kernel_results_do_not_depend_on_the_thread_count():
 
 
 def test_the_fused_jump_markov_step_agrees_with_the_generic_filter():
-    Z = _track(30, seed=4)
+    Z = cv_track(30, seed=4)
     Pi = np.array([[0.9, 0.05, 0.05], [0.1, 0.8, 0.1], [0.1, 0.1, 0.8]])
     n = 40_000
     rng = np.random.default_rng(2)

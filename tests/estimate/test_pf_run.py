@@ -128,3 +128,16 @@ def test_the_schema_defaults_are_the_entry_points_defaults():
     assert job_config({**cfg, "hmpf": {"x": 1}, "geolocation": {}}) == job_config(cfg)
     assert "vehicles" not in job_config(cfg)
     assert cfg["threshold"] == pytest.approx(DEFAULTS["threshold"])
+
+
+def test_a_shorter_filter_state_leaves_the_missing_columns_nan(tmp_path):
+    from pipeline.estimate.pf_run import pf_frame, write_pf
+
+    T = 4
+    df = pf_frame(np.arange(T, dtype=np.int64), np.ones((T, 5)), np.ones((T, 5, 5)), np.full((T, 4), 0.25),
+                  np.full(T, 10.0), np.ones(T, bool), modes=("s", "l", "r", "w"))
+    assert np.all(df["x_omega_radps"] == 1.0) and df["x_acc_n_mps2"].isna().all()
+    assert np.all(df["P_4_4"] == 1.0) and df["P_0_5"].isna().all() and df["P_5_6"].isna().all()
+    write_pf(df, tmp_path / "h.parquet", {"status": "ok"})
+    assert [c for c in read_table(tmp_path / "h.parquet").columns if c.startswith("mode_p_")] == [
+        "mode_p_s", "mode_p_l", "mode_p_r", "mode_p_w"]

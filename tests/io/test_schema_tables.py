@@ -11,7 +11,7 @@ from pipeline.io import schema
 from pipeline.io.parquet import read_table, write_table
 
 DERIVED = ("state", "segments", "calibration", "simulate_set", "simulate_summary", "flights",
-           "classification", "model_evaluation", "estimate", "estimate_hmm")
+           "classification", "model_evaluation", "estimate", "estimate_hmm", "pf")
 
 
 def test_the_registry_holds_every_stream_and_every_derived_table():

@@ -47,8 +47,8 @@ DEMO = "demo-quad\tresults/sim/demo/demo-quad.bin\tsim-quad\ttest\tnone\t\tdemo"
 SIM = ("sim-M1-000-bin\tresults/sim/logs/sim-M1-000.bin\tsim-quad\ttest\t"
        "results/sim/logs/sim-M1-000.bin.truth.parquet\t\tsimulated M1 with truth side-car")
 STAGES = ("demo_log", "simulate_sets", "ekf_sets", "simulate_logs", "ingest_flight", "preprocess_flight", "train_model",
-          "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "flight_report", "model_report",
-          "report_index", "plotly_js", "all")
+          "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "estimate_pf_jm", "flight_report",
+          "model_report", "report_index", "plotly_js", "all")
 
 
 @pytest.mark.slow
@@ -82,10 +82,10 @@ def test_dry_run_default_config_plans_every_stage():
                   "train_model", "classify_flight", "classify"}),
     # the EKF+HMM's model is simekf (input: ekf): its Q2 needs the EKF sets and the truth sets
     ("estimate", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
-                  "train_model", "estimate_q2", "estimate_flight", "estimate"}),
+                  "train_model", "estimate_q2", "estimate_flight", "estimate_pf_jm", "estimate"}),
     ("report", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
-                "train_model", "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "plotly_js",
-                "flight_report", "model_report", "report_index", "report"}),
+                "train_model", "evaluate_model", "classify_flight", "estimate_q2", "estimate_flight", "estimate_pf_jm",
+                "plotly_js", "flight_report", "model_report", "report_index", "report"}),
 ])
 def test_named_stage_targets(tmp_path, target, rules):
     wd = _copy_workflow(tmp_path / "wf", [DEMO, SIM])
@@ -407,8 +407,13 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
         assert m["status"] == "failed" and "no radar stream" in m["error"]
         assert not (res / "estimate" / e / "broken.parquet").exists()
     assert json.loads((res / "estimate" / "q2" / "simekf.json").read_text())["status"] == "ok"  # the EKF+HMM's model set
+    # the jump-Markov PF (issue 17) over the sim-quad flights, measured by the state's position
+    m = read_table_meta(res / "estimate" / "pf_jm" / "sim-M1-000-bin.parquet")
+    assert m["status"] == "ok" and m["n_steps"] > 100 and m["table"] == "pf", m
+    assert not (res / "estimate" / "pf_jm" / "broken.parquet").exists()
     page = (res / "report" / "flights" / "sim-M1-000-bin.html").read_text()
     assert "Estimation error vs truth: acceleration" in page and "EKF+HMM mode (" in page
+    assert "jump-Markov PF mode fractions beside the classifier" in page
     assert _planned_jobs(wd) == {}
 
     # add one test flight: a second, identical demo log copied in as a plain file
@@ -418,7 +423,7 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     jobs = _planned_jobs(wd)
     # classified by every model set of its vehicle (sim, sim2, simekf), estimated once
     assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 3, "estimate_flight": 1,
-                    "flight_report": 1, "report_index": 1, "all": 1}, jobs
+                    "estimate_pf_jm": 1, "flight_report": 1, "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
 
@@ -430,8 +435,8 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     jobs = _planned_jobs(wd)
     # 3 sim-quad flights x 3 model sets (sim, sim2, simekf); estimated: the three sim-quad flights
     # (the broken flight's vehicle is generic)
-    assert jobs == {"preprocess_flight": 4, "classify_flight": 9, "estimate_flight": 3, "flight_report": 4,
-                    "report_index": 1, "all": 1}, jobs
+    assert jobs == {"preprocess_flight": 4, "classify_flight": 9, "estimate_flight": 3, "estimate_pf_jm": 3,
+                    "flight_report": 4, "report_index": 1, "all": 1}, jobs
 
     # snakemake --report over the finished run
     cfg.write_text(text)

@@ -1151,3 +1151,101 @@ def radar2d_range_criterion(delta_max_m: float, sigma_bearing_rad: float, k_sigm
     beyond it the radar cannot see a weave's straight bend at all.
     """
     return float(delta_max_m / (2.0 * np.tan(k_sigma * sigma_bearing_rad)))
+
+
+# issue 17: seed 001 geo-location driving modes (digest 001 §7, D4). The five modes STOP, ACCEL,
+# DECEL, COAST, TURN map onto the PF models above: STOP = CV held at v = 0, ACCEL/DECEL = CA
+# with the acceleration drawn along ±v̂ on entering, COAST = CV, TURN = augmented CT. The state
+# is PF_STATE with the target's D appended (GEO_IX_DOWN, the thesis estimates z), which every
+# model above keeps; :class:`PfDownRandomWalk` adds its random walk.
+# --------------------------------------------------------------------------------------------
+
+#: the geo-location particle state: PF_STATE + the target's D (m)
+GEO_STATE: tuple[str, ...] = (*PF_STATE, "pos_d_m")
+GEO_IX_DOWN = 7
+#: the seed-001 driving modes in the order of Π_d / Π_p (digest 001 §7)
+DRIVING_MODES: tuple[str, ...] = ("STOP", "ACCEL", "DECEL", "COAST", "TURN")
+
+
+@dataclass(frozen=True)
+class PfStop:
+    """STOP (digest D4: CV with v = 0): velocity, ω and a zeroed; white position jitter σ_a T²/2."""
+
+    sigma_a: float = 0.05
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        out = _need(x, 4, "PfStop").copy()
+        out[:, 2:4] = 0.0
+        out[:, 0:2] += (0.5 * dt * dt * self.sigma_a) * rng.standard_normal((out.shape[0], 2))
+        _zero(out, True, True)
+        return out
+
+    def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
+        out = _need(x, 4, "PfStop").copy()
+        out[:, 2:4] = 0.0
+        return out
+
+
+@dataclass(frozen=True)
+class PfAlongTrackAcceleration:
+    """ACCEL (``sign`` +1) or DECEL (−1): CA whose acceleration on entering is ``±|α| v̂``.
+
+    ``|α| ~ U(accel[0], accel[1])`` (m/s²) along the velocity (the heading when at rest: N);
+    then :class:`PfConstantAcceleration` with white jerk ``σ_j``. DECEL does not reverse: a
+    particle whose velocity turned against its acceleration is held at rest (the target
+    simulator forces DECEL to STOP at v = 0, digest §7).
+    """
+
+    sign: int = 1
+    accel: tuple[float, float] = (0.5, 2.0)
+    sigma_j: float = 0.5
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        x = _need(x, 7, "PfAlongTrackAcceleration")
+        v0 = x[:, 2:4].copy()
+        out = PfConstantAcceleration(sigma_j=self.sigma_j).propagate(x, dt, rng)
+        if self.sign < 0:
+            rev = np.einsum("ij,ij->i", v0, out[:, 2:4]) < 0
+            if np.any(rev):
+                out[rev, 2:4] = 0.0
+                out[rev, 5:7] = 0.0
+        return out
+
+    def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
+        out = _need(x, 7, "PfAlongTrackAcceleration").copy()
+        t, _ = curvilinear_axes(out[:, 2:4])
+        a = rng.uniform(self.accel[0], self.accel[1], out.shape[0]) * (1.0 if self.sign >= 0 else -1.0)
+        out[:, 5:7] = t * a[:, None]
+        return out
+
+
+@dataclass(frozen=True)
+class PfDownRandomWalk:
+    """Wrap a mode model: the target's D (column ``index``) gets ``σ_d √T`` random walk."""
+
+    model: Any
+    sigma_d: float = 0.2
+    index: int = GEO_IX_DOWN
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        out = self.model.propagate(x, dt, rng)
+        out[:, self.index] += self.sigma_d * np.sqrt(max(dt, 0.0)) * rng.standard_normal(out.shape[0])
+        return out
+
+    def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
+        enter = getattr(self.model, "enter", None)
+        return enter(x, rng) if enter is not None else np.asarray(x, dtype=np.float64)
+
+
+def driving_mode_models(*, stop_sigma_a: float = 0.05, accel_sigma_j: float = 0.5, coast_sigma_a: float = 0.3,
+                        turn_sigma_a: float = 0.3, turn_sigma_omega: float = 0.05, down_sigma: float = 0.2,
+                        accel: tuple[float, float] = (0.5, 2.0), omega: tuple[float, float] = (0.05, 0.3),
+                        estimate_down: bool = True) -> list:
+    """The five filter models of :data:`DRIVING_MODES` (digest D4), with the config's noise values."""
+    models = [PfStop(stop_sigma_a),
+              PfAlongTrackAcceleration(+1, tuple(accel), accel_sigma_j),
+              PfAlongTrackAcceleration(-1, tuple(accel), accel_sigma_j),
+              PfConstantVelocity(coast_sigma_a),
+              PfAugmentedCoordinatedTurn(sigma_a=turn_sigma_a, sigma_omega=turn_sigma_omega,
+                                         omega_init=tuple(omega), sign=0)]
+    return [PfDownRandomWalk(m, down_sigma) for m in models] if estimate_down else models

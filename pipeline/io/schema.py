@@ -169,6 +169,15 @@ STREAMS: dict[str, tuple[Column, ...]] = {
         _f("range_rate_mps", "m/s"),
         _f("sensor_id", "1"),
     ),
+    # issue 17 (seed 001): a camera detection per observer (``instance``) and frame; the observer's
+    # pose is in ``local_position``/``attitude`` of the same instance, the gimbal angles here.
+    "camera_det": (
+        _f("u_px", "px", "image", "detection centroid, column (x right; principal point at the image centre)"),
+        _f("v_px", "px", "image", "detection centroid, row (y down)"),
+        _f("sigma_px", "px", "image", "detection standard deviation per image axis"),
+        _f("gimbal_yaw_rad", "rad", "FRD", "gimbal yaw relative to the body (Rz, ZYX, no roll)"),
+        _f("gimbal_pitch_rad", "rad", "FRD", "gimbal pitch relative to the body (Ry; -pi/2 looks down)"),
+    ),
     "truth": (
         *(_f(f"pos_{a}_m", "m", "NED") for a in _NED),
         *(_f(f"vel_{a}_mps", "m/s", "NED") for a in _NED),
@@ -203,7 +212,7 @@ EVENT_STREAMS: tuple[str, ...] = ("messages", "params")
 #: streams of measurements (not pilot inputs, modes, setpoints, events, labels or simulation
 #: truth): the span a reader of the log means by "how long was the flight logged"
 SENSOR_STREAMS: tuple[str, ...] = ("imu", "gps", "baro", "mag", "attitude", "local_position", "odometry",
-                                   "rangefinder", "airspeed", "radar", "bearing")
+                                   "rangefinder", "airspeed", "radar", "bearing", "camera_det")
 
 #: The streams added by schema 1.1 (none of them moves a reader's ``t0``).
 STREAMS_1_1: tuple[str, ...] = ("battery", "setpoint", "messages", "params", "vibration")

@@ -1,0 +1,118 @@
+"""Seed-001 geo-location filter cost (issue 17): linear in particles and in observers (thesis §6.4–§6.5).
+
+1. **Per step vs N** (N = 10⁴, 10⁵, 10⁶ by default): one step of the five-mode jump-Markov
+   filter of :mod:`pipeline.simulate.geolocation` (mode draw from Π_p, the D4 mode models,
+   the 3-observer :class:`~pipeline.estimate.camera.CameraLikelihood`, estimate, systematic
+   resampling at N/3 — forced every step here so each timed step does the same work).
+   ``RESULT geo_step_linear_dev_n`` is the largest relative deviation of the medians from the
+   least-squares line through the origin (acceptance: ≤ 0.2, ``…_met``).
+2. **Weighting vs observers** (1, 2, 4, 8, 16 at ``--n-obs-particles``, default 10⁵): the camera
+   likelihood alone (the thesis's "weight update", Fig. 6.19), and the whole step, which is
+   affine (the non-weight part does not grow with observers): ``RESULT geo_weight_linear_dev_obs``
+   through the origin and ``geo_step_us_per_observer`` / ``geo_step_us_intercept`` of the
+   step's affine fit. ``RESULT geo_camera_loglik_16obs_us`` times the 16-observer likelihood.
+
+Timing: process CPU time after a warm-up (numba compiles/caches), ``--repeat`` rounds, medians;
+numba's pool is set to ``--threads`` (default 1), BLAS to one thread.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+
+from pipeline.estimate.camera import pack_detections  # noqa: E402
+from pipeline.simulate.geolocation import (GeolocationConfig, detect, make_filter, mobile_observers,  # noqa: E402
+                                           observer_poses)
+
+
+def _scene(n_obs: int, cfg: GeolocationConfig, rng: np.random.Generator) -> np.ndarray:
+    target = np.array([20.0, 10.0, 0.0])
+    ob = mobile_observers(n_obs, target, cfg, rng)
+    ob.pos[:, :2] = target[:2] + 0.5 * (ob.pos[:, :2] - target[:2])
+    T = observer_poses(ob, target)
+    return pack_detections(detect(target, T, cfg, rng), cfg.sigma_px, T)
+
+
+def _filter(n: int, cfg: GeolocationConfig, rng: np.random.Generator):
+    pf = make_filter(cfg, cv_only=False, n_particles=n, rng=rng)
+    pf.every_step = True
+    mean = np.array([20.0, 10.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0])
+    pf.init(mean=mean, cov=np.diag([100.0, 100.0, 9.0, 9.0, 0.0, 0.0, 0.0, 0.0]))
+    return pf
+
+
+def _cpu(fn, repeat: int) -> float:
+    fn()
+    ts = []
+    for _ in range(repeat):
+        t0 = time.process_time()
+        fn()
+        ts.append(time.process_time() - t0)
+    return float(np.median(ts))
+
+
+def _origin_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Slope of the least-squares line through the origin and the largest relative deviation."""
+    b = float(np.dot(x, y) / np.dot(x, x))
+    return b, float(np.max(np.abs(y / (b * x) - 1.0)))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
+    ap.add_argument("--observers", type=int, nargs="+", default=[1, 2, 4, 8, 16])
+    ap.add_argument("--n-obs-particles", type=int, default=100_000)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=1)
+    a = ap.parse_args(argv)
+    numba.set_num_threads(a.threads)
+    cfg = GeolocationConfig()
+    rng = np.random.default_rng(a.seed)
+    dt = cfg.dt
+
+    row3 = _scene(3, cfg, rng)
+    step_s = []
+    for n in a.n:
+        pf = _filter(n, cfg, rng)
+        step_s.append(_cpu(lambda: pf.step(dt, row3), a.repeat))
+        print(f"RESULT geo_step_us_n{n} {1e6 * step_s[-1]:.4g}")
+    b, dev = _origin_fit(np.asarray(a.n, float), np.asarray(step_s))
+    print(f"RESULT geo_step_ns_per_particle {1e9 * b:.4g}")
+    print(f"RESULT geo_step_linear_dev_n {dev:.3f}")
+    print(f"RESULT geo_step_linear_n_met {int(dev <= 0.2)}")
+
+    pf = _filter(a.n_obs_particles, cfg, rng)
+    w_s, s_s = [], []
+    for o in a.observers:
+        row = _scene(o, cfg, rng)
+        w_s.append(_cpu(lambda: pf.likelihood(pf.x, row), a.repeat))
+        s_s.append(_cpu(lambda: pf.step(dt, row), a.repeat))
+        print(f"RESULT geo_weight_us_obs{o} {1e6 * w_s[-1]:.4g}")
+        print(f"RESULT geo_step_us_obs{o} {1e6 * s_s[-1]:.4g}")
+    obs = np.asarray(a.observers, float)
+    bw, devw = _origin_fit(obs, np.asarray(w_s))
+    print(f"RESULT geo_weight_ns_per_particle_observer {1e9 * bw / a.n_obs_particles:.4g}")
+    print(f"RESULT geo_weight_linear_dev_obs {devw:.3f}")
+    print(f"RESULT geo_weight_linear_obs_met {int(devw <= 0.2)}")
+    slope, icpt = np.polyfit(obs, np.asarray(s_s), 1)
+    print(f"RESULT geo_step_us_per_observer {1e6 * slope:.4g}")
+    print(f"RESULT geo_step_us_intercept {1e6 * icpt:.4g}")
+    if 16 in a.observers:
+        print(f"RESULT geo_camera_loglik_16obs_us {1e6 * w_s[a.observers.index(16)]:.4g}")
+    print(f"RESULT geo_obs_particles {a.n_obs_particles}")
+    print(f"RESULT geo_threads {a.threads}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

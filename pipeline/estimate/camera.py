@@ -1,0 +1,467 @@
+"""Pinhole camera, the camera→UAV→world chain and the multi-observer image likelihood (seed 001 §3, §6).
+
+Frames (NED world, digest 001 §13 item 4)
+-----------------------------------------
+- **world**: local NED, ``(x, y) = (N, E)``; seed-001's ENU converts as ``N = y, E = x, D = −z``
+  (:func:`enu_to_ned`), headings as ``ψ_NED = π/2 − ψ_ENU`` (:func:`yaw_enu_to_ned`).
+- **body** (UAV): FRD, attitude ``R_U = Rz(ψ) Ry(θ) Rx(φ)`` body→NED (ZYX, seed 001 (3.9)).
+- **gimbal**: FRD-like with its x axis along the optical axis, ``R_G = Rz(ψ_g) Ry(θ_g)`` relative
+  to the body (no roll, φ_C = 0, digest §3); ``θ_g = −π/2`` looks straight down.
+- **camera**: the computer-vision frame x right, y down, z along the optical axis. The thesis's
+  camera frame has +y up; ours is the same up to the sign of the image y, which we take *down*
+  so that pixel rows grow downward. ``p_gimbal = M p_camera`` with ``M`` = :data:`CAMERA_TO_GIMBAL`
+  (forward = z, right = x, down = y), so ``R_C = R_G M``.
+
+The chain (seed 001 (3.7)/(3.32)) is ``p^W = T_U R_U T_C R_C p^C = T̄ p^C`` as 4×4 homogeneous
+matrices (:func:`camera_to_world`), and world→camera is the inverse ``T̄⁻¹`` (digest D10: the
+printed (3.33) repeats the U factors; :func:`invert_pose` inverts the 4×4 exactly).
+
+Pinhole (seed 001 (3.2)–(3.3)) in pixels: ``u = c_u + f x_C/z_C``, ``v = c_v + f y_C/z_C`` with
+the principal point ``(c_u, c_v)`` the image centre; a point with ``z_C ≤ 0`` is behind the
+camera (projection NaN).
+
+Likelihood (seed 001 (3.34)–(3.35), (3.42))
+-------------------------------------------
+Independent observers factorise, so ``log p(z | x) = Σ_o log N(h_o(x); z_o, σ_o² I₂)``:
+:class:`CameraLikelihood` implements the PF core's ``Likelihood`` protocol over packed
+per-step measurement rows (:func:`pack_detections`): per observer ``[valid, u, v, σ_px,
+c_N, c_E, c_D, R_wc (9, row-major)]`` where ``c`` is the camera centre and ``R_wc`` the
+camera→world rotation of that step. An observer without a detection has ``valid = 0``; a step
+with none is an all-NaN row (predict-only in :class:`~pipeline.estimate.pf.ParticleFilter`).
+The weighting is a numba kernel, parallel over particles, linear in particles × observers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+from numpy.typing import ArrayLike, NDArray
+
+F64 = NDArray[np.float64]
+
+#: fields per observer in a packed measurement row (see the module docstring)
+OBS_FIELDS = 16
+#: camera (x right, y down, z optical axis) → gimbal (forward, right, down): columns are the
+#: camera axes expressed in the gimbal frame
+CAMERA_TO_GIMBAL: F64 = np.array([[0.0, 0.0, 1.0],
+                                  [1.0, 0.0, 0.0],
+                                  [0.0, 1.0, 0.0]])
+
+
+# --- frames -------------------------------------------------------------------------------------
+def enu_to_ned(p: ArrayLike) -> F64:
+    """Seed-001 ENU ``(x E, y N, z Up)`` → NED: ``N = y, E = x, D = −z`` (last axis of size 3 or 2)."""
+    p = np.asarray(p, dtype=np.float64)
+    out = np.empty_like(p)
+    out[..., 0] = p[..., 1]
+    out[..., 1] = p[..., 0]
+    if p.shape[-1] > 2:
+        out[..., 2] = -p[..., 2]
+    return out
+
+
+def ned_to_enu(p: ArrayLike) -> F64:
+    """The inverse of :func:`enu_to_ned` (the map is its own inverse)."""
+    return enu_to_ned(p)
+
+
+def yaw_enu_to_ned(yaw: ArrayLike) -> F64:
+    """Heading from E toward N (ENU, CCW) → from N toward E (NED, CW): ``π/2 − ψ``, wrapped."""
+    a = np.pi / 2 - np.asarray(yaw, dtype=np.float64)
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def rot_zyx(yaw: ArrayLike, pitch: ArrayLike, roll: ArrayLike = 0.0) -> F64:
+    """``Rz(ψ) Ry(θ) Rx(φ)`` (body→world, seed 001 (3.9)), broadcast over leading axes → (..., 3, 3)."""
+    y, p, r = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (yaw, pitch, roll)))
+    cy, sy, cp, sp, cr, sr = np.cos(y), np.sin(y), np.cos(p), np.sin(p), np.cos(r), np.sin(r)
+    R = np.empty(y.shape + (3, 3))
+    R[..., 0, 0] = cy * cp
+    R[..., 0, 1] = cy * sp * sr - sy * cr
+    R[..., 0, 2] = cy * sp * cr + sy * sr
+    R[..., 1, 0] = sy * cp
+    R[..., 1, 1] = sy * sp * sr + cy * cr
+    R[..., 1, 2] = sy * sp * cr - cy * sr
+    R[..., 2, 0] = -sp
+    R[..., 2, 1] = cp * sr
+    R[..., 2, 2] = cp * cr
+    return R
+
+
+def quat_to_rot(q: ArrayLike) -> F64:
+    """Hamilton quaternion ``[w, x, y, z]`` (the ``attitude`` stream, FRD→NED) → (..., 3, 3)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def homogeneous(R: ArrayLike | None = None, t: ArrayLike | None = None) -> F64:
+    """4×4 ``[[R, t], [0, 1]]`` (seed 001 (3.8): ``T(d)`` is ``R = I, t = d``), broadcast → (..., 4, 4)."""
+    R = np.eye(3) if R is None else np.asarray(R, dtype=np.float64)
+    t = np.zeros(3) if t is None else np.asarray(t, dtype=np.float64)
+    shape = np.broadcast_shapes(R.shape[:-2], t.shape[:-1])
+    T = np.zeros(shape + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def invert_pose(T: ArrayLike) -> F64:
+    """Exact inverse of a rigid 4×4 ``[[R, t], [0, 1]]``: ``[[Rᵀ, −Rᵀt], [0, 1]]`` (digest D10)."""
+    T = np.asarray(T, dtype=np.float64)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    return homogeneous(Rt, -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3]))
+
+
+def gimbal_rotation(gimbal_yaw: ArrayLike, gimbal_pitch: ArrayLike) -> F64:
+    """``R_C = Rz(ψ_g) Ry(θ_g) M``: camera (CV axes) → UAV body (module docstring)."""
+    return rot_zyx(gimbal_yaw, gimbal_pitch, 0.0) @ CAMERA_TO_GIMBAL
+
+
+def camera_to_world(uav_pos_ned: ArrayLike, uav_rot: ArrayLike, gimbal_yaw: ArrayLike,
+                    gimbal_pitch: ArrayLike, offset_body: ArrayLike = (0.0, 0.0, 0.0)) -> F64:
+    """``T̄ = T_U R_U T_C R_C`` (seed 001 (3.7)): camera → NED world, (..., 4, 4).
+
+    Parameters
+    ----------
+    uav_pos_ned : (..., 3)
+        UAV position ``T_U`` (m, NED).
+    uav_rot : (..., 3, 3)
+        UAV attitude ``R_U`` body (FRD) → NED (:func:`rot_zyx` or :func:`quat_to_rot`).
+    gimbal_yaw, gimbal_pitch : (...,)
+        Gimbal angles relative to the body (rad), ``R_C`` by :func:`gimbal_rotation`.
+    offset_body : (3,)
+        Camera centre in the body frame ``T_C`` (m, FRD).
+    """
+    TU = homogeneous(None, uav_pos_ned)
+    RU = homogeneous(uav_rot, None)
+    TC = homogeneous(None, offset_body)
+    RC = homogeneous(gimbal_rotation(gimbal_yaw, gimbal_pitch), None)
+    return TU @ RU @ TC @ RC
+
+
+def look_at_angles(uav_pos_ned: ArrayLike, uav_rot: ArrayLike, target_ned: ArrayLike) -> tuple[F64, F64]:
+    """Gimbal yaw and pitch that put ``target`` on the optical axis (seed 001 (4.44)–(4.46)).
+
+    ``η̄ = R_Uᵀ (p_t − p)/‖p_t − p‖`` in the body frame; ``ψ_g = atan2(η̄_y, η̄_x)`` and
+    ``θ_g = −atan2(η̄_z, √(η̄_x² + η̄_y²))`` (the printed (4.46) drops the norm, digest D9; the
+    sign because FRD's z is down, so a target below has θ_g < 0).
+    """
+    d = np.asarray(target_ned, dtype=np.float64) - np.asarray(uav_pos_ned, dtype=np.float64)
+    eta = np.einsum("...ji,...j->...i", np.asarray(uav_rot, dtype=np.float64), d)
+    yaw = np.arctan2(eta[..., 1], eta[..., 0])
+    pitch = -np.arctan2(eta[..., 2], np.hypot(eta[..., 0], eta[..., 1]))
+    return yaw, pitch
+
+
+# --- pinhole ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PinholeCamera:
+    """A pinhole camera: focal length and image size in pixels, principal point at the centre.
+
+    ``sigma_px`` of a bearing error ``σ_ψ`` on the optical axis is ``f tan σ_ψ``
+    (:meth:`sigma_px_from_bearing`; digest D1: an angular error gives a ~constant pixel error).
+    """
+
+    focal_px: float = 800.0
+    width_px: int = 1280
+    height_px: int = 960
+
+    @property
+    def principal(self) -> tuple[float, float]:
+        return 0.5 * self.width_px, 0.5 * self.height_px
+
+    def sigma_px_from_bearing(self, sigma_psi_rad: float) -> float:
+        return float(self.focal_px * np.tan(sigma_psi_rad))
+
+    def project_camera(self, p_cam: ArrayLike) -> F64:
+        """``W(P p)`` (seed 001 (3.3)) in pixels: (..., 3) camera points → (..., 2); NaN behind."""
+        p = np.asarray(p_cam, dtype=np.float64)
+        z = p[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            zi = np.where(z > 0, 1.0 / z, np.nan)
+        cu, cv = self.principal
+        return np.stack([cu + self.focal_px * p[..., 0] * zi, cv + self.focal_px * p[..., 1] * zi], axis=-1)
+
+    def in_image(self, uv: ArrayLike) -> NDArray[np.bool_]:
+        uv = np.asarray(uv, dtype=np.float64)
+        return ((uv[..., 0] >= 0) & (uv[..., 0] <= self.width_px) & (uv[..., 1] >= 0)
+                & (uv[..., 1] <= self.height_px))
+
+    def project(self, points_ned: ArrayLike, T_wc: ArrayLike) -> F64:
+        """World points (N, 3) seen by observers with camera→world poses ``T_wc`` (O, 4, 4) → (O, N, 2).
+
+        ``p^C = T̄⁻¹ p^W`` per observer (digest §5 step 3), vectorised over points × observers.
+        """
+        P = np.asarray(points_ned, dtype=np.float64)
+        T = np.asarray(T_wc, dtype=np.float64).reshape(-1, 4, 4)
+        R, c = T[:, :3, :3], T[:, :3, 3]
+        pc = np.einsum("oji,onj->oni", R, P[None, :, :] - c[:, None, :])
+        return self.project_camera(pc)
+
+    def ray(self, uv: ArrayLike, T_wc: ArrayLike) -> tuple[F64, F64]:
+        """Back-projection (digest §3): camera centre (…, 3) and unit line-of-sight (…, 3) in the world."""
+        uv = np.asarray(uv, dtype=np.float64)
+        T = np.asarray(T_wc, dtype=np.float64)
+        cu, cv = self.principal
+        d_c = np.stack([(uv[..., 0] - cu) / self.focal_px, (uv[..., 1] - cv) / self.focal_px,
+                        np.ones(uv.shape[:-1])], axis=-1)
+        d_w = np.einsum("...ij,...j->...i", T[..., :3, :3], d_c)
+        return T[..., :3, 3], d_w / np.linalg.norm(d_w, axis=-1, keepdims=True)
+
+
+def ground_intersection(origin: ArrayLike, direction: ArrayLike, ground_d: float = 0.0) -> F64:
+    """Where rays meet the plane ``D = ground_d`` (…, 3); NaN for rays not pointing down to it."""
+    o = np.asarray(origin, dtype=np.float64)
+    d = np.asarray(direction, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (ground_d - o[..., 2]) / d[..., 2]
+    s = np.where(np.isfinite(s) & (s > 0), s, np.nan)
+    return o + s[..., None] * d
+
+
+def ray_intersection(origins: ArrayLike, directions: ArrayLike) -> F64:
+    """Least-squares point nearest to ≥ 2 rays: ``(Σ(I − uuᵀ))⁻¹ Σ(I − uuᵀ) o`` (digest §3, not in the source)."""
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    u = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    P = np.eye(3)[None] - u[:, :, None] * u[:, None, :]
+    return np.linalg.solve(P.sum(axis=0), np.einsum("kij,kj->i", P, o))
+
+
+# --- packed measurement rows ----------------------------------------------------------------------
+def pack_detections(uv: ArrayLike, sigma_px: ArrayLike, T_wc: ArrayLike) -> F64:
+    """One PF measurement row from O observers' detections (module docstring).
+
+    Parameters
+    ----------
+    uv : (O, 2)
+        Detections (pixels); a NaN row = that observer saw nothing this step.
+    sigma_px : (O,) or float
+        Pixel noise standard deviation per observer.
+    T_wc : (O, 4, 4)
+        Camera→world poses of the step (:func:`camera_to_world`).
+
+    Returns
+    -------
+    (O * OBS_FIELDS,) float; all-NaN when no observer detected the target (predict-only).
+    """
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    O = len(uv)
+    T = np.asarray(T_wc, dtype=np.float64).reshape(O, 4, 4)
+    sig = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), (O,))
+    valid = np.all(np.isfinite(uv), axis=1) & np.isfinite(sig) & (sig > 0) & np.all(np.isfinite(T), axis=(1, 2))
+    if not np.any(valid):
+        return np.full(O * OBS_FIELDS, np.nan)
+    row = np.zeros((O, OBS_FIELDS))
+    row[:, 0] = valid
+    row[valid, 1:3] = uv[valid]
+    row[:, 3] = np.where(valid, sig, 1.0)
+    row[valid, 4:7] = T[valid, :3, 3]
+    row[valid, 7:16] = T[valid, :3, :3].reshape(-1, 9)
+    return row.reshape(-1)
+
+
+#: particles from which the weighting runs on numba's thread pool (below it the thread start-up
+#: and, on a loaded machine, the wait for idle cores cost more than the work)
+PARALLEL_FROM = 50_000
+
+
+@njit(cache=True)
+def _camera_loglik_serial(x, ip, ie, idd, ground_d, obs, f, cu, cv, out):
+    # observers outer, particles inner: one streaming pass per observer, so the cost is
+    # proportional to the observer count (the thesis's weight update, Fig. 6.19)
+    n = x.shape[0]
+    O = obs.shape[0]
+    const = 0.0
+    for o in range(O):
+        if obs[o, 0] > 0.5:
+            const += -2.0 * np.log(obs[o, 3]) - np.log(2.0 * np.pi)
+    for i in range(n):
+        out[i] = const
+    for o in range(O):
+        if obs[o, 0] <= 0.5:
+            continue
+        cn, ce, cd = obs[o, 4], obs[o, 5], obs[o, 6]
+        # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
+        r00, r10, r20 = obs[o, 7], obs[o, 10], obs[o, 13]
+        r01, r11, r21 = obs[o, 8], obs[o, 11], obs[o, 14]
+        r02, r12, r22 = obs[o, 9], obs[o, 12], obs[o, 15]
+        u0, v0, isg = obs[o, 1], obs[o, 2], 1.0 / obs[o, 3]
+        for i in range(n):
+            dn = x[i, ip] - cn
+            de = x[i, ie] - ce
+            dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+            zc = r02 * dn + r12 * de + r22 * dd
+            if zc <= 0.0:
+                out[i] = -np.inf
+            else:
+                iz = f / zc
+                ru = (cu + (r00 * dn + r10 * de + r20 * dd) * iz - u0) * isg
+                rv = (cv + (r01 * dn + r11 * de + r21 * dd) * iz - v0) * isg
+                out[i] -= 0.5 * (ru * ru + rv * rv)
+
+
+@njit(cache=True, parallel=True)
+def _camera_loglik_parallel(x, ip, ie, idd, ground_d, obs, f, cu, cv, out):
+    # observers outer, particles inner: one streaming pass per observer, so the cost is
+    # proportional to the observer count (the thesis's weight update, Fig. 6.19)
+    n = x.shape[0]
+    O = obs.shape[0]
+    const = 0.0
+    for o in range(O):
+        if obs[o, 0] > 0.5:
+            const += -2.0 * np.log(obs[o, 3]) - np.log(2.0 * np.pi)
+    for i in prange(n):
+        out[i] = const
+    for o in range(O):
+        if obs[o, 0] <= 0.5:
+            continue
+        cn, ce, cd = obs[o, 4], obs[o, 5], obs[o, 6]
+        # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
+        r00, r10, r20 = obs[o, 7], obs[o, 10], obs[o, 13]
+        r01, r11, r21 = obs[o, 8], obs[o, 11], obs[o, 14]
+        r02, r12, r22 = obs[o, 9], obs[o, 12], obs[o, 15]
+        u0, v0, isg = obs[o, 1], obs[o, 2], 1.0 / obs[o, 3]
+        for i in prange(n):
+            dn = x[i, ip] - cn
+            de = x[i, ie] - ce
+            dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+            zc = r02 * dn + r12 * de + r22 * dd
+            if zc <= 0.0:
+                out[i] = -np.inf
+            else:
+                iz = f / zc
+                ru = (cu + (r00 * dn + r10 * de + r20 * dd) * iz - u0) * isg
+                rv = (cv + (r01 * dn + r11 * de + r21 * dd) * iz - v0) * isg
+                out[i] -= 0.5 * (ru * ru + rv * rv)
+
+
+def camera_loglik(x: ArrayLike, row: ArrayLike, camera: PinholeCamera, *, pos_index: tuple[int, int] = (0, 1),
+                  d_index: int | None = None, ground_d: float = 0.0, parallel: bool | None = None) -> F64:
+    """``Σ_o log N(h_o(x); z_o, σ_o² I₂)`` per particle (seed 001 (3.42)); −∞ behind a camera.
+
+    ``parallel`` None runs on numba's thread pool from :data:`PARALLEL_FROM` particles on;
+    True/False forces it (the result is the same).
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    obs = np.ascontiguousarray(np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS))
+    out = np.empty(len(x))
+    cu, cv = camera.principal
+    par = len(x) >= PARALLEL_FROM if parallel is None else bool(parallel)
+    kernel = _camera_loglik_parallel if par else _camera_loglik_serial
+    kernel(x, int(pos_index[0]), int(pos_index[1]), -1 if d_index is None else int(d_index), float(ground_d),
+           obs, float(camera.focal_px), float(cu), float(cv), out)
+    return out
+
+
+def camera_loglik_per_observer(x: ArrayLike, row: ArrayLike, camera: PinholeCamera, *,
+                               pos_index: tuple[int, int] = (0, 1), d_index: int | None = None,
+                               ground_d: float = 0.0) -> F64:
+    """The numpy oracle: (O, N) per-observer log-likelihoods (NaN for an observer without a detection)."""
+    x = np.asarray(x, dtype=np.float64)
+    obs = np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS)
+    d = x[:, d_index] if d_index is not None else np.full(len(x), float(ground_d))
+    P = np.stack([x[:, pos_index[0]], x[:, pos_index[1]], d], axis=1)
+    out = np.full((len(obs), len(x)), np.nan)
+    for o, ob in enumerate(obs):
+        if ob[0] <= 0.5:
+            continue
+        T = homogeneous(ob[7:16].reshape(3, 3), ob[4:7])
+        uv = camera.project(P, T[None])[0]
+        r = (uv - ob[1:3]) / ob[3]
+        ll = -0.5 * np.sum(r * r, axis=1) - 2 * np.log(ob[3]) - np.log(2 * np.pi)
+        out[o] = np.where(np.isfinite(ll), ll, -np.inf)
+    return out
+
+
+@dataclass(frozen=True)
+class CameraLikelihood:
+    """The PF core's ``Likelihood`` for packed camera rows (module docstring), product over observers.
+
+    Attributes
+    ----------
+    camera : PinholeCamera
+    pos_index : (int, int)
+        The particle state's N and E components.
+    d_index : int or None
+        The state's D component; None puts the target on the plane ``D = ground_d`` (digest D7).
+    ground_d : float
+    reinit_sigma_m : float
+        On re-initialisation (every weight zero) the particles' N/E are drawn around the mean
+        ground intersection of the step's rays with this spread; velocity etc. are kept.
+    """
+
+    camera: PinholeCamera
+    pos_index: tuple[int, int] = (0, 1)
+    d_index: int | None = None
+    ground_d: float = 0.0
+    reinit_sigma_m: float = 10.0
+
+    def __call__(self, x: F64, z: F64) -> F64:
+        return camera_loglik(x, z, self.camera, pos_index=self.pos_index, d_index=self.d_index,
+                             ground_d=self.ground_d)
+
+    def ground_fix(self, z: ArrayLike) -> F64:
+        """Mean ground-plane intersection of the step's valid rays (N, E, D); NaN if none points down."""
+        obs = np.asarray(z, dtype=np.float64).reshape(-1, OBS_FIELDS)
+        ok = obs[:, 0] > 0.5
+        if not np.any(ok):
+            return np.full(3, np.nan)
+        T = homogeneous(obs[ok, 7:16].reshape(-1, 3, 3), obs[ok, 4:7])
+        o, d = self.camera.ray(obs[ok, 1:3], T)
+        g = ground_intersection(o, d, self.ground_d)
+        g = g[np.all(np.isfinite(g), axis=1)]
+        return g.mean(axis=0) if len(g) else np.full(3, np.nan)
+
+    def reinit(self, x: F64, z: F64, rng: np.random.Generator) -> F64:
+        out = np.array(x, dtype=np.float64, copy=True)
+        g = self.ground_fix(z)
+        if not np.all(np.isfinite(g)):
+            return out
+        out[:, list(self.pos_index)] = g[None, :2] + self.reinit_sigma_m * rng.standard_normal((len(out), 2))
+        if self.d_index is not None:
+            out[:, self.d_index] = self.ground_d
+        return out
+
+
+def observers_from_streams(camera_det, local_position, attitude, *, offset_body=(0.0, 0.0, 0.0)) -> F64:
+    """Camera→world poses (K, 4, 4) of ``camera_det`` rows from the observers' pose streams.
+
+    Each detection's observer (``instance``) takes its position from ``local_position`` and its
+    attitude from ``attitude`` of the same instance, linearly interpolated in time (quaternions
+    normalised after interpolation); the gimbal angles are the row's own. An instance without
+    a pose fails with one line naming it.
+    """
+    det = camera_det
+    out = np.full((len(det), 4, 4), np.nan)
+    inst = np.asarray(det["instance"]).astype(int)
+    for k in np.unique(inst):
+        lp = local_position[np.asarray(local_position["instance"]).astype(int) == k]
+        at = attitude[np.asarray(attitude["instance"]).astype(int) == k]
+        missing = [name for name, d in (("local_position", lp), ("attitude", at)) if len(d) == 0]
+        if missing:
+            raise ValueError(f"camera_det: observer instance {k} has no pose ({' and '.join(missing)} "
+                             f"has no rows for instance {k})")
+        sel = inst == k
+        t = np.asarray(det["t_ns"])[sel].astype(np.float64)
+        lt = np.asarray(lp["t_ns"]).astype(np.float64)
+        at_t = np.asarray(at["t_ns"]).astype(np.float64)
+        pos = np.stack([np.interp(t, lt, np.asarray(lp[f"pos_{a}_m"], dtype=np.float64)) for a in "ned"], axis=1)
+        q = np.stack([np.interp(t, at_t, np.asarray(at[f"q_{c}"], dtype=np.float64)) for c in "wxyz"], axis=1)
+        out[sel] = camera_to_world(pos, quat_to_rot(q), np.asarray(det["gimbal_yaw_rad"])[sel],
+                                   np.asarray(det["gimbal_pitch_rad"])[sel], offset_body)
+    return out

@@ -1,0 +1,169 @@
+"""The seed-001 section of ``study_pf``: multi-UAV camera geo-location (digest 001 §10–§13).
+
+:func:`geolocation_study` runs the thesis's scenarios with :mod:`pipeline.simulate.geolocation`
+and the config values fixed in ``estimate.pf.geolocation`` (written to the ``geo_config`` table):
+
+- §6.1 *base*: CV target, 3 stationary observers, N = 50;
+- §6.2 *maneuvering*: the Π_d five-mode target, 3 stationary observers, Π_p filter, N = 50;
+- §6.3 *mobile*: as §6.2 with 3 orbiting observers (30/40/50 m);
+- §6.4 particle sweep and §6.5 observer sweep, both on the §6.3 setup.
+
+Every acceptance check of issue 17 is a RESULT row with its number and a 0/1 ``…_met`` row;
+nothing is tuned to meet a target. ε is the mean 3-D error (m) pooled over time (after the
+first second, digest D11) and runs; η% the mean percent error ``100 ε_k / mean_u ‖p − p^U_u‖``.
+
+The lead wires this into ``pipeline/studies/pf.py`` (its "Seed 001" section):
+``tables, rows = geolocation_study(settings, seed=seed, size=size, progress=progress)``, then
+``geolocation_panels(tables)`` gives the page panels as **plotly figure dicts** (title, dict).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..simulate.geolocation import GeolocationConfig, per_step_frame, run_scenario, summarise
+
+#: per-size run settings (durations in s); ``small`` is what the RESULT lines in the report use
+GEO_SIZES: dict[str, dict[str, Any]] = {
+    "tiny": {"runs": 1, "sweep_runs": 1, "base_s": 3.0, "maneuvering_s": 3.0, "mobile_s": 3.0, "sweep_s": 2.0,
+             "particles": [10, 80], "observers": [1, 2]},
+    "small": {"runs": 10, "sweep_runs": 6, "base_s": 120.0, "maneuvering_s": 180.0, "mobile_s": 180.0,
+              "sweep_s": 90.0, "particles": [10, 20, 40, 80, 160], "observers": [1, 2, 4, 8, 16]},
+    "thesis": {"runs": 50, "sweep_runs": 10, "base_s": 120.0, "maneuvering_s": 180.0, "mobile_s": 180.0,
+               "sweep_s": 180.0, "particles": [10, 20, 40, 80, 160], "observers": [1, 2, 4, 8, 16]},
+}
+#: the thesis's percent-error anchors (digest §12)
+THESIS_ETA = {"base": "6-9 %", "maneuvering": "5-8 %", "mobile": "~7 % at ~70 m"}
+ETA_LIMIT_PCT = 15.0
+
+Row = tuple[str, Any, str]
+
+
+def _cfg(settings: Mapping) -> GeolocationConfig:
+    return GeolocationConfig.from_config(settings.get("geolocation"))
+
+
+def geolocation_study(settings: Mapping, *, seed: int, size: str,
+                      progress: Callable[[str], None] | None = None) -> tuple[dict[str, pd.DataFrame], list[Row]]:
+    """Run the seed-001 scenarios and sweeps; return ``(tables, RESULT rows)``.
+
+    Parameters
+    ----------
+    settings : mapping
+        ``geolocation``: the ``estimate.pf.geolocation`` config section (defaults when absent);
+        optional ``geo_sizes``: ``{size: {...}}`` overriding :data:`GEO_SIZES`.
+    seed : int
+        Run ``r`` of a scenario draws from ``default_rng([seed, crc32(scenario:tag), r])``.
+    size : str
+        ``tiny``, ``small`` or ``thesis``.
+    progress : callable, optional
+        Stage lines (e.g. :class:`~pipeline.studies.base.Progress`).
+
+    Returns
+    -------
+    tables : dict
+        ``geo_summary`` (one row per scenario / sweep point), ``geo_series`` (per time index,
+        averaged over runs, per scenario / sweep point) and ``geo_config`` (the chosen values,
+        ``key``/``value`` JSON).
+    rows : list of (name, value, definition)
+    """
+    say = progress or (lambda msg: None)
+    if size not in GEO_SIZES:
+        raise ValueError(f"geolocation study: unknown size {size!r}; expected one of {', '.join(GEO_SIZES)}")
+    run = {**GEO_SIZES[size], **dict((settings.get("geo_sizes") or {}).get(size) or {})}
+    cfg = _cfg(settings)
+    summary, series = [], []
+
+    def one(name: str, scenario: str, *, n_runs: int, duration: float, n_obs: int = 3,
+            n_particles: int | None = None, tag: str = "") -> dict[str, float]:
+        say(f"seed 001: {name} ({n_runs} runs x {duration:g} s, {n_obs} observers, "
+            f"N = {n_particles or cfg.n_particles})")
+        runs = run_scenario(scenario, cfg, n_runs=n_runs, seed=seed, n_observers=n_obs,
+                            n_particles=n_particles, duration_s=duration, tag=tag)
+        s = summarise(runs)
+        say(f"seed 001: {name}: eps {s['eps_m']:.2f} m, eta {s['eta_pct']:.2f} %, mean distance "
+            f"{s['mean_dist_m']:.1f} m, {s['step_us']:.0f} us/step")
+        summary.append({"case": name, "scenario": scenario, "n_observers": n_obs,
+                        "n_particles": int(n_particles or cfg.n_particles), "duration_s": duration, **s})
+        series.append(per_step_frame(runs, case=name))
+        return s
+
+    base = one("base", "base", n_runs=run["runs"], duration=run["base_s"])
+    man = one("maneuvering", "maneuvering", n_runs=run["runs"], duration=run["maneuvering_s"])
+    mob = one("mobile", "mobile", n_runs=run["runs"], duration=run["mobile_s"])
+    eps_n = {n: one(f"particles_{n}", "mobile", n_runs=run["sweep_runs"], duration=run["sweep_s"],
+                    n_particles=int(n), tag=f"N{n}")["eps_m"] for n in run["particles"]}
+    eps_o = {o: one(f"observers_{o}", "mobile", n_runs=run["sweep_runs"], duration=run["sweep_s"],
+                    n_obs=int(o), tag=f"O{o}")["eps_m"] for o in run["observers"]}
+
+    rows: list[Row] = []
+    bound = 100.0 * float(np.sin(cfg.sigma_psi_rad))
+    rows.append(("geo_sigma_px", round(cfg.sigma_px, 2), f"pixel noise f*tan(sigma_psi), sigma_psi = {cfg.sigma_psi_rad} rad, f = {cfg.focal_px:g} px"))
+    rows.append(("geo_bound_pct", round(bound, 1), "single-bearing relative-error bound 100*sin(sigma_psi) (digest 001 §11)"))
+    for name, s in (("base", base), ("maneuvering", man), ("mobile", mob)):
+        rows.append((f"geo_eta_pct_{name}", round(s["eta_pct"], 2),
+                     f"mean percent error eta% of the §6.{('base', 'maneuvering', 'mobile').index(name) + 1} setup "
+                     f"({s['n_runs']} runs, size {size}); thesis {THESIS_ETA[name]}"))
+        rows.append((f"geo_eps_m_{name}", round(s["eps_m"], 2), f"mean 3-D error (m), {name}; median {s['median_eps_m']:.2f} m"))
+    for name, s in (("base", base), ("maneuvering", man)):
+        rows.append((f"geo_eta_{name}_met", int(s["eta_pct"] <= ETA_LIMIT_PCT), f"eta% <= {ETA_LIMIT_PCT:g} % in the {name} setup"))
+    for n, e in eps_n.items():
+        rows.append((f"geo_eps_m_particles_{n}", round(e, 2), f"mean 3-D error (m) with N = {n} particles (§6.3 setup, §6.4)"))
+    for o, e in eps_o.items():
+        rows.append((f"geo_eps_m_observers_{o}", round(e, 2), f"mean 3-D error (m) with {o} observers (§6.3 setup, §6.5)"))
+    if 1 in eps_o and 2 in eps_o:
+        rows.append(("geo_obs_1_to_2_met", int(eps_o[2] <= eps_o[1] / 2), "eps(2) <= eps(1)/2"))
+    if 2 in eps_o and 4 in eps_o:
+        rows.append(("geo_obs_2_to_4_met", int(eps_o[4] <= eps_o[2]), "eps(4) <= eps(2)"))
+    if all(o in eps_o for o in (4, 8, 16)):
+        m = min(eps_o[4], eps_o[8])
+        ok = all(abs(eps_o[o] - m) <= 0.2 * m for o in (8, 16))
+        rows.append(("geo_obs_plateau_met", int(ok), "eps(8) and eps(16) within 20 % of min(eps(4), eps(8))"))
+    if 10 in eps_n and 80 in eps_n:
+        rows.append(("geo_particles_10_vs_80_met", int(eps_n[10] >= 1.5 * eps_n[80]), "eps(N=10) >= 1.5 eps(N=80)"))
+    if 160 in eps_n and 80 in eps_n:
+        rows.append(("geo_particles_160_vs_80_met", int(eps_n[160] >= 0.8 * eps_n[80]), "eps(N=160) >= 0.8 eps(N=80)"))
+    rows.append(("geo_step_us_maneuvering", round(man["step_us"], 1), "mean filter step (us) at N = 50, 3 observers, 5 modes (pure Python/numpy core + numba weighting)"))
+
+    meta = {**cfg.meta(), "size": size, "seed": int(seed), "runs": run}
+    tables = {"geo_summary": pd.DataFrame(summary),
+              "geo_series": pd.concat(series, ignore_index=True),
+              "geo_config": pd.DataFrame({"key": list(meta), "value": [json.dumps(v) for v in meta.values()]})}
+    return tables, rows
+
+
+def geolocation_panels(tables: Mapping[str, pd.DataFrame]) -> list[tuple[str, dict]]:
+    """The digest 001 §13 item 5 page panels as ``(title, plotly figure dict)``.
+
+    Error vs time, percent error vs time (§6.1–§6.3), error vs mean observer distance, the
+    particle sweep and the observer sweep.
+    """
+    import plotly.graph_objects as go
+
+    ser, summ = tables["geo_series"], tables["geo_summary"]
+    panels: list[tuple[str, dict]] = []
+    main = [c for c in ("base", "maneuvering", "mobile") if c in set(ser["case"])]
+    for col, title, ylab in (("eps_m", "Seed 001: mean error vs time", "error (m)"),
+                             ("eta_pct", "Seed 001: percent error vs time", "percent error (%)")):
+        fig = go.Figure([go.Scatter(x=ser.loc[ser.case == c, "t_s"], y=ser.loc[ser.case == c, col], name=c, mode="lines")
+                         for c in main])
+        fig.update_layout(title=title, xaxis_title="time (s)", yaxis_title=ylab)
+        panels.append((title, fig.to_dict()))
+    fig = go.Figure([go.Scatter(x=ser.loc[ser.case == c, "mean_dist_m"], y=ser.loc[ser.case == c, "eps_m"], name=c,
+                                mode="markers", marker={"size": 3}) for c in main])
+    fig.update_layout(title="Seed 001: error vs mean observer distance", xaxis_title="mean UAV-target distance (m)",
+                      yaxis_title="error (m)")
+    panels.append(("Seed 001: error vs distance", fig.to_dict()))
+    for prefix, xcol, title, xlab in (("particles_", "n_particles", "Seed 001: error vs particle count", "particles N"),
+                                      ("observers_", "n_observers", "Seed 001: error vs observer count", "observers")):
+        s = summ[summ.case.str.startswith(prefix)]
+        fig = go.Figure([go.Scatter(x=s[xcol], y=s["eps_m"], mode="lines+markers", name="mean error")])
+        fig.update_layout(title=title, xaxis_title=xlab, yaxis_title="mean error (m)",
+                          xaxis_type="log" if len(s) > 2 else None)
+        panels.append((title, fig.to_dict()))
+    return panels

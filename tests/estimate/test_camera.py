@@ -1,0 +1,191 @@
+"""Seed-001 camera: pinhole closed forms, the 4x4 chain, frames and the multi-observer likelihood."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.estimate.camera import (CAMERA_TO_GIMBAL, OBS_FIELDS, CameraLikelihood, PinholeCamera,
+                                      camera_loglik, camera_loglik_per_observer, camera_to_world, enu_to_ned,
+                                      ground_intersection, homogeneous, invert_pose, look_at_angles,
+                                      ned_to_enu, observers_from_streams, pack_detections, quat_to_rot,
+                                      ray_intersection, rot_zyx, yaw_enu_to_ned)
+from pipeline.estimate.pf import ParticleFilter
+from pipeline.estimate.models import PfConstantVelocity
+
+CAM = PinholeCamera(800.0, 1280, 960)
+
+
+def _rx(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _ry(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rz(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def test_enu_converts_to_ned_as_n_equals_y_e_equals_x_d_equals_minus_z():
+    p = np.array([[1.15, 0.96, 40.0], [-30.0, 10.0, 0.0]])
+    assert np.allclose(enu_to_ned(p), [[0.96, 1.15, -40.0], [10.0, -30.0, 0.0]])
+    assert np.allclose(ned_to_enu(enu_to_ned(p)), p)
+    # "40° north of east" in ENU is a NED bearing atan2(E, N) of 50°
+    assert np.isclose(np.degrees(yaw_enu_to_ned(np.radians(40.0))), 50.0)
+
+
+def test_zyx_rotation_equals_the_hand_built_product():
+    y, p, r = 0.3, -0.4, 0.2
+    assert np.allclose(rot_zyx(y, p, r), _rz(y) @ _ry(p) @ _rx(r))
+    q = np.array([np.cos(0.35), 0, 0, np.sin(0.35)])          # 0.7 rad about D
+    assert np.allclose(quat_to_rot(q), _rz(0.7))
+
+
+def test_the_chain_composes_translations_and_rotations_in_the_printed_order():
+    pos, RU = np.array([5.0, -3.0, -40.0]), _rz(0.5) @ _ry(0.1) @ _rx(-0.05)
+    off, gy, gp = np.array([0.2, 0.0, 0.1]), 0.7, -0.6
+    T = camera_to_world(pos, RU, gy, gp, off)
+    RC = _rz(gy) @ _ry(gp) @ CAMERA_TO_GIMBAL
+    hand = homogeneous(None, pos) @ homogeneous(RU) @ homogeneous(None, off) @ homogeneous(RC)
+    assert np.allclose(T, hand)
+    assert np.allclose(T[:3, :3], RU @ RC) and np.allclose(T[:3, 3], pos + RU @ off)
+    assert np.allclose(invert_pose(T) @ T, np.eye(4)) and np.allclose(invert_pose(T), np.linalg.inv(T))
+
+
+def test_a_point_on_the_optical_axis_projects_to_the_principal_point():
+    pos, RU = np.array([0.0, 0.0, -40.0]), rot_zyx(0.3, 0.0, 0.0)
+    target = np.array([60.0, 25.0, 0.0])
+    gy, gp = look_at_angles(pos, RU, target)
+    T = camera_to_world(pos, RU, gy, gp)
+    assert np.allclose(CAM.project(target[None], T[None])[0, 0], CAM.principal)
+    # and any point on the axis, at any depth
+    axis = pos + np.outer([1.0, 7.0, 30.0], T[:3, 2])
+    assert np.allclose(CAM.project(axis, T[None])[0], np.broadcast_to(CAM.principal, (3, 2)))
+
+
+def test_a_camera_looking_down_maps_north_to_up_in_the_image_and_east_to_the_right():
+    T = camera_to_world([0.0, 0.0, -10.0], np.eye(3), 0.0, -np.pi / 2)
+    uv = CAM.project(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -20.0]]), T[None])[0]
+    cu, cv = CAM.principal
+    assert np.allclose(uv[0], [cu, cv - 80.0])       # f * 1 m / 10 m
+    assert np.allclose(uv[1], [cu + 80.0, cv])
+    assert np.all(np.isnan(uv[2]))                    # behind the camera
+
+
+def test_projection_is_vectorised_over_particles_and_observers():
+    rng = np.random.default_rng(0)
+    P = rng.normal(0, 20, (7, 3)) * [1, 1, 0]
+    Ts = np.stack([camera_to_world([x, y, -40.0], rot_zyx(h, 0, 0), *look_at_angles([x, y, -40.0], rot_zyx(h, 0, 0), [0, 0, 0.0]))
+                   for x, y, h in ((50, 0, 0.1), (-30, 60, 1.0))])
+    uv = CAM.project(P, Ts)
+    assert uv.shape == (2, 7, 2)
+    for o in range(2):
+        for i in range(7):
+            pc = np.linalg.inv(Ts[o]) @ np.r_[P[i], 1.0]
+            assert np.allclose(uv[o, i], [640 + 800 * pc[0] / pc[2], 480 + 800 * pc[1] / pc[2]])
+
+
+def test_rays_back_project_through_the_detection_and_meet_the_ground_at_the_target():
+    target = np.array([30.0, -20.0, 0.0])
+    origins, dirs = [], []
+    for pos in ([0.0, 0.0, -40.0], [60.0, 10.0, -50.0], [10.0, -70.0, -30.0]):
+        RU = rot_zyx(0.2, 0, 0)
+        T = camera_to_world(pos, RU, *look_at_angles(pos, RU, target + [3.0, 2.0, 0.0]))
+        uv = CAM.project(target[None], T[None])[0, 0]
+        o, d = CAM.ray(uv, T)
+        assert np.allclose(ground_intersection(o, d), target)
+        origins.append(o)
+        dirs.append(d)
+    assert np.allclose(ray_intersection(origins, dirs), target)
+
+
+def _scene(rng, n_obs=3, target=(20.0, 10.0, 0.0), sigma=5.0):
+    target = np.asarray(target)
+    Ts = []
+    for k in range(n_obs):
+        pos = np.array([80 * np.cos(2 * k), 80 * np.sin(2 * k), -40.0 - 10 * k])
+        RU = rot_zyx(k, 0, 0)
+        Ts.append(camera_to_world(pos, RU, *look_at_angles(pos, RU, target)))
+    Ts = np.stack(Ts)
+    uv = CAM.project(target[None], Ts)[:, 0] + sigma * rng.standard_normal((n_obs, 2))
+    return Ts, uv
+
+
+def test_the_likelihood_is_the_sum_of_the_per_observer_log_likelihoods():
+    rng = np.random.default_rng(1)
+    Ts, uv = _scene(rng, 4)
+    sig = np.array([5.0, 6.0, 7.0, 8.0])
+    row = pack_detections(uv, sig, Ts)
+    x = np.zeros((200, 8))
+    x[:, :2] = [20.0, 10.0] + rng.normal(0, 5, (200, 2))
+    x[:, 7] = rng.normal(0, 1, 200)
+    total = camera_loglik(x, row, CAM, d_index=7)
+    per = camera_loglik_per_observer(x, row, CAM, d_index=7)
+    assert np.allclose(total, per.sum(axis=0))
+    # each term is the closed-form bivariate normal log-density of the pixel residual
+    uv0 = CAM.project(np.column_stack([x[:, 0], x[:, 1], x[:, 7]]), Ts)
+    r = (uv0 - uv[:, None, :]) / sig[:, None, None]
+    assert np.allclose(per, -0.5 * (r ** 2).sum(-1) - np.log(2 * np.pi * sig[:, None] ** 2))
+    # an observer without a detection drops out of the product
+    uv[2] = np.nan
+    row2 = pack_detections(uv, sig, Ts)
+    assert np.allclose(camera_loglik(x, row2, CAM, d_index=7), np.delete(per, 2, axis=0).sum(axis=0))
+
+
+def test_the_parallel_weighting_equals_the_serial_one():
+    rng = np.random.default_rng(2)
+    Ts, uv = _scene(rng, 16)
+    row = pack_detections(uv, 5.0, Ts)
+    x = np.zeros((1000, 7))
+    x[:, :2] = rng.normal(0, 10, (1000, 2))
+    a = camera_loglik(x, row, CAM, parallel=False)
+    b = camera_loglik(x, row, CAM, parallel=True)
+    assert np.allclose(a, b) and np.allclose(a, camera_loglik_per_observer(x, row, CAM).sum(axis=0))
+
+
+def test_no_detection_at_all_is_a_predict_only_step():
+    rng = np.random.default_rng(3)
+    Ts, uv = _scene(rng, 3)
+    row = pack_detections(np.full((3, 2), np.nan), 5.0, Ts)
+    assert row.shape == (3 * OBS_FIELDS,) and np.all(np.isnan(row))
+    lik = CameraLikelihood(CAM)
+    pf = ParticleFilter([PfConstantVelocity(0.3)], None, lik, n_particles=100, rng=4)
+    pf.init(mean=[20, 10, 1, 0, 0, 0, 0], cov=np.diag([25, 25, 1, 1, 0, 0, 0]))
+    w0 = pf.weights.copy()
+    s = pf.step(0.025, row)
+    assert s.predict_only and not s.resampled and np.allclose(pf.weights, w0)
+    s = pf.step(0.025, pack_detections(uv, 5.0, Ts))
+    assert not s.predict_only and np.isfinite(s.loglik)
+
+
+def test_the_filter_reinitialises_at_the_rays_ground_fix_when_every_weight_is_zero():
+    rng = np.random.default_rng(5)
+    Ts, uv = _scene(rng, 3, sigma=0.0)
+    lik = CameraLikelihood(CAM, reinit_sigma_m=1.0)
+    assert np.allclose(lik.ground_fix(pack_detections(uv, 5.0, Ts)), [20.0, 10.0, 0.0])
+    # particles on a plane far above every camera are behind them all and weigh zero
+    lik_above = CameraLikelihood(CAM, ground_d=-500.0, reinit_sigma_m=1.0)
+    pf = ParticleFilter([PfConstantVelocity(0.3)], None, lik_above, n_particles=200, rng=6, reinit=lik.reinit)
+    pf.init(mean=[20, 10, 0, 0, 0, 0, 0], cov=np.diag([1, 1, 0, 0, 0, 0, 0]))
+    s = pf.step(0.0, pack_detections(uv, 5.0, Ts))
+    assert s.reinit and pf.n_reinit == 1
+    assert np.allclose(pf.x[:, :2].mean(axis=0), [20.0, 10.0], atol=0.3)
+
+
+def test_a_camera_det_observer_without_a_pose_fails_naming_it():
+    det = pd.DataFrame({"t_ns": [0, 0], "instance": [1, 2], "u_px": [640.0, 600.0], "v_px": [480.0, 500.0],
+                        "sigma_px": [5.0, 5.0], "gimbal_yaw_rad": [0.0, 0.1], "gimbal_pitch_rad": [-0.5, -0.6]})
+    lp = pd.DataFrame({"t_ns": [0, 10**9], "instance": [1, 1], "pos_n_m": [0.0, 1.0], "pos_e_m": [0.0, 0.0],
+                       "pos_d_m": [-40.0, -40.0]})
+    att = pd.DataFrame({"t_ns": [0, 10**9, 0], "instance": [1, 1, 2], "q_w": [1.0, 1.0, 1.0], "q_x": [0.0] * 3,
+                        "q_y": [0.0] * 3, "q_z": [0.0] * 3})
+    with pytest.raises(ValueError, match="observer instance 2 has no pose.*local_position"):
+        observers_from_streams(det, lp, att)
+    T = observers_from_streams(det.iloc[:1], lp, att)
+    assert np.allclose(T[0], camera_to_world([0, 0, -40.0], np.eye(3), 0.0, -0.5))

@@ -1,0 +1,123 @@
+"""Seed-001 target/observer simulator: Π_d/Π_p, forced switches, observers, seeded determinism."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.estimate.models import DRIVING_MODES, PfAlongTrackAcceleration, PfStop, driving_mode_models
+from pipeline.simulate.geolocation import (ACCEL, COAST, DECEL, PI_D, PI_D_PRINTED, PI_P, STOP, TURN,
+                                           GeolocationConfig, TargetState, detect, enter_mode, make_filter,
+                                           mobile_observers, observer_poses, observers_step, run_once,
+                                           run_scenario, stationary_observers, summarise, target_step)
+
+CFG = GeolocationConfig()
+
+
+def test_pi_d_rows_are_renormalised_and_pi_p_is_the_doubled_off_diagonal_matrix():
+    assert np.allclose(PI_D_PRINTED.sum(axis=1), [1.0, 0.999, 0.999, 1.0, 0.999])
+    assert np.allclose(PI_D.sum(axis=1), 1.0)
+    assert np.allclose(PI_D, PI_D_PRINTED / PI_D_PRINTED.sum(axis=1, keepdims=True))
+    off = ~np.eye(5, dtype=bool)
+    assert np.allclose(PI_P[off], 2 * PI_D_PRINTED[off]) and np.allclose(PI_P.sum(axis=1), 1.0)
+    assert DRIVING_MODES == ("STOP", "ACCEL", "DECEL", "COAST", "TURN")
+    # STOP is reached only from DECEL and left only via ACCEL (digest §7, Fig. 3.4)
+    assert np.flatnonzero(PI_D[:, STOP]).tolist() == [STOP, DECEL]
+    assert np.flatnonzero(PI_D[STOP]).tolist() == [STOP, ACCEL]
+
+
+def test_the_sigma_px_comes_from_the_bearing_error_and_the_metadata_holds_every_chosen_value():
+    assert np.isclose(CFG.sigma_px, 800.0 * np.tan(0.3))
+    meta = CFG.meta()
+    assert np.isclose(meta["bound_percent"], 29.55, atol=0.01)
+    for key in ("focal_px", "image_px", "sigma_px", "noise", "accel_mps2", "omega_radps", "observers", "init",
+                "threshold", "roughening"):
+        assert key in meta
+    assert np.isclose(meta["threshold"], 1 / 3) and meta["observers"]["accel_max_mps2"] == 3.0
+    with pytest.raises(ValueError, match="geolocation.noise: unknown key"):
+        GeolocationConfig.from_config({"noise": {"sigma": 1.0}})
+
+
+def test_decel_to_rest_is_forced_to_stop_and_accel_at_the_cap_to_coast():
+    rng = np.random.default_rng(0)
+    s = TargetState(np.zeros(3), 0.3, 1.0, DECEL, accel=2.0)
+    for _ in range(40):
+        target_step(s, 0.025, None, CFG, rng)
+    assert s.mode == STOP and s.speed == 0.0
+    s = TargetState(np.zeros(3), 0.0, CFG.speed_max_mps - 0.01, ACCEL, accel=2.0)
+    target_step(s, 0.025, None, CFG, rng)
+    assert s.mode == COAST and np.isclose(s.speed, CFG.speed_max_mps)
+
+
+def test_a_turn_with_positive_rate_turns_right_in_ned():
+    rng = np.random.default_rng(1)
+    s = TargetState(np.zeros(3), 0.0, 10.0, COAST)
+    enter_mode(s, TURN, CFG, rng)
+    s.omega = 0.2
+    for _ in range(40):
+        target_step(s, 0.025, None, CFG, rng)
+    assert np.isclose(s.heading, 0.2) and s.pos[1] > 0       # heading north, turning toward east
+    assert np.isclose(s.pos[0], 10 * np.sin(0.2) / 0.2, rtol=1e-4)
+
+
+def test_the_filter_modes_follow_the_d4_mapping():
+    rng = np.random.default_rng(2)
+    models = driving_mode_models(estimate_down=False)
+    assert isinstance(models[0], PfStop) and models[1].sign == 1 and models[2].sign == -1
+    x = np.zeros((500, 7))
+    x[:, 2] = 5.0
+    xa = models[ACCEL].enter(x, rng)
+    xd = models[DECEL].enter(x, rng)
+    assert np.all(xa[:, 5] >= 0.5) and np.all(xd[:, 5] <= -0.5) and np.allclose(xa[:, 6], 0)
+    assert np.allclose(models[STOP].propagate(x, 0.025, rng)[:, 2:4], 0.0)
+    # DECEL never reverses the velocity
+    slow = xd.copy()
+    slow[:, 2] = 0.01
+    assert np.all(PfAlongTrackAcceleration(-1, sigma_j=0.0).propagate(slow, 0.1, rng)[:, 2] >= 0)
+    pf = make_filter(CFG, cv_only=False, rng=rng)
+    assert pf.K == 5 and pf.N == CFG.n_particles and np.isclose(pf.threshold, 1 / 3)
+
+
+def test_stationary_observers_follow_the_thesis_setup_and_mobile_ones_hold_height_and_orbit():
+    rng = np.random.default_rng(3)
+    ob = stationary_observers(3, CFG, rng)
+    assert np.all(np.abs(ob.pos[:, :2]) <= 100) and np.allclose(ob.pos[:, 2], -40.0)
+    mob = mobile_observers(3, np.zeros(3), CFG, rng)
+    assert np.allclose(mob.pos[:, 2], [-30.0, -40.0, -50.0]) and mob.direction.tolist() == [1.0, -1.0, 1.0]
+    sp = []
+    for _ in range(40 * 40):
+        v0 = mob.vel.copy()
+        observers_step(mob, np.zeros(3), 0.025, CFG)
+        sp.append(np.linalg.norm(mob.vel - v0, axis=1) / 0.025)
+    assert np.max(sp) <= CFG.observers["accel_max_mps2"] + 1e-9
+    r = np.hypot(mob.pos[:, 0], mob.pos[:, 1])
+    assert np.allclose(r, 50.0, atol=5.0) and np.allclose(mob.pos[:, 2], [-30.0, -40.0, -50.0])
+
+
+def test_detections_need_the_target_in_the_image():
+    rng = np.random.default_rng(4)
+    ob = stationary_observers(2, CFG, rng)
+    target = np.array([5.0, 5.0, 0.0])
+    T = observer_poses(ob, target)
+    assert np.all(np.isfinite(detect(target, T, CFG, rng)))
+    far = detect(target + [3000.0, 0.0, 0.0], T, CFG, rng)
+    assert np.all(np.isnan(far))
+
+
+def test_runs_are_seeded_and_deterministic():
+    a = run_scenario("maneuvering", CFG, n_runs=2, seed=7, duration_s=0.5)
+    b = run_scenario("maneuvering", CFG, n_runs=2, seed=7, duration_s=0.5)
+    c = run_scenario("maneuvering", CFG, n_runs=1, seed=8, duration_s=0.5)
+    for ra, rb in zip(a, b):
+        assert np.array_equal(ra.truth, rb.truth) and np.array_equal(ra.estimate, rb.estimate)
+    assert not np.array_equal(a[0].truth, c[0].truth)
+    s = summarise(a)
+    assert s["n_runs"] == 2 and np.isfinite(s["eps_m"]) and np.isfinite(s["eta_pct"])
+
+
+def test_with_small_bearing_noise_and_enough_particles_the_base_setup_tracks_to_a_metre():
+    cfg = GeolocationConfig(sigma_psi_rad=0.02, n_particles=500)
+    r = run_once("base", cfg, np.random.default_rng(11), duration_s=4.0)
+    assert np.nanmean(r.err_m[r.t_s >= 2.0]) < 1.0
+    with pytest.raises(ValueError, match="unknown scenario"):
+        run_once("nope", cfg, np.random.default_rng(0), duration_s=1.0)

@@ -1,0 +1,42 @@
+"""The seed-001 section of study_pf at tiny size: tables, RESULT rows, metadata and panels."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.studies.pf_geolocation import geolocation_panels, geolocation_study
+
+
+def test_the_tiny_geolocation_study_returns_its_tables_rows_and_panels():
+    tables, rows = geolocation_study({}, seed=3, size="tiny")
+    assert set(tables) == {"geo_summary", "geo_series", "geo_config"}
+    summ = tables["geo_summary"]
+    assert summ["case"].tolist() == ["base", "maneuvering", "mobile", "particles_10", "particles_80",
+                                     "observers_1", "observers_2"]
+    assert np.all(np.isfinite(summ["eps_m"])) and np.all(summ["eps_m"] >= 0)
+    names = [r[0] for r in rows]
+    for n in ("geo_eta_pct_base", "geo_eta_pct_maneuvering", "geo_eta_base_met", "geo_obs_1_to_2_met",
+              "geo_particles_10_vs_80_met", "geo_bound_pct", "geo_sigma_px"):
+        assert n in names
+    assert all(isinstance(d, str) and d for _, _, d in rows)
+    assert all(v in (0, 1) for n, v, _ in rows if n.endswith("_met"))
+    meta = {k: json.loads(v) for k, v in zip(tables["geo_config"]["key"], tables["geo_config"]["value"])}
+    assert meta["focal_px"] == 800.0 and meta["size"] == "tiny" and np.isclose(meta["threshold"], 1 / 3)
+    panels = geolocation_panels(tables)
+    assert len(panels) == 5 and all(isinstance(f, dict) and "data" in f for _, f in panels)
+
+
+def test_the_geolocation_study_is_seeded_and_rejects_an_unknown_size():
+    short = {"geo_sizes": {"tiny": {"particles": [], "observers": [], "base_s": 1.5, "maneuvering_s": 1.5,
+                                     "mobile_s": 1.5}}}
+    a, ra = geolocation_study(short, seed=5, size="tiny")
+    b, rb = geolocation_study(short, seed=5, size="tiny")
+    timing = ["step_us"]
+    assert a["geo_summary"].drop(columns=timing).equals(b["geo_summary"].drop(columns=timing))
+    assert a["geo_series"].equals(b["geo_series"])
+    assert [r for r in ra if "step_us" not in r[0]] == [r for r in rb if "step_us" not in r[0]]
+    with pytest.raises(ValueError, match="unknown size 'huge'"):
+        geolocation_study({}, seed=5, size="huge")

@@ -13,8 +13,10 @@ unless a scenario says otherwise; the §4.3 final values (500 m, π; the config 
 real logs) are run once as well. Every trend of issue 17 is a ``RESULT`` line with its numbers
 and a 0/1 ``…_met`` line; nothing is tuned to meet a target.
 
-**Seed 001 part** (camera geo-location, digest 001 §13 item 5): not yet in — a later session
-adds it; the report says so in its own section and no number is written for it.
+**Seed 001 part** (camera geo-location, digest 001 §10–§13): :func:`.pf_geolocation.geolocation_study`
+runs the §6.1–§6.5 scenarios with the values fixed in ``estimate.pf.geolocation`` and writes the
+``geo_summary``, ``geo_series`` and ``geo_config`` tables, its ``geo_*`` RESULT lines and the
+digest 001 §13 item 5 panels.
 """
 
 from __future__ import annotations
@@ -35,9 +37,12 @@ from ..simulate.seeds import set_rng
 from ..simulate.ship import ShipTrack, gps_measure, pi_turn_track, radar_measure, straight_track, weave_track
 from .base import (STUDY_TABLES, Progress, Results, StudyResult, input_path, md_table, output_path, say,
                    study_outputs, study_settings, write_text)
+from .pf_geolocation import geolocation_panels, geolocation_study
 
 NAME = "pf"
 OUTPUT_TABLES = STUDY_TABLES[NAME]
+#: the seed-001 tables (written by :func:`.pf_geolocation.geolocation_study`)
+GEO_TABLES = ("geo_summary", "geo_series", "geo_config")
 
 #: settings of every size (``studies.pf``)
 DEFAULTS: dict[str, Any] = {
@@ -150,7 +155,7 @@ def cv_kf_steady_state(sigma_a: float, sigma_m: float, dt: float = 1.0) -> tuple
 # -- report ---------------------------------------------------------------------------------------
 
 def write_report(path, size, st, seed, runs: pd.DataFrame, checks: list[tuple[str, str, str, bool]],
-                 crit_m: float) -> None:
+                 crit_m: float, geo_lines: list[str] | None = None) -> None:
     L = [f"# Study: particle filters (issue 17) — {size}", "",
          f"Seed {seed}; {st['seeds']} noise realisations per scenario; {st['n_particles']} particles; T = 1 s.", "",
          "## Seed 003: the weave classifier (hmpf) on simulated ship tracks", "",
@@ -178,11 +183,8 @@ def write_report(path, size, st, seed, runs: pd.DataFrame, checks: list[tuple[st
         straight_frac=("straight_frac", "mean"), weave_in=("weave_frac_in_weave", "mean"),
         weave_off=("weave_frac_off_weave", "mean"), flagged=("ever_flagged", "mean"),
         pos_rmse=("pos_rmse_m", "mean"), vel_rmse=("vel_rmse_mps", "mean")).reset_index()
-    L += [md_table(agg, "{:.3f}"), "",
-          "## Seed 001: multi-UAV camera geo-location", "",
-          "**Not yet in.** The seed-001 geo-location part of this study (digest 001 §13 item 5: η% in the "
-          "§6.1/§6.2 setups, ε against particle and observer counts, per-step timing) comes in a later "
-          "session; no number is reported for it here.", ""]
+    L += [md_table(agg, "{:.3f}"), ""]
+    L += geo_lines or []
     write_text(path, "\n".join(L) + "\n")
 
 
@@ -397,14 +399,35 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     res.add("pf_hmpf_final_settings_weave_frac", f"{float(w_fin['weave_frac_in_weave'].mean()):.3f}",
             "GPS weave with the §4.3 final δ_max = 500 m, θ_max = π (the config defaults): weave fraction during the weave.")
     res.add("pf_hmpf_trends_met", f"{sum(c[3] for c in checks)}/{len(checks)}", "Issue-17 seed-003 trend checks met.")
+    # -- seed 001: camera geo-location (pipeline.studies.pf_geolocation) ------------------------
+    geo_tables, geo_rows = geolocation_study({"geolocation": ((estimate or {}).get("pf") or {}).get("geolocation")},
+                                             seed=seed, size=size, progress=progress)
+    for t in GEO_TABLES:
+        write_table(geo_tables[t], paths[t], name=f"pf_{t}", extra={"seed": seed, "size": size})
+    for metric, value, definition in geo_rows:
+        res.add(metric, value, definition)
+    geo_summary = geo_tables["geo_summary"]
+    geo_lines = ["## Seed 001: multi-UAV camera geo-location", "",
+                 "Digest 001 §10–§13 scenarios with the values fixed in `estimate.pf.geolocation` before any run "
+                 "(table `geo_config`); ε = mean 3-D error pooled over time (after the first second) and runs, "
+                 "η% = 100 ε / mean observer distance. Issue-17 checks as RESULT lines (`geo_*_met`, 1 = met); "
+                 "nothing tuned to meet them.", "",
+                 md_table(geo_summary[[c for c in ("case", "n_observers", "n_particles", "duration_s", "n_runs",
+                                                   "eps_m", "median_eps_m", "eta_pct", "mean_dist_m")
+                                       if c in geo_summary.columns]], "{:.2f}"), "",
+                 "| check | value |", "|---|---|"]
+    geo_lines += [f"| {m} | {v} |" for m, v, _ in geo_rows if m.endswith("_met")]
+    geo_lines += [""]
     res.add("pf_study_wall_s", f"{progress.elapsed:.0f}", "Wall time of the study (s), page excluded.")
     res.write(paths["results"])
-    write_report(paths["report"], size, st, seed, runs_df, checks, crit)
+    write_report(paths["report"], size, st, seed, runs_df, checks, crit, geo_lines)
     build_study_page(NAME, paths["page"], results=paths["results"], report_md=paths["report"], template=template,
-                     definitions=res.definitions, figures=figures(tl, runs_df),
-                     title=f"Study: particle filters — seed-003 weave classifier ({size})",
+                     definitions=res.definitions,
+                     figures=[*figures(tl, runs_df),
+                              *((t, go.Figure(d)) for t, d in geolocation_panels(geo_tables))],
+                     title=f"Study: particle filters — seed-003 weave classifier and seed-001 geo-location ({size})",
                      facts=[("size", size), ("seed", str(seed)), ("seeds per scenario", str(R_)),
-                            ("particles", str(base.n_particles)), ("seed-001 geo-location", "not yet in"),
+                            ("particles", str(base.n_particles)), ("seed-001 geo-location", f"{len(geo_summary)} cases"),
                             ("tables", ", ".join(f"{t}.parquet" for t in OUTPUT_TABLES))])
     return StudyResult(name=NAME, status="ok", results=dict(res.values),
                        diagnostics={"size": size, "seed": seed, "settings": st, "wall_s": round(progress.elapsed, 1),

@@ -1,5 +1,5 @@
-"""The particle-filter study (seed-003 part) at ``tiny`` size through its entry point: every
-trend as a RESULT line, the tables, the report (with the seed-001 part marked not yet in) and the page."""
+"""The particle-filter study at ``tiny`` size through its entry point: every seed-003 trend and
+seed-001 geo-location check as a RESULT line, the tables, the report and the page."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def tiny(ran, tmp_path_factory):
 
 def test_the_study_is_registered_with_its_tables():
     assert STUDIES[NAME] == "pipeline.studies.pf:run_pf"
-    assert STUDY_TABLES[NAME] == ("hmpf_runs", "hmpf_timeline")
+    assert STUDY_TABLES[NAME] == ("hmpf_runs", "hmpf_timeline", "geo_summary", "geo_series", "geo_config")
 
 
 def test_the_tiny_study_writes_every_trend_as_a_result_line_with_numbers(tiny):
@@ -52,12 +52,24 @@ def test_the_tables_hold_every_scenario_and_seed(tiny):
     assert np.allclose(w["delta_max_m"], 0.8 * spf.weave_truth_max({**spf.DEFAULTS, **spf.SIZES["tiny"]})[0])
 
 
-def test_the_report_says_the_seed_001_part_is_not_yet_in_and_the_page_has_the_panels(tiny):
+def test_the_report_has_both_seed_parts_and_the_page_has_the_panels_of_both_digests(tiny):
     report = Path(tiny.outputs["report"]).read_text()
-    assert "## Seed 001: multi-UAV camera geo-location" in report and "Not yet in" in report
-    assert "| check | measured | target | met |" in report
+    assert "## Seed 001: multi-UAV camera geo-location" in report and "Not yet in" not in report
+    assert "| check | measured | target | met |" in report and "geo_eta_base_met" in report
     page = Path(tiny.outputs["page"]).read_text()
-    assert 'src="../assets/plotly.min.js"' in page and page.count("Plotly.newPlot") >= 5
+    # 5 seed-003 panels (digest 003 §11 item 7) + 5 seed-001 panels (digest 001 §13 item 5)
+    assert 'src="../assets/plotly.min.js"' in page and page.count("Plotly.newPlot") >= 10
     for metric in tiny.figures:
         row = page[page.index(f"<code>{metric}</code>"):].split("</tr>")[0]
         assert row.count("<td") == 2 and "<td>–</td>" not in row, metric
+
+
+def test_the_seed_001_part_writes_its_checks_and_the_config_values_fixed_before_the_runs(tiny):
+    f = tiny.figures
+    for key in ("geo_eta_pct_base", "geo_eta_pct_maneuvering", "geo_eta_base_met", "geo_eta_maneuvering_met",
+                "geo_obs_1_to_2_met", "geo_particles_10_vs_80_met", "geo_sigma_px"):
+        assert key in f, key
+    assert float(f["geo_sigma_px"]) == pytest.approx(800 * np.tan(0.3), abs=0.01)
+    summ, cfg = tiny.table("geo_summary"), tiny.table("geo_config")
+    assert {"base", "maneuvering", "mobile", "particles_10", "observers_2"} <= set(summ["case"])
+    assert {"focal_px", "sigma_px"} <= set(cfg["key"])

@@ -39,6 +39,8 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
+from ..frames.rotations import quat_to_dcm
+
 F64 = NDArray[np.float64]
 
 #: fields per observer in a packed measurement row (see the module docstring)
@@ -91,21 +93,9 @@ def rot_zyx(yaw: ArrayLike, pitch: ArrayLike, roll: ArrayLike = 0.0) -> F64:
 
 
 def quat_to_rot(q: ArrayLike) -> F64:
-    """Hamilton quaternion ``[w, x, y, z]`` (the ``attitude`` stream, FRD→NED) → (..., 3, 3)."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    R[..., 0, 1] = 2 * (x * y - w * z)
-    R[..., 0, 2] = 2 * (x * z + w * y)
-    R[..., 1, 0] = 2 * (x * y + w * z)
-    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    R[..., 1, 2] = 2 * (y * z - w * x)
-    R[..., 2, 0] = 2 * (x * z - w * y)
-    R[..., 2, 1] = 2 * (y * z + w * x)
-    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return R
+    """Hamilton quaternion ``[w, x, y, z]`` (the ``attitude`` stream, FRD→NED) → (..., 3, 3):
+    :func:`pipeline.frames.rotations.quat_to_dcm`, the project's one quaternion→matrix."""
+    return quat_to_dcm(q)
 
 
 def homogeneous(R: ArrayLike | None = None, t: ArrayLike | None = None) -> F64:

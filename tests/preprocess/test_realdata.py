@@ -51,6 +51,7 @@ def _read(rel):
 
 
 @pytest.mark.realdata
+@pytest.mark.slow  # preprocesses every real log (the fast lane keeps the synthetic preprocess tests)
 @pytest.mark.parametrize("rel, vehicle", REAL_LOGS, ids=[r.split("/")[-1] for r, _ in REAL_LOGS])
 def test_every_real_log_gives_a_state_table(rel, vehicle):
     log = _read(rel)

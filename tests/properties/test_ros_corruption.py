@@ -88,6 +88,7 @@ def _absolute(log, stream):
     return df.assign(t_abs=df["t_ns"] + log.meta["t0_utc_ns"]).drop(columns="t_ns")
 
 
+@pytest.mark.slow  # reads a real bag end to end (fast lane: the small synthetic bag above)
 def test_truncated_real_ros1_bag_keeps_the_messages_before_the_cut(tmp_path):
     src = realdata_file("ros1_husky_imu_gps/test1.bag")
     full = Ros1BagReader().read(src)
@@ -104,6 +105,7 @@ def test_truncated_real_ros1_bag_keeps_the_messages_before_the_cut(tmp_path):
         pd.testing.assert_frame_equal(got, ref.iloc[: len(got)].reset_index(drop=True), obj=s)
 
 
+@pytest.mark.slow  # reads a real bag end to end (fast lane: the small synthetic bag above)
 def test_truncated_real_mcap(tmp_path):
     src = realdata_file("ros2mcap_husky_imu_gps/husky_mcap.mcap")
     data = src.read_bytes()

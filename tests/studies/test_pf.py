@@ -24,6 +24,7 @@ def test_the_study_is_registered_with_its_tables():
     assert STUDY_TABLES[NAME] == ("hmpf_runs", "hmpf_timeline", "geo_summary", "geo_series", "geo_config")
 
 
+@pytest.mark.slow
 def test_the_tiny_study_writes_every_trend_as_a_result_line_with_numbers(tiny):
     assert tiny.result.status == "ok" and tiny.result.diagnostics["size"] == "tiny"
     text = Path(tiny.outputs["results"]).read_text().splitlines()
@@ -41,6 +42,7 @@ def test_the_tiny_study_writes_every_trend_as_a_result_line_with_numbers(tiny):
     assert total == 10 and 0 <= met <= total
 
 
+@pytest.mark.slow
 def test_the_tables_hold_every_scenario_and_seed(tiny):
     runs, tl = tiny.table("hmpf_runs"), tiny.table("hmpf_timeline")
     scen = set(runs["scenario"])
@@ -52,6 +54,7 @@ def test_the_tables_hold_every_scenario_and_seed(tiny):
     assert np.allclose(w["delta_max_m"], 0.8 * spf.weave_truth_max({**spf.DEFAULTS, **spf.SIZES["tiny"]})[0])
 
 
+@pytest.mark.slow
 def test_the_report_has_both_seed_parts_and_the_page_has_the_panels_of_both_digests(tiny):
     report = Path(tiny.outputs["report"]).read_text()
     assert "## Seed 001: multi-UAV camera geo-location" in report and "Not yet in" not in report
@@ -64,6 +67,7 @@ def test_the_report_has_both_seed_parts_and_the_page_has_the_panels_of_both_dige
         assert row.count("<td") == 2 and "<td>–</td>" not in row, metric
 
 
+@pytest.mark.slow
 def test_the_seed_001_part_writes_its_checks_and_the_config_values_fixed_before_the_runs(tiny):
     f = tiny.figures
     for key in ("geo_eta_pct_base", "geo_eta_pct_maneuvering", "geo_eta_base_met", "geo_eta_maneuvering_met",

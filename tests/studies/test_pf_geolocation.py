@@ -10,6 +10,7 @@ import pytest
 from pipeline.studies.pf_geolocation import geolocation_panels, geolocation_study
 
 
+@pytest.mark.slow
 def test_the_tiny_geolocation_study_returns_its_tables_rows_and_panels():
     tables, rows = geolocation_study({}, seed=3, size="tiny")
     assert set(tables) == {"geo_summary", "geo_series", "geo_config"}

@@ -40,6 +40,7 @@ from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
 from ..frames.rotations import quat_to_dcm
+from .models import wrap_angle
 
 F64 = NDArray[np.float64]
 
@@ -71,8 +72,7 @@ def ned_to_enu(p: ArrayLike) -> F64:
 
 def yaw_enu_to_ned(yaw: ArrayLike) -> F64:
     """Heading from E toward N (ENU, CCW) → from N toward E (NED, CW): ``π/2 − ψ``, wrapped."""
-    a = np.pi / 2 - np.asarray(yaw, dtype=np.float64)
-    return (a + np.pi) % (2 * np.pi) - np.pi
+    return wrap_angle(np.pi / 2 - np.asarray(yaw, dtype=np.float64))
 
 
 def rot_zyx(yaw: ArrayLike, pitch: ArrayLike, roll: ArrayLike = 0.0) -> F64:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .models import STATE_COLUMNS, STATE_GROUPS
+from .models import STATE_COLUMNS, STATE_GROUPS, wrap_angle
 
 F64 = NDArray[np.float64]
 
@@ -117,7 +117,7 @@ def mean_relative_abs_error(est: ArrayLike, truth: ArrayLike, axis: int = 0) -> 
 def mean_abs_angle_error(est: ArrayLike, truth: ArrayLike, axis: int = 0) -> F64:
     """The thesis's heading metric: the mean of ``|wrap_[−π,π)(θ̂ − θ)|`` (rad) over runs."""
     d = np.asarray(est, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
-    return _nanmean(np.abs((d + np.pi) % (2 * np.pi) - np.pi), axis)
+    return _nanmean(np.abs(wrap_angle(d)), axis)
 
 
 def _nanmean(a: F64, axis) -> F64:
@@ -133,13 +133,13 @@ def bearing_errors(est: ArrayLike, truth: ArrayLike) -> dict[str, F64]:
     r_hat, r = np.hypot(e[..., 0], e[..., 1]), np.hypot(x[..., 0], x[..., 1])
     dth = e[..., 3] - x[..., 3]
     return {"range_m": r_hat - r, "range_rel": (r_hat - r) / r, "speed_mps": e[..., 2] - x[..., 2],
-            "heading_rad": (dth + np.pi) % (2 * np.pi) - np.pi, "omega_rps": e[..., 4] - x[..., 4]}
+            "heading_rad": wrap_angle(dth), "omega_rps": e[..., 4] - x[..., 4]}
 
 
 def bearing_nees(est: ArrayLike, cov: ArrayLike, truth: ArrayLike) -> F64:
     """5-state NEES ``eᵀP⁻¹e`` (R, T) with the heading error wrapped."""
     e = np.asarray(est, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
-    e[..., 3] = (e[..., 3] + np.pi) % (2 * np.pi) - np.pi
+    e[..., 3] = wrap_angle(e[..., 3])
     return nees(e, cov)
 
 

@@ -46,7 +46,8 @@ from numpy.typing import NDArray
 
 from ..estimate.camera import CameraLikelihood, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
 from ..estimate.markov import retime
-from ..estimate.models import DRIVING_MODES, GEO_IX_DOWN, GEO_STATE, PfConstantVelocity, PfDownRandomWalk, driving_mode_models
+from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_STATE, PfConstantVelocity, PfDownRandomWalk,
+                               driving_mode_models, wrap_angle)
 from ..estimate.pf import ParticleFilter
 
 F64 = NDArray[np.float64]
@@ -202,7 +203,7 @@ def target_step(s: TargetState, dt: float, Pi: F64 | None, cfg: GeolocationConfi
         cap = s.speed / cfg.min_turn_radius_m
         w = float(np.clip(s.omega, -cap, cap))
     h0 = s.heading
-    s.heading = float((h0 + w * dt + np.pi) % (2 * np.pi) - np.pi)
+    s.heading = float(wrap_angle(h0 + w * dt))
     hm = h0 + 0.5 * w * dt          # midpoint heading: second-order exact for a constant turn
     s.pos = s.pos + s.speed * dt * np.array([np.cos(hm), np.sin(hm), 0.0])
 

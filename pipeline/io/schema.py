@@ -337,6 +337,15 @@ MODEL_EVALUATION: tuple[Column, ...] = (
 )
 EVAL_COLUMNS: tuple[str, ...] = tuple(c.name for c in MODEL_EVALUATION)
 
+
+def _upper_covariance(state: tuple[tuple[str, str], ...], what: str = "covariance") -> tuple[Column, ...]:
+    """``P_<i>_<j>`` (i <= j, state order) of an estimator table's state ``((name, unit), ...)``,
+    unit the product of the two states' units, NED."""
+    return tuple(_f(f"P_{i}_{j}", f"({state[i][1]})*({state[j][1]})", "NED",
+                    f"{what} of x_{state[i][0]} and x_{state[j][0]}")
+                 for i in range(len(state)) for j in range(i, len(state)))
+
+
 #: Columns of an estimator output table (estimate ``results/estimate/<estimator>/<flight>.parquet``):
 #: the 9-state CA estimate ``x_<state column>`` in the ``state`` table's names (NED), the upper
 #: triangle of its covariance ``P_<i>_<j>`` (i <= j, state order pos n/e/d, vel n/e/d, acc
@@ -347,9 +356,7 @@ _EST_STATE = (*((f"pos_{a}_m", "m") for a in _NED), *((f"vel_{a}_mps", "m/s") fo
 ESTIMATE: tuple[Column, ...] = (
     Column("t_ns", "int64", "ns"),
     *(_f(f"x_{n}", u, "NED", "estimate") for n, u in _EST_STATE),
-    *(_f(f"P_{i}_{j}", f"({_EST_STATE[i][1]})*({_EST_STATE[j][1]})", "NED",
-         f"covariance of x_{_EST_STATE[i][0]} and x_{_EST_STATE[j][0]}")
-      for i in range(9) for j in range(i, 9)),
+    *_upper_covariance(_EST_STATE),
     _f("nis", "1", "", "normalised innovation squared (0 on predict-only steps)"),
     _f("nees", "1", "", "normalised estimation error squared (NaN without truth)"),
 )
@@ -376,9 +383,7 @@ _HMPF_STATE = (("pos_n_m", "m"), ("pos_e_m", "m"), ("vel_n_mps", "m/s"), ("vel_e
 HMPF: tuple[Column, ...] = (
     Column("t_ns", "int64", "ns"),
     *(_f(f"x_{n}", u, "NED", "particle mean") for n, u in _HMPF_STATE),
-    *(_f(f"P_{i}_{j}", f"({_HMPF_STATE[i][1]})*({_HMPF_STATE[j][1]})", "NED",
-         f"covariance of x_{_HMPF_STATE[i][0]} and x_{_HMPF_STATE[j][0]}")
-      for i in range(5) for j in range(i, 5)),
+    *_upper_covariance(_HMPF_STATE),
     *(_f(f"mode_p_{m}", "1", "", f"fraction of particles in mode {m} (straight/left/right/weave)")
       for m in ("S", "L", "R", "W")),
     *(_f(f"submode_p_{m}", "1", "", f"fraction of particles in weave submode {m}") for m in ("CL", "SL", "CR", "SR")),
@@ -401,9 +406,7 @@ _PF_STATE = (("pos_n_m", "m"), ("pos_e_m", "m"), ("vel_n_mps", "m/s"), ("vel_e_m
 PF: tuple[Column, ...] = (
     Column("t_ns", "int64", "ns"),
     *(_f(f"x_{n}", u, "NED", "particle-weighted mean") for n, u in _PF_STATE),
-    *(_f(f"P_{i}_{j}", f"({_PF_STATE[i][1]})*({_PF_STATE[j][1]})", "NED",
-         f"weighted covariance of x_{_PF_STATE[i][0]} and x_{_PF_STATE[j][0]}")
-      for i in range(len(_PF_STATE)) for j in range(i, len(_PF_STATE))),
+    *_upper_covariance(_PF_STATE, what="weighted covariance"),
     Column("mode_p_*", "float64", "1", "", "weighted fraction of the particles in each mode"),
     _f("neff", "1", "", "effective sample size 1/sum(w^2) before resampling"),
     Column("resampled", "bool", "", "", "the particles were resampled after this step"),
@@ -423,9 +426,7 @@ _BRG_STATE = (("rel_n_m", "m"), ("rel_e_m", "m"), ("speed_mps", "m/s"), ("course
 BEARING_ESTIMATE: tuple[Column, ...] = (
     Column("t_ns", "int64", "ns"),
     *(_f(f"x_{n}", u, "NED", "estimate") for n, u in _BRG_STATE),
-    *(_f(f"P_{i}_{j}", f"({_BRG_STATE[i][1]})*({_BRG_STATE[j][1]})", "NED",
-         f"covariance of x_{_BRG_STATE[i][0]} and x_{_BRG_STATE[j][0]}")
-      for i in range(5) for j in range(i, 5)),
+    *_upper_covariance(_BRG_STATE),
     _f("range_m", "m", "", "estimated range |rel|"),
     _f("range_sigma_m", "m", "", "1-sigma of the range (g^T P_pos g, g the unit LOS)"),
     _f("nis", "1", "", "NIS of the bearing innovation (NaN on predict-only steps)"),

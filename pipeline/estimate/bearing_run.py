@@ -48,6 +48,7 @@ from ..io import schema
 from ..io.parquet import read_table, write_table
 from ..io.stage import declared
 from .models import wrap_angle
+from .table import upper_triangle
 
 F64 = NDArray[np.float64]
 
@@ -241,10 +242,6 @@ def range_error_pct_at(t_s: F64, est_range: F64, true_range: F64, at_s: float = 
 # tables
 
 
-def _upper(cov: F64) -> dict[str, F64]:
-    return {f"P_{i}_{j}": cov[:, i, j] for i in range(5) for j in range(i, 5)}
-
-
 def estimate_table(t_ns: NDArray[np.int64], mean: F64, cov: F64, *, nis: F64 | None = None,
                    mode_p: F64 | None = None, n_diverged: NDArray | None = None) -> pd.DataFrame:
     """A ``bearing_estimate`` table from CPPV means (K, 5) and covariances (K, 5, 5)."""
@@ -254,7 +251,7 @@ def estimate_table(t_ns: NDArray[np.int64], mean: F64, cov: F64, *, nis: F64 | N
     g = mean[:, :2] / np.where(r > 0, r, 1.0)[:, None]
     var_r = np.einsum("ki,kij,kj->k", g, cov[:, :2, :2], g)
     df = pd.DataFrame({"t_ns": np.asarray(t_ns, np.int64), **{n: mean[:, i] for i, n in enumerate(names)},
-                       **_upper(cov), "range_m": r, "range_sigma_m": np.sqrt(np.maximum(var_r, 0.0)),
+                       **upper_triangle(cov, 5), "range_m": r, "range_sigma_m": np.sqrt(np.maximum(var_r, 0.0)),
                        "nis": np.full(k, np.nan) if nis is None else nis,
                        "mode_p_cv": np.full(k, np.nan) if mode_p is None else mode_p[:, 0],
                        "mode_p_ct": np.full(k, np.nan) if mode_p is None else mode_p[:, 1],

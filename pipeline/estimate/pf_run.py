@@ -57,6 +57,7 @@ from ..io.parquet import read_table, read_table_meta, write_table
 from ..io.stage import declared, declared_list
 from .models import PF_STATE, PfAugmentedCoordinatedTurn, PfConstantAcceleration, PfConstantVelocity
 from .pf import GaussianPositionLikelihood, ParticleFilter, dwell_transition, run_pf, track_meta
+from .table import upper_triangle
 
 F64 = NDArray[np.float64]
 
@@ -181,9 +182,7 @@ def pf_frame(t_ns: NDArray[np.int64], mean: F64, cov: F64, mode_p: F64, neff: F6
     cols: dict[str, Any] = {"t_ns": np.asarray(t_ns, dtype=np.int64)}
     for i, c in enumerate(PF_STATE):
         cols[f"x_{c}"] = mean[:, i] if i < n else nan
-    for i in range(len(PF_STATE)):
-        for j in range(i, len(PF_STATE)):
-            cols[f"P_{i}_{j}"] = cov[:, i, j] if j < n else nan
+    cols.update(upper_triangle(cov, len(PF_STATE)))
     for k, m in enumerate(modes):
         cols[f"mode_p_{m}"] = mode_p[:, k]
     cols["neff"] = np.asarray(neff, dtype=np.float64)

@@ -16,6 +16,17 @@ X_COLUMNS: tuple[str, ...] = tuple(f"x_{c}" for c in STATE_COLUMNS)
 P_COLUMNS: tuple[str, ...] = tuple(f"P_{i}_{j}" for i in range(9) for j in range(i, 9))
 
 
+def upper_triangle(cov: ArrayLike, n: int | None = None) -> dict[str, NDArray[np.float64]]:
+    """``{P_<i>_<j>: cov[:, i, j]}`` for ``i <= j < n`` (i-major, the tables' column order) of a
+    covariance track (T, m, m); ``n`` defaults to ``m``, and entries beyond ``m`` (a filter whose
+    state is shorter than its table's) are NaN."""
+    P = np.asarray(cov, dtype=np.float64)
+    m = P.shape[-1]
+    n = m if n is None else n
+    nan = np.full(P.shape[0], np.nan)
+    return {f"P_{i}_{j}": P[:, i, j] if j < m else nan for i in range(n) for j in range(i, n)}
+
+
 def estimate_frame(t_ns: ArrayLike, mean: ArrayLike, cov: ArrayLike, nis: ArrayLike | None = None,
                    nees: ArrayLike | None = None):
     """One run's estimates as the canonical ``estimate`` table.
@@ -41,8 +52,7 @@ def estimate_frame(t_ns: ArrayLike, mean: ArrayLike, cov: ArrayLike, nis: ArrayL
     n = len(t)
     if m.shape != (n, 9) or P.shape != (n, 9, 9):
         raise ValueError(f"estimate_frame: need mean (T, 9) and cov (T, 9, 9) for T={n}, got {m.shape}, {P.shape}")
-    iu = np.triu_indices(9)
-    cols = {"t_ns": t, **dict(zip(X_COLUMNS, m.T)), **dict(zip(P_COLUMNS, P[:, iu[0], iu[1]].T))}
+    cols = {"t_ns": t, **dict(zip(X_COLUMNS, m.T)), **upper_triangle(P)}
     cols["nis"] = np.full(n, np.nan) if nis is None else np.asarray(nis, dtype=np.float64)
     cols["nees"] = np.full(n, np.nan) if nees is None else np.asarray(nees, dtype=np.float64)
     return schema.conform("estimate", pd.DataFrame(cols))

@@ -35,6 +35,7 @@ from ..config import validate_section
 from ..io import schema
 from ..io.parquet import read_table, write_table
 from .models import wrap_angle
+from .table import upper_triangle
 from .weave import MODES, SUBMODES, GpsSensor, HmpfConfig, HmpfTrack, hmpf_filter
 
 #: the output table (``pipeline.io.schema.HMPF``)
@@ -135,9 +136,7 @@ def hmpf_frame(t_ns: np.ndarray, track: HmpfTrack, run: int = 0) -> pd.DataFrame
     xs = [c for c in names if c.startswith("x_")]
     for i, c in enumerate(xs):
         d[c] = track.mean[run, :, i]
-    for i in range(5):
-        for j in range(i, 5):
-            d[f"P_{i}_{j}"] = track.cov[run, :, i, j]
+    d.update(upper_triangle(track.cov[run], 5))
     for k, m in enumerate(MODES):
         d[f"mode_p_{m}"] = track.mode_p[run, :, k]
     for k, m in enumerate(SUBMODES):

@@ -28,7 +28,8 @@ import pyarrow as pa
 #: 1.1.0 (minor): the streams ``battery``, ``setpoint``, ``messages``, ``params``, ``vibration``
 #: and the ``gps`` columns ``hdop``/``vdop`` are new; every 1.0.0 column is unchanged.
 #: 1.2.0: bearing stream (issue 16)
-SCHEMA_VERSION = "1.2.0"
+#: 1.3.0 (minor): the ``estimator_status`` stream (issue 13 item 2); every 1.2.0 column is unchanged.
+SCHEMA_VERSION = "1.3.0"
 
 #: Number of RC input / servo output channels carried by the ``control`` stream.
 N_RC = 18
@@ -162,6 +163,32 @@ STREAMS: dict[str, tuple[Column, ...]] = {
         _f("gyr_vibration_radps", "rad/s", "", "one-number gyro vibration metric (PX4)"),
         *(_f(f"clip_{i}", "1", "", f"accelerometer {i} clipping events since boot") for i in range(3)),
     ),
+    # issue 13 item 2: the navigation filter's own health report, one row per report and EKF
+    # core (``instance`` = core / lane: ArduPilot ``C`` or NKF4/NKF9, ULog multi_id). The bit
+    # fields are as logged; their bit names depend on the source (``src``) and are tabled once in
+    # :mod:`pipeline.io.estimator_bits`. A test ratio below 1 means the measurement passed its
+    # innovation gate (ArduPilot logs the square root of its squared ratio, PX4 the ratio itself:
+    # 1 is the gate in both).
+    "estimator_status": (
+        Column("solution_flags", "Int64", "1", "",
+               "solution status bits (ArduPilot SS nav_filter_status; MAVLink EKF_STATUS_REPORT flags; "
+               "PX4 solution_status_flags)"),
+        Column("fault_flags", "Int64", "1", "", "filter fault bits (ArduPilot FS; PX4 filter_fault_flags)"),
+        Column("innovation_fail_flags", "Int64", "1", "",
+               "innovation-check failure bits (PX4 innovation_check_flags)"),
+        Column("gps_check_flags", "Int64", "1", "", "failed GPS quality checks (ArduPilot GPS; PX4 "
+                                                    "gps_check_fail_flags)"),
+        Column("timeout_flags", "Int64", "1", "", "measurement timeout bits (ArduPilot TS; PX4 timeout_flags)"),
+        Column("control_mode_flags", "Int64", "1", "", "filter control-mode bits (PX4 control_mode_flags)"),
+        _f("vel_test_ratio", "1", "", "velocity innovation test ratio (>= 1: rejected)"),
+        _f("pos_test_ratio", "1", "", "horizontal position innovation test ratio"),
+        _f("hgt_test_ratio", "1", "", "height innovation test ratio"),
+        _f("mag_test_ratio", "1", "", "magnetometer innovation test ratio"),
+        _f("hdg_test_ratio", "1", "", "heading innovation test ratio (PX4 hdg_test_ratio)"),
+        _f("tas_test_ratio", "1", "", "true-airspeed innovation test ratio"),
+        _f("hagl_test_ratio", "1", "", "height-above-ground innovation test ratio"),
+        _f("primary_core", "1", "", "primary EKF core index at this report (ArduPilot PI)"),
+    ),
     "radar": (
         _f("range_m", "m", "", "as measured: rho + tau_RD * rho_dot"),
         _f("dcos_u", "1", "NED", "direction cosine (north component)"),
@@ -219,6 +246,9 @@ STREAMS_1_1: tuple[str, ...] = ("battery", "setpoint", "messages", "params", "vi
 
 #: The streams added by schema 1.2 (issue 16).
 STREAMS_1_2: tuple[str, ...] = ("bearing",)
+
+#: The streams added by schema 1.3 (issue 13): reports, not measurements (they move no ``t0``).
+STREAMS_1_3: tuple[str, ...] = ("estimator_status",)
 
 #: Columns of the derived ``state`` table (preprocess output; style.md §3.2).
 STATE: tuple[Column, ...] = (

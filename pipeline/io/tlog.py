@@ -117,6 +117,14 @@ Message -> stream mapping (units converted to SI, NED/FRD)
                              deg -> rad; ``POSITION_TARGET_LOCAL_NED`` (frame 1) velocity.
 ``VIBRATION``                ``vibration``: ``vibration_x/y/z`` m/s², ``clipping_0..2``.
 ``GPS_RAW_INT`` ``eph/epv``  also ``gps`` ``hdop``/``vdop`` (× 0.01; 65535 NaN).
+``EKF_STATUS_REPORT``        ``estimator_status`` (ArduPilot): ``flags``
+                             (EKF_STATUS_FLAGS) -> ``solution_flags``; the
+                             ``*_variance`` fields, which ArduPilot fills with its
+                             innovation test ratios (the XKF4 ``SV SP SH SM SVT``
+                             values), -> ``vel/pos/hgt/mag/hagl/tas_test_ratio``.
+``ESTIMATOR_STATUS``         ``estimator_status`` (PX4): ``flags``
+                             (ESTIMATOR_STATUS_FLAGS) -> ``solution_flags``,
+                             ``*_ratio`` -> the test ratios.
 ===========================  ==========================================================
 
 NED origin (``meta['ned_origin']``): the vehicle's first ``GPS_GLOBAL_ORIGIN`` (the EKF origin
@@ -247,10 +255,16 @@ _FIELDS: dict[str, tuple[str, ...]] = {
     "POSITION_TARGET_LOCAL_NED": ("time_boot_ms", "coordinate_frame", "type_mask", "vx", "vy", "vz"),
     "VIBRATION": ("time_usec", "vibration_x", "vibration_y", "vibration_z", "clipping_0", "clipping_1",
                   "clipping_2"),
+    # schema 1.3 stream (estimator_status)
+    "EKF_STATUS_REPORT": ("flags", "velocity_variance", "pos_horiz_variance", "pos_vert_variance",
+                          "compass_variance", "terrain_alt_variance", "airspeed_variance"),
+    "ESTIMATOR_STATUS": ("time_usec", "flags", "vel_ratio", "pos_horiz_ratio", "pos_vert_ratio", "mag_ratio",
+                         "hagl_ratio", "tas_ratio"),
 }
-#: Types added with schema 1.1: not counted when picking the vehicle (the pick stays as it was).
+#: Types added with schema 1.1 (and 1.3): not counted when picking the vehicle (the pick stays as
+#: it was).
 _V11_TYPES = frozenset({"SYS_STATUS", "BATTERY_STATUS", "ATTITUDE_TARGET", "NAV_CONTROLLER_OUTPUT",
-                        "POSITION_TARGET_LOCAL_NED", "VIBRATION"})
+                        "POSITION_TARGET_LOCAL_NED", "VIBRATION", "EKF_STATUS_REPORT", "ESTIMATOR_STATUS"})
 #: Messages only a vehicle sends: used to pick the vehicle's (sysid, compid).
 _VEHICLE_TYPES = frozenset(_FIELDS) - {"HEARTBEAT", "GPS_GLOBAL_ORIGIN", "HOME_POSITION"} - _V11_TYPES
 _BOOT_SCALE = {"time_boot_ms": 1_000_000, "time_usec": 1_000}
@@ -447,7 +461,7 @@ class TlogReader(LogReader):
 
     name = "tlog"
     source_format = "mavlink_tlog"
-    version = "2"  # 2: the schema 1.1 streams
+    version = "3"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3)
     priority = 15
 
     @classmethod
@@ -713,6 +727,7 @@ def _build(res: _Scan) -> FlightLog:
             "t_ns": t_ns(tab), "instance": 0, "src": "VIBRATION", "t_boot_ns": t_boot(tab, "time_usec"),
             **{f"vibe_{a}_mps2": tab[f"vibration_{a}"] for a in "xyz"},
             **{f"clip_{i}": tab[f"clipping_{i}"] for i in range(3)}}))
+    _estimator_status(tabs, streams, t_ns, t_boot)
     texts = [(ts, sev, text) for ts, s, c, sev, text in res.texts if (s, c) == vehicle]
     if texts:
         streams["messages"].append({
@@ -754,6 +769,34 @@ def _build(res: _Scan) -> FlightLog:
                  "bytes_decoded": int(res.bytes_kept)},
     )
     return FlightLog.from_streams(meta, dict(streams))
+
+
+#: (message, its flag field, ratio field -> estimator_status column)
+_ESTIMATOR_SOURCES = (
+    ("EKF_STATUS_REPORT", None, {"velocity_variance": "vel_test_ratio", "pos_horiz_variance": "pos_test_ratio",
+                                 "pos_vert_variance": "hgt_test_ratio", "compass_variance": "mag_test_ratio",
+                                 "terrain_alt_variance": "hagl_test_ratio", "airspeed_variance": "tas_test_ratio"}),
+    ("ESTIMATOR_STATUS", "time_usec", {"vel_ratio": "vel_test_ratio", "pos_horiz_ratio": "pos_test_ratio",
+                                       "pos_vert_ratio": "hgt_test_ratio", "mag_ratio": "mag_test_ratio",
+                                       "hagl_ratio": "hagl_test_ratio", "tas_ratio": "tas_test_ratio"}),
+)
+
+
+def _estimator_status(tabs, streams, t_ns, t_boot) -> None:
+    """EKF_STATUS_REPORT (ArduPilot; no boot stamp) and ESTIMATOR_STATUS (PX4) -> one
+    ``estimator_status`` part each: ``flags`` -> ``solution_flags`` (bit names per ``src`` in
+    :mod:`pipeline.io.estimator_bits`), the ratios as sent. ``airspeed_variance`` is a MAVLink 2
+    extension: a v1 frame carries none and pymavlink gives 0 -- kept as sent."""
+    for mtype, boot, ratios in _ESTIMATOR_SOURCES:
+        tab = tabs.get(mtype)
+        if tab is None or not len(tab["ts"]):
+            continue
+        part = {"t_ns": t_ns(tab), "instance": 0, "src": mtype,
+                "solution_flags": np.asarray(tab["flags"]).astype(np.int64),
+                **{col: tab[f] for f, col in ratios.items()}}
+        if boot is not None:
+            part["t_boot_ns"] = t_boot(tab, boot)
+        streams["estimator_status"].append(part)
 
 
 def _battery(tabs, streams, t_ns) -> None:

@@ -44,7 +44,23 @@ logged messages (``L``, tagged ``C``)      ``messages``       ``text``, ``severi
 initial + changed parameters               ``params``         initial at ``t_ns = 0``, changes at
                                                               their time
 (GPS topic ``hdop``/``vdop``)              ``gps``            dilutions as logged
+``estimator_status``                       ``estimator_       ``solution_status_flags``,
+                                           status``           ``filter_fault_flags``,
+                                                              ``innovation_check_flags``,
+                                                              ``gps_check_fail_flags``,
+                                                              ``timeout_flags``,
+                                                              ``control_mode_flags`` as logged;
+                                                              ``*_test_ratio``; instance = EKF
+                                                              instance (multi_id)
 =========================================  =================  ===================================
+
+``estimator_status_flags`` (PX4 1.12+, one boolean per bit, published on change) is not a
+stream: it repeats ``estimator_status``'s bits. It tells which layout the log's bit fields use,
+recorded in ``meta['estimator_status']['layout']`` (:mod:`pipeline.io.estimator_bits`): a log
+whose ``fs_*`` fields include ``fs_bad_vel_n``, or without the topic, has the legacy 0-17
+``filter_fault_flags``; otherwise the current one (bit 9 unused, 10 ``bad_acc_vertical``). Its
+``reject_*`` field names, in order, name the bits of ``innovation_check_flags``
+(``meta['estimator_status']['innovation_fail_flags']``).
 
 Time. ``t_boot_ns = timestamp * 1000`` (``timestamp``: µs since boot, the publication time of
 every uORB message) and ``t_ns = t_boot_ns - t0_boot_ns`` with ``t0_boot_ns`` the ULog header
@@ -121,7 +137,7 @@ class ULogReader(LogReader):
 
     name = "ulog"
     source_format = "px4_ulog"
-    version = "2"  # 2: the schema 1.1 streams
+    version = "3"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3)
     priority = 10
 
     @classmethod
@@ -196,6 +212,8 @@ class ULogReader(LogReader):
         vib_topic = next((n for n in ("vehicle_imu_status", "estimator_status") if n in topics), None)
         for d in topics.get(vib_topic, []):
             add("vibration", _vibration(d, conv))
+        for d in topics.get("estimator_status", []):
+            add("estimator_status", _estimator_status(d, conv))
 
         out = {k: pd.concat(v, ignore_index=True) if len(v) > 1 else v[0] for k, v in streams.items()}
         if conv.n_before_start:
@@ -204,6 +222,8 @@ class ULogReader(LogReader):
                 "written at subscription) have t_ns < 0")
         meta = schema.new_meta(t0_boot_ns=t0_us * 1000)
         meta["ned_origin"] = _ned_origin(topics, out.get("gps"), diag)
+        if "estimator_status" in out:
+            meta["estimator_status"] = _estimator_layout(topics)
         _utc(meta, topics, out, cfg, t0_us)
         streams_ev = _messages(ulog, diag, t0_us)
         if streams_ev is not None:
@@ -580,6 +600,42 @@ def _vibration(d, conv: _Conv) -> pd.DataFrame | None:
     if clip is not None:
         cols.update({f"clip_{i}": c for i, c in enumerate(clip)})
     return conv.frame(d, cols)
+
+
+#: ``estimator_status`` field -> ``estimator_status`` stream column
+_ESTIMATOR_FLAGS = (("solution_status_flags", "solution_flags"), ("filter_fault_flags", "fault_flags"),
+                    ("innovation_check_flags", "innovation_fail_flags"), ("gps_check_fail_flags", "gps_check_flags"),
+                    ("timeout_flags", "timeout_flags"), ("control_mode_flags", "control_mode_flags"))
+_ESTIMATOR_RATIOS = ("vel", "pos", "hgt", "mag", "hdg", "tas", "hagl")
+
+
+def _estimator_status(d, conv: _Conv) -> pd.DataFrame | None:
+    """``estimator_status``: the bit fields as logged (int64; ``control_mode_flags`` is a uint64
+    whose highest named bit is 44) and the ``<x>_test_ratio`` fields; a field this firmware does
+    not log stays missing."""
+    cols: dict[str, np.ndarray] = {}
+    for src, col in _ESTIMATOR_FLAGS:
+        if src in d.data:
+            cols[col] = np.asarray(d.data[src]).astype(np.int64)
+    for r in _ESTIMATOR_RATIOS:
+        v = _f(d, f"{r}_test_ratio")
+        if v is not None:
+            cols[f"{r}_test_ratio"] = v
+    if "solution_flags" not in cols and not any(k.endswith("_test_ratio") for k in cols):
+        return None  # an estimator_status without any of them (very old PX4): vibration only
+    return conv.frame(d, cols)
+
+
+def _estimator_layout(topics: dict) -> dict:
+    """Which bit layout the log's ``estimator_status`` uses (see the module docstring)."""
+    flags = topics.get("estimator_status_flags", [])
+    fields = list(flags[0].data) if flags else []
+    fs = [f for f in fields if f.startswith("fs_")]
+    out = {"layout": "px4" if fs and "fs_bad_vel_n" not in fs else "px4_legacy"}
+    reject = [f for f in fields if f.startswith("reject_")]
+    if reject and any("innovation_check_flags" in d.data for d in topics.get("estimator_status", [])):
+        out["innovation_fail_flags"] = reject
+    return out
 
 
 def _ned_origin(topics: dict, gps: pd.DataFrame | None, diag: dict) -> dict | None:

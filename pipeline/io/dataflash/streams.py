@@ -29,6 +29,10 @@ setpoint        ATT ``DesRoll/DesPitch/DesYaw`` deg -> rad; RATE ``RDes/PDes/YDe
 messages        MSG ``Message`` (no severity in DataFlash: NaN)
 params          PARM ``Name``, ``Value``, every record at its time
 vibration       VIBE ``VibeX/Y/Z`` m/s², ``Clip0..2`` (Copter 4: per ``IMU``, ``Clip``)
+estimator_      XKF4 (core ``C``; before it XKF4/XKF9 = cores 0/1), NKF4/NKF9 (EKF2 cores 0/1),
+status          EKF4 (EKF1): ``SV SP SH SM SVT`` test ratios (EKF1 ``SMX/SMY/SMZ``: the
+                largest), ``FS`` fault, ``TS`` timeout, ``SS`` solution, ``GPS`` check bits,
+                ``PI`` primary core; integer ``H`` ratio fields (Copter 4.1+) × 0.01
 ==============  ===============================================================================
 
 PARM -> also ``meta['params']``; MSG -> also ``meta['diagnostics']['messages']``; ORGN (else the first 3D
@@ -61,7 +65,7 @@ from .decode import DecodeResult
 
 SOURCE_FORMAT = "ardupilot_dataflash"
 READER_NAME = "dataflash"
-READER_VERSION = "2"  # 2: the schema 1.1 streams
+READER_VERSION = "3"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3)
 
 GPS_EPOCH_UNIX_S = 315964800
 #: pymavlink's fixed GPS − UTC (DFReader._gpsTimeToTime), true since 2017-01-01; the reader
@@ -663,6 +667,44 @@ def _vibration(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
     return d
 
 
+#: EKF status message -> core when the message has no ``C`` field (EKF2/early EKF3 log the
+#: second core as a separate message type)
+_EKF4_CORE = {"XKF4": 0, "XKF9": 1, "NKF4": 0, "NKF9": 1, "EKF4": 0}
+
+
+def _estimator_status(ctx: _Ctx, name: str, parts: list[Part]) -> Part | None:
+    """XKF4/XKF9/NKF4/NKF9/EKF4: innovation test ratios ``SV SP SH SM SVT`` (EKF1: ``SMX SMY
+    SMZ``, the largest of the three, as EKF2/3 log it) and the bit fields ``FS`` (fault),
+    ``TS`` (timeout), ``SS`` (solution: nav_filter_status), ``GPS`` (failed GPS checks), ``PI``
+    (primary core). The ratios are ``100 x value`` in int16 ``c`` fields (decoded as pymavlink
+    does, / 100) or, from Copter 4.1, in uint16 ``H`` fields with an FMTU multiplier of 1e-2
+    (applied here). ``instance`` = core: ``C``, else the message's own core."""
+    c = ctx.res.tables[name]
+    if not all(k in c for k in ("SV", "SP", "SH", "SS")):
+        return None
+    fmt = _fmt_of(ctx, name)
+    d, _ = ctx.base(name, name, None if "C" in c else _EKF4_CORE.get(name, 0))
+
+    def ratio(k: str) -> np.ndarray:
+        v = c[k].astype(np.float64)
+        return v * 0.01 if fmt[k] in "hHiI" else v
+    for k, col in (("SV", "vel_test_ratio"), ("SP", "pos_test_ratio"), ("SH", "hgt_test_ratio"),
+                   ("SVT", "tas_test_ratio")):
+        if k in c:
+            d[col] = ratio(k)
+    if "SM" in c:
+        d["mag_test_ratio"] = ratio("SM")
+    elif all(f"SM{a}" in c for a in "XYZ"):
+        d["mag_test_ratio"] = np.max([ratio(f"SM{a}") for a in "XYZ"], axis=0)
+    for k, col in (("FS", "fault_flags"), ("TS", "timeout_flags"), ("SS", "solution_flags"),
+                   ("GPS", "gps_check_flags")):
+        if k in c:
+            d[col] = np.asarray(c[k]).astype(np.int64)
+    if "PI" in c:
+        d["primary_core"] = c["PI"].astype(np.float64)
+    return d
+
+
 Builder = Callable[[_Ctx, str, list], "Part | list[Part] | None"]
 
 #: The one mapping table: (stream, message, builder), in stream order and, within a stream, in
@@ -693,6 +735,7 @@ STREAM_TABLE: tuple[tuple[str, str | tuple[str, ...], Builder], ...] = (
     ("messages", "MSG", _messages),
     ("params", "PARM", _params),
     ("vibration", "VIBE", _vibration),
+    *(("estimator_status", m, _estimator_status) for m in ("XKF4", "XKF9", "NKF4", "NKF9", "EKF4")),
 )
 
 #: Stream -> message types it is built from (documentation and the "contains" checks).
@@ -704,8 +747,8 @@ for _stream, _msg, _ in STREAM_TABLE:
 del _stream, _msg
 
 
-#: Streams whose records do not define t0 (schema 1.1; t0 stays the first sensor record).
-_NOT_T0 = frozenset(schema.STREAMS_1_1)
+#: Streams whose records do not define t0 (schema 1.1 and 1.3; t0 stays the first sensor record).
+_NOT_T0 = frozenset(schema.STREAMS_1_1) | frozenset(schema.STREAMS_1_3)
 
 
 def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,

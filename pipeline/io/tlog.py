@@ -261,6 +261,8 @@ _FIELDS: dict[str, tuple[str, ...]] = {
     "ESTIMATOR_STATUS": ("time_usec", "flags", "vel_ratio", "pos_horiz_ratio", "pos_vert_ratio", "mag_ratio",
                          "hagl_ratio", "tas_ratio"),
 }
+#: MAVLink 2 extension fields of the mapped types that the streams keep (absent from v1 frames)
+_EXTENSIONS = {"EKF_STATUS_REPORT": frozenset({"airspeed_variance"})}
 #: Types added with schema 1.1 (and 1.3): not counted when picking the vehicle (the pick stays as
 #: it was).
 _V11_TYPES = frozenset({"SYS_STATUS", "BATTERY_STATUS", "ATTITUDE_TARGET", "NAV_CONTROLLER_OUTPUT",
@@ -419,7 +421,12 @@ def _keep(res: _Scan, msg, ts: int, size: int, mode_string) -> None:
     res.protocols.add(2 if msg.get_msgbuf()[0] == _MAGIC_V2 else 1)
     fields = _FIELDS.get(mtype)
     if fields is not None:
-        res.rows[mtype].append((ts, *sender, *(getattr(msg, f, None) for f in fields)))
+        if mtype in _EXTENSIONS and msg.get_msgbuf()[0] != _MAGIC_V2:
+            # a MAVLink 1 frame carries no extension field: missing (NaN), not the decoder's 0
+            ext = _EXTENSIONS[mtype]
+            res.rows[mtype].append((ts, *sender, *(None if f in ext else getattr(msg, f, None) for f in fields)))
+        else:
+            res.rows[mtype].append((ts, *sender, *(getattr(msg, f, None) for f in fields)))
         if mtype in _VEHICLE_TYPES:
             res.senders[sender] += 1
         elif mtype == "HEARTBEAT":
@@ -786,7 +793,7 @@ def _estimator_status(tabs, streams, t_ns, t_boot) -> None:
     """EKF_STATUS_REPORT (ArduPilot; no boot stamp) and ESTIMATOR_STATUS (PX4) -> one
     ``estimator_status`` part each: ``flags`` -> ``solution_flags`` (bit names per ``src`` in
     :mod:`pipeline.io.estimator_bits`), the ratios as sent. ``airspeed_variance`` is a MAVLink 2
-    extension: a v1 frame carries none and pymavlink gives 0 -- kept as sent."""
+    extension: from a v1 frame it is missing (NaN), as pymavlink's v1 message has no such field."""
     for mtype, boot, ratios in _ESTIMATOR_SOURCES:
         tab = tabs.get(mtype)
         if tab is None or not len(tab["ts"]):

@@ -11,7 +11,7 @@ from pipeline.io.base import FlightLog
 
 def test_schema_version_is_a_minor_bump_of_1_0():
     major, minor, _ = (int(x) for x in schema.SCHEMA_VERSION.split("."))
-    assert (major, minor) == (1, 2)  # 1.1: these streams; 1.2.0: bearing stream (issue 16)
+    assert (major, minor) == (1, 3)  # 1.1: these streams; 1.2.0: bearing (issue 16); 1.3.0: estimator_status
 
 
 def test_new_streams_are_canonical_streams_with_common_columns_first():

@@ -241,6 +241,109 @@ def weave_panels(path: str | os.PathLike) -> tuple[list, list]:
         [("hmpf", fact)]
 
 
+# --- issue 13 item 2: the estimator-flags panel ---------------------------------------------
+
+#: the flag columns of the ``estimator_status`` stream as the panel names them
+_FLAG_WORDS = {"solution_flags": "solution", "fault_flags": "fault", "innovation_fail_flags": "rejected",
+               "gps_check_flags": "GPS check failed", "timeout_flags": "timed out", "control_mode_flags": "mode"}
+#: the innovation test ratios (``<x>_test_ratio``) in words
+_RATIO_WORDS = {"vel": "velocity", "pos": "horizontal position", "hgt": "height", "mag": "magnetometer",
+                "hdg": "heading", "tas": "true airspeed", "hagl": "height above ground"}
+ESTIMATOR_FLAGS_TITLE = "Estimator flags (EKF status, XKF flags, estimator_status)"
+ESTIMATOR_RATIOS_TITLE = "Estimator innovation test ratios"
+
+
+def _set_intervals(t_s: np.ndarray, on: np.ndarray) -> list:
+    """x values (``None``-separated segments) of the intervals where ``on`` holds: a sample
+    that sets the bit starts a segment, the next sample that clears it (or the last sample) ends it."""
+    xs: list = []
+    k = np.flatnonzero(np.diff(np.r_[False, on, False].astype(np.int8)))
+    for a, b in zip(k[::2], k[1::2]):
+        xs.extend((round(float(t_s[a]), 3), round(float(t_s[min(b, len(t_s) - 1)]), 3), None))
+    return xs
+
+
+def estimator_flag_panels(est: pd.DataFrame | None, meta: dict | None = None) -> list[tuple[str, object]]:
+    """The estimator-flags panels of a flight page from its ``estimator_status`` stream.
+
+    One band per (lane, flag column, bit) that is ever set, drawn over the intervals where it
+    is set (a bit holds from the report that sets it to the report that clears it), named by
+    :mod:`pipeline.io.estimator_bits` for the row's source (``src``; ULog: the layout in
+    ``meta['estimator_status']``); a lane is one EKF core / instance of one message. Then the
+    innovation test ratios per lane with the gate at 1 (a ratio above it: the measurement was
+    rejected; ArduPilot logs the square root of its squared ratio, PX4 the ratio, both gated at
+    1); ratios that stay 0 the whole flight (not fused) are named in the title instead of drawn.
+
+    Returns ``[(title, figure or None)]``: one ``(title, None)`` ("no data" line) when the
+    stream is empty.
+    """
+    import plotly.graph_objects as go
+
+    from ..io import estimator_bits
+
+    if est is None or not len(est):
+        return [(ESTIMATOR_FLAGS_TITLE, None)]
+    est = est.sort_values("t_ns", kind="stable")
+    lanes = [(str(s), int(i)) for s, i in est[["src", "instance"]].astype({"src": str}).drop_duplicates()
+             .itertuples(index=False)]
+    multi = len(lanes) > 1
+    flags, rows = go.Figure(), []
+    for src, inst in lanes:
+        lane = est[(est["src"].astype(str) == src) & (est["instance"] == inst)]
+        t_s = lane["t_ns"].to_numpy(np.int64) * 1e-9
+        tag = f" ({src} {inst})" if multi else ""
+        for col in estimator_bits.FLAG_COLUMNS:
+            v = lane[col]
+            if not v.notna().any():
+                continue
+            vals = v.fillna(0).astype("int64").to_numpy()
+            for bit in estimator_bits.bits_set(vals):
+                name = f"{_FLAG_WORDS[col]}: {estimator_bits.bit_name(src, col, bit, meta)}{tag}"
+                xs = _set_intervals(t_s, (vals >> bit & 1).astype(bool))
+                y = len(rows)
+                rows.append(name)
+                flags.add_trace(go.Scatter(x=xs, y=[None if x is None else y for x in xs],
+                                           mode="lines", name=name, showlegend=False,
+                                           line=dict(color=plots.colour(col), width=8),
+                                           hovertemplate=f"{name}<br>t = %{{x:.1f}} s<extra></extra>"))
+    out: list[tuple[str, object]] = []
+    if flags.data:
+        flags.update_xaxes(title="t [s]")
+        flags.update_yaxes(tickmode="array", tickvals=list(range(len(rows))), ticktext=rows,
+                           range=[len(rows) - 0.5, -0.5], showgrid=False)  # first row on top
+        out.append((ESTIMATOR_FLAGS_TITLE, plots.layout(
+            flags, f"{ESTIMATOR_FLAGS_TITLE}: each bit ever set, drawn where it is set",
+            height=max(260, 22 * len(rows) + 110), margin=dict(l=260, r=20, t=40, b=40))))
+    else:
+        out.append((ESTIMATOR_FLAGS_TITLE, None))
+    ratios, zero = go.Figure(), set()
+    for n_lane, (src, inst) in enumerate(lanes):
+        lane = est[(est["src"].astype(str) == src) & (est["instance"] == inst)]
+        tag = f" ({src} {inst})" if multi else ""
+        for r, words in _RATIO_WORDS.items():
+            col = f"{r}_test_ratio"
+            v = lane[col]
+            if not v.notna().any():
+                continue
+            if not (v.fillna(0) != 0).any():
+                zero.add(words)
+                continue
+            d = plots.decimate(lane[["t_ns", col]].dropna(), max_points=1000, cols=[col])
+            ratios.add_trace(go.Scatter(x=d["t_ns"].to_numpy() * 1e-9, y=d[col], mode="lines",
+                                        name=f"{words}{tag}",
+                                        line=dict(color=plots.colour(col), dash=("solid", "dot", "dash")[n_lane % 3])))
+    if ratios.data:
+        ratios.add_hline(y=1.0, line=dict(color="#d62728", dash="dash", width=1),
+                         annotation_text="gate: above 1 rejected", annotation_position="top right")
+        ratios.update_xaxes(title="t [s]")
+        ratios.update_yaxes(title="innovation test ratio [1]", rangemode="tozero")
+        title = "Estimator innovation test ratios (gate at 1)"
+        if zero:
+            title += f"; always 0: {', '.join(sorted(zero))}"
+        out.append((ESTIMATOR_RATIOS_TITLE, plots.layout(ratios, title)))
+    return out
+
+
 def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLike, *,
                         template: str | os.PathLike, plotly_js: str, index_href: str = "../index.html",
                         state: str | os.PathLike | None = None,
@@ -338,9 +441,9 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("Gyroscope", plots.time_series(imu, [f"gyr_{a}_radps" for a in "xyz"],
                                         "Gyroscope (raw, sensor frame)", "angular rate [rad/s]")),
         ("Battery", plots.battery(log["battery"])),
-        # no reader ingests EKF status / XKF flags (DataFlash) or estimator_status flags (ULog)
-        # into a canonical stream yet: the panel says so rather than vanishing
-        ("Estimator flags (EKF status, XKF flags, estimator_status)", None),
+        # the estimator_status stream (DataFlash XKF4/NKF4/EKF4, tlog EKF_STATUS_REPORT, ULog
+        # estimator_status); an empty stream keeps the one "no data" line
+        *estimator_flag_panels(log["estimator_status"], meta),
     ]
     if len(timelines) <= 1:
         figs.append(("Maneuver timeline", plots.timeline(seg, next(iter(timelines.values()), None))))

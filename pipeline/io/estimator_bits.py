@@ -30,7 +30,8 @@ by a *layout* that :func:`layout_of` finds from the row's ``src``:
     ``gps_check_fail_flags`` and ``control_mode_flags`` differently; their bits are named by
     this table all the same.
 
-A bit with no name here is shown as ``bit <k>``.
+A bit with no name here is shown as ``bit <k>``. The ROS 1/2, MCAP, FlightCoach and CSV readers
+have no such message: their ``estimator_status`` stream is empty.
 """
 
 from __future__ import annotations

@@ -44,8 +44,8 @@ logged messages (``L``, tagged ``C``)      ``messages``       ``text``, ``severi
 initial + changed parameters               ``params``         initial at ``t_ns = 0``, changes at
                                                               their time
 (GPS topic ``hdop``/``vdop``)              ``gps``            dilutions as logged
-``estimator_status``                       ``estimator_       ``solution_status_flags``,
-                                           status``           ``filter_fault_flags``,
+``estimator_status``                       ``estimator_status`` ``solution_status_flags``,
+                                                              ``filter_fault_flags``,
                                                               ``innovation_check_flags``,
                                                               ``gps_check_fail_flags``,
                                                               ``timeout_flags``,

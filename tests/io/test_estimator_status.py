@@ -7,6 +7,8 @@ writer, read back by the same oracles, where they do not. Counts and values equa
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import pytest
 
@@ -17,7 +19,6 @@ from pipeline.io.registry import read_log
 
 EKF_MSGS = ("XKF4", "XKF9", "NKF4", "NKF9", "EKF4")
 REAL_BIN = (
-    "ap_copter313_austin_4flights/2014-10-18_20-04-24.bin",
     "ap_copter_forum_crash_pool/log_0036_mechanical_failure.bin",
     "ap_plane_flightcoach_box/pilot_0004.BIN",
     "pymavlink_test_bin/test.BIN",
@@ -27,6 +28,12 @@ TLOG = "tlog_phoenix_ubc_quad/phoenix_mission1_2018-09-17_16-44-06.tlog"
 #: DataFlash field -> stream column
 AP_RATIOS = {"SV": "vel_test_ratio", "SP": "pos_test_ratio", "SH": "hgt_test_ratio", "SVT": "tas_test_ratio"}
 AP_FLAGS = {"FS": "fault_flags", "TS": "timeout_flags", "SS": "solution_flags", "GPS": "gps_check_flags"}
+
+
+@lru_cache(maxsize=None)
+def _real(rel):
+    """A real log read once per module run (several tests look at the same file)."""
+    return read_log(realdata_file(rel))
 
 
 def _src(log, src):
@@ -62,16 +69,13 @@ def test_schema_1_3_adds_the_estimator_status_stream_and_nothing_else():
 
 @pytest.fixture(scope="module", params=REAL_BIN)
 def real_bin(request):
-    path = realdata_file(request.param)
-    return request.param, read_log(path), pymavlink_by_type(path)
+    return request.param, _real(request.param), pymavlink_by_type(realdata_file(request.param))
 
 
 def test_dataflash_estimator_status_equals_pymavlink_on_every_real_log(real_bin):
     rel, log, orc = real_bin
     present = [m for m in EKF_MSGS if orc.get(m)]
-    if not present:
-        assert len(log["estimator_status"]) == 0
-        pytest.skip(f"{rel} logs no EKF status message (its firmware predates the EKF)")
+    assert present, rel
     assert len(log["estimator_status"]) == sum(len(orc[m]) for m in present)
     t0 = log.meta["t0_boot_ns"]
     for m in present:
@@ -90,8 +94,22 @@ def test_dataflash_estimator_status_equals_pymavlink_on_every_real_log(real_bin)
         assert rows["innovation_fail_flags"].isna().all() and rows["control_mode_flags"].isna().all()
 
 
+def test_a_real_log_from_before_the_ekf_has_an_empty_estimator_stream():
+    """ArduCopter 3.1.3 (2014) declares no EKF message: pymavlink finds none (FMT), nor do we."""
+    from pymavlink import mavutil
+
+    path = realdata_file("ap_copter313_austin_4flights/2014-10-18_20-04-24.bin")
+    m = mavutil.mavlink_connection(str(path))
+    try:
+        declared = {f.name for f in m.formats.values()}
+    finally:
+        m.close()
+    assert declared and not declared & set(EKF_MSGS)
+    assert len(_real("ap_copter313_austin_4flights/2014-10-18_20-04-24.bin")["estimator_status"]) == 0
+
+
 def test_real_ekf2_log_has_both_cores_and_named_solution_bits():
-    log = read_log(realdata_file("ap_copter_forum_crash_pool/log_0036_mechanical_failure.bin"))
+    log = _real("ap_copter_forum_crash_pool/log_0036_mechanical_failure.bin")
     e = log["estimator_status"]
     assert e.groupby(["src", "instance"], observed=True).size().to_dict() == {("NKF4", 0): 1502, ("NKF9", 1): 1502}
     names = {bits.bit_name("NKF4", "solution_flags", k) for k in bits.bits_set(e["solution_flags"].dropna())}
@@ -104,7 +122,7 @@ def test_estimator_status_does_not_move_t0_of_the_real_logs():
           "ap_plane_flightcoach_box/pilot_0004.BIN": 4835992000,
           "pymavlink_test_bin/test.BIN": 81794643000}
     for rel, want in t0.items():
-        assert read_log(realdata_file(rel)).meta["t0_boot_ns"] == want, rel
+        assert _real(rel).meta["t0_boot_ns"] == want, rel
 
 
 # --- DataFlash: fixtures (uavpipe's writer, read back by pymavlink) ---------------------------
@@ -252,8 +270,7 @@ def test_mavlink_bit_tables_equal_pymavlink_enums():
 def real_ulg(request):
     import pyulog
 
-    path = realdata_file(request.param)
-    return request.param, read_log(path), pyulog.ULog(str(path))
+    return request.param, _real(request.param), pyulog.ULog(str(realdata_file(request.param)))
 
 
 def test_ulog_estimator_status_equals_pyulog_on_the_real_logs(real_ulg):
@@ -281,8 +298,7 @@ def test_ulog_estimator_status_equals_pyulog_on_the_real_logs(real_ulg):
 
 
 def test_ulog_layout_follows_the_logs_own_estimator_status_flags():
-    new = read_log(realdata_file(REAL_ULG[0]))
-    old = read_log(realdata_file(REAL_ULG[1]))
+    new, old = _real(REAL_ULG[0]), _real(REAL_ULG[1])
     assert new.meta["estimator_status"] == {"layout": "px4"}  # no innovation_check_flags: no names
     assert old.meta["estimator_status"] == {"layout": "px4_legacy"}  # PX4 1.9: no estimator_status_flags
     # ekf_failure.ulg: filter_fault_flags 1024 is the vertical-accelerometer fault in PX4 1.15

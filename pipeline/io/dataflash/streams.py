@@ -29,10 +29,11 @@ setpoint        ATT ``DesRoll/DesPitch/DesYaw`` deg -> rad; RATE ``RDes/PDes/YDe
 messages        MSG ``Message`` (no severity in DataFlash: NaN)
 params          PARM ``Name``, ``Value``, every record at its time
 vibration       VIBE ``VibeX/Y/Z`` m/s², ``Clip0..2`` (Copter 4: per ``IMU``, ``Clip``)
-estimator_      XKF4 (core ``C``; before it XKF4/XKF9 = cores 0/1), NKF4/NKF9 (EKF2 cores 0/1),
-status          EKF4 (EKF1): ``SV SP SH SM SVT`` test ratios (EKF1 ``SMX/SMY/SMZ``: the
+estimator_stat  XKF4 (core ``C``; before it XKF4/XKF9 = cores 0/1), NKF4/NKF9 (EKF2 cores 0/1),
+                EKF4 (EKF1): ``SV SP SH SM SVT`` test ratios (EKF1 ``SMX/SMY/SMZ``: the
                 largest), ``FS`` fault, ``TS`` timeout, ``SS`` solution, ``GPS`` check bits,
                 ``PI`` primary core; integer ``H`` ratio fields (Copter 4.1+) × 0.01
+                (stream ``estimator_status``)
 ==============  ===============================================================================
 
 PARM -> also ``meta['params']``; MSG -> also ``meta['diagnostics']['messages']``; ORGN (else the first 3D

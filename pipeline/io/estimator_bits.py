@@ -25,7 +25,8 @@ by a *layout* that :func:`layout_of` finds from the row's ``src``:
     the 0-17 one of PX4 1.9-1.13; the ULog reader picks one from the log's own
     ``estimator_status_flags`` fields (:mod:`pipeline.io.ulog`). ``innovation_check_flags``
     (legacy only; the field left ``estimator_status`` later) follows the PX4 1.9-1.13
-    ``estimator_status.msg``, or the log's own ``reject_*`` names where it logs them. PX4
+    ``estimator_status.msg``, or the log's own ``reject_*`` names where it logs them (also for the
+    ``estimator_status_flags`` rows the ULog reader packs from those booleans, PX4 1.14+). PX4
     releases before 1.7 (``estimator_status`` with ``nan_flags``) numbered
     ``gps_check_fail_flags`` and ``control_mode_flags`` differently; their bits are named by
     this table all the same.
@@ -122,6 +123,7 @@ SRC_LAYOUT = {
     "EKF_STATUS_REPORT": "mavlink_ekf",
     "ESTIMATOR_STATUS": "px4",
     "estimator_status": "px4",
+    "estimator_status_flags": "px4",
 }
 #: The flag columns of the stream, in display order.
 FLAG_COLUMNS = ("solution_flags", "fault_flags", "innovation_fail_flags", "gps_check_flags",
@@ -142,7 +144,7 @@ def bit_names(src: str, column: str, meta: dict | None = None) -> dict[int, str]
     """``{bit: name}`` of flag ``column`` in rows from ``src`` (empty when unknown); names that
     the log itself gives (``meta['estimator_status'][column]``, a list in bit order) win."""
     own = ((meta or {}).get("estimator_status") or {}).get(column)
-    if str(src) == "estimator_status" and isinstance(own, list):
+    if str(src) in ("estimator_status", "estimator_status_flags") and isinstance(own, list):
         return {k: str(n) for k, n in enumerate(own)}
     return dict(LAYOUTS.get(layout_of(src, meta) or "", {}).get(column, {}))
 

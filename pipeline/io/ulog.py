@@ -54,8 +54,11 @@ initial + changed parameters               ``params``         initial at ``t_ns 
                                                               instance (multi_id)
 =========================================  =================  ===================================
 
-``estimator_status_flags`` (PX4 1.12+, one boolean per bit, published on change) is not a
-stream: it repeats ``estimator_status``'s bits. It tells which layout the log's bit fields use,
+``estimator_status_flags`` (PX4 1.12+, one boolean per bit, published on change) mostly repeats
+``estimator_status``'s bits; where ``estimator_status`` has no ``innovation_check_flags`` (PX4
+1.14+) its ``reject_*`` booleans become ``estimator_status`` rows (``src``
+``estimator_status_flags``) whose ``innovation_fail_flags`` bit ``k`` is the ``k``-th
+``reject_*`` field. The topic also tells which layout the log's bit fields use,
 recorded in ``meta['estimator_status']['layout']`` (:mod:`pipeline.io.estimator_bits`): a log
 whose ``fs_*`` fields include ``fs_bad_vel_n``, or without the topic, has the legacy 0-17
 ``filter_fault_flags``; otherwise the current one (bit 9 unused, 10 ``bad_acc_vertical``). Its
@@ -214,6 +217,9 @@ class ULogReader(LogReader):
             add("vibration", _vibration(d, conv))
         for d in topics.get("estimator_status", []):
             add("estimator_status", _estimator_status(d, conv))
+        if not any("innovation_check_flags" in d.data for d in topics.get("estimator_status", [])):
+            for d in topics.get("estimator_status_flags", []):  # PX4 1.14+: rejections only here
+                add("estimator_status", _estimator_rejections(d, conv))
 
         out = {k: pd.concat(v, ignore_index=True) if len(v) > 1 else v[0] for k, v in streams.items()}
         if conv.n_before_start:
@@ -626,6 +632,20 @@ def _estimator_status(d, conv: _Conv) -> pd.DataFrame | None:
     return conv.frame(d, cols)
 
 
+def _estimator_rejections(d, conv: _Conv) -> pd.DataFrame | None:
+    """``estimator_status_flags`` ``reject_*`` booleans packed into ``innovation_fail_flags``,
+    bit ``k`` = the ``k``-th ``reject_*`` field of the topic (the names recorded in
+    ``meta['estimator_status']['innovation_fail_flags']``); one row per record (the topic is
+    published on change, so a bit holds until the next record)."""
+    reject = [f for f in d.data if f.startswith("reject_")]
+    if not reject:
+        return None
+    packed = np.zeros(len(d.data["timestamp"]), np.int64)
+    for k, f in enumerate(reject):
+        packed |= (np.asarray(d.data[f]) != 0).astype(np.int64) << k
+    return conv.frame(d, {"innovation_fail_flags": packed})
+
+
 def _estimator_layout(topics: dict) -> dict:
     """Which bit layout the log's ``estimator_status`` uses (see the module docstring)."""
     flags = topics.get("estimator_status_flags", [])
@@ -633,7 +653,7 @@ def _estimator_layout(topics: dict) -> dict:
     fs = [f for f in fields if f.startswith("fs_")]
     out = {"layout": "px4" if fs and "fs_bad_vel_n" not in fs else "px4_legacy"}
     reject = [f for f in fields if f.startswith("reject_")]
-    if reject and any("innovation_check_flags" in d.data for d in topics.get("estimator_status", [])):
+    if reject:  # they name innovation_check_flags (PX4 1.12-1.13) or the packed estimator_status_flags rows
         out["innovation_fail_flags"] = reject
     return out
 

@@ -276,7 +276,7 @@ def real_ulg(request):
 def test_ulog_estimator_status_equals_pyulog_on_the_real_logs(real_ulg):
     rel, log, u = real_ulg
     ds = [d for d in u.data_list if d.name == "estimator_status"]
-    e = log["estimator_status"]
+    e = _src(log, "estimator_status")
     assert len(e) == sum(len(d.data["timestamp"]) for d in ds) > 0
     for d in ds:
         rows = e[e["instance"] == d.multi_id].reset_index(drop=True)
@@ -299,7 +299,9 @@ def test_ulog_estimator_status_equals_pyulog_on_the_real_logs(real_ulg):
 
 def test_ulog_layout_follows_the_logs_own_estimator_status_flags():
     new, old = _real(REAL_ULG[0]), _real(REAL_ULG[1])
-    assert new.meta["estimator_status"] == {"layout": "px4"}  # no innovation_check_flags: no names
+    assert new.meta["estimator_status"] == {"layout": "px4", "innovation_fail_flags": [
+        "reject_hor_vel", "reject_ver_vel", "reject_hor_pos", "reject_ver_pos", "reject_yaw", "reject_airspeed",
+        "reject_sideslip", "reject_hagl", "reject_optflow_x", "reject_optflow_y"]}  # the log's own names
     assert old.meta["estimator_status"] == {"layout": "px4_legacy"}  # PX4 1.9: no estimator_status_flags
     # ekf_failure.ulg: filter_fault_flags 1024 is the vertical-accelerometer fault in PX4 1.15
     faults = bits.bits_set(new["estimator_status"]["fault_flags"])
@@ -307,6 +309,24 @@ def test_ulog_layout_follows_the_logs_own_estimator_status_flags():
     assert bits.bit_name("estimator_status", "fault_flags", 10, new.meta) == "bad_acc_vertical"
     assert bits.bit_name("estimator_status", "fault_flags", 10, old.meta) == "bad_vel_e"
     assert bits.bit_name("estimator_status", "gps_check_flags", 5, new.meta) == "max_spd_err"
+
+
+def test_px4_1_15_rejections_come_from_estimator_status_flags_packed_in_field_order():
+    """ekf_failure.ulg (PX4 1.15) logs no innovation_check_flags: its estimator_status_flags
+    ``reject_*`` booleans become rows whose bit k is the k-th reject field (pyulog's values)."""
+    import pyulog
+
+    log = _real(REAL_ULG[0])
+    f = pyulog.ULog(str(realdata_file(REAL_ULG[0]))).get_dataset("estimator_status_flags").data
+    rows = _src(log, "estimator_status_flags")
+    assert len(rows) == len(f["timestamp"]) == 91
+    names = log.meta["estimator_status"]["innovation_fail_flags"]
+    want = sum((f[n].astype(np.int64) != 0).astype(np.int64) << k for k, n in enumerate(names))
+    assert np.array_equal(_int(rows["innovation_fail_flags"]), want)
+    assert rows[[c for c in bits.FLAG_COLUMNS if c != "innovation_fail_flags"]].isna().all().all()
+    assert bits.bit_name("estimator_status_flags", "innovation_fail_flags", 2, log.meta) == "reject_hor_pos"
+    # motor_failure.ulg (PX4 1.9) has innovation_check_flags and no such topic: no extra rows
+    assert set(_real(REAL_ULG[1])["estimator_status"]["src"].astype(str)) == {"estimator_status"}
 
 
 def test_px4_bit_tables_match_the_field_order_of_a_real_estimator_status_flags():
@@ -373,6 +393,7 @@ def test_ulog_fixture_with_two_instances_and_reject_names(tmp_path):
         assert rows["mag_test_ratio"].isna().all() and rows["timeout_flags"].isna().all()
     assert log.meta["estimator_status"] == {
         "layout": "px4", "innovation_fail_flags": ["reject_hor_vel", "reject_ver_vel", "reject_hor_pos"]}
+    assert set(e["src"].astype(str)) == {"estimator_status"}  # innovation_check_flags logged: no packed rows
     assert bits.bit_name("estimator_status", "innovation_fail_flags", 2, log.meta) == "reject_hor_pos"
     assert bits.bit_name("estimator_status", "control_mode_flags", 44, log.meta) == "gnss_vel"
     assert bits.bit_name("estimator_status", "control_mode_flags", 43, log.meta) == "bit 43"

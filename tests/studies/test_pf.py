@@ -77,3 +77,62 @@ def test_the_seed_001_part_writes_its_checks_and_the_config_values_fixed_before_
     summ, cfg = tiny.table("geo_summary"), tiny.table("geo_config")
     assert {"base", "maneuvering", "mobile", "particles_10", "observers_2"} <= set(summ["case"])
     assert {"focal_px", "sigma_px"} <= set(cfg["key"])
+
+
+def test_the_cv_kalman_oracle_is_the_filters_actual_error_on_a_noise_free_track_not_its_nominal_std():
+    # an independent Monte Carlo: the steady-state-gain CV filter run on a constant-velocity truth
+    sa, sm = 2.0, 1.0
+    F, G, H = np.array([[1.0, 1.0], [0.0, 1.0]]), np.array([[0.5], [1.0]]), np.array([[1.0, 0.0]])
+    P = np.eye(2) * 10.0
+    for _ in range(500):   # the steady-state gain by iterating the Riccati recursion
+        P = F @ P @ F.T + sa ** 2 * G @ G.T
+        K = P @ H.T / (H @ P @ H.T + sm ** 2)
+        P = (np.eye(2) - K @ H) @ P
+    rng = np.random.default_rng(0)
+    n, T = 4000, 60
+    x = np.zeros((n, 2))
+    x[:, 1] = 1.4
+    xh = x + rng.standard_normal((n, 2))
+    for _ in range(T):
+        x = x @ F.T
+        xh = xh @ F.T
+        z = x[:, 0] + sm * rng.standard_normal(n)
+        xh = xh + (z - xh[:, 0])[:, None] * K[:, 0][None, :]
+    sd = (xh - x).std(axis=0)
+    pos, vel = spf.cv_kf_error_on_cv_truth(sa, sm)
+    assert vel == pytest.approx(sd[1], rel=0.05) and pos == pytest.approx(sd[0], rel=0.05)
+    assert vel == pytest.approx(0.946, abs=0.002)
+    nominal = spf.cv_kf_steady_state(sa, sm)[1]
+    assert nominal == pytest.approx(np.sqrt(P[1, 1]), rel=1e-6) and nominal == pytest.approx(1.572, abs=0.002)
+    assert nominal > 1.5 * vel
+
+
+def test_the_ideal_likelihood_straight_fraction_bound_matches_the_two_state_closed_form():
+    from pipeline.estimate.weave import HmpfConfig
+    # S <-> W only; entering W starts at a curve (A3 'curve'), which survives only by switching to
+    # its straight at once (p1); a weave straight survives when it stays in W and does not switch
+    a, p1 = 0.1, 0.3
+    pi = [[1 - a, 0, 0, a], [1, 0, 0, 0], [1, 0, 0, 0], [a, 0, 0, 1 - a]]
+    c = HmpfConfig.from_config({}).with_(pi_m=tuple(map(tuple, pi)), p1=p1, enter_submode="curve",
+                                         delta_max_m=1e12)
+    f = spf.straight_fraction_bound(c, 1.0, kill_after=1, steps=150, n=30000, startup=50,
+                                    rng=np.random.default_rng(1))
+    A = np.array([[1 - a, a], [a * p1, (1 - a) * (1 - p1)]])   # new [S, W] = A @ old
+    w, v = np.linalg.eig(A)
+    v = np.abs(v[:, np.argmax(w.real)].real)
+    assert f[1] == f[2] == 0.0
+    np.testing.assert_allclose(f[[0, 3]], v / v.sum(), atol=0.004)
+
+
+def test_with_pi_m_4_2_even_an_ideal_likelihood_keeps_the_straight_fraction_near_0_95():
+    from pipeline.estimate.weave import HmpfConfig
+    st = {**spf.DEFAULTS}
+    d, t = spf.weave_truth_max(st)
+    c = HmpfConfig.from_config({}).with_(delta_max_m=1.2 * d, theta_max_rad=1.2 * t)
+    f1 = spf.straight_fraction_bound(c, st["speed_mps"], kill_after=1, steps=200, n=20000,
+                                     rng=np.random.default_rng(2))
+    f2 = spf.straight_fraction_bound(c, st["speed_mps"], kill_after=2, steps=200, n=20000,
+                                     rng=np.random.default_rng(3))
+    assert 0.94 < f1[0] < 0.96 and f2[0] < f1[0] - 0.01
+    with pytest.raises(ValueError, match="theta"):
+        spf.straight_fraction_bound(c.with_(theta_max_rad=0.2), 1.0, kill_after=1)

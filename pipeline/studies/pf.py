@@ -440,6 +440,13 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     checks.append(("weave flagged within 80 steps of the 3rd turn (GPS)", f"{n_in80}/{R_} seeds", "every seed",
                    n_in80 == R_))
 
+    # the straight track's false alarms by when they start: at the first step the detector may
+    # flag (k = startup + 1, AF still the mean over the start-up, whose uniform initial modes relax
+    # through Π_m's 0.97 weave self-transition) or later
+    at_start = int((s_gps["first_flag_step"] == startup + 1).sum())
+    res.add("pf_hmpf_straight_flagged_at_startup_end_seeds", f"{at_start}/{int(s_gps['ever_flagged'].sum())}",
+            "Straight GPS track: flagged seeds whose first flag is the first step after the 25 start-up steps "
+            "(the start-up's weave fraction still in AF), over all flagged seeds.")
     for nm, df in (("straight", s_gps), ("pi_turn", p_gps)):
         n_never = int((~df["ever_flagged"]).sum())
         res.add(f"pf_hmpf_{nm}_never_flagged_seeds", f"{n_never}/{R_}",

@@ -162,7 +162,7 @@ def _hmpf_scenario(name, sensor, n_particles, seeds=20, seed=20261123):
     "give 0.950 (0.926 at the second; pf_hmpf_straight_frac_bound_*); measured 0.845 mean, 0/20 seeds, at "
     "2,000 particles (0.874 at 20,000)"))
 def test_issue17_straight_tracks_keep_a_straight_fraction_of_0_95_in_19_of_20_seeds():
-    _, out = _hmpf_scenario("straight", "gps", 400)
+    _, out = _hmpf_scenario("straight", "gps", 200)
     frac = out.mode_p[:, 25:, 0].mean(axis=1)
     assert int((frac >= 0.95).sum()) >= 19, np.round(frac, 3)
 
@@ -173,7 +173,7 @@ def test_issue17_straight_tracks_keep_a_straight_fraction_of_0_95_in_19_of_20_se
     "has an actual velocity error of 0.946 m/s even with a 1 m GPS on a noise-free straight "
     "(pf_hmpf_cv_kf_vel_error_cv_truth_mps); measured 1.02 m/s at 2,000 particles (position 3.61 m, <= 4 met)"))
 def test_issue17_the_radar_weave_velocity_rms_is_at_most_0_4_mps():
-    tr, out = _hmpf_scenario("weave", "radar", 500, seeds=4)
+    tr, out = _hmpf_scenario("weave", "radar", 300, seeds=4)
     ev = out.mean[:, 25:, 2:4] - tr.state[None, 25:, 2:4]
     vel = float(np.sqrt(np.mean(np.sum(ev * ev, axis=-1) / 2.0, axis=1)).mean())
     assert vel <= 0.4, vel
@@ -185,6 +185,18 @@ def test_issue17_the_radar_weave_velocity_rms_is_at_most_0_4_mps():
     "thesis's own §4.2.3 reading; it never ran the detector on this track); measured 7/20 at 2,000 particles, "
     "5/20 at 20,000"))
 def test_issue17_pi_turn_tracks_are_never_flagged_in_19_of_20_seeds():
-    _, out = _hmpf_scenario("pi_turn", "gps", 400)
+    _, out = _hmpf_scenario("pi_turn", "gps", 200)
+    never = int((~out.weave_detected.any(axis=1)).sum())
+    assert never >= 19, never
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "issue 17: straight tracks never flagged in >= 19/20 seeds. At 2,000 particles every false alarm starts at "
+    "the first step after the 25 start-up steps (pf_hmpf_straight_flagged_at_startup_end_seeds): the modes start uniform "
+    "(thesis §2.4), W relaxes through its 0.97 self-transition and S and W straights share the CM, so AF over "
+    "steps 1-26 averages about 0.2 with a seed spread from particle drift; measured 14/20 at 2,000 particles, "
+    "15/20 at 6,500, 17/20 at 20,000"))
+def test_issue17_straight_tracks_are_never_flagged_in_19_of_20_seeds():
+    _, out = _hmpf_scenario("straight", "gps", 200)
     never = int((~out.weave_detected.any(axis=1)).sum())
     assert never >= 19, never

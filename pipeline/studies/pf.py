@@ -277,8 +277,8 @@ def write_report(path, size, st, seed, runs: pd.DataFrame, checks: list[tuple[st
           "curve particles stay in their curve at 0.97·0.95 per step against a left curve's 0.66, so W peaks in "
           "and after the turn — the thesis's own §4.2.3 reading (it never ran the detector on that track). At 0.8× "
           "the forced switches (p2 = 0.95 at δ_max, θ_max) fall near the true segment ends for the particles that "
-          "entered a segment late, which keeps them in step with the weave; the measured weave fraction is then "
-          "not lower than at 1.2×.",
+          "entered a segment late, plausibly keeping them in step with the weave (a reading, not verified); the "
+          "measured weave fraction is not lower than at 1.2×.",
           "", f"Range criterion (§5.3.1): a 500 m straight lies within ±3σ_b beyond r = {crit_m:,.0f} m "
           "(thesis ≈ 16,700 m).", "",
           "### Per scenario (means over seeds)", ""]

@@ -45,7 +45,9 @@ Per particle and step k (digest 003 §5):
 
 The detector (§6): ``AF(k)`` is the mean of the weave fraction F over the last N = 80 steps
 (over all steps so far while k < N); a weave is declared while ``AF(k) ≥ τ = 0.269``, never
-during the first 25 steps.
+during the first 25 steps. k counts the filter's steps 1..T (index 1 on): index 0 is the
+initial cloud (modes uniform, no measurement weighed), which the thesis does not output, so
+it is in neither the average nor the start-up count (its ``af`` is NaN).
 
 Vectorised over runs and particles: arrays ``(R, N)``. The per-particle logic (mode and
 submode draws, the leaf's noise, the counters, the guard, the weighted statistics) runs in
@@ -260,7 +262,8 @@ class HmpfTrack:
         N_eff = 1/Σw² before resampling.
     resampled : ndarray of bool (R, T)
     af : ndarray (R, T)
-        The detector's windowed weave fraction AF(k).
+        The detector's windowed weave fraction AF(k) over F at indices 1..k (NaN at index 0,
+        the initial cloud).
     weave_detected : ndarray of bool (R, T)
     n_reinit : ndarray of int (R,)
         Steps where every weight was zero and the cloud was re-initialised around z_k.
@@ -557,6 +560,12 @@ def hmpf_filter(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator)
             resampled[do, k] = True
         logw = np.log(np.maximum(w, 1e-300))
         _fractions(w, m, sm, mode_p[:, k], submode_p[:, k])
-    af, flag = detector(mode_p[..., W], cfg.detector_window, cfg.tau, cfg.startup_steps)
+    # the detector runs over the filter's outputs F(1..T) (thesis §2.4 algorithm: "Output ... for
+    # all time steps k = 1, 2, ..., T"; §6: AF(k) = (1/k) Σ_{i=1..k} F(i)): index 0 is the initial
+    # cloud, spread uniformly over the modes (F = 1/4 by construction, no measurement weighed),
+    # so it enters neither the average nor the 25 start-up steps; its AF is NaN, never flagged
+    af = np.full((R_, T), np.nan)
+    flag = np.zeros((R_, T), dtype=bool)
+    af[:, 1:], flag[:, 1:] = detector(mode_p[:, 1:, W], cfg.detector_window, cfg.tau, cfg.startup_steps)
     return HmpfTrack(mean=mean, cov=cov, mode_p=mode_p, submode_p=submode_p, neff=neff, resampled=resampled,
                      af=af, weave_detected=flag, n_reinit=n_reinit, n_guarded=n_guarded)

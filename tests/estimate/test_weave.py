@@ -153,3 +153,20 @@ def test_fast_trend_the_radar_filter_tracks_the_weave_near_the_site(cfg):
     out = hmpf_filter(radar_measure(wv, 2, rng), RadarSensor(), cfg.with_(n_particles=600), rng)
     e = out.mean[:, 25:, :2] - wv.state[None, 25:, :2]
     assert np.sqrt(np.mean(e ** 2)) < 8.0
+
+
+def test_the_detector_averages_the_filter_outputs_from_step_1_and_never_the_initial_cloud(cfg):
+    # thesis §2.4: the filter outputs k = 1..T and §6 averages F(1..k); index 0 is the initial
+    # cloud (modes uniform by construction), so it is neither averaged nor counted as start-up
+    tr = straight_track(60)
+    out = hmpf_filter(gps_measure(tr, 2, np.random.default_rng(4)), GpsSensor(), cfg.with_(n_particles=300),
+                      np.random.default_rng(6))
+    np.testing.assert_allclose(out.mode_p[:, 0], 0.25, atol=0.1)   # the uniform initial spread
+    assert np.all(np.isnan(out.af[:, 0])) and not out.weave_detected[:, 0].any()
+    F = out.mode_p[:, 1:, 3]
+    np.testing.assert_allclose(out.af[:, 1], F[:, 0])                      # AF(1) = F(1)
+    np.testing.assert_allclose(out.af[:, 25], F[:, :25].mean(axis=1))      # AF(25) = mean F(1..25)
+    af, flag = detector(F, cfg.detector_window, cfg.tau, cfg.startup_steps)
+    np.testing.assert_allclose(out.af[:, 1:], af)
+    np.testing.assert_array_equal(out.weave_detected[:, 1:], flag)
+    assert not out.weave_detected[:, :26].any()   # steps 1..25 ignored

@@ -30,6 +30,7 @@ import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pipeline.estimate.camera import pack_detections  # noqa: E402
+from pipeline.estimate.models import GEO_STATE  # noqa: E402
 from pipeline.simulate.geolocation import (GeolocationConfig, detect, make_filter, mobile_observers,  # noqa: E402
                                            observer_poses)
 
@@ -45,8 +46,9 @@ def _scene(n_obs: int, cfg: GeolocationConfig, rng: np.random.Generator) -> np.n
 def _filter(n: int, cfg: GeolocationConfig, rng: np.random.Generator):
     pf = make_filter(cfg, cv_only=False, n_particles=n, rng=rng)
     pf.every_step = True
-    mean = np.array([20.0, 10.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0])
-    pf.init(mean=mean, cov=np.diag([100.0, 100.0, 9.0, 9.0, 0.0, 0.0, 0.0, 0.0]))
+    mean = np.zeros(len(GEO_STATE))
+    mean[:4] = [20.0, 10.0, 1.0, 1.0]
+    pf.init(mean=mean, cov=np.diag([100.0, 100.0, 9.0, 9.0] + [0.0] * (len(GEO_STATE) - 4)))
     return pf
 
 

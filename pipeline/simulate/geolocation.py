@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from ..estimate.camera import CameraLikelihood, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
 from ..estimate.markov import retime
-from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_STATE, PfConstantVelocity, PfDownRandomWalk,
+from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfConstantVelocity, PfDownRandomWalk,
                                driving_mode_models, wrap_angle)
 from ..estimate.pf import ParticleFilter
 
@@ -369,8 +369,9 @@ def init_filter(pf: ParticleFilter, row: F64, cfg: GeolocationConfig, fallback: 
     """
     sp, sv, sd = cfg.init["sigma_pos_m"], cfg.init["sigma_vel_mps"], cfg.init["sigma_down_m"]
     mean = np.zeros(len(GEO_STATE))
-    cov = np.diag([0.0, 0.0, sv ** 2, sv ** 2, 0.0, 0.0, 0.0, sd ** 2 if cfg.estimate_down else 0.0])
+    cov = np.diag([0.0, 0.0, sv ** 2, sv ** 2, 0.0, 0.0, 0.0, sd ** 2 if cfg.estimate_down else 0.0, 0.0])
     pf.init(mean=mean, cov=cov, mode_p=None if pf.K > 1 else None)
+    pf.x[:, GEO_IX_HEADING] = np.arctan2(pf.x[:, 3], pf.x[:, 2])
     p = (pf.likelihood.sample_positions(row, pf.N, pf.rng) if np.all(np.isfinite(row))
          else np.full((pf.N, 3), np.nan))
     bad = ~np.all(np.isfinite(p[:, :2]), axis=1)

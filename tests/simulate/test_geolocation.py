@@ -152,3 +152,28 @@ def test_the_initial_particles_cover_the_target_even_from_one_grazing_mobile_obs
     # 50 particles drawn from one 0.3 rad ray at ~200 m and 30 m height: the target lies inside
     # the cloud's N/E extent in 18/20 runs (a 10 m spread around the mean ray-ground point: 7/20)
     assert sum(covered) >= 16
+
+
+def test_a_stopped_particle_accelerates_along_the_heading_it_stopped_with():
+    from pipeline.estimate.models import GEO_IX_HEADING, GEO_STATE
+
+    rng = np.random.default_rng(21)
+    models = driving_mode_models(estimate_down=False)
+    x = np.zeros((400, len(GEO_STATE)))
+    h = rng.uniform(-np.pi, np.pi, 400)
+    x[:, 2], x[:, 3] = 4.0 * np.cos(h), 4.0 * np.sin(h)
+    # DECEL to rest, or a switch to STOP while moving, then rest for a while, then ACCEL
+    decel = PfAlongTrackAcceleration(-1, (0.5, 2.0), sigma_j=0.0)
+    xd = decel.enter(x[:200], rng)
+    for _ in range(400):
+        xd = decel.propagate(xd, 0.025, rng)
+    xs = np.vstack([xd, models[STOP].enter(x[200:], rng)])
+    assert np.allclose(xs[:, 2:4], 0.0)
+    for _ in range(40):
+        xs = models[STOP].propagate(xs, 0.025, rng)
+    xa = models[ACCEL].enter(xs, rng)
+    # digest §7: "acceleration acts along the velocity (or the heading when stopped)"
+    assert np.allclose(np.arctan2(xa[:, 6], xa[:, 5]), h, atol=0.05)
+    assert np.allclose(xs[:, GEO_IX_HEADING], h, atol=0.05)
+    # a state without the heading column keeps the old behaviour (N)
+    assert np.allclose(models[ACCEL].enter(np.zeros((5, 7)), rng)[:, 6], 0.0)

@@ -346,13 +346,19 @@ def roughen(pf: ParticleFilter, K: float) -> None:
     Each component ``j`` of :data:`ROUGHEN_INDEX` gets ``N(0, (K E_j N^{−1/d})²)`` jitter, ``E_j``
     the particles' range in it and ``d`` the number of roughened components: resampled copies
     of one particle separate again, which the small 40 Hz process noise alone does not do.
+    ``d`` counts the components that vary (``E_j > 0``): D on the ground plane (not estimated,
+    digest D7) is constant and is not a dimension of the state being roughened (the first
+    version counted it, d = 5 instead of 4).
     """
     if K <= 0:
         return
     idx = list(ROUGHEN_INDEX)
     X = pf.x[:, idx]
     E = X.max(axis=0) - X.min(axis=0)
-    sig = K * E * pf.N ** (-1.0 / len(idx))
+    d = int(np.count_nonzero(E > 0))
+    if d == 0:
+        return
+    sig = K * E * pf.N ** (-1.0 / d)
     pf.x[:, idx] = X + sig[None, :] * pf.rng.standard_normal(X.shape)
 
 

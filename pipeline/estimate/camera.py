@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
@@ -406,14 +407,17 @@ def camera_loglik(x: ArrayLike, row: ArrayLike, camera: PinholeCamera, *, pos_in
                   d_index: int | None = None, ground_d: float = 0.0, parallel: bool | None = None) -> F64:
     """``Σ_o log N(h_o(x); z_o, σ_o² I₂)`` per particle (seed 001 (3.42)); −∞ behind a camera.
 
-    ``parallel`` None runs on numba's thread pool from :data:`PARALLEL_FROM` particles on;
+    ``parallel`` None runs on numba's thread pool from :data:`PARALLEL_FROM` particles on
+    (when the pool has more than one thread);
     True/False forces it (the result is the same).
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
     obs = np.ascontiguousarray(np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS))
     out = np.empty(len(x))
     cu, cv = camera.principal
-    par = len(x) >= PARALLEL_FROM if parallel is None else bool(parallel)
+    # one numba thread: the parallel kernel is the serial loop plus the pool's start-up, so the
+    # kernel (and the per-particle cost) does not change at PARALLEL_FROM
+    par = (len(x) >= PARALLEL_FROM and numba.get_num_threads() > 1) if parallel is None else bool(parallel)
     kernel = _camera_loglik_parallel if par else _camera_loglik_serial
     kernel(x, int(pos_index[0]), int(pos_index[1]), -1 if d_index is None else int(d_index), float(ground_d),
            obs, float(camera.focal_px), float(cu), float(cv), out)

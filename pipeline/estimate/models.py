@@ -1267,6 +1267,38 @@ class PfDownRandomWalk:
         return enter(x, rng) if enter is not None else np.asarray(x, dtype=np.float64)
 
 
+@dataclass(frozen=True)
+class PfBlocked:
+    """Run a mode model's ``propagate``/``enter`` over blocks of ``block`` particles.
+
+    The same model, applied block by block: each block's temporaries (a dozen (block, 9)
+    arrays per step) stay in the CPU cache, so the cost per particle does not grow once N's
+    arrays outgrow it (10⁶ particles cost ~45 % more per particle than 10⁵ unblocked). At
+    N ≤ ``block`` it is the model itself (the same random draws).
+    """
+
+    model: Any
+    block: int = 16384
+
+    def _blocks(self, fn, x: ArrayLike, *args) -> F64:
+        x = np.asarray(x, dtype=np.float64)
+        if len(x) <= self.block:
+            return fn(x, *args)
+        out = np.empty_like(x)
+        for i in range(0, len(x), self.block):
+            out[i:i + self.block] = fn(x[i:i + self.block], *args)
+        return out
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        return self._blocks(self.model.propagate, x, dt, rng)
+
+    def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
+        enter = getattr(self.model, "enter", None)
+        if enter is None:
+            return np.asarray(x, dtype=np.float64)
+        return self._blocks(enter, x, rng)
+
+
 def driving_mode_models(*, stop_sigma_a: float = 0.05, accel_sigma_j: float = 0.5, coast_sigma_a: float = 0.3,
                         turn_sigma_a: float = 0.3, turn_sigma_omega: float = 0.05, down_sigma: float = 0.2,
                         accel: tuple[float, float] = (0.5, 2.0), omega: tuple[float, float] = (0.05, 0.3),

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from ..estimate.camera import CameraLikelihood, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
 from ..estimate.markov import retime
-from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfConstantVelocity, PfDownRandomWalk,
+from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfBlocked, PfConstantVelocity, PfDownRandomWalk,
                                driving_mode_models, wrap_angle)
 from ..estimate.pf import ParticleFilter
 
@@ -332,6 +332,8 @@ def make_filter(cfg: GeolocationConfig, *, cv_only: bool, n_particles: int | Non
     else:
         models = driving_mode_models(**nz, accel=cfg.accel_mps2, omega=cfg.omega_radps, estimate_down=down)
         Pi = PI_P
+    # block-wise propagation: the same models, cache-sized blocks at 10⁵–10⁶ particles
+    models = [PfBlocked(m) for m in models]
     return ParticleFilter(models, Pi, lik, n_particles=int(n_particles or cfg.n_particles), resample="systematic",
                           threshold=float(cfg.threshold), dt_ref=1.0 / PI_RATE_HZ, rng=rng)
 

@@ -24,6 +24,14 @@ estimate (4.44–4.46), at the first step at the true target (acquisition assume
 Detections: the noise-free projection must fall inside the image; the detection is that plus
 ``N(0, σ_px²)`` per axis, ``σ_px = f tan σ_ψ``.
 
+Initialisation (seed 001 §2.1, "a rough distribution built from the first measurement(s)"):
+every particle is the least-squares ray intersection of the first detections re-noised by σ_px
+(:func:`~pipeline.estimate.camera.sample_fixes`, digest §3), so the cloud has the spread of a
+fix from those detections; the first step then only takes the estimate.
+
+Randomness: each run splits its generator into target, observer-start, per-observer pixel-noise
+and filter streams, so the truth and the detections do not depend on N or on the observer count.
+
 Filter: :class:`~pipeline.estimate.pf.ParticleFilter` with the D4 mode models
 (:func:`~pipeline.estimate.models.driving_mode_models`), the PF matrix Π_p (Table 6.1,
 :data:`PI_P`), systematic resampling at N_eff < N/3, and the multi-observer

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
@@ -232,6 +233,68 @@ def ray_intersection(origins: ArrayLike, directions: ArrayLike) -> F64:
     return np.linalg.solve(P.sum(axis=0), np.einsum("kij,kj->i", P, o))
 
 
+def sample_fixes(row: ArrayLike, camera: PinholeCamera, n: int, rng: np.random.Generator, *,
+                 ground_d: float = 0.0, on_ground: bool = True, max_tries: int = 50) -> F64:
+    """``n`` target positions drawn from one step's detections: the "rough distribution built
+    from the first measurement(s)" of seed 001 §2.1 (digest §1 *Init*), also used to re-initialise.
+
+    Each draw perturbs every valid detection of the packed ``row`` (:func:`pack_detections`) by
+    its own measurement noise ``N(0, σ_px² I₂)``, back-projects the rays (:meth:`PinholeCamera.ray`)
+    and takes their least-squares intersection ``p* = (Σ(I − uuᵀ))⁻¹ Σ(I − uuᵀ) o`` (digest §3,
+    "for initialization"); with ``on_ground`` (digest D7) ``p*`` is restricted to the plane
+    ``D = ground_d``, which for a single ray is its ground intersection. A draw whose point is
+    behind one of the cameras (a ray pointing above the horizon, say) is drawn again, up to
+    ``max_tries`` times; rows still without a point are NaN.
+
+    The spread of the draws is thus the spread of a fix from these detections: at a 0.3 rad
+    bearing error and grazing rays it is hundreds of metres, which a fixed spread around the
+    mean ray–ground intersection (the first version) did not cover, so the filter started far
+    from the target with no particle near it.
+
+    Returns
+    -------
+    (n, 3) float, NED.
+    """
+    obs = np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS)
+    obs = obs[obs[:, 0] > 0.5] if np.all(np.isfinite(obs[:, 0])) else obs[:0]
+    out = np.full((int(n), 3), np.nan)
+    if len(obs) == 0 or n <= 0:
+        return out
+    T = homogeneous(obs[:, 7:16].reshape(-1, 3, 3), obs[:, 4:7])           # (O, 4, 4)
+    axis = T[:, :3, 2]                                                        # optical axes (O, 3)
+    plane = bool(on_ground) or len(obs) == 1
+    todo = np.arange(int(n))
+    for _ in range(int(max_tries)):
+        m = len(todo)
+        uv = obs[None, :, 1:3] + obs[None, :, 3:4] * rng.standard_normal((m, len(obs), 2))
+        o, u = camera.ray(uv, np.broadcast_to(T, (m,) + T.shape))          # (m, O, 3)
+        P = np.eye(3) - u[..., :, None] * u[..., None, :]                    # (m, O, 3, 3)
+        if plane:
+            og = o.copy()
+            og[..., 2] -= ground_d
+            A = P[..., :2, :2].sum(axis=1)
+            b = np.einsum("moij,moj->mi", P[..., :2, :], og)
+            with np.errstate(all="ignore"):
+                ok = np.abs(np.linalg.det(A)) > 1e-12
+                q = np.full((m, 2), np.nan)
+                q[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
+            p = np.column_stack([q, np.full(m, float(ground_d))])
+        else:
+            A = P.sum(axis=1)
+            b = np.einsum("moij,moj->mi", P, o)
+            with np.errstate(all="ignore"):
+                ok = np.abs(np.linalg.det(A)) > 1e-12
+                p = np.full((m, 3), np.nan)
+                p[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
+        front = np.all(np.einsum("moj,oj->mo", p[:, None, :] - T[None, :, :3, 3], axis) > 0, axis=1)
+        good = np.all(np.isfinite(p), axis=1) & front
+        out[todo[good]] = p[good]
+        todo = todo[~good]
+        if len(todo) == 0:
+            break
+    return out
+
+
 # --- packed measurement rows ----------------------------------------------------------------------
 def pack_detections(uv: ArrayLike, sigma_px: ArrayLike, T_wc: ArrayLike) -> F64:
     """One PF measurement row from O observers' detections (module docstring).
@@ -344,14 +407,17 @@ def camera_loglik(x: ArrayLike, row: ArrayLike, camera: PinholeCamera, *, pos_in
                   d_index: int | None = None, ground_d: float = 0.0, parallel: bool | None = None) -> F64:
     """``Σ_o log N(h_o(x); z_o, σ_o² I₂)`` per particle (seed 001 (3.42)); −∞ behind a camera.
 
-    ``parallel`` None runs on numba's thread pool from :data:`PARALLEL_FROM` particles on;
+    ``parallel`` None runs on numba's thread pool from :data:`PARALLEL_FROM` particles on
+    (when the pool has more than one thread);
     True/False forces it (the result is the same).
     """
     x = np.ascontiguousarray(x, dtype=np.float64)
     obs = np.ascontiguousarray(np.asarray(row, dtype=np.float64).reshape(-1, OBS_FIELDS))
     out = np.empty(len(x))
     cu, cv = camera.principal
-    par = len(x) >= PARALLEL_FROM if parallel is None else bool(parallel)
+    # one numba thread: the parallel kernel is the serial loop plus the pool's start-up, so the
+    # kernel (and the per-particle cost) does not change at PARALLEL_FROM
+    par = (len(x) >= PARALLEL_FROM and numba.get_num_threads() > 1) if parallel is None else bool(parallel)
     kernel = _camera_loglik_parallel if par else _camera_loglik_serial
     kernel(x, int(pos_index[0]), int(pos_index[1]), -1 if d_index is None else int(d_index), float(ground_d),
            obs, float(camera.focal_px), float(cu), float(cv), out)
@@ -417,14 +483,28 @@ class CameraLikelihood:
         g = g[np.all(np.isfinite(g), axis=1)]
         return g.mean(axis=0) if len(g) else np.full(3, np.nan)
 
+    def sample_positions(self, z: ArrayLike, n: int, rng: np.random.Generator) -> F64:
+        """(n, 3) positions drawn from the step's detections by :func:`sample_fixes` (on the
+        ground plane when the state has no D)."""
+        return sample_fixes(z, self.camera, n, rng, ground_d=self.ground_d, on_ground=self.d_index is None)
+
     def reinit(self, x: F64, z: F64, rng: np.random.Generator) -> F64:
+        """Particles re-drawn from the step's detections (:meth:`sample_positions`) plus
+        ``N(0, reinit_sigma_m²)`` per horizontal axis; draws without a fix take the mean ground
+        intersection (:meth:`ground_fix`); velocity etc. are kept (digest §13 item 7)."""
         out = np.array(x, dtype=np.float64, copy=True)
+        p = self.sample_positions(z, len(out), rng)
         g = self.ground_fix(z)
-        if not np.all(np.isfinite(g)):
-            return out
-        out[:, list(self.pos_index)] = g[None, :2] + self.reinit_sigma_m * rng.standard_normal((len(out), 2))
+        bad = ~np.all(np.isfinite(p), axis=1)
+        if np.any(bad):
+            if not np.all(np.isfinite(g)):
+                if np.all(bad):
+                    return out
+                g = np.nanmean(p, axis=0)
+            p[bad] = g
+        out[:, list(self.pos_index)] = p[:, :2] + self.reinit_sigma_m * rng.standard_normal((len(out), 2))
         if self.d_index is not None:
-            out[:, self.d_index] = self.ground_d
+            out[:, self.d_index] = p[:, 2]
         return out
 
 

@@ -1160,9 +1160,32 @@ def radar2d_range_criterion(delta_max_m: float, sigma_bearing_rad: float, k_sigm
 # model above keeps; :class:`PfDownRandomWalk` adds its random walk.
 # --------------------------------------------------------------------------------------------
 
-#: the geo-location particle state: PF_STATE + the target's D (m)
-GEO_STATE: tuple[str, ...] = (*PF_STATE, "pos_d_m")
+#: the geo-location particle state: PF_STATE + the target's D (m) + the heading kept while at
+#: rest (rad, from N toward E): digest §7 "acceleration acts along the velocity (or the heading
+#: when stopped)", so a stopped particle must remember where it was pointing
+GEO_STATE: tuple[str, ...] = (*PF_STATE, "pos_d_m", "rest_heading_rad")
 GEO_IX_DOWN = 7
+GEO_IX_HEADING = 8
+
+
+def _remember_heading(x: F64, v: F64) -> None:
+    """In place: particles that are moving (|v| > 1e-9) store ``atan2(v_E, v_N)`` in the heading
+    column, when the state has one (GEO_STATE); resting particles keep theirs."""
+    if x.shape[1] <= GEO_IX_HEADING:
+        return
+    moving = np.hypot(v[:, 0], v[:, 1]) > 1e-9
+    x[moving, GEO_IX_HEADING] = np.arctan2(v[moving, 1], v[moving, 0])
+
+
+def _heading_axes(x: F64) -> F64:
+    """Unit along-track axis (N, 2): ``v/|v|``, or for a particle at rest its remembered heading
+    (GEO_STATE), N when the state has none (the first version's behaviour for every state)."""
+    t, _ = curvilinear_axes(x[:, 2:4])
+    if x.shape[1] > GEO_IX_HEADING:
+        rest = np.hypot(x[:, 2], x[:, 3]) <= 1e-9
+        h = x[rest, GEO_IX_HEADING]
+        t[rest] = np.column_stack([np.cos(h), np.sin(h)])
+    return t
 #: the seed-001 driving modes in the order of Π_d / Π_p (digest 001 §7)
 DRIVING_MODES: tuple[str, ...] = ("STOP", "ACCEL", "DECEL", "COAST", "TURN")
 
@@ -1175,6 +1198,7 @@ class PfStop:
 
     def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
         out = _need(x, 4, "PfStop").copy()
+        _remember_heading(out, out[:, 2:4])
         out[:, 2:4] = 0.0
         out[:, 0:2] += (0.5 * dt * dt * self.sigma_a) * rng.standard_normal((out.shape[0], 2))
         _zero(out, True, True)
@@ -1182,6 +1206,8 @@ class PfStop:
 
     def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
         out = _need(x, 4, "PfStop").copy()
+        # the heading at the stop is kept (GEO_STATE), so a later ACCEL leaves along it
+        _remember_heading(out, out[:, 2:4])
         out[:, 2:4] = 0.0
         return out
 
@@ -1190,7 +1216,8 @@ class PfStop:
 class PfAlongTrackAcceleration:
     """ACCEL (``sign`` +1) or DECEL (−1): CA whose acceleration on entering is ``±|α| v̂``.
 
-    ``|α| ~ U(accel[0], accel[1])`` (m/s²) along the velocity (the heading when at rest: N);
+    ``|α| ~ U(accel[0], accel[1])`` (m/s²) along the velocity, or at rest along the heading
+    remembered in GEO_STATE's ``rest_heading_rad`` (digest §7; N for a state without it);
     then :class:`PfConstantAcceleration` with white jerk ``σ_j``. DECEL does not reverse: a
     particle whose velocity turned against its acceleration is held at rest (the target
     simulator forces DECEL to STOP at v = 0, digest §7).
@@ -1207,13 +1234,16 @@ class PfAlongTrackAcceleration:
         if self.sign < 0:
             rev = np.einsum("ij,ij->i", v0, out[:, 2:4]) < 0
             if np.any(rev):
-                out[rev, 2:4] = 0.0
-                out[rev, 5:7] = 0.0
+                sub = out[rev]
+                _remember_heading(sub, v0[rev])
+                sub[:, 2:4] = 0.0
+                sub[:, 5:7] = 0.0
+                out[rev] = sub
         return out
 
     def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
         out = _need(x, 7, "PfAlongTrackAcceleration").copy()
-        t, _ = curvilinear_axes(out[:, 2:4])
+        t = _heading_axes(out)
         a = rng.uniform(self.accel[0], self.accel[1], out.shape[0]) * (1.0 if self.sign >= 0 else -1.0)
         out[:, 5:7] = t * a[:, None]
         return out
@@ -1235,6 +1265,38 @@ class PfDownRandomWalk:
     def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
         enter = getattr(self.model, "enter", None)
         return enter(x, rng) if enter is not None else np.asarray(x, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class PfBlocked:
+    """Run a mode model's ``propagate``/``enter`` over blocks of ``block`` particles.
+
+    The same model, applied block by block: each block's temporaries (a dozen (block, 9)
+    arrays per step) stay in the CPU cache, so the cost per particle does not grow once N's
+    arrays outgrow it (10⁶ particles cost ~45 % more per particle than 10⁵ unblocked). At
+    N ≤ ``block`` it is the model itself (the same random draws).
+    """
+
+    model: Any
+    block: int = 16384
+
+    def _blocks(self, fn, x: ArrayLike, *args) -> F64:
+        x = np.asarray(x, dtype=np.float64)
+        if len(x) <= self.block:
+            return fn(x, *args)
+        out = np.empty_like(x)
+        for i in range(0, len(x), self.block):
+            out[i:i + self.block] = fn(x[i:i + self.block], *args)
+        return out
+
+    def propagate(self, x: ArrayLike, dt: float, rng: np.random.Generator) -> F64:
+        return self._blocks(self.model.propagate, x, dt, rng)
+
+    def enter(self, x: ArrayLike, rng: np.random.Generator) -> F64:
+        enter = getattr(self.model, "enter", None)
+        if enter is None:
+            return np.asarray(x, dtype=np.float64)
+        return self._blocks(enter, x, rng)
 
 
 def driving_mode_models(*, stop_sigma_a: float = 0.05, accel_sigma_j: float = 0.5, coast_sigma_a: float = 0.3,

@@ -200,6 +200,10 @@ class PfTrack:
     n_particles: int
 
 
+#: rows per block of the covariance sum in :meth:`ParticleFilter.estimate`
+_BLOCK = 16384
+
+
 def _logsumexp(a: F64) -> float:
     m = np.max(a)
     if not np.isfinite(m):
@@ -343,8 +347,13 @@ class ParticleFilter:
             F = np.cumsum(self.transition_matrix(dt), axis=1)
             F[:, -1] = 1.0
             u = self.rng.random(self.N)
-            # r = j where F[r, j−1] < u ≤ F[r, j] (seed 001 (2.21))
-            new = np.sum(u[:, None] > F[self.mode], axis=1).astype(np.int64)
+            # r = j where F[r, j−1] < u ≤ F[r, j] (seed 001 (2.21)): the count of F[r, :] below u,
+            # by a search per from-mode (no (N, K) temporary: at 10⁶ particles its fresh pages
+            # cost more kernel time than the draw)
+            new = np.empty(self.N, dtype=np.int64)
+            for r in range(self.K):
+                sel = self.mode == r
+                new[sel] = np.searchsorted(F[r], u[sel], side="left")
         else:
             return
         switched = new != self.mode
@@ -398,8 +407,11 @@ class ParticleFilter:
         """Weighted mean (n,), covariance (n, n) and mode fractions (K,)."""
         w = self.weights
         mean = w @ self.x
-        d = self.x - mean
-        cov = (d * w[:, None]).T @ d
+        # in blocks of rows: the same sum, without two (N, n) temporaries per step
+        cov = np.zeros((self.x.shape[1], self.x.shape[1]))
+        for i in range(0, len(w), _BLOCK):
+            d = self.x[i:i + _BLOCK] - mean
+            cov += (d * w[i:i + _BLOCK, None]).T @ d
         mode_p = np.bincount(self.mode, weights=w, minlength=self.K)
         return mean, cov, mode_p
 

@@ -24,6 +24,14 @@ estimate (4.44–4.46), at the first step at the true target (acquisition assume
 Detections: the noise-free projection must fall inside the image; the detection is that plus
 ``N(0, σ_px²)`` per axis, ``σ_px = f tan σ_ψ``.
 
+Initialisation (seed 001 §2.1, "a rough distribution built from the first measurement(s)"):
+every particle is the least-squares ray intersection of the first detections re-noised by σ_px
+(:func:`~pipeline.estimate.camera.sample_fixes`, digest §3), so the cloud has the spread of a
+fix from those detections; the first step then only takes the estimate.
+
+Randomness: each run splits its generator into target, observer-start, per-observer pixel-noise
+and filter streams, so the truth and the detections do not depend on N or on the observer count.
+
 Filter: :class:`~pipeline.estimate.pf.ParticleFilter` with the D4 mode models
 (:func:`~pipeline.estimate.models.driving_mode_models`), the PF matrix Π_p (Table 6.1,
 :data:`PI_P`), systematic resampling at N_eff < N/3, and the multi-observer
@@ -46,7 +54,7 @@ from numpy.typing import NDArray
 
 from ..estimate.camera import CameraLikelihood, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
 from ..estimate.markov import retime
-from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_STATE, PfConstantVelocity, PfDownRandomWalk,
+from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfBlocked, PfConstantVelocity, PfDownRandomWalk,
                                driving_mode_models, wrap_angle)
 from ..estimate.pf import ParticleFilter
 
@@ -257,8 +265,12 @@ def stationary_observers(n: int, cfg: GeolocationConfig, rng: np.random.Generato
 def mobile_observers(n: int, target0: F64, cfg: GeolocationConfig, rng: np.random.Generator) -> Observers:
     """Thesis §6.3/§6.5: heights from ``mobile_heights_m`` in 10 m steps, orbit sense alternating."""
     h = cfg.observers["mobile_heights_m"] + 10.0 * np.arange(n)
-    r = rng.uniform(*MOBILE_START_RANGE_M, n)
-    b = rng.uniform(-np.pi, np.pi, n)
+    # one (n, 2) draw, so the first k observers of an n-observer scene are those of the
+    # k-observer scene (the observer sweep adds UAVs to the same scene, common random numbers)
+    u = rng.random((n, 2))
+    lo, hi = MOBILE_START_RANGE_M
+    r = lo + (hi - lo) * u[:, 0]
+    b = -np.pi + 2.0 * np.pi * u[:, 1]
     pos = np.column_stack([target0[0] + r * np.cos(b), target0[1] + r * np.sin(b), -h])
     direction = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
     return Observers(pos, np.zeros((n, 3)), True, direction)
@@ -295,12 +307,21 @@ def observer_poses(ob: Observers, aim_at: F64) -> F64:
     return camera_to_world(ob.pos, R, gy, gp)
 
 
-def detect(target: F64, T_wc: F64, cfg: GeolocationConfig, rng: np.random.Generator) -> F64:
-    """(O, 2) pixel detections: noise-free projection in the image + N(0, σ_px²); NaN rows otherwise."""
+def detect(target: F64, T_wc: F64, cfg: GeolocationConfig,
+           rng: np.random.Generator | list[np.random.Generator]) -> F64:
+    """(O, 2) pixel detections: noise-free projection in the image + N(0, σ_px²); NaN rows otherwise.
+
+    ``rng`` is one generator or one per observer (then observer ``o``'s noise does not depend
+    on how many observers there are).
+    """
     cam = cfg.camera
     uv = cam.project(np.asarray(target, dtype=np.float64)[None, :], T_wc)[:, 0, :]
     ok = np.all(np.isfinite(uv), axis=1) & cam.in_image(uv)
-    noisy = uv + cfg.sigma_px * rng.standard_normal(uv.shape)
+    if isinstance(rng, np.random.Generator):
+        e = rng.standard_normal(uv.shape)
+    else:
+        e = np.stack([g.standard_normal(2) for g in rng[:len(uv)]]).reshape(uv.shape)
+    noisy = uv + cfg.sigma_px * e
     return np.where(ok[:, None], noisy, np.nan)
 
 
@@ -319,6 +340,8 @@ def make_filter(cfg: GeolocationConfig, *, cv_only: bool, n_particles: int | Non
     else:
         models = driving_mode_models(**nz, accel=cfg.accel_mps2, omega=cfg.omega_radps, estimate_down=down)
         Pi = PI_P
+    # block-wise propagation: the same models, cache-sized blocks at 10⁵–10⁶ particles
+    models = [PfBlocked(m) for m in models]
     return ParticleFilter(models, Pi, lik, n_particles=int(n_particles or cfg.n_particles), resample="systematic",
                           threshold=float(cfg.threshold), dt_ref=1.0 / PI_RATE_HZ, rng=rng)
 
@@ -333,26 +356,43 @@ def roughen(pf: ParticleFilter, K: float) -> None:
     Each component ``j`` of :data:`ROUGHEN_INDEX` gets ``N(0, (K E_j N^{−1/d})²)`` jitter, ``E_j``
     the particles' range in it and ``d`` the number of roughened components: resampled copies
     of one particle separate again, which the small 40 Hz process noise alone does not do.
+    ``d`` counts the components that vary (``E_j > 0``): D on the ground plane (not estimated,
+    digest D7) is constant and is not a dimension of the state being roughened (the first
+    version counted it, d = 5 instead of 4).
     """
     if K <= 0:
         return
     idx = list(ROUGHEN_INDEX)
     X = pf.x[:, idx]
     E = X.max(axis=0) - X.min(axis=0)
-    sig = K * E * pf.N ** (-1.0 / len(idx))
+    d = int(np.count_nonzero(E > 0))
+    if d == 0:
+        return
+    sig = K * E * pf.N ** (-1.0 / d)
     pf.x[:, idx] = X + sig[None, :] * pf.rng.standard_normal(X.shape)
 
 
 def init_filter(pf: ParticleFilter, row: F64, cfg: GeolocationConfig, fallback: F64) -> None:
-    """Particles around the first detections' mean ground intersection (``fallback`` when none)."""
-    g = pf.likelihood.ground_fix(row) if np.all(np.isfinite(row)) else np.full(3, np.nan)
-    if not np.all(np.isfinite(g)):
-        g = np.asarray(fallback, dtype=np.float64)
+    """Particles from the first detections (seed 001 §2.1: "a rough distribution built from the
+    first measurement(s)"), ``w₀ = 1/N``.
+
+    Positions are :meth:`~pipeline.estimate.camera.CameraLikelihood.sample_positions` draws (the
+    rays re-noised by σ_px and intersected, digest §3) plus ``N(0, init.sigma_pos_m²)`` per
+    axis; a draw without a fix, or a first step without detections, takes ``fallback`` (the
+    true start: acquisition assumed) plus that spread. Velocity ``N(0, init.sigma_vel_mps²)``
+    per axis, D ``N(0, init.sigma_down_m²)`` when estimated. The first detections are thereby
+    used; :func:`run_once` does not weight by them a second time.
+    """
     sp, sv, sd = cfg.init["sigma_pos_m"], cfg.init["sigma_vel_mps"], cfg.init["sigma_down_m"]
     mean = np.zeros(len(GEO_STATE))
-    mean[0:2] = g[:2]
-    cov = np.diag([sp ** 2, sp ** 2, sv ** 2, sv ** 2, 0.0, 0.0, 0.0, sd ** 2 if cfg.estimate_down else 0.0])
+    cov = np.diag([0.0, 0.0, sv ** 2, sv ** 2, 0.0, 0.0, 0.0, sd ** 2 if cfg.estimate_down else 0.0, 0.0])
     pf.init(mean=mean, cov=cov, mode_p=None if pf.K > 1 else None)
+    pf.x[:, GEO_IX_HEADING] = np.arctan2(pf.x[:, 3], pf.x[:, 2])
+    p = (pf.likelihood.sample_positions(row, pf.N, pf.rng) if np.all(np.isfinite(row))
+         else np.full((pf.N, 3), np.nan))
+    bad = ~np.all(np.isfinite(p[:, :2]), axis=1)
+    p[bad, :2] = np.asarray(fallback, dtype=np.float64)[:2]
+    pf.x[:, 0:2] = p[:, :2] + sp * pf.rng.standard_normal((pf.N, 2))
     if pf.K > 1:
         # enter each particle's initial mode (draws a, Ω along its velocity, D4)
         for k, m in enumerate(pf.models):
@@ -390,10 +430,16 @@ def run_once(scenario: str, cfg: GeolocationConfig, rng: np.random.Generator, *,
     T = int(round(duration_s / dt))
     Pi_d = None if scenario == "base" else (PI_D if abs(cfg.rate_hz - PI_RATE_HZ) < 1e-9
                                            else retime(PI_D, dt, 1.0 / PI_RATE_HZ, "Pi_d"))
-    tgt = initial_target(scenario, cfg, rng)
-    ob = (stationary_observers(n_observers, cfg, rng) if scenario in ("base", "maneuvering")
-          else mobile_observers(n_observers, tgt.pos, cfg, rng))
-    pf = make_filter(cfg, cv_only=scenario == "base", n_particles=n_particles, rng=rng)
+    # independent streams for the target, the observers' start, each observer's pixel noise and
+    # the filter: the truth and the detections do not depend on the filter's draws (N) nor on
+    # the observer count, so the particle and observer sweeps compare like with like
+    # (common random numbers); the first version drew everything from one generator.
+    g_target, g_obs, g_filter, g_det = rng.spawn(4)
+    g_pix = g_det.spawn(max(int(n_observers), 1))
+    tgt = initial_target(scenario, cfg, g_target)
+    ob = (stationary_observers(n_observers, cfg, g_obs) if scenario in ("base", "maneuvering")
+          else mobile_observers(n_observers, tgt.pos, cfg, g_obs))
+    pf = make_filter(cfg, cv_only=scenario == "base", n_particles=n_particles, rng=g_filter)
     out = {k: np.full(T, np.nan) for k in ("err", "dist", "neff", "step", "wt")}
     truth, est = np.full((T, 3), np.nan), np.full((T, 3), np.nan)
     mode_p = np.full((T, pf.K), np.nan)
@@ -402,16 +448,18 @@ def run_once(scenario: str, cfg: GeolocationConfig, rng: np.random.Generator, *,
     aim = tgt.pos.copy()
     for k in range(T):
         if k > 0:
-            target_step(tgt, dt, Pi_d, cfg, rng)
+            target_step(tgt, dt, Pi_d, cfg, g_target)
             observers_step(ob, aim, dt, cfg)
         Twc = observer_poses(ob, aim)
-        uv = detect(tgt.pos, Twc, cfg, rng)
+        uv = detect(tgt.pos, Twc, cfg, g_pix)
         row = pack_detections(uv, cfg.sigma_px, Twc)
         ndet[k] = int(np.sum(np.all(np.isfinite(uv), axis=1)))
         t0 = time.perf_counter_ns()
         if k == 0:
+            # the first detections built the particles (init_filter): the first step only
+            # takes the estimate, it does not weight by the same detections again
             init_filter(pf, row, cfg, tgt.pos)
-            s = pf.step(0.0, row)
+            s = pf.step(0.0, np.full_like(row, np.nan))
         else:
             s = pf.step(dt, row)
         if s.resampled:
@@ -433,10 +481,15 @@ def run_once(scenario: str, cfg: GeolocationConfig, rng: np.random.Generator, *,
 
 def run_scenario(scenario: str, cfg: GeolocationConfig, *, n_runs: int, seed: int, n_observers: int = 3,
                  n_particles: int | None = None, duration_s: float = 120.0, tag: str = "") -> list[RunResult]:
-    """``n_runs`` independent runs, run ``r`` seeded by ``SeedSequence([seed, crc(tag), r])``."""
+    """``n_runs`` independent runs, run ``r`` seeded by ``SeedSequence([seed, crc32(scenario), r])``.
+
+    ``tag`` labels a sweep point and is deliberately not in the seed: run ``r`` of every point
+    has the same target, observer start and pixel noise streams (common random numbers).
+    """
     import zlib
 
-    key = zlib.crc32(f"{scenario}:{tag}".encode())
+    # the tag (sweep point) is not part of the seed: every sweep point replays the same runs
+    key = zlib.crc32(f"{scenario}".encode())
     return [run_once(scenario, cfg, np.random.default_rng([int(seed), key, r]), n_observers=n_observers,
                      n_particles=n_particles, duration_s=duration_s) for r in range(int(n_runs))]
 

@@ -58,7 +58,10 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
         ``geolocation``: the ``estimate.pf.geolocation`` config section (defaults when absent);
         optional ``geo_sizes``: ``{size: {...}}`` overriding :data:`GEO_SIZES`.
     seed : int
-        Run ``r`` of a scenario draws from ``default_rng([seed, crc32(scenario:tag), r])``.
+        Run ``r`` of a scenario draws from ``default_rng([seed, crc32(scenario), r])``, split
+        into independent target / observer / pixel-noise / filter streams: every point of the
+        particle and observer sweeps replays the same targets (common random numbers), and the
+        observer sweep adds UAVs to the same scene.
     size : str
         ``tiny``, ``small`` or ``thesis``.
     progress : callable, optional

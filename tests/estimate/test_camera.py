@@ -189,3 +189,59 @@ def test_a_camera_det_observer_without_a_pose_fails_naming_it():
         observers_from_streams(det, lp, att)
     T = observers_from_streams(det.iloc[:1], lp, att)
     assert np.allclose(T[0], camera_to_world([0, 0, -40.0], np.eye(3), 0.0, -0.5))
+
+
+def test_fixes_drawn_from_one_detection_are_its_ray_ground_intersections_with_the_pixel_noise_spread():
+    from pipeline.estimate.camera import sample_fixes
+
+    rng = np.random.default_rng(7)
+    Ts, uv = _scene(rng, 1, sigma=0.0)
+    row = pack_detections(uv, 1e-9, Ts)
+    # no noise: every draw is the target itself
+    assert np.allclose(sample_fixes(row, CAM, 50, rng), [20.0, 10.0, 0.0], atol=1e-5)
+    # σ = 4 px: the draws' covariance is J diag(σ²) Jᵀ, J the pixel → ground-point Jacobian
+    # taken here by finite differences of the hand-built ray-plane intersection
+    sig = 4.0
+
+    def ground(u, v):
+        o, d = CAM.ray(np.array([u, v]), Ts[0])
+        return (o + (0.0 - o[2]) / d[2] * d)[:2]
+
+    h = 1e-3
+    J = np.column_stack([(ground(uv[0, 0] + h, uv[0, 1]) - ground(uv[0, 0] - h, uv[0, 1])) / (2 * h),
+                         (ground(uv[0, 0], uv[0, 1] + h) - ground(uv[0, 0], uv[0, 1] - h)) / (2 * h)])
+    p = sample_fixes(pack_detections(uv, sig, Ts), CAM, 20000, rng)
+    assert np.all(np.isfinite(p)) and np.allclose(p[:, 2], 0.0)
+    C = np.cov(p[:, :2].T)
+    assert np.allclose(C, sig ** 2 * J @ J.T, rtol=0.1, atol=0.02)
+    assert np.allclose(p[:, :2].mean(axis=0), [20.0, 10.0], atol=0.05)
+
+
+def test_fixes_from_several_detections_are_least_squares_ray_intersections_in_front_of_every_camera():
+    from pipeline.estimate.camera import sample_fixes
+
+    rng = np.random.default_rng(8)
+    Ts, uv = _scene(rng, 3, sigma=0.0)
+    row = pack_detections(uv, 1e-9, Ts)
+    assert np.allclose(sample_fixes(row, CAM, 10, rng, on_ground=False), [20.0, 10.0, 0.0], atol=1e-5)
+    # a grazing camera with a huge pixel error: rays above the horizon are redrawn, never used
+    pos = np.array([200.0, 0.0, -30.0])
+    T = camera_to_world(pos, np.eye(3), *look_at_angles(pos, np.eye(3), np.zeros(3)))[None]
+    u0 = CAM.project(np.zeros((1, 3)), T)[:, 0]
+    p = sample_fixes(pack_detections(u0, 250.0, T), CAM, 3000, rng)
+    ok = np.all(np.isfinite(p), axis=1)
+    assert ok.mean() > 0.99
+    ahead = np.einsum("ij,j->i", p[ok] - pos, T[0, :3, 2])
+    assert np.all(ahead > 0)
+    # the draws follow an independent Monte Carlo of the same rays built by hand (R_wc d_c with
+    # d_c = [(u − c_u)/f, (v − c_v)/f, 1], kept where they point down and meet the ground)
+    e = 250.0 * rng.standard_normal((200000, 2))
+    dc = np.column_stack([(u0[0, 0] + e[:, 0] - 640.0) / 800.0, (u0[0, 1] + e[:, 1] - 480.0) / 800.0,
+                          np.ones(len(e))])
+    dw = dc @ T[0, :3, :3].T
+    down = dw[:, 2] > 0
+    hand = pos[:2] + (30.0 / dw[down, 2])[:, None] * dw[down, :2]
+    dist = np.hypot(*(p[ok, :2] - pos[:2]).T)
+    dist_hand = np.hypot(*(hand - pos[:2]).T)
+    for q in (0.25, 0.5, 0.75):
+        assert np.isclose(np.quantile(dist, q), np.quantile(dist_hand, q), rtol=0.08)

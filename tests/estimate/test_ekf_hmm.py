@@ -198,3 +198,45 @@ def test_q2_from_estimated_inputs_equals_the_truth_q2_on_the_truth_and_grows_wit
     assert np.trace(qn[6:, 6:]) > np.trace(q1[6:, 6:])
     with pytest.raises(EkfHmmError, match=r"input_state lacks column"):
         q2_from_runs(ms, data, input_state=noisy.drop(columns=["pos_n_m"]))
+
+
+def test_the_a_h_b_filter_is_exact_with_the_current_inputs_and_one_step_late_loses_a_whole_step():
+    """The EKF+HMM machinery (A_H, B, Q₂ from one-step errors, the radar update) isolated from
+    the GMR: on white-jerk truth, inputs ``[a_k; (a_{k+1} − a_k)/dt]`` make the predicted
+    acceleration exact (4.3: a_{k+1} = â + dt ĵ), so the filter's acceleration error vanishes;
+    the same inputs one step late leave an error of about the acceleration's one-step change
+    (the radar update barely corrects it). The real-data diagnosis of issue 14 rests on this:
+    an HMM acceleration that trails the current one by a fraction of a step costs that much."""
+    from pipeline.estimate.montecarlo import measure, simulate_white_jerk
+
+    dt, q, R, T = DT, 20.0, 30, 100
+    rng = np.random.default_rng(14)
+    truth = simulate_white_jerk(R, T, dt, q, np.array([0, 0, -100, 20, 5, 0, 0, 0, 0.0]), rng=rng)
+    radar = RadarModel(site_ned_m=(-800.0, 600.0, 0.0))
+    z = measure(radar, truth, rng)
+    z = z if z.shape[0] == T else np.swapaxes(z, 0, 1)
+    t_ns = np.arange(T, dtype=np.int64) * int(dt * 1e9)
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(q), radar)
+    prior = GaussianState(truth[:, 0], np.broadcast_to(initial_cov(), (R, 9, 9)).copy(), 0)
+    base = run_filter(ekf, prior, t_ns, z, store="mean")
+    a = truth[..., 6:]
+    j = np.zeros_like(a)
+    j[:, :-1] = (a[:, 1:] - a[:, :-1]) / dt
+    axes = np.ones((R, T, 3), dtype=bool)
+    axes[:, 0] = False
+
+    def q2(acc, jerk):                           # E[e eᵀ] of the one-step A_H/B errors (q2_from_runs)
+        u = np.concatenate([acc, jerk], -1)[:, :-1]
+        e = (truth[:, 1:] - truth[:, :-1] @ hmm_transition(dt).T - u @ hmm_input(dt).T).reshape(-1, 9)
+        return e.T @ e / len(e)
+
+    def acc_rmse(mean):
+        return float(np.sqrt(np.mean(np.sum((mean - truth)[:, 5:, 6:] ** 2, -1))))
+
+    exact = hmm_filter(ekf, prior, t_ns, z, q2(a, j), axes, a, j, store="mean")
+    la, lj = np.concatenate([a[:, :1], a[:, :-1]], 1), np.concatenate([j[:, :1], j[:, :-1]], 1)
+    late = hmm_filter(ekf, prior, t_ns, z, q2(la, lj), axes, la, lj, store="mean")
+    step = float(np.sqrt(np.mean(np.sum((a[:, 6:] - a[:, 5:-1]) ** 2, -1))))   # one-step change
+    e_ekf, e_exact, e_late = acc_rmse(base.mean), acc_rmse(exact.mean), acc_rmse(late.mean)
+    assert e_exact < 1e-6 * e_ekf
+    assert 0.8 * step < e_late < 1.1 * step

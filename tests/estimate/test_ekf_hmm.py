@@ -240,3 +240,16 @@ def test_the_a_h_b_filter_is_exact_with_the_current_inputs_and_one_step_late_los
     e_ekf, e_exact, e_late = acc_rmse(base.mean), acc_rmse(exact.mean), acc_rmse(late.mean)
     assert e_exact < 1e-6 * e_ekf
     assert 0.8 * step < e_late < 1.1 * step
+
+
+def test_one_step_q2_is_the_second_moment_of_the_a_h_b_errors_and_skips_nan_steps(rng):
+    from pipeline.estimate.ekf_hmm import one_step_q2
+
+    x, acc, jerk = rng.normal(size=(40, 9)), rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    acc[7] = np.nan
+    e = np.array([x[k + 1] - hmm_transition(DT) @ x[k] - hmm_input(DT) @ np.r_[acc[k], jerk[k]]
+                  for k in range(39) if k != 7])
+    np.testing.assert_allclose(one_step_q2(x, acc, jerk, DT), e.T @ e / len(e), rtol=1e-12)
+    np.testing.assert_allclose(one_step_q2(x[None], acc[None], jerk[None], DT), e.T @ e / len(e), rtol=1e-12)
+    with pytest.raises(EkfHmmError, match="do not fit"):
+        one_step_q2(x, acc[:, :2], jerk, DT)

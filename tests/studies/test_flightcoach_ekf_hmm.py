@@ -111,3 +111,20 @@ def test_the_radar_is_synthesised_at_5_hz_from_the_reference_with_gaps_left_out(
     np.testing.assert_allclose(radar.sigma, (1.5, 45e-6, 45e-6, 0.2))
     ok = np.delete(np.arange(11), 2)
     assert (np.abs(z[ok, 0] - radar.h(x[ok])) < 6 * np.asarray(radar.sigma)).all()
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_the_diagnosis_shows_a_sound_filter_and_a_late_gmr(tiny):
+    """The study's diagnosis (issue 14): with the reference's current acceleration and jerk as its
+    inputs the A_H/B filter beats the EKF on the test flight, the same exact inputs one step late
+    lose that, and the GMR fed the exact reference state matches an acceleration from the past."""
+    from pipeline.studies.flightcoach_ekf_hmm import DIAGNOSTICS
+
+    f = {k: float(tiny.figures[f"flightcoach_ekf_hmm_{k}"]) for k in DIAGNOSTICS}
+    ekf = float(tiny.figures["flightcoach_ekf_hmm_ekf_acc_rmse"])
+    assert all(np.isfinite(v) for v in f.values())
+    assert f["oracle_input_acc_rmse"] < 0.8 * ekf < f["late_oracle_input_acc_rmse"]
+    assert -0.4 <= f["gmr_on_reference_best_offset_s"] < 0.0
+    assert 0 < f["train_gmr_on_reference_acc_rmse"] < f["train_gmr_acc_rmse"]
+    assert "## Diagnosis" in Path(tiny.outputs["report"]).read_text()

@@ -253,3 +253,30 @@ def test_one_step_q2_is_the_second_moment_of_the_a_h_b_errors_and_skips_nan_step
     np.testing.assert_allclose(one_step_q2(x[None], acc[None], jerk[None], DT), e.T @ e / len(e), rtol=1e-12)
     with pytest.raises(EkfHmmError, match="do not fit"):
         one_step_q2(x, acc[:, :2], jerk, DT)
+
+
+def test_q2_from_runs_pairs_each_gmr_input_with_the_step_that_leaves_it(trained):
+    """``q2_from_runs`` recomputed by hand: per run, the classifier's ``â_k, ĵ_k`` (known label, no
+    axis gated) drive the step ``x_k → x_{k+1}``; the second moment of those errors, through
+    :func:`one_step_q2`, is the same matrix."""
+    from pipeline.estimate.ekf_hmm import one_step_q2
+
+    ms, data = trained
+    cls = ms.classify(data)
+    xs, accs, jerks = [], [], []
+    for rid, run in data.groupby("run_id", sort=False):
+        c = cls[cls["run_id"] == rid].set_index("t_ns")
+        run = run.sort_values("t_ns")
+        a = c.reindex(run["t_ns"])[[f"acc_hmm_{x}_mps2" for x in "ned"]].to_numpy()
+        j = c.reindex(run["t_ns"])[[f"jerk_hmm_{x}_mps3" for x in "ned"]].to_numpy()
+        g = c.reindex(run["t_ns"])[[f"acc_hmm_gated_{x}" for x in "ned"]].fillna(True).to_numpy(dtype=bool)
+        bad = (c.reindex(run["t_ns"])["pred"] == "unknown").to_numpy() | g.any(axis=1)
+        a[bad], j[bad] = np.nan, np.nan
+        xs.append(run[list(STATE_COLUMNS)].to_numpy())
+        accs.append(a)
+        jerks.append(j)
+    T = min(len(x) for x in xs)
+    x, a, j = (np.stack([v[:T] for v in vs]) for vs in (xs, accs, jerks))
+    by_hand = one_step_q2(x, a, j, DT)
+    assert np.isfinite(a).all(axis=-1).mean() > 0.5          # most steps carry HMM inputs
+    np.testing.assert_allclose(q2_from_runs(ms, data), by_hand, rtol=1e-10, atol=1e-14)

@@ -41,6 +41,15 @@ logged, acceleration differentiated from it) is the **reference** every error is
 
 Headline: ``RESULT flightcoach_ekf_hmm_acc_better_maneuvers <n>`` (issue 14 target: ≥ 12 of 17).
 
+5. **Diagnosis** (:func:`diagnose`, :data:`DIAGNOSTICS`; reported, never used to choose a setting):
+   the GMR acceleration in-sample (training flight, fed its reference state and fed its EKF
+   posteriors) beside the EKF's; the time offset of the reference acceleration that the GMR at
+   ``t_k`` matches best; and the A_H/B filter (4.2–4.4) fed the reference's own acceleration and
+   jerk of the current step (a perfect HMM; ``Q₂`` from those inputs' one-step errors on the
+   training flight, :func:`pipeline.estimate.ekf_hmm.one_step_q2`) and the same inputs one step
+   late. They separate the filter (sound when its input is on time) from the input (late and,
+   on EKF posteriors, no better than the EKF's own acceleration).
+
 Outputs (under ``results/studies/flightcoach_ekf_hmm/``): ``maneuvers.parquet`` (test flight),
 ``train_maneuvers.parquet`` (the training flight at the chosen settings, in-sample),
 ``tuning.parquet`` (the ``q`` and ``Q₂``-scale grids and their scores), ``timeline.parquet`` (test

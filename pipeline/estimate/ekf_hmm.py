@@ -413,3 +413,45 @@ def q2_from_runs(model_set, truth_state: pd.DataFrame, *, scale: float = 1.0, ru
                           "unknown or gated)")
     e = np.concatenate(errs)
     return scale * (e.T @ e) / len(e)
+
+
+def one_step_q2(x, acc, jerk, dt: float) -> F64:
+    """Second moment of the A_H/B one-step errors for given inputs (the core of :func:`q2_from_runs`).
+
+    .. math:: e_k = x_{k+1} - (A_H x_k + B [a_k; j_k]), \\qquad Q_2 = \\frac{1}{N}\\sum_k e_k e_k^T
+
+    over the steps where ``x_k``, ``x_{k+1}`` and the inputs are finite. With the true
+    acceleration and jerk as inputs this is the Q₂ of an *exact* HMM input (an oracle), the
+    yardstick against which the GMR's own inputs are judged (issue 14 diagnosis).
+
+    Parameters
+    ----------
+    x : array_like, shape (T, 9) or (R, T, 9)
+        States ``[r, v, a]`` on a regular grid of step ``dt``.
+    acc, jerk : array_like, shape (T, 3) or (R, T, 3)
+        Inputs at each step (used for the step that leaves it).
+    dt : float
+        Step, s.
+
+    Returns
+    -------
+    ndarray, shape (9, 9)
+
+    Raises
+    ------
+    EkfHmmError
+        Shapes that do not fit, or no finite step.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    acc, jerk = np.asarray(acc, dtype=np.float64), np.asarray(jerk, dtype=np.float64)
+    if x.ndim == 2:
+        x, acc, jerk = x[None], acc[None], jerk[None]
+    if x.shape[-1] != 9 or acc.shape != x.shape[:-1] + (3,) or jerk.shape != acc.shape:
+        raise EkfHmmError(f"one_step_q2: states {x.shape}, acc {acc.shape}, jerk {jerk.shape} do not fit")
+    u = np.concatenate([acc, jerk], axis=-1)[:, :-1]
+    e = x[:, 1:] - x[:, :-1] @ hmm_transition(dt).T - u @ hmm_input(dt).T
+    e = e.reshape(-1, 9)
+    e = e[np.isfinite(e).all(axis=1)]
+    if not len(e):
+        raise EkfHmmError("one_step_q2: no step with finite states and inputs")
+    return (e.T @ e) / len(e)

@@ -41,6 +41,15 @@ logged, acceleration differentiated from it) is the **reference** every error is
 
 Headline: ``RESULT flightcoach_ekf_hmm_acc_better_maneuvers <n>`` (issue 14 target: ≥ 12 of 17).
 
+5. **Diagnosis** (:func:`diagnose`, :data:`DIAGNOSTICS`; reported, never used to choose a setting):
+   the GMR acceleration in-sample (training flight, fed its reference state and fed its EKF
+   posteriors) beside the EKF's; the time offset of the reference acceleration that the GMR at
+   ``t_k`` matches best; and the A_H/B filter (4.2–4.4) fed the reference's own acceleration and
+   jerk of the current step (a perfect HMM; ``Q₂`` from those inputs' one-step errors on the
+   training flight, :func:`pipeline.estimate.ekf_hmm.one_step_q2`) and the same inputs one step
+   late. They separate the filter (sound when its input is on time) from the input (late and,
+   on EKF posteriors, no better than the EKF's own acceleration).
+
 Outputs (under ``results/studies/flightcoach_ekf_hmm/``): ``maneuvers.parquet`` (test flight),
 ``train_maneuvers.parquet`` (the training flight at the chosen settings, in-sample),
 ``tuning.parquet`` (the ``q`` and ``Q₂``-scale grids and their scores), ``timeline.parquet`` (test
@@ -67,7 +76,7 @@ import plotly.graph_objects as go
 from ..config import ROOT
 from ..estimate.base import ConstantAcceleration, GaussianState
 from ..estimate.ekf import ExtendedKalmanFilter
-from ..estimate.ekf_hmm import EkfHmmTrack, q2_from_runs, run_ekf_hmm
+from ..estimate.ekf_hmm import EkfHmmTrack, hmm_filter, one_step_q2, q2_from_runs, run_ekf_hmm
 from ..estimate.models import STATE_COLUMNS, RadarModel, initial_cov
 from ..estimate.montecarlo import tune_q
 from ..io.parquet import write_table
@@ -207,6 +216,114 @@ def per_maneuver(track: EkfHmmTrack, t_ns: np.ndarray, x: np.ndarray, seg: pd.Da
     return pd.DataFrame(rows)
 
 
+#: diagnostic figures (``RESULT flightcoach_ekf_hmm_<key>``), what each one measures
+DIAGNOSTICS: dict[str, str] = {
+    "train_gmr_on_reference_acc_rmse":
+        "Diagnostic: RMSE (m/s²) of the GMR acceleration on the training maneuvers when the models classify the "
+        "training flight's own reference state (in-sample, exact state).",
+    "train_gmr_acc_rmse":
+        "Diagnostic: RMSE (m/s²) of the GMR acceleration input on the training-maneuver steps that used it, fed by "
+        "the EKF posteriors of the training flight (in-sample models).",
+    "train_ekf_acc_rmse":
+        "Diagnostic: EKF acceleration RMSE (m/s²) over the training maneuvers (its own synthesised radar).",
+    "gmr_on_reference_best_offset_s":
+        "Diagnostic: time offset (s, 25 Hz grid, negative = in the past) of the test reference acceleration that "
+        "the GMR acceleration at t_k (fed the reference state) matches best; 0 would be on time.",
+    "oracle_input_acc_rmse":
+        "Diagnostic: acceleration RMSE (m/s²) over the test maneuvers of the A_H/B filter fed the reference "
+        "acceleration and jerk of the current step on every step (Q2 from those inputs' one-step errors on the "
+        "training flight): the EKF+HMM with a perfect HMM.",
+    "late_oracle_input_acc_rmse":
+        "Diagnostic: the same with the exact inputs one step (0.2 s) late.",
+}
+
+
+def _inside(t_ns: np.ndarray, seg: pd.DataFrame, skip=SKIP) -> np.ndarray:
+    """Steps inside a labelled maneuver (take-off and landing excluded)."""
+    m = np.zeros(len(t_ns), dtype=bool)
+    for _, s in seg.iterrows():
+        if s["label"] not in skip:
+            m |= (t_ns >= s["t_start_ns"]) & (t_ns < s["t_end_ns"])
+    return m
+
+
+def _reference_jerk(state: pd.DataFrame) -> np.ndarray:
+    """The preprocessed jerk at the radar steps (rows of :func:`synthesise_radar`)."""
+    return decimate(state, RATE_HZ)[[f"jerk_{a}_mps3" for a in "ned"]].to_numpy(dtype=np.float64)
+
+
+def _oracle_filter(ekf, prior, t_ns, z, Q2, acc, jerk):
+    """The A_H/B filter with given inputs on every step whose inputs are finite."""
+    ok = np.isfinite(acc).all(axis=1) & np.isfinite(jerk).all(axis=1)
+    axes = np.zeros((1, len(t_ns), 3), dtype=bool)
+    axes[0, 1:] = ok[:-1, None]
+    return hmm_filter(ekf, prior, t_ns, z, Q2, axes, np.nan_to_num(acc)[None], np.nan_to_num(jerk)[None],
+                      store="mean")
+
+
+def diagnose(ms, ekf, train, test, ref_cls: pd.DataFrame) -> dict[str, float]:
+    """Where the EKF+HMM loses (issue 14): the GMR in-sample, its timing, the filter with exact inputs.
+
+    Parameters
+    ----------
+    ms : ManeuverModelSet
+    ekf : ExtendedKalmanFilter
+        The tuned baseline (its radar model is the synthesised radar's).
+    train : tuple
+        ``(state, segments, box_rotation_rad, t_ns, x, track)`` of the training flight, ``track`` the
+        EKF+HMM run at the chosen Q₂.
+    test : tuple
+        ``(state, segments, t_ns, x, z, prior)`` of the test flight.
+    ref_cls : DataFrame
+        The models' classification of the test flight's 5 Hz reference state.
+
+    Returns
+    -------
+    dict
+        One value per key of :data:`DIAGNOSTICS`. Nothing here feeds back into a setting.
+    """
+    st_tr, seg_tr, box_tr, t_tr, x_tr, trk_tr = train
+    st_te, seg_te, t_te, x_te, z_te, prior = test
+    acc_cols = [f"acc_hmm_{a}_mps2" for a in "ned"]
+    out: dict[str, float] = {}
+    # 1. in-sample: the training flight's reference state through its own models
+    cls = ms.classify(decimate(st_tr, RATE_HZ).assign(run_id=0), reset_t_ns=seg_tr["t_start_ns"].to_numpy(),
+                      box_heading_rad=box_tr)
+    k = np.searchsorted(t_tr, cls["t_ns"].to_numpy())
+    keep = _inside(t_tr, seg_tr)[k] & (cls["pred"].to_numpy(dtype=object) != "unknown")
+    out["train_gmr_on_reference_acc_rmse"] = rmse_norm((cls[acc_cols].to_numpy() - x_tr[k, 6:])[keep])
+    ins_tr = _inside(t_tr, seg_tr)
+    used = ins_tr & trk_tr.mode[0]
+    out["train_gmr_acc_rmse"] = rmse_norm((trk_tr.acc_hmm[0] - x_tr[:, 6:])[used])
+    out["train_ekf_acc_rmse"] = rmse_norm((trk_tr.ekf.mean[0] - x_tr)[ins_tr, 6:])
+    # 2. timing: which past/future reference acceleration the test GMR-on-reference matches
+    t25 = st_te["t_ns"].to_numpy(dtype=np.int64)
+    a25 = st_te[[f"acc_{a}_mps2" for a in "ned"]].to_numpy(dtype=np.float64)
+    k = np.searchsorted(t_te, ref_cls["t_ns"].to_numpy())
+    keep = _inside(t_te, seg_te)[k] & (ref_cls["pred"].to_numpy(dtype=object) != "unknown")
+    i25 = np.searchsorted(t25, ref_cls["t_ns"].to_numpy())
+    a_ref = ref_cls[acc_cols].to_numpy(dtype=np.float64)
+    dt25 = float(np.median(np.diff(t25))) * 1e-9
+    shifts = np.arange(-10, 6)
+    scores = [rmse_norm((a_ref - a25[np.clip(i25 + s, 0, len(t25) - 1)])[keep]) for s in shifts]
+    out["gmr_on_reference_best_offset_s"] = float(shifts[int(np.nanargmin(scores))] * dt25)
+    # 3. the filter with a perfect HMM: the reference's own acceleration and jerk as inputs
+    dt = 1.0 / RATE_HZ
+    j_tr, j_te = _reference_jerk(st_tr), _reference_jerk(st_te)
+    keep_tr = np.where(ins_tr[:, None], 1.0, np.nan)
+    Q2 = one_step_q2(x_tr * keep_tr, x_tr[:, 6:], j_tr, dt)
+    a_te = x_te[:, 6:]
+    late_a, late_j = np.vstack([np.full((1, 3), np.nan), a_te[:-1]]), np.vstack([np.full((1, 3), np.nan), j_te[:-1]])
+    Q2_late = one_step_q2(x_tr * keep_tr, np.vstack([np.full((1, 3), np.nan), x_tr[:-1, 6:]]),
+                          np.vstack([np.full((1, 3), np.nan), j_tr[:-1]]), dt)
+    ins_te = _inside(t_te, seg_te)
+    for key, (Qk, a_in, j_in) in (("oracle_input_acc_rmse", (Q2, a_te, j_te)),
+                                  ("late_oracle_input_acc_rmse", (Q2_late, late_a, late_j))):
+        h = _oracle_filter(ekf, prior, t_te, z_te, Qk, a_in, j_in)
+        out[key] = rmse_norm((h.mean[0] - x_te)[ins_te, 6:])
+    return out
+
+
 def _timeline(track: EkfHmmTrack, t_ns: np.ndarray, x: np.ndarray, seg: pd.DataFrame) -> pd.DataFrame:
     lab = np.full(len(t_ns), "", dtype=object)
     for _, s in seg.iterrows():
@@ -222,7 +339,7 @@ def _timeline(track: EkfHmmTrack, t_ns: np.ndarray, x: np.ndarray, seg: pd.DataF
 
 
 def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, q, scale, man, man_tr,
-                 tuning, n_better) -> None:
+                 tuning, n_better, diag: Mapping[str, float] | None = None) -> None:
     """``report.md``: settings, tuning, the per-maneuver tables."""
     cols = ["label", "duration_s", "hmm_share_pct", "label_pct", "ekf_acc_rmse", "ekf_hmm_acc_rmse", "acc_ratio",
             "gmr_acc_rmse", "better", "ekf_vel_rmse", "ekf_hmm_vel_rmse", "ekf_pos_rmse", "ekf_hmm_pos_rmse"]
@@ -244,6 +361,18 @@ def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, q
          f"## Training flight `{TRAIN}` (in-sample: the models classify the flight they were trained on)", "",
          md_table(man_tr[cols], "{:.2f}"), "",
          "## Tuning grids (training flight)", "", md_table(tuning, "{:.4g}"), ""]
+    if diag:
+        L += ["## Diagnosis (no setting is chosen from these)", "",
+              md_table(pd.DataFrame({"figure": list(DIAGNOSTICS), "value": [diag[k] for k in DIAGNOSTICS],
+                                     "meaning": list(DIAGNOSTICS.values())}), "{:.3f}"), "",
+              f"Test maneuvers, acceleration RMSE (m/s²): the EKF {diag['ekf_acc_rmse']:.2f}; the A_H/B filter fed "
+              f"the reference acceleration and jerk of the current step {diag['oracle_input_acc_rmse']:.2f}, fed "
+              f"the same exact inputs one step (0.2 s) late {diag['late_oracle_input_acc_rmse']:.2f}. The GMR "
+              f"acceleration at t_k fed the exact reference state matches the reference "
+              f"{-diag['gmr_on_reference_best_offset_s']:.2f} s earlier best; in-sample it is "
+              f"{diag['train_gmr_on_reference_acc_rmse']:.2f} on the reference state and "
+              f"{diag['train_gmr_acc_rmse']:.2f} on the EKF posteriors (the EKF's own: "
+              f"{diag['train_ekf_acc_rmse']:.2f}).", ""]
     write_text(path, "\n".join(L) + "\n")
 
 
@@ -341,8 +470,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
         score = float(man_s["acc_ratio"].mean())
         tuning.append({"parameter": "q2_scale", "value": s, "score": score, "chosen": False})
         if best is None or score < best[1]:
-            best = (s, score, man_s)
-    scale, _, man_tr = best
+            best = (s, score, man_s, trk)
+    scale, _, man_tr, trk_tr = best
     for row in tuning:
         if row["parameter"] == "q2_scale":
             row["chosen"] = row["value"] == scale
@@ -370,7 +499,6 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     with pd.option_context("display.width", 220):
         say(man[["label", "hmm_share_pct", "pred_end", "ekf_acc_rmse", "ekf_hmm_acc_rmse", "acc_ratio",
                  "gmr_acc_rmse", "better"]].to_string(index=False, float_format=lambda v: f"{v:.2f}"))
-    write_report(paths["report"], size, int(seed), opt, ms, n_train, q, scale, man, man_tr, tuning, n_better)
 
     inside = np.zeros(len(t_te), dtype=bool)
     for _, s in seg_te.iterrows():
@@ -385,6 +513,11 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     a_ref = ref_cls[[f"acc_hmm_{a}_mps2" for a in "ned"]].to_numpy(dtype=np.float64)
     keep = inside[k] & (ref_cls["pred"].to_numpy(dtype=object) != "unknown")
     gmr_ref = rmse_norm((a_ref - x_te[k, 6:])[keep])
+    progress("diagnosis: GMR in-sample, its time offset, the EKF+HMM with exact inputs")
+    diag = diagnose(ms, ekf, (st_tr, seg_tr, box_tr, t_tr, x_tr, trk_tr), (st_te, seg_te, t_te, x_te, z_te, prior),
+                    ref_cls)
+    write_report(paths["report"], size, int(seed), opt, ms, n_train, q, scale, man, man_tr, tuning, n_better,
+                 {**diag, "ekf_acc_rmse": rmse_norm((trk.ekf.mean[0] - x_te)[inside, 6:])})
     r = Results()
     r.add("flightcoach_ekf_hmm_acc_better_maneuvers", n_better,
           f"Test-flight maneuvers (of {len(man)}) whose EKF+HMM acceleration RMSE is below {BETTER_RATIO} × the "
@@ -410,6 +543,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
           "Test maneuvers whose classifier label (on the EKF posteriors) at the last step is the right one.")
     r.add("flightcoach_ekf_hmm_train_acc_better_maneuvers", int(man_tr["better"].sum()),
           "The same count on the training flight (in-sample models, its own synthesised radar).")
+    for key, what in DIAGNOSTICS.items():
+        r.add(f"flightcoach_ekf_hmm_{key}", f"{diag[key]:.3f}", what)
     r.add("flightcoach_ekf_hmm_q", f"{q:g}", "EKF jerk PSD q (m²/s⁵), tuned on the training flight.")
     r.add("flightcoach_ekf_hmm_q2_scale", f"{scale:g}", "Scale of Q₂, tuned on the training flight.")
     r.add("flightcoach_ekf_hmm_study_wall_s", f"{progress.elapsed:.0f}",

@@ -164,3 +164,101 @@ def test_gmr_state9_sample_alignment_and_pos_vel_inputs(rng):
     np.testing.assert_allclose(j_pv, j_i, rtol=1e-4, atol=1e-3)
     with pytest.raises(ValueError, match="align"):
         gmr_state9(mu[None], cov[None], q, st, norm, dt, align="centre")
+
+
+# -- the classifier's GMR, end to end, against an independent computation (issue 14 checks) --------
+
+def _box_obs(run, psi, norm):
+    """Normalised ``state9box`` increments of one 5 Hz run, written out by hand (no features.py):
+    every NED triple turned by ``[[c, s, 0], [−s, c, 0], [0, 0, 1]]``, differenced, min-max."""
+    c, s = np.cos(psi), np.sin(psi)
+    Rz = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    cols = [f"{k}_{a}_{u}" for k, u in (("pos", "m"), ("vel", "mps"), ("acc", "mps2")) for a in "ned"]
+    x = run[cols].to_numpy()
+    xb = np.hstack([x[:, 3 * g:3 * g + 3] @ Rz.T for g in range(3)])
+    inc = xb[1:] - xb[:-1]
+    return (inc - norm.x_min) / (norm.x_max - norm.x_min), Rz
+
+
+@pytest.fixture(scope="module")
+def box_models():
+    """Two state9box maneuver HMMs on synthetic runs turned into a box at the P23 #36 heading."""
+    from helpers_maneuvers import synth_bulk
+
+    from pipeline.models.base import ModelsConfig
+    from pipeline.models.classifier import ManeuverModelSet
+
+    data = synth_bulk(("M1", "M2"), 3, np.random.default_rng(1414))
+    cfg = ModelsConfig(feature_set="state9box", n_states=3, n_iter=5, tol=1e-1, gmm_restarts=1, seed=5)
+    return ManeuverModelSet(config=cfg).fit(data, box_heading_rad=-0.59), data
+
+
+@pytest.mark.parametrize("inputs", ["pos", "pos_fd"])
+def test_classify_gmr_is_the_gaussian_conditioning_of_the_viterbi_state_emission(box_models, inputs):
+    """``classify``'s ``acc_hmm``/``jerk_hmm`` equal E[Δv, Δa | inputs] of the emission Gaussian of
+    the reported Viterbi state of the best model, computed here by hand from the stored model
+    (explicit inverse of Σ_kk, the box rotation written out, de-normalised as §13.3, ``sample``
+    alignment, turned back to NED by R_zᵀ). Pins the model, state, feature order, normaliser,
+    frame and timing that reach the EKF+HMM."""
+    import copy
+    import dataclasses
+
+    ms0, data = box_models
+    ms = copy.copy(ms0)
+    ms.config = dataclasses.replace(ms0.config, gmr_input=inputs, gmr_align="sample")
+    psi, dt = -0.59 + 0.07, 0.2                      # another flight's box heading
+    run = data[data.run_id == "M2-1"].reset_index(drop=True)
+    out = ms.classify(run, box_heading_rad=psi)
+    norm = ms.normaliser_
+    obs, Rz = _box_obs(run, psi, norm)
+    span = norm.x_max - norm.x_min
+    if inputs == "pos_fd":                           # Δv̂_k = (Δr_k − Δr_{k−1})/dt, re-normalised
+        dr = obs[:, :3] * span[:3] + norm.x_min[:3]
+        dv = np.full_like(dr, np.nan)
+        dv[1:] = (dr[1:] - dr[:-1]) / dt
+        obs = obs.copy()
+        obs[:, 3:6] = (dv - norm.x_min[3:6]) / span[3:6]
+    k = [0, 1, 2] if inputs == "pos" else [0, 1, 2, 3, 4, 5]
+    u = [3, 4, 5, 6, 7, 8] if inputs == "pos" else [6, 7, 8]
+    labels = list(ms.labels_)
+    acc = np.full((len(out), 3), np.nan)
+    jerk = np.full((len(out), 3), np.nan)
+    for n, row in enumerate(out.itertuples()):
+        if row.best not in labels or row.state < 0 or not np.isfinite(obs[n]).all():
+            continue
+        p = ms.models_[labels.index(row.best)].params_
+        mu, S = p.means[row.state, 0], p.covars[row.state, 0]
+        cond = mu[u] + S[np.ix_(u, k)] @ np.linalg.inv(S[np.ix_(k, k)]) @ (obs[n, k] - mu[k])
+        d_a = cond[-3:] * span[6:9] + norm.x_min[6:9]
+        d_v = (cond[:3] if inputs == "pos" else obs[n, 3:6]) * span[3:6] + norm.x_min[3:6]
+        j_box = d_a / dt
+        # Δv/dt sits at t_{k−½} (pos) or t_{k−1} (pos_fd); "sample" moves it to t_k with ĵ
+        a_box = d_v / dt + (0.5 if inputs == "pos" else 1.0) * dt * j_box
+        acc[n], jerk[n] = Rz.T @ a_box, Rz.T @ j_box
+    got_a = out[[f"acc_hmm_{a}_mps2" for a in "ned"]].to_numpy()
+    got_j = out[[f"jerk_hmm_{a}_mps3" for a in "ned"]].to_numpy()
+    assert np.isfinite(acc).mean() > 0.9
+    np.testing.assert_array_equal(np.isnan(got_a), np.isnan(acc))
+    np.testing.assert_allclose(got_a, acc, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(got_j, jerk, rtol=1e-9, atol=1e-9)
+
+
+def test_pos_fd_acceleration_is_the_ned_second_difference_plus_dt_jerk_in_any_box(box_models):
+    """With ``pos_fd``/``sample`` the HMM acceleration at ``t_k`` is, in NED and whatever the box
+    heading, the second difference of the last three positions (``a(t_{k−1})``) plus ``dt·ĵ``:
+    the box rotation is undone exactly and the estimate uses no sample after ``t_k``."""
+    ms, data = box_models
+    assert (ms.config.gmr_input, ms.config.gmr_align) == ("pos_fd", "sample")
+    run = data[data.run_id == "M1-0"].reset_index(drop=True)
+    dt = 0.2
+    pos = run[[f"pos_{a}_m" for a in "ned"]].to_numpy()
+    fd2 = np.full_like(pos, np.nan)
+    fd2[2:] = (pos[2:] - 2 * pos[1:-1] + pos[:-2]) / dt ** 2        # a(t_{k−1}) at row k
+    for psi in (-0.59, 1.1):
+        out = ms.classify(run, box_heading_rad=psi)
+        i = np.searchsorted(run["t_ns"].to_numpy(), out["t_ns"].to_numpy())
+        a = out[[f"acc_hmm_{x}_mps2" for x in "ned"]].to_numpy()
+        j = out[[f"jerk_hmm_{x}_mps3" for x in "ned"]].to_numpy()
+        ok = np.isfinite(a).all(1)
+        assert ok.mean() > 0.9 and not ok[0]             # the first increment has no Δr_{k−1}
+        np.testing.assert_allclose(a[ok] - dt * j[ok], fd2[i[ok]], rtol=1e-9, atol=1e-8)

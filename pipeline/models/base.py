@@ -73,9 +73,9 @@ class ModelsConfig:
         optimistic). Default 0 (thesis-style percentile only).
     threshold_fraction : float
         ``f`` of the impostor-scaled one-class threshold
-        :math:`\theta_m(n) = f\,q_m(n) + (1-f)\,n\,\bar\ell_m - s\,n`: how far from the mean
+        :math:`\\theta_m(n) = f\\,q_m(n) + (1-f)\\,n\\,\\bar\\ell_m - s\\,n`: how far from the mean
         per-sample log-likelihood of model ``m`` on the other training maneuvers
-        (:math:`\bar\ell_m`) towards its training percentile curve ``q_m`` the threshold
+        (:math:`\\bar\\ell_m`) towards its training percentile curve ``q_m`` the threshold
         sits (:mod:`pipeline.models.classifier`). Default 1 (the percentile curve).
     mode : str
         ``cumulative`` (thesis, from t = 1), ``windowed`` (sliding window of predictive

@@ -20,18 +20,18 @@ labels that have several recordings) lowers the curve by ``slack · n`` after ``
 **Impostor-scaled threshold** (``threshold_fraction`` f, default 1). A constant slack treats
 every model alike, but the models' scales differ: on the F3A training flight the mean
 per-sample log-likelihood that model ``m`` gives the *other* maneuvers of the training data
-(its impostors), :math:`\bar\ell_m`, ranges from −12 to +7 nats/sample while the genuine
+(its impostors), :math:`\\bar\\ell_m`, ranges from −12 to +7 nats/sample while the genuine
 percentile curves all sit near 12–14 nats/sample, so 1.85 nats/sample is 37 % of ``hB``'s
 genuine–impostor gap and 7 % of ``sqL``'s. The threshold is therefore placed a fraction ``f``
 of the way from the impostors' expected score to the genuine percentile curve ``q_m(n)``:
 
-.. math:: \theta_m(n) = f\,q_m(n) + (1 - f)\,n\,\bar\ell_m - s\,n,
-          \qquad \bar\ell_m = \operatorname{mean}_{x \notin m} LL_m(x_{1:T_x}) / T_x
+.. math:: \\theta_m(n) = f\\,q_m(n) + (1 - f)\\,n\\,\\bar\\ell_m - s\\,n,
+          \\qquad \\bar\\ell_m = \\operatorname{mean}_{x \\notin m} LL_m(x_{1:T_x}) / T_x
 
 (the mean over every training sequence of the other labels, cumulative from its first
 sample; ``n`` is capped at the window in ``windowed`` mode). ``f = 1`` is the percentile rule
 above; ``f = 0`` accepts whatever scores like an average impostor. Only training data enter
-``q_m`` and :math:`\bar\ell_m`; ``f`` (like ``s``) is a calibration constant.
+``q_m`` and :math:`\\bar\\ell_m`; ``f`` (like ``s``) is a calibration constant.
 
 **Persistence**: ``DIR/params.npz`` (arrays, no pickles; ``np.load(allow_pickle=False)``) and
 ``DIR/meta.json`` (labels, config, normaliser, training metadata, code version).
@@ -85,11 +85,11 @@ class ManeuverModelSet:
     normaliser_ : MinMaxNormaliser
     thresholds_ : dict
         ``{"cumulative": (M, T), "windowed": (M, W')}`` score thresholds by elapsed sample
-        (:math:`\theta_m(n)`, module docstring).
+        (:math:`\\theta_m(n)`, module docstring).
     threshold_base_ : dict
         The same shapes: the training percentile curves :math:`q_m(n)` (no slack, f = 1).
     impostor_ll_ : ndarray, shape (M,)
-        :math:`\bar\ell_m`, nats/sample (NaN in model files written before it existed).
+        :math:`\\bar\\ell_m`, nats/sample (NaN in model files written before it existed).
     training_ : dict
         Per-label training metadata (runs, sequences, samples, iterations, convergence, BIC).
     """
@@ -194,7 +194,7 @@ class ManeuverModelSet:
         return self
 
     def _compose_thresholds(self, slack: float, fraction: float) -> dict[str, F64]:
-        """:math:`\theta_m(n) = f q_m(n) + (1 - f) n \bar\ell_m - s n` for every mode."""
+        """:math:`\\theta_m(n) = f q_m(n) + (1 - f) n \\bar\\ell_m - s n` for every mode."""
         if fraction != 1.0 and not np.all(np.isfinite(self.impostor_ll_)):
             raise ModelError(f"threshold_fraction {fraction:g} needs the impostor log-likelihoods, which "
                              "this model set lacks (retrain it)")
@@ -226,7 +226,7 @@ class ManeuverModelSet:
         return self.with_threshold(slack=slack)
 
     def _impostor_ll(self, recordings: dict[str, list[list[F64]]]) -> F64:
-        """:math:`\bar\ell_m`: mean per-sample cumulative log-likelihood of model ``m`` over every
+        """:math:`\\bar\\ell_m`: mean per-sample cumulative log-likelihood of model ``m`` over every
         training sequence (all phases) of the other labels; NaN with a single label."""
         seqs, labs = [], []
         for li, lab in enumerate(self.labels_):

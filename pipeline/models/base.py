@@ -71,6 +71,12 @@ class ModelsConfig:
         estimates it leave-one-recording-out where a label has several recordings (real
         flights: phases of one recording are near-duplicates, so their percentile is
         optimistic). Default 0 (thesis-style percentile only).
+    threshold_fraction : float
+        ``f`` of the impostor-scaled one-class threshold
+        :math:`\\theta_m(n) = f\\,q_m(n) + (1-f)\\,n\\,\\bar\\ell_m - s\\,n`: how far from the mean
+        per-sample log-likelihood of model ``m`` on the other training maneuvers
+        (:math:`\\bar\\ell_m`) towards its training percentile curve ``q_m`` the threshold
+        sits (:mod:`pipeline.models.classifier`). Default 1 (the percentile curve).
     mode : str
         ``cumulative`` (thesis, from t = 1), ``windowed`` (sliding window of predictive
         log-likelihood increments with a restart transition) or ``reset`` (windowed change
@@ -127,6 +133,7 @@ class ModelsConfig:
     seed: int = field(default=0, metadata={"config_key": None})
     threshold_percentile: float = _hmm("threshold_percentile")
     threshold_slack: Any = _hmm("threshold_slack")
+    threshold_fraction: float = _hmm("threshold_fraction")
     mode: str = _hmm("mode")
     window_s: Any = _hmm("window_s")
     restart_prob: float = _hmm("restart_prob")
@@ -178,6 +185,8 @@ class ModelsConfig:
             raise ConfigError("hmm.rate_hz must be positive and hmm.window_s positive or 'auto'")
         if not (self.threshold_slack == "auto" or isinstance(self.threshold_slack, (int, float))):
             raise ConfigError("hmm.threshold_slack must be a number or 'auto'")
+        if not (isinstance(self.threshold_fraction, (int, float)) and 0.0 <= self.threshold_fraction <= 1.0):
+            raise ConfigError(f"hmm.threshold_fraction must lie in [0, 1], got {self.threshold_fraction!r}")
         lo, hi = self.n_states_range
         if not 2 <= lo <= hi:
             raise ConfigError("hmm.n_states_range must be [lo, hi] with 2 <= lo <= hi")

@@ -17,6 +17,22 @@ leave-one-phase-out: a model trained on the other phases scores the held-out one
 per-sample slack (``threshold_slack``; ``auto`` estimates it leave-one-recording-out on the
 labels that have several recordings) lowers the curve by ``slack · n`` after ``n`` samples.
 
+**Impostor-scaled threshold** (``threshold_fraction`` f, default 1). A constant slack treats
+every model alike, but the models' scales differ: on the F3A training flight the mean
+per-sample log-likelihood that model ``m`` gives the *other* maneuvers of the training data
+(its impostors), :math:`\\bar\\ell_m`, ranges from −12 to +7 nats/sample while the genuine
+percentile curves all sit near 12–14 nats/sample, so 1.85 nats/sample is 37 % of ``hB``'s
+genuine–impostor gap and 7 % of ``sqL``'s. The threshold is therefore placed a fraction ``f``
+of the way from the impostors' expected score to the genuine percentile curve ``q_m(n)``:
+
+.. math:: \\theta_m(n) = f\\,q_m(n) + (1 - f)\\,n\\,\\bar\\ell_m - s\\,n,
+          \\qquad \\bar\\ell_m = \\operatorname{mean}_{x \\notin m} LL_m(x_{1:T_x}) / T_x
+
+(the mean over every training sequence of the other labels, cumulative from its first
+sample; ``n`` is capped at the window in ``windowed`` mode). ``f = 1`` is the percentile rule
+above; ``f = 0`` accepts whatever scores like an average impostor. Only training data enter
+``q_m`` and :math:`\\bar\\ell_m`; ``f`` (like ``s``) is a calibration constant.
+
 **Persistence**: ``DIR/params.npz`` (arrays, no pickles; ``np.load(allow_pickle=False)``) and
 ``DIR/meta.json`` (labels, config, normaliser, training metadata, code version).
 """
@@ -68,7 +84,12 @@ class ManeuverModelSet:
     models_ : list of ManeuverHMM
     normaliser_ : MinMaxNormaliser
     thresholds_ : dict
-        ``{"cumulative": (M, T), "windowed": (M, W')}`` score thresholds by elapsed sample.
+        ``{"cumulative": (M, T), "windowed": (M, W')}`` score thresholds by elapsed sample
+        (:math:`\\theta_m(n)`, module docstring).
+    threshold_base_ : dict
+        The same shapes: the training percentile curves :math:`q_m(n)` (no slack, f = 1).
+    impostor_ll_ : ndarray, shape (M,)
+        :math:`\\bar\\ell_m`, nats/sample (NaN in model files written before it existed).
     training_ : dict
         Per-label training metadata (runs, sequences, samples, iterations, convergence, BIC).
     """
@@ -153,7 +174,8 @@ class ManeuverModelSet:
             self.training_[lab] = meta
         self.threshold_slack_ = self._slack(recordings) if cfg.threshold_slack == "auto" \
             else float(cfg.threshold_slack)
-        self.thresholds_ = {}
+        self.impostor_ll_ = self._impostor_ll(recordings)
+        self.threshold_base_ = {}
         for mode, cs in curves.items():
             T = max(len(c) for c in cs)
             arr = np.empty((len(cs), T))
@@ -166,24 +188,62 @@ class ManeuverModelSet:
                     if len(c) < T:
                         from .online import extend_threshold
                         arr[i, len(c):] = extend_threshold(c, np.arange(len(c) + 1, T + 1), False)
-            n = np.arange(1, T + 1)
-            if mode == "windowed":
-                n = np.minimum(n, cfg.window)
-            self.thresholds_[mode] = arr - self.threshold_slack_ * n
+            self.threshold_base_[mode] = arr
+        self.threshold_fraction_ = float(cfg.threshold_fraction)
+        self.thresholds_ = self._compose_thresholds(self.threshold_slack_, self.threshold_fraction_)
         return self
+
+    def _compose_thresholds(self, slack: float, fraction: float) -> dict[str, F64]:
+        """:math:`\\theta_m(n) = f q_m(n) + (1 - f) n \\bar\\ell_m - s n` for every mode."""
+        if fraction != 1.0 and not np.all(np.isfinite(self.impostor_ll_)):
+            raise ModelError(f"threshold_fraction {fraction:g} needs the impostor log-likelihoods, which "
+                             "this model set lacks (retrain it)")
+        out = {}
+        for mode, base in self.threshold_base_.items():
+            n = np.arange(1, base.shape[1] + 1)
+            if mode == "windowed":
+                n = np.minimum(n, self.config.window)
+            thr = base - slack * n
+            if fraction != 1.0:   # f = 1 leaves the percentile curve bit for bit
+                thr = thr + (fraction - 1.0) * base + (1.0 - fraction) * self.impostor_ll_[:, None] * n
+            out[mode] = thr
+        return out
+
+    def with_threshold(self, *, slack: float | None = None, fraction: float | None = None) -> "ManeuverModelSet":
+        """A shallow copy whose one-class thresholds use another per-sample ``slack`` and/or
+        impostor ``fraction`` (module docstring); the models are shared."""
+        import copy
+
+        slack = self.threshold_slack_ if slack is None else float(slack)
+        fraction = self.threshold_fraction_ if fraction is None else float(fraction)
+        out = copy.copy(self)
+        out.thresholds_ = self._compose_thresholds(slack, fraction)
+        out.threshold_slack_, out.threshold_fraction_ = slack, fraction
+        return out
 
     def with_slack(self, slack: float) -> "ManeuverModelSet":
         """A shallow copy whose one-class thresholds use another per-sample ``slack``."""
-        import copy
+        return self.with_threshold(slack=slack)
 
-        out = copy.copy(self)
-        out.thresholds_ = {}
-        for mode, arr in self.thresholds_.items():
-            n = np.arange(1, arr.shape[1] + 1)
-            if mode == "windowed":
-                n = np.minimum(n, self.config.window)
-            out.thresholds_[mode] = arr + (self.threshold_slack_ - slack) * n
-        out.threshold_slack_ = float(slack)
+    def _impostor_ll(self, recordings: dict[str, list[list[F64]]]) -> F64:
+        """:math:`\\bar\\ell_m`: mean per-sample cumulative log-likelihood of model ``m`` over every
+        training sequence (all phases) of the other labels; NaN with a single label."""
+        seqs, labs = [], []
+        for li, lab in enumerate(self.labels_):
+            for rec in recordings[lab]:
+                for x in rec:
+                    seqs.append(self.normaliser_.transform(x))
+                    labs.append(li)
+        clf = OnlineClassifier([m.params_ for m in self.models_], mode="cumulative", viterbi=False)
+        sc = classify_batch(clf, _pad(seqs))["scores"]                       # (R, T, M)
+        lens = np.array([len(x) for x in seqs])
+        per = sc[np.arange(len(seqs)), lens - 1, :] / lens[:, None]           # (R, M) nats/sample
+        labs = np.asarray(labs)
+        out = np.full(len(self.labels_), np.nan)
+        for m in range(len(self.labels_)):
+            other = labs != m
+            if other.any():
+                out[m] = float(np.mean(per[other, m]))
         return out
 
     def _slack(self, recordings: dict[str, list[list[F64]]]) -> float:
@@ -400,13 +460,17 @@ class ManeuverModelSet:
         arrays["norm_min"], arrays["norm_max"] = self.normaliser_.x_min, self.normaliser_.x_max
         for mode, thr in self.thresholds_.items():
             arrays[f"threshold_{mode}"] = thr
+        for mode, base in self.threshold_base_.items():
+            arrays[f"percentile_{mode}"] = base
+        arrays["impostor_ll"] = self.impostor_ll_
         if self.background_ is not None:
             arrays.update(self.background_.to_arrays(prefix="bg_"))
         tmp = out / ".params.tmp.npz"
         np.savez(tmp, **arrays)
         os.replace(tmp, out / "params.npz")
         meta = {"format_version": FORMAT_VERSION, "code_version": __version__,
-                "labels": self.labels_, "threshold_slack": self.threshold_slack_, "config": self.config.to_dict(),
+                "labels": self.labels_, "threshold_slack": self.threshold_slack_,
+                "threshold_fraction": self.threshold_fraction_, "config": self.config.to_dict(),
                 "feature_names": list(self.feature_set.names),
                 "normaliser": self.normaliser_.to_dict(), "training": self.training_}
         write_json(meta, out / "meta.json")
@@ -435,5 +499,16 @@ class ManeuverModelSet:
         for i, lab in enumerate(self.labels_):
             self.models_.append(ManeuverHMM.from_params(HMMParams.from_arrays(z, prefix=f"m{i}_")))
         self.thresholds_ = {k[len("threshold_"):]: z[k] for k in z.files if k.startswith("threshold_")}
+        self.threshold_fraction_ = float(meta.get("threshold_fraction", 1.0))
+        self.impostor_ll_ = z["impostor_ll"] if "impostor_ll" in z.files else np.full(len(self.labels_), np.nan)
+        if any(k.startswith("percentile_") for k in z.files):
+            self.threshold_base_ = {k[len("percentile_"):]: z[k] for k in z.files if k.startswith("percentile_")}
+        else:   # written before the impostor fraction: the thresholds are q_m(n) − s n
+            self.threshold_base_ = {}
+            for mode, thr in self.thresholds_.items():
+                n = np.arange(1, thr.shape[1] + 1)
+                if mode == "windowed":
+                    n = np.minimum(n, self.config.window)
+                self.threshold_base_[mode] = thr + self.threshold_slack_ * n
         self.background_ = HMMParams.from_arrays(z, prefix="bg_") if "bg_means" in z.files else None
         return self

@@ -52,8 +52,9 @@ METRICS: tuple[Metric, ...] = (
            "training maximises its sum over the training sequences (Baum–Welch).",
            "seed 000 §4–§5 (thesis §3.3–§3.4)", r"LL|log-likelihood", re.IGNORECASE),
     Metric("one-class", "one-class decision",
-           "The best model is accepted only when its log-likelihood is above a threshold that most of "
-           "its training sequences exceed; otherwise 'unknown'.",
+           "The best model is accepted only when its log-likelihood is above a threshold from its training "
+           "data (a low percentile of its training sequences' scores, or a set fraction of the way to it from "
+           "its mean score on the other training maneuvers); otherwise 'unknown'.",
            "seed 000 §5 (thesis §3.4, Yeung)", r"one-class|oneclass|(?<![0-9])1c(?![0-9])", re.IGNORECASE),
     Metric("RMSE", "root-mean-square error",
            "√(mean over steps (and runs) of |x̂ − x|²) of one state group (position, velocity or "

@@ -103,6 +103,10 @@ def build_model_report(model_dir: str | os.PathLike, evaluation: str | os.PathLi
         cfg = meta.get("config", {})
         facts += [("maneuvers", ", ".join(labels)), ("feature set", cfg.get("feature_set")),
                   ("model rate", f"{cfg.get('rate_hz')} Hz"), ("decision", cfg.get("decision")),
+                  # the one-class rule the decision uses (pipeline.models.classifier, module docstring)
+                  ("one-class threshold", "θ_m(n) = f q_m(n) + (1 − f) n l_m − s n with f = "
+                   f"{meta.get('threshold_fraction', 1.0):g}, s = {meta.get('threshold_slack', 0.0):g} nats/sample "
+                   "(q_m: training percentile curve; l_m: mean per-sample LL of the other training maneuvers)"),
                   ("mode", cfg.get("mode")), ("seed", cfg.get("seed")), ("code version", meta.get("code_version"))]
         figs.append(("Training log-likelihood", training_curves(training)))
         for i, lab in enumerate(labels):

@@ -34,11 +34,13 @@ def _renamed(old: dict) -> dict:
 
 
 def _f3a_slack(old: dict) -> dict:
-    """Issue 13 item 15: the f3a one-class slack, 1.5 before, is the flightcoach study's P21
-    calibration refined at 0.05 nats/sample (1.85); everything else of the set is unchanged."""
+    """Issue 13 item 15: the f3a one-class slack, 1.5 before, is 0: the set's one-class rule is the
+    impostor-scaled threshold (the new key ``threshold_fraction``, the flightcoach study's P21
+    calibration, 0.62); everything else of the set is unchanged."""
     hmm = old["model_sets"]["f3a"]["hmm"]
     assert hmm["threshold_slack"] == 1.5
-    hmm["threshold_slack"] = 1.85
+    hmm["threshold_slack"] = 0.0
+    hmm["threshold_fraction"] = 0.62
     return old
 
 

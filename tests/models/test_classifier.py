@@ -337,3 +337,76 @@ def test_background_model_makes_an_unseen_maneuver_unknown(synth, rng, tmp_path)
         none.classify(test, decision="confidence_bg")
     with pytest.raises(ConfigError, match="background"):
         ModelsConfig(decision="confidence_bg", background=0).validate()
+
+
+def _impostor_oracle(ms, data):
+    """mean over the other labels' training runs of LL_m(T) / T, scored run by run."""
+    per = {m: [] for m in ms.labels_}
+    for _, g in data.groupby("run_id"):
+        x = ms.normaliser_.transform(np.diff(raw_features(g), axis=0))
+        sc = classify_batch(ms.classifier(mode="cumulative", decision="confidence"), x[None])["scores"][0, -1]
+        for i, m in enumerate(ms.labels_):
+            if m != g["label"].iloc[0]:
+                per[m].append(sc[i] / len(x))
+    return np.array([np.mean(per[m]) for m in ms.labels_])
+
+
+def test_the_impostor_mean_is_each_models_per_sample_score_of_the_other_training_maneuvers(trained3):
+    ms, data = trained3
+    np.testing.assert_allclose(ms.impostor_ll_, _impostor_oracle(ms, data), rtol=1e-9)
+    gen = np.array([ms.thresholds_["cumulative"][i, -1] for i in range(len(ms.labels_))])
+    assert (ms.impostor_ll_ * ms.thresholds_["cumulative"].shape[1] < gen).all()   # impostors score lower
+
+
+def test_the_impostor_fraction_threshold_is_f_q_plus_one_minus_f_n_times_the_impostor_mean(trained3):
+    ms, _ = trained3
+    q = ms.thresholds_["cumulative"]                                 # default f = 1, slack 0: the percentile
+    assert ms.threshold_fraction_ == 1.0
+    np.testing.assert_array_equal(ms.threshold_base_["cumulative"], q)
+    f, s = 0.3, 0.2
+    m2 = ms.with_threshold(fraction=f, slack=s)
+    n = np.arange(1, q.shape[1] + 1)
+    np.testing.assert_allclose(m2.thresholds_["cumulative"],
+                               f * q + (1 - f) * n * ms.impostor_ll_[:, None] - s * n, rtol=1e-12)
+    W = ms.config.window
+    nw = np.minimum(np.arange(1, ms.thresholds_["windowed"].shape[1] + 1), W)
+    np.testing.assert_allclose(m2.thresholds_["windowed"], f * ms.thresholds_["windowed"]
+                               + (1 - f) * nw * ms.impostor_ll_[:, None] - s * nw, rtol=1e-12)
+    # f = 0 accepts an average impostor: the threshold is its expected cumulative score
+    np.testing.assert_allclose(ms.with_threshold(fraction=0.0).thresholds_["cumulative"],
+                               n * ms.impostor_ll_[:, None], rtol=1e-12)
+    back = m2.with_threshold(fraction=1.0, slack=0.0)
+    np.testing.assert_array_equal(back.thresholds_["cumulative"], q)   # f = 1 is bit for bit the old rule
+    assert ms.thresholds_["cumulative"] is q                             # the original is untouched
+
+
+def test_a_lower_impostor_fraction_accepts_more_and_the_setting_survives_save_and_load(synth, rng, trained3, tmp_path):
+    ms, _ = trained3
+    _, bulk = synth
+    test = bulk(("M1", "M2", "M3", "U"), 3, rng)
+    acc = [(ms.with_threshold(fraction=f).classify(test, decision="oneclass", gmr=False)["pred"] != "unknown").mean()
+           for f in (1.0, 0.5, 0.0)]
+    assert acc[0] <= acc[1] <= acc[2] and acc[2] > acc[0]
+    data = bulk(("M1", "M2"), 3, rng)
+    cfg = ModelsConfig(**{**FAST, "threshold_fraction": 0.4})
+    a = ManeuverModelSet(config=cfg).fit(data)
+    a.save(tmp_path / "m")
+    b = ManeuverModelSet.load(tmp_path / "m")
+    assert b.threshold_fraction_ == 0.4 and json.loads((tmp_path / "m" / "meta.json").read_text())["threshold_fraction"] == 0.4
+    for mode in a.thresholds_:
+        np.testing.assert_array_equal(a.thresholds_[mode], b.thresholds_[mode])
+        np.testing.assert_array_equal(a.threshold_base_[mode], b.threshold_base_[mode])
+    np.testing.assert_array_equal(a.impostor_ll_, b.impostor_ll_)
+    pd.testing.assert_frame_equal(a.classify(data, decision="both", gmr=False), b.classify(data, decision="both", gmr=False))
+
+
+def test_a_bad_fraction_or_a_model_file_without_impostor_scores_fails_in_one_line(trained3):
+    ms, _ = trained3
+    with pytest.raises(ConfigError, match="threshold_fraction"):
+        ModelsConfig.from_section({"threshold_fraction": 1.5})
+    old = ms.with_threshold()
+    old.impostor_ll_ = np.full(len(ms.labels_), np.nan)              # as loaded from a pre-fraction file
+    old.with_threshold(fraction=1.0)                                  # the percentile rule needs none
+    with pytest.raises(ModelError, match="retrain") as e:
+        old.with_threshold(fraction=0.5)
+    assert "\n" not in str(e.value)

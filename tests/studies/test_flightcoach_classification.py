@@ -93,20 +93,32 @@ def test_the_f3a_default_is_calibrated_on_p21_and_keeps_new_f23_maneuvers_unknow
     assert len(row) == 1 and row["p21_balanced_pct"].iloc[0] == sweep["p21_balanced_pct"].max()
     assert (sweep.loc[sweep["p21_balanced_pct"] == sweep["p21_balanced_pct"].max(), "slack_nats_per_sample"]
             <= used).all()                                          # ties go to the largest slack
+    # the impostor-fraction family, calibrated the same way on P21 (ties: the smallest fraction)
+    frac = float(r["flightcoach_oneclass_fraction_used"])
+    rep = Path(run.outputs["report"]).read_text()
+    assert "Impostor-fraction rule (P21 calibration)" in rep and "Rule families" in rep
+    fcal = [ln.split("|")[1:3] for ln in rep.split("## Impostor-fraction rule")[1].split("## Rule families")[0]
+            .splitlines() if ln.startswith("| ") and not ln.startswith("| fraction")]
+    fcal = pd.DataFrame({"f": [float(a) for a, _ in fcal], "b": [float(b) for _, b in fcal]})
+    assert frac == pytest.approx(fcal.loc[fcal["b"] == fcal["b"].max(), "f"].min(), abs=1e-3)   # ties: smallest f
+    rule = r["flightcoach_default_rule"]
+    assert rule == "fraction"                                       # the study's default family
+    d_slack, d_frac = (used, 1.0) if rule == "slack" else (0.0, frac)
+    assert float(r["flightcoach_default_threshold_slack"]) == pytest.approx(d_slack, abs=1e-3)
+    assert float(r["flightcoach_default_threshold_fraction"]) == pytest.approx(d_frac, abs=1e-3)
     models = yaml.safe_load((ROOT / "datasets" / "config.yaml").read_text())["model_sets"]["f3a"]["hmm"]
     assert models["decision"] == r["flightcoach_default_decision"] == "both"
-    assert models["threshold_slack"] == pytest.approx(used)         # the workflow uses the calibrated slack
+    # the workflow uses the P21-calibrated default rule
+    assert models.get("threshold_slack", 0.0) == pytest.approx(d_slack, abs=1e-3)
+    assert models.get("threshold_fraction", 1.0) == pytest.approx(d_frac, abs=1e-3)
     unk, n_new = map(int, r["flightcoach_default_f23_new_maneuvers_unknown"].split("/"))
-    assert n_new == 14 and unk >= 12
-    ok, n = map(int, r["flightcoach_default_p23_correct_at_segment_end"].split("/"))
-    assert n == 17 and ok >= 15                                     # measured 15/17 (see the xfail below)
+    assert n_new == 14 and unk >= 12                                # issue 13 item 15
 
 
 @pytest.mark.realdata
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 13 item 15 asks P23 #350 >= 16/17 under the f3a default; the "
-                   "P21-calibrated slack (1.85) gives 15/17, 16/17 needs >= 2.0 where P21 accepts 2/10 unknowns")
 def test_the_f3a_default_gets_16_of_17_p23_maneuvers_right(full):
+    # issue 13 item 15; the slack rule (1.85) gave 15/17, the P21-chosen impostor-fraction rule 17/17
     ok, n = map(int, full[0].figures["flightcoach_default_p23_correct_at_segment_end"].split("/"))
     assert n == 17 and ok >= 16
 
@@ -116,6 +128,15 @@ def test_a_missing_flight_fails_with_one_line_naming_the_file(tmp_path):
         flightcoach_inputs(tmp_path)
     msg = str(e.value)
     assert "\n" not in msg and str(tmp_path / FLIGHTCOACH_DIR) in msg and "not found" in msg
+
+
+def test_each_family_is_calibrated_to_its_permissive_end():
+    from pipeline.studies.flightcoach_classification import calibrated, p21_over_time
+
+    curve = pd.DataFrame({"f": [0.4, 0.5, 0.6, 0.7], "p21_balanced_pct": [50.0, 60.0, 60.0, 55.0]})
+    assert calibrated(curve, "f", "min") == 0.5 and calibrated(curve, "f", "max") == 0.6
+    seg = pd.DataFrame({"known": [True, True, False], "accepted_pct": [80.0, 40.0, 30.0]})
+    assert p21_over_time(seg) == pytest.approx(0.5 * (60.0 + 70.0))
 
 
 def test_the_calibration_refines_from_the_grid_point_below_to_the_one_above_the_maximisers():

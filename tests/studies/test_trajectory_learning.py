@@ -122,3 +122,26 @@ def test_a_label_flown_twice_in_each_flight_is_one_maneuver_per_occurrence():
     assert list(out) == ["hB#1", "hB#2", "loop", "rollC#1", "rollC#2"]
     assert [d.name for d in out["hB#2"]] == ["f1:hB#2", "f2:hB#2"]
     assert [d.name for d in out["rollC#2"]] == ["f1:rollC#2", "f2:rollC#2"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="issue 15 real-data target missed on faithful code (box 35.3 %, centred 52.9 % of 34 "
+                   "maneuvers): on the 23 two-demo maneuvers the learned trajectory interpolates its one "
+                   "training demo and ties it within 0.3 m; on the 11 with three or more it sits within 1-3 m "
+                   "of the others' DBA average, and the demos differ by where and how each pilot flew, not by "
+                   "independent noise, so the closest single demo wins (0/11 box, 5/11 centred)")
+def test_the_trajectory_learned_from_the_other_demos_is_closer_on_80_pct_of_the_real_maneuvers():
+    need_shared("FlightCoach JSON and kd0aij CSV flights")
+    from pipeline.studies.trajectory_learning import DEFAULTS, real_part
+
+    root = Path("results")
+    flights = ["fc-p23-036", "fc-p23-350", "fc-p21-026", "kd0aij-p21", "kd0aij-141"]
+    if not all((root / "state" / f"{f}.parquet").exists() for f in flights):
+        pytest.skip("results/state of the P23/P21 flights not built (snakemake results/state/<flight>.parquet)")
+    inputs = {"states": [str(root / "state" / f"{f}.parquet") for f in flights],
+              "segments": [str(root / "segments" / f"{f}.parquet") for f in flights]}
+    _, summ, _ = real_part(inputs, section(load_config(), "align"), {**DEFAULTS, "frames": ["box"]},
+                           lambda msg: None)
+    assert len(summ) >= 30
+    assert 100.0 * float(summ["better"].mean()) >= 80.0  # RESULT align_real_loo_better_pct

@@ -19,7 +19,11 @@ distance along their DTW path (symmetric2, box frame), both taken as curves (den
 samples alone reads 3-5 m between a demo and a trajectory learned from that very demo), beside each other demo's distance to it and their DBA
 average's (:func:`pipeline.align.baselines.dba_average`). Where only one other demo is left (a
 maneuver with two demos) the learner is given that demo twice (it needs two; the fit is then a
-smoother of that one demo on the hidden axis) — such folds are marked ``single_other``.
+smoother of that one demo on the hidden axis) — such folds are marked ``single_other``. Two
+identical demos drive the ML Σ^(y) to its floor, so the fit interpolates that demo (on simulated
+demos it is exactly as far from the truth as the demo); its distance to the left-out demo then
+equals the other demo's within the curves' resolution (≤ 0.3 m measured), and "better" on such a
+maneuver is decided by that tie.
 
 Each comparison is made twice (``frames``): in the box frame as the demos are (the headline),
 and **centred**, each demo's mean position subtracted first, so that what is compared is the

@@ -378,13 +378,21 @@ def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments:
                      ref_heading_rad: float | None, sample_hz: float, fit_hz: float = 1.0,
                      headings: int = 24, iterations: int = 30,
                      path_fn: PathFn | None = None,
-                     ref_origin_ned_m: Sequence[float] | None = None) -> tuple[RigidFit, pd.DataFrame]:
+                     ref_origin_ned_m: Sequence[float] | None = None,
+                     schedule_exclude: Sequence[str] | None = None) -> tuple[RigidFit, pd.DataFrame]:
     """Rigid fit of a box-less flight to a labelled reference, and its carried segments.
 
     The fit uses both tracks at ``fit_hz``; the segments come from one more DTW path of the
     fitted positions at ``sample_hz`` (:func:`transfer_segments`). The reference is taken in its
     box frame: rotated by ``ref_heading_rad`` about its box origin ``ref_origin_ned_m`` (default
     its NED origin), as :func:`flight_demos` puts its demos.
+
+    ``schedule_exclude`` (labels, e.g. take-off and landing): fit the *schedule* only. The first
+    fit of the whole flights gives the carried segments; both tracks are then cut to the span of
+    their segments other than these labels (the CSV logs carry minutes of taxiing, climb-out and
+    circuits the reference does not have, and they pull the translation: kd0aij-p21's maneuvers
+    sat 45 m nearer and 22 m higher than the reference's on average), and the fit and the segment
+    transfer are redone on the cut tracks.
     """
     path_fn = path_fn or warping_path
     psi_ref = float(ref_heading_rad) if ref_heading_rad is not None else 0.0
@@ -407,4 +415,33 @@ def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments:
     t_ref, ref = positions(ref_state, sample_hz)
     ref = ref @ heading_rotation(psi_ref).T + ref_shift
     path = path_fn(_transform_pos(src, fit.heading_rad, fit.translation_m), ref)
-    return fit, transfer_segments(t_ref, ref_segments, t_src, path)
+    carried = transfer_segments(t_ref, ref_segments, t_src, path)
+    if schedule_exclude is None:
+        return fit, carried
+    skip = set(schedule_exclude)
+
+    def span(seg: pd.DataFrame) -> tuple[int, int] | None:
+        keep = seg[~seg["label"].astype(str).isin(skip)]
+        return (int(keep["t_start_ns"].min()), int(keep["t_end_ns"].max())) if len(keep) else None
+
+    s_ref, s_src = span(ref_segments), span(carried)
+    if s_ref is None or s_src is None or s_src[1] <= s_src[0]:
+        return fit, carried
+
+    def cut(st: pd.DataFrame, sp: tuple[int, int]) -> pd.DataFrame:
+        t = st["t_ns"].to_numpy(np.int64)
+        return st.loc[(t >= sp[0]) & (t <= sp[1])]
+
+    state_s, ref_s = cut(state, s_src), cut(ref_state, s_ref)
+    t_src, src = positions(state_s, fit_hz)
+    t_ref, ref = positions(ref_s, fit_hz)
+    if len(src) < 3 or len(ref) < 3:
+        return fit, carried
+    ref = ref @ heading_rotation(psi_ref).T + ref_shift
+    fit = rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn)
+    t_src, src = positions(state_s, sample_hz)
+    t_ref, ref = positions(ref_s, sample_hz)
+    ref = ref @ heading_rotation(psi_ref).T + ref_shift
+    path = path_fn(_transform_pos(src, fit.heading_rad, fit.translation_m), ref)
+    inside = ref_segments[~ref_segments["label"].astype(str).isin(skip)]
+    return fit, transfer_segments(t_ref, inside, t_src, path)

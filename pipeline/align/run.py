@@ -146,7 +146,7 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
                                             fit_hz=float(fit_cfg.get("sample_hz", 1.0)),
                                             headings=int(fit_cfg.get("headings", 24)),
                                             iterations=int(fit_cfg.get("iterations", 30)),
-                                            ref_origin_ned_m=origins.get(ref))
+                                            ref_origin_ned_m=origins.get(ref), schedule_exclude=exclude)
             if not len(seg):
                 seg = carried
             _say(f"set {set_name}: {f} fitted to {ref}: heading {np.degrees(fit.heading_rad):.1f} deg, "

@@ -160,3 +160,37 @@ def test_a_box_less_flight_is_fitted_onto_the_reference_in_its_pilot_centred_box
                                     headings=12, iterations=10, ref_origin_ned_m=pilot)
     assert fit.rms_m < 1.0
     np.testing.assert_allclose(fit.translation_m, 0.0, atol=0.5)  # both already start at the box origin
+
+
+def test_the_rigid_fit_of_a_log_with_extra_flying_before_the_schedule_fits_the_schedule_only():
+    import pandas as pd
+
+    def figure(st):  # a figure-of-eight with a climb: DTW pins it down, unlike a straight line
+        ts = st["t_ns"].to_numpy() * 1e-9
+        st["pos_n_m"], st["pos_e_m"] = 150.0 * np.sin(0.1 * ts), 100.0 * np.sin(0.2 * ts)
+        st["pos_d_m"] = -100.0 - 20.0 * np.sin(0.3 * ts)
+        return st
+
+    ref = figure(synthetic_state(1500, seed=1))  # 60 s: take-off, two maneuvers, landing
+    seg = synthetic_segments([(0, 4, "tkoff"), (4, 30, "a"), (30, 56, "b"), (56, 60, "lnd")])
+    shift = np.array([40.0, -25.0, 5.0])
+    sched = figure(synthetic_state(1500, seed=2))
+    for c, a in enumerate(("pos_n_m", "pos_e_m", "pos_d_m")):
+        sched[a] = sched[a] - shift[c]
+    # 15 s of circling 200 m away before the schedule (the CSV logs' climb-out and circuits)
+    loiter = synthetic_state(375, seed=3)
+    w = np.arange(375) * 0.04 * 0.3
+    loiter["pos_n_m"], loiter["pos_e_m"] = -150.0 + 40.0 * np.cos(w), 120.0 + 40.0 * np.sin(w)
+    sched["t_ns"] = sched["t_ns"] + loiter["t_ns"].iloc[-1] + 40_000_000
+    other = pd.concat([loiter, sched], ignore_index=True)
+    kw = dict(ref_heading_rad=0.0, sample_hz=2.0, fit_hz=1.0, headings=12, iterations=20)
+    whole, _ = fit_to_reference(other, ref, seg, **kw)
+    fit, carried = fit_to_reference(other, ref, seg, **kw, schedule_exclude=("tkoff", "lnd"))
+    # the loiter pulls the whole-flight fit (61 m RMS, translation 36 m off); the schedule's is
+    # left with the one-pass uncertainty of the carried span (6 m, 2 m)
+    assert whole.rms_m > 30.0 and np.linalg.norm(whole.translation_m - shift) > 20.0
+    assert fit.rms_m < 10.0 and abs(fit.heading_rad) < 0.02
+    np.testing.assert_allclose(fit.translation_m, shift, atol=3.0)
+    assert list(carried["label"]) == ["a", "b"]
+    start_a = int(carried.loc[carried["label"] == "a", "t_start_ns"].iloc[0])
+    assert abs(start_a - (int(sched["t_ns"].iloc[0]) + 4_000_000_000)) <= 500_000_000

@@ -374,6 +374,11 @@ def transfer_segments(ref_t_ns: NDArray[np.int64], ref_segments: pd.DataFrame,
     return out.reset_index(drop=True)
 
 
+#: most heading change (deg) the schedule-only refit may make on the whole-flight fit; more means
+#: the whole-flight fit did not find the schedule, and it is kept
+SCHEDULE_FIT_MAX_TURN_DEG = 20.0
+
+
 def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments: pd.DataFrame, *,
                      ref_heading_rad: float | None, sample_hz: float, fit_hz: float = 1.0,
                      headings: int = 24, iterations: int = 30,
@@ -392,7 +397,10 @@ def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments:
     their segments other than these labels (the CSV logs carry minutes of taxiing, climb-out and
     circuits the reference does not have, and they pull the translation: kd0aij-p21's maneuvers
     sat 45 m nearer and 22 m higher than the reference's on average), and the fit and the segment
-    transfer are redone on the cut tracks.
+    transfer are redone on the cut tracks, unless the refit turns the heading by more than
+    :data:`SCHEDULE_FIT_MAX_TURN_DEG` (then the whole-flight fit did not find the schedule, its
+    span is arbitrary, and it is kept: kd0aij-141, 112-114 m pair RMS either way, whose refit
+    turned by 175°).
     """
     path_fn = path_fn or warping_path
     psi_ref = float(ref_heading_rad) if ref_heading_rad is not None else 0.0
@@ -438,7 +446,13 @@ def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments:
     if len(src) < 3 or len(ref) < 3:
         return fit, carried
     ref = ref @ heading_rotation(psi_ref).T + ref_shift
+    first = fit
     fit = rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn)
+    turn = abs(float(np.angle(np.exp(1j * (fit.heading_rad - first.heading_rad)))))
+    if turn > np.radians(SCHEDULE_FIT_MAX_TURN_DEG):
+        # the whole-flight fit was too poor to say where the schedule is (its span is then
+        # arbitrary): keep it rather than a fit of an arbitrary piece
+        return first, carried
     t_src, src = positions(state_s, sample_hz)
     t_ref, ref = positions(ref_s, sample_hz)
     ref = ref @ heading_rotation(psi_ref).T + ref_shift

@@ -7,12 +7,18 @@ sample_hz)``-th grid row) as a ``(N, 13)`` array of :data:`DEMO_COLUMNS`: NED po
 velocity, acceleration and the attitude quaternion (scalar first, sign-continuous along the demo,
 :func:`~pipeline.frames.rotations.quat_continuity`), all in the **box frame**.
 
-**Box frame.** A FlightCoach flight carries its box heading ``box_rotation_rad`` (ψ) in the
-``state`` metadata (preprocessing copies ``params.box_rotation_rad`` of the ingest meta there);
-its NED frame is centred on the box origin (the pilot), so the box frame is NED rotated about
-down by ψ about the origin, :math:`x_{box} = R_z(\\psi)\\,x_{NED}` for position, velocity and
-acceleration (:func:`~pipeline.models.features.heading_rotation`) and
-:math:`q_{box} = q_z(-\\psi) \\otimes q` for the body→NED quaternion.
+**Box frame.** A FlightCoach flight carries its box heading ``box_rotation_rad`` (ψ) and the
+box origin, the pilot's position ``box_pilot_ned_m`` (:math:`o`, in the flight's NED frame), in
+the ``state`` metadata (preprocessing copies them from the ingest meta's ``params``). Its NED
+frame is about ``originLat/Lng/Alt``, which is *not* the box origin: FlightCoach's box is centred
+on the pilot (FlightAnalysis ``Box.from_fcjson_parmameters``: from ``pilotLat/Lng`` towards
+``centerLat/Lng``), 17-44 m away in the P23 flights, on opposite sides along the box axis, so
+ignoring it displaced the two P23 flights' demos by ~60 m against each other. The box frame is
+NED rotated about down by ψ about the pilot, :math:`x_{box} = R_z(\\psi)\\,(x_{NED} - o)` for
+position (:math:`R_z(\\psi)\\,v` for velocity and acceleration;
+:func:`~pipeline.models.features.heading_rotation`) and :math:`q_{box} = q_z(-\\psi) \\otimes q`
+for the body→NED quaternion. Without ``box_pilot_ned_m`` (older state tables) the rotation is
+about the NED origin.
 
 **Box-less flights** (the kd0aij CSVs: NED about the first fix, no labels) get a rigid transform
 onto the set's labelled reference flight (already in its box frame), :func:`rigid_fit`: the
@@ -161,9 +167,19 @@ def grid_stride(t_ns: NDArray[np.int64], sample_hz: float) -> int:
 
 # --- demos of one flight -------------------------------------------------------------------------
 
+def box_translation(heading_rad: float, origin_ned_m: Sequence[float] | None) -> F64 | None:
+    """The translation of :func:`to_frame` that puts the box origin ``origin_ned_m`` (NED, m) at
+    zero after the rotation by ``heading_rad``: :math:`-R_z(\\psi)\\,o` (``None`` without one)."""
+    if origin_ned_m is None:
+        return None
+    o = np.asarray(origin_ned_m, dtype=np.float64).reshape(3)
+    return -(heading_rotation(heading_rad) @ o)
+
+
 def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
                  heading_rad: float | None = None, fit: RigidFit | None = None,
-                 sample_hz: float = 3.0, exclude: Sequence[str] = ()) -> FlightDemos:
+                 sample_hz: float = 3.0, exclude: Sequence[str] = (),
+                 box_origin_ned_m: Sequence[float] | None = None) -> FlightDemos:
     """Cut one flight's labelled segments into box-frame demos.
 
     Parameters
@@ -174,13 +190,16 @@ def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
         ``segment_id``, ``t_start_ns``, ``t_end_ns``, ``label``.
     flight_id : str
     heading_rad : float, optional
-        The box heading (FlightCoach ``box_rotation_rad``); rotation about the origin.
+        The box heading (FlightCoach ``box_rotation_rad``); rotation about ``box_origin_ned_m``.
     fit : RigidFit, optional
         A rigid transform onto a reference flight (box-less flights); wins over ``heading_rad``.
     sample_hz : float
         Demo rate (nearest grid rows, see :func:`grid_stride`).
     exclude : sequence of str
         Labels never taken (take-off, landing).
+    box_origin_ned_m : sequence of 3 float, optional
+        The box origin (FlightCoach: the pilot, ``box_pilot_ned_m``) in the flight's NED frame;
+        default the NED origin. Used with ``heading_rad`` only.
 
     Returns
     -------
@@ -196,6 +215,7 @@ def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
         frame, psi = "box", float(heading_rad)
     else:
         frame, psi = "ned", 0.0
+    shift = box_translation(psi, box_origin_ned_m) if frame == "box" else None
     demos: list[Demo] = []
     dropped: list[Dropped] = []
     seen: dict[str, int] = {}
@@ -220,10 +240,12 @@ def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
             dropped.append(Dropped(name, flight_id, label, int(row.segment_id), reason))
             continue
         x = x_all[idx]
-        x = fit.apply(x) if fit is not None else to_frame(x, psi)
+        x = fit.apply(x) if fit is not None else to_frame(x, psi, shift)
         demos.append(Demo(name, flight_id, label, int(row.segment_id), t[idx], x))
     diag = {"stride": stride, "n_demos": len(demos), "n_dropped": len(dropped), "frame": frame,
             "heading_rad": psi}
+    if shift is not None:
+        diag["box_origin_ned_m"] = [float(v) for v in box_origin_ned_m]
     if fit is not None:
         diag.update(translation_m=[float(v) for v in fit.translation_m], fit_rms_m=fit.rms_m,
                     fit_pairs=fit.n_pairs)
@@ -352,17 +374,38 @@ def transfer_segments(ref_t_ns: NDArray[np.int64], ref_segments: pd.DataFrame,
     return out.reset_index(drop=True)
 
 
+#: most heading change (deg) the schedule-only refit may make on the whole-flight fit; more means
+#: the whole-flight fit did not find the schedule, and it is kept
+SCHEDULE_FIT_MAX_TURN_DEG = 20.0
+
+
 def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments: pd.DataFrame, *,
                      ref_heading_rad: float | None, sample_hz: float, fit_hz: float = 1.0,
                      headings: int = 24, iterations: int = 30,
-                     path_fn: PathFn | None = None) -> tuple[RigidFit, pd.DataFrame]:
+                     path_fn: PathFn | None = None,
+                     ref_origin_ned_m: Sequence[float] | None = None,
+                     schedule_exclude: Sequence[str] | None = None) -> tuple[RigidFit, pd.DataFrame]:
     """Rigid fit of a box-less flight to a labelled reference, and its carried segments.
 
     The fit uses both tracks at ``fit_hz``; the segments come from one more DTW path of the
-    fitted positions at ``sample_hz`` (:func:`transfer_segments`).
+    fitted positions at ``sample_hz`` (:func:`transfer_segments`). The reference is taken in its
+    box frame: rotated by ``ref_heading_rad`` about its box origin ``ref_origin_ned_m`` (default
+    its NED origin), as :func:`flight_demos` puts its demos.
+
+    ``schedule_exclude`` (labels, e.g. take-off and landing): fit the *schedule* only. The first
+    fit of the whole flights gives the carried segments; both tracks are then cut to the span of
+    their segments other than these labels (the CSV logs carry minutes of taxiing, climb-out and
+    circuits the reference does not have, and they pull the translation: kd0aij-p21's maneuvers
+    sat 45 m nearer and 22 m higher than the reference's on average), and the fit and the segment
+    transfer are redone on the cut tracks, unless the refit turns the heading by more than
+    :data:`SCHEDULE_FIT_MAX_TURN_DEG` (then the whole-flight fit did not find the schedule, its
+    span is arbitrary, and it is kept: kd0aij-141, 112-114 m pair RMS either way, whose refit
+    turned by 175°).
     """
     path_fn = path_fn or warping_path
     psi_ref = float(ref_heading_rad) if ref_heading_rad is not None else 0.0
+    ref_shift = box_translation(psi_ref, ref_origin_ned_m) if ref_heading_rad is not None else None
+    ref_shift = np.zeros(3) if ref_shift is None else ref_shift
 
     def positions(st: pd.DataFrame, hz: float) -> tuple[NDArray[np.int64], F64]:
         t = st["t_ns"].to_numpy(np.int64)
@@ -374,10 +417,45 @@ def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments:
 
     t_src, src = positions(state, fit_hz)
     t_ref, ref = positions(ref_state, fit_hz)
-    ref = ref @ heading_rotation(psi_ref).T
+    ref = ref @ heading_rotation(psi_ref).T + ref_shift
     fit = rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn)
     t_src, src = positions(state, sample_hz)
     t_ref, ref = positions(ref_state, sample_hz)
-    ref = ref @ heading_rotation(psi_ref).T
+    ref = ref @ heading_rotation(psi_ref).T + ref_shift
     path = path_fn(_transform_pos(src, fit.heading_rad, fit.translation_m), ref)
-    return fit, transfer_segments(t_ref, ref_segments, t_src, path)
+    carried = transfer_segments(t_ref, ref_segments, t_src, path)
+    if schedule_exclude is None:
+        return fit, carried
+    skip = set(schedule_exclude)
+
+    def span(seg: pd.DataFrame) -> tuple[int, int] | None:
+        keep = seg[~seg["label"].astype(str).isin(skip)]
+        return (int(keep["t_start_ns"].min()), int(keep["t_end_ns"].max())) if len(keep) else None
+
+    s_ref, s_src = span(ref_segments), span(carried)
+    if s_ref is None or s_src is None or s_src[1] <= s_src[0]:
+        return fit, carried
+
+    def cut(st: pd.DataFrame, sp: tuple[int, int]) -> pd.DataFrame:
+        t = st["t_ns"].to_numpy(np.int64)
+        return st.loc[(t >= sp[0]) & (t <= sp[1])]
+
+    state_s, ref_s = cut(state, s_src), cut(ref_state, s_ref)
+    t_src, src = positions(state_s, fit_hz)
+    t_ref, ref = positions(ref_s, fit_hz)
+    if len(src) < 3 or len(ref) < 3:
+        return fit, carried
+    ref = ref @ heading_rotation(psi_ref).T + ref_shift
+    first = fit
+    fit = rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn)
+    turn = abs(float(np.angle(np.exp(1j * (fit.heading_rad - first.heading_rad)))))
+    if turn > np.radians(SCHEDULE_FIT_MAX_TURN_DEG):
+        # the whole-flight fit was too poor to say where the schedule is (its span is then
+        # arbitrary): keep it rather than a fit of an arbitrary piece
+        return first, carried
+    t_src, src = positions(state_s, sample_hz)
+    t_ref, ref = positions(ref_s, sample_hz)
+    ref = ref @ heading_rotation(psi_ref).T + ref_shift
+    path = path_fn(_transform_pos(src, fit.heading_rad, fit.translation_m), ref)
+    inside = ref_segments[~ref_segments["label"].astype(str).isin(skip)]
+    return fit, transfer_segments(t_ref, inside, t_src, path)

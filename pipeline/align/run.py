@@ -114,6 +114,7 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     notices: list[str] = []
     dropped: list[Dropped] = []
     loaded: dict[str, tuple[pd.DataFrame, pd.DataFrame, float | None]] = {}
+    origins: dict[str, list[float] | None] = {}
     for f in flights:
         if f not in paths or paths[f][1] is None:
             msg = f"set {set_name}: flight {f} missing (no state/segments input): skipped"
@@ -130,6 +131,8 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
             dropped.append(Dropped(f"{f}:", f, "", -1, f"preprocessing failed: {reason}"))
             continue
         box = meta.get("box_rotation_rad")
+        pilot = meta.get("box_pilot_ned_m")  # the box origin (older state tables: none, NED origin)
+        origins[f] = [float(v) for v in pilot] if pilot is not None else None
         loaded[f] = (read_table(sp), read_table(gp), float(box) if box is not None else None)
     if ref is not None and ref not in loaded:
         notices.append(f"set {set_name}: reference {ref} not available: box-less flights stay in NED")
@@ -142,12 +145,14 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
             fit, carried = fit_to_reference(state, r_state, r_seg, ref_heading_rad=r_box, sample_hz=hz,
                                             fit_hz=float(fit_cfg.get("sample_hz", 1.0)),
                                             headings=int(fit_cfg.get("headings", 24)),
-                                            iterations=int(fit_cfg.get("iterations", 30)))
+                                            iterations=int(fit_cfg.get("iterations", 30)),
+                                            ref_origin_ned_m=origins.get(ref), schedule_exclude=exclude)
             if not len(seg):
                 seg = carried
             _say(f"set {set_name}: {f} fitted to {ref}: heading {np.degrees(fit.heading_rad):.1f} deg, "
                  f"pair RMS {fit.rms_m:.1f} m")
-        fd = flight_demos(state, seg, flight_id=f, heading_rad=box, fit=fit, sample_hz=hz, exclude=exclude)
+        fd = flight_demos(state, seg, flight_id=f, heading_rad=box, fit=fit, sample_hz=hz, exclude=exclude,
+                          box_origin_ned_m=origins.get(f))
         per_flight.append(fd)
         dropped.extend(fd.dropped)
         info[f] = fd.diagnostics

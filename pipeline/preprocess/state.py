@@ -311,6 +311,9 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     box = box_rotation_rad(log.meta)
     if box is not None:
         diag["box_rotation_rad"] = box
+    pilot = box_pilot_ned_m(log.meta)  # the box origin (issue 15: demos in the box frame)
+    if pilot is not None:
+        diag["box_pilot_ned_m"] = pilot
     if vehicle and vehicle != cfg.vehicle:
         diag["notes"].append(f"vehicle {vehicle!r} has no preprocess.vehicles entry: "
                              f"{cfg.vehicle or 'built-in'} defaults used")
@@ -482,6 +485,26 @@ def box_rotation_rad(meta: Mapping | None) -> float | None:
     return v if np.isfinite(v) else None
 
 
+def box_pilot_ned_m(meta: Mapping | None) -> list[float] | None:
+    """The aerobatic box origin of a FlightCoach flight, the pilot's position, in the flight's NED
+    frame (m): ``params.pilotLat/pilotLng/pilotAlt`` about ``params.originLat/originLng/originAlt``.
+
+    FlightCoach's N/E/D are about ``originLat/Lng/Alt``, but its box is centred on the pilot
+    (FlightAnalysis ``Box.from_fcjson_parmameters``: the box from ``pilotLat/Lng`` towards
+    ``centerLat/Lng``, ``gps_to_point``: ``gps - pilot_position``); the two differ by 17-44 m in
+    the P23 flights. ``None`` when any of the six values is absent or not finite.
+    """
+    p = (meta or {}).get("params") or {}
+    try:
+        v = [float(p[k]) for k in ("pilotLat", "pilotLng", "pilotAlt", "originLat", "originLng", "originAlt")]
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not np.all(np.isfinite(v)):
+        return None
+    n, e, d = geodetic_to_ned(v[0], v[1], v[2], v[3], v[4], v[5])
+    return [float(n), float(e), float(d)]
+
+
 # --- files -------------------------------------------------------------------------------------
 
 def write_outputs(result: PreprocessResult, *, state_path, segments_path, calibration_path=None,
@@ -496,6 +519,8 @@ def write_outputs(result: PreprocessResult, *, state_path, segments_path, calibr
     extra = {"flight_id": diag.get("flight_id"), "preprocess": diag}
     if diag.get("box_rotation_rad") is not None:
         extra["box_rotation_rad"] = float(diag["box_rotation_rad"])
+    if diag.get("box_pilot_ned_m") is not None:
+        extra["box_pilot_ned_m"] = [float(v) for v in diag["box_pilot_ned_m"]]
     write_table(result.state, state_path, schema.STATE, name="state", extra=extra)
     write_table(result.segments, segments_path, schema.SEGMENTS, name="segments",
                 extra={"flight_id": diag.get("flight_id")})

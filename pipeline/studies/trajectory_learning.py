@@ -9,15 +9,21 @@ average and the smoothed DBA average (tables ``sim_cases``, ``sim_summary``;
 
 **Real part** (this module): the demo sets ``align.sets`` named by ``sets`` (default P23: the
 two P23 flights, whose ``hB`` is flown twice each; P21: the labelled FlightCoach flight and the
-two kd0aij CSVs rigidly fitted to it), demos in the box frame (:mod:`pipeline.align.demos`).
+two kd0aij CSVs rigidly fitted to it), demos in the box frame (:mod:`pipeline.align.demos`). A label flown twice in a flight is two
+maneuvers, one per occurrence (``repeats: split``, :func:`by_occurrence`; ``pool``: one).
 For every maneuver and every demo *k* (leave one out), the trajectory is learned from the other
 demos (:class:`~pipeline.align.trajectory.TrajectoryLearner` with the ``align`` settings; the
-learned μ taken every second hidden step, i.e. at the demo rate) and compared with the left-out
-demo by the RMS 3-D position distance along their DTW path (symmetric2, box frame,
-:func:`pipeline.align.anchors.dtw_rms`), beside each other demo's distance to it and their DBA
+learned μ on its whole hidden axis) and compared with the left-out demo by the RMS 3-D position
+distance along their DTW path (symmetric2, box frame), both taken as curves (densified to 0.5 m,
+:func:`pipeline.align.anchors.dense_dtw_rms`: on the 3 Hz samples, ~9 m apart, the pairing of
+samples alone reads 3-5 m between a demo and a trajectory learned from that very demo), beside each other demo's distance to it and their DBA
 average's (:func:`pipeline.align.baselines.dba_average`). Where only one other demo is left (a
 maneuver with two demos) the learner is given that demo twice (it needs two; the fit is then a
-smoother of that one demo on the hidden axis) — such folds are marked ``single_other``.
+smoother of that one demo on the hidden axis) — such folds are marked ``single_other``. Two
+identical demos drive the ML Σ^(y) to its floor, so the fit interpolates that demo (on simulated
+demos it is exactly as far from the truth as the demo); its distance to the left-out demo then
+equals the other demo's within the curves' resolution (≤ 0.3 m measured), and "better" on such a
+maneuver is decided by that tie.
 
 Each comparison is made twice (``frames``): in the box frame as the demos are (the headline),
 and **centred**, each demo's mean position subtracted first, so that what is compared is the
@@ -44,9 +50,8 @@ import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 
-from ..align.anchors import dtw_rms
+from ..align.anchors import dense_dtw_rms
 from ..align.baselines import dba_average
-from ..align.dtw import dtw
 from ..align.run import load_demo_set, make_learner, stretchable
 from ..config import ConfigError, load_config, section
 from ..io.parquet import write_table
@@ -58,19 +63,42 @@ NAME = "trajectory_learning"
 ROOT = Path(__file__).resolve().parents[2]
 OUTPUT_TABLES = ("sim_cases", "sim_summary", "real_loo", "real_summary")
 DEFAULTS: dict[str, Any] = {"sets": ["p23", "p21"], "skip": [], "sim": {}, "frames": ["box", "centred"],
-                            "real_max_iter": 30, "real_maneuvers": 0}
+                            "real_max_iter": 30, "real_maneuvers": 0, "repeats": "split"}
 SIZES: dict[str, dict[str, Any]] = {"tiny": {"real_max_iter": 5, "real_maneuvers": 3},
                                     "small": {}, "thesis": {}}
 
 
 def _path_rms(a: np.ndarray, b: np.ndarray) -> float:
-    return dtw_rms(a, b, dtw(a[:, :3], b[:, :3], step_pattern="symmetric2").path)
+    # as curves (densified to 0.5 m): on the 3 Hz samples (~9 m apart) the path's pairing error
+    # alone is 3-5 m, more than most of the differences compared here
+    return dense_dtw_rms(a, b)
 
 
 def _centred(x: np.ndarray) -> np.ndarray:
     y = np.array(x, dtype=np.float64, copy=True)
     y[:, :3] -= y[:, :3].mean(axis=0)
     return y
+
+
+def by_occurrence(maneuvers: Mapping[str, list]) -> dict[str, list]:
+    """The maneuvers with a label flown more than once in a flight split by occurrence: the k-th
+    ``hB`` of every flight (demo name ``<flight>:hB#k``) is the maneuver ``hB#k``.
+
+    A schedule that flies a label twice flies two different figures under it (P23's two ``hB``
+    are one at the box centre and one at its end, with different shapes and heights), so the
+    demos of one intended trajectory are the same occurrence in each flight; pooled, the
+    leave-one-out learns from the other figure and compares with it. Occurrences count dropped
+    segments too (:func:`~pipeline.align.demos.flight_demos`), so the pairing follows the schedule.
+    """
+    out: dict[str, list] = {}
+    for lab, demos in maneuvers.items():
+        occ = [int(str(d.name).rsplit("#", 1)[1]) if "#" in str(d.name) else 1 for d in demos]
+        if max(occ, default=1) == 1:
+            out[lab] = list(demos)
+            continue
+        for k in sorted(set(occ)):
+            out[f"{lab}#{k}"] = [d for d, o in zip(demos, occ) if o == k]
+    return out
 
 
 def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_iter: int,
@@ -98,7 +126,7 @@ def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_it
                        rms_worst_other_m=np.nan, rms_dba_m=np.nan)
             rows.append(row)
             continue
-        mu = np.asarray(model.mean_)[::2]  # hidden step dt/2: back to the demo rate
+        mu = np.asarray(model.mean_)  # the whole hidden axis (step dt/2); compared as a curve
         d_other = [_path_rms(o, lx) for o in ox]
         dba = dba_average([o[:, :3] for o in ox]) if len(ox) >= 2 else ox[0][:, :3]
         row.update(status="ok", rms_learned_m=_path_rms(mu, lx), rms_best_other_m=float(min(d_other)),
@@ -120,11 +148,14 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
         if not ds.maneuvers:
             notices.append(f"set {s}: no demos (its flights are not available): skipped")
             continue
-        labels = list(ds.maneuvers)
+        if st["repeats"] not in ("split", "pool"):
+            raise ConfigError(f"studies.{NAME}.repeats: {st['repeats']!r} is not 'split' or 'pool'")
+        maneuvers = by_occurrence(ds.maneuvers) if st["repeats"] == "split" else dict(ds.maneuvers)
+        labels = list(maneuvers)
         if int(st["real_maneuvers"]) > 0:
             labels = labels[: int(st["real_maneuvers"])]
         for lab in labels:
-            demos, misfits = stretchable(ds.maneuvers[lab])
+            demos, misfits = stretchable(maneuvers[lab])
             if len(demos) < 2:
                 rows += [{"set": s, "maneuver": lab, "frame": fr, "left_out": "", "n_others": len(demos) - 1,
                           "single_other": False, "status": f"skipped: {len(demos)} usable demo(s)"}

@@ -113,3 +113,84 @@ def test_paths_come_as_k_by_2_from_every_usual_shape(shape):
     p = np.array([[0, 0], [1, 0], [2, 1], [3, 2]])
     given = {"K2": p, "2K": p.T, "pair": (p[:, 0], p[:, 1])}[shape]
     np.testing.assert_array_equal(path_array(given), p)
+
+
+def test_the_box_frame_is_centred_on_the_pilot_not_on_the_ned_origin():
+    # FlightCoach's box is centred on the pilot (FlightAnalysis Box.from_fcjson_parmameters);
+    # its N/E/D are about originLat/Lng/Alt, tens of metres away
+    psi = np.radians(-33.7)
+    pilot = np.array([35.5, -26.4, -2.8])
+    st = synthetic_state(500, heading_rad=psi)
+    for c, a in enumerate(("pos_n_m", "pos_e_m", "pos_d_m")):
+        st[a] = st[a] + pilot[c]
+    fd = flight_demos(st, synthetic_segments([(0, 8, "a")]), flight_id="f", heading_rad=psi, sample_hz=5.0,
+                      box_origin_ned_m=pilot)
+    x, ts = fd.demos[0].x, fd.demos[0].t_ns * 1e-9
+    np.testing.assert_allclose(x[:, 0], 20.0 * ts, atol=0.05)
+    np.testing.assert_allclose(x[:, 1], 5.0 * np.sin(0.2 * ts), atol=1e-9)
+    np.testing.assert_allclose(x[:, 2], st["pos_d_m"].to_numpy()[::5][:len(x)] - pilot[2], atol=1e-9)
+    assert fd.diagnostics["box_origin_ned_m"] == pytest.approx(list(pilot))
+    # velocities are not shifted
+    np.testing.assert_allclose(x[:, 3], 20.0, atol=0.5)
+
+
+def test_the_pilot_position_of_a_flightcoach_log_is_its_box_origin_in_ned():
+    from pipeline.preprocess.state import box_pilot_ned_m
+
+    # P23 #036's parameters: FlightCoach's own moveNorth/moveEast shift (-E, -N of the pilot)
+    # says the same within its rounding
+    params = {"pilotLat": "51.6416694", "pilotLng": "-2.525727", "pilotAlt": 2.81, "originLat": 51.6413505,
+              "originLng": -2.5253452, "originAlt": 0.04, "moveEast": -35.45999327314384,
+              "moveNorth": 26.346327680554936}
+    n, e, d = box_pilot_ned_m({"params": params})
+    assert n == pytest.approx(-params["moveEast"], abs=0.05) and e == pytest.approx(-params["moveNorth"], abs=0.1)
+    assert d == pytest.approx(-(2.81 - 0.04), abs=0.01)
+    assert box_pilot_ned_m({"params": {"rotation": 0.1}}) is None and box_pilot_ned_m(None) is None
+
+
+def test_a_box_less_flight_is_fitted_onto_the_reference_in_its_pilot_centred_box_frame():
+    psi = np.radians(25.0)
+    pilot = np.array([30.0, -20.0, 0.0])
+    ref = synthetic_state(1500, heading_rad=psi, seed=1)
+    for c, a in enumerate(("pos_n_m", "pos_e_m")):
+        ref[a] = ref[a] + pilot[c]
+    other = synthetic_state(1500, heading_rad=0.0, seed=2)  # the same schedule in its own NED
+    seg = synthetic_segments([(0, 20, "a"), (20, 40, "b")])
+    fit, carried = fit_to_reference(other, ref, seg, ref_heading_rad=psi, sample_hz=2.0, fit_hz=1.0,
+                                    headings=12, iterations=10, ref_origin_ned_m=pilot)
+    assert fit.rms_m < 1.0
+    np.testing.assert_allclose(fit.translation_m, 0.0, atol=0.5)  # both already start at the box origin
+
+
+def test_the_rigid_fit_of_a_log_with_extra_flying_before_the_schedule_fits_the_schedule_only():
+    import pandas as pd
+
+    def figure(st):  # a figure-of-eight with a climb: DTW pins it down, unlike a straight line
+        ts = st["t_ns"].to_numpy() * 1e-9
+        st["pos_n_m"], st["pos_e_m"] = 150.0 * np.sin(0.1 * ts), 100.0 * np.sin(0.2 * ts)
+        st["pos_d_m"] = -100.0 - 20.0 * np.sin(0.3 * ts)
+        return st
+
+    ref = figure(synthetic_state(1500, seed=1))  # 60 s: take-off, two maneuvers, landing
+    seg = synthetic_segments([(0, 4, "tkoff"), (4, 30, "a"), (30, 56, "b"), (56, 60, "lnd")])
+    shift = np.array([40.0, -25.0, 5.0])
+    sched = figure(synthetic_state(1500, seed=2))
+    for c, a in enumerate(("pos_n_m", "pos_e_m", "pos_d_m")):
+        sched[a] = sched[a] - shift[c]
+    # 15 s of circling 200 m away before the schedule (the CSV logs' climb-out and circuits)
+    loiter = synthetic_state(375, seed=3)
+    w = np.arange(375) * 0.04 * 0.3
+    loiter["pos_n_m"], loiter["pos_e_m"] = -150.0 + 40.0 * np.cos(w), 120.0 + 40.0 * np.sin(w)
+    sched["t_ns"] = sched["t_ns"] + loiter["t_ns"].iloc[-1] + 40_000_000
+    other = pd.concat([loiter, sched], ignore_index=True)
+    kw = dict(ref_heading_rad=0.0, sample_hz=2.0, fit_hz=1.0, headings=12, iterations=20)
+    whole, _ = fit_to_reference(other, ref, seg, **kw)
+    fit, carried = fit_to_reference(other, ref, seg, **kw, schedule_exclude=("tkoff", "lnd"))
+    # the loiter pulls the whole-flight fit (61 m RMS, translation 36 m off); the schedule's is
+    # left with the one-pass uncertainty of the carried span (6 m, 2 m)
+    assert whole.rms_m > 30.0 and np.linalg.norm(whole.translation_m - shift) > 20.0
+    assert fit.rms_m < 10.0 and abs(fit.heading_rad) < 0.02
+    np.testing.assert_allclose(fit.translation_m, shift, atol=3.0)
+    assert list(carried["label"]) == ["a", "b"]
+    start_a = int(carried.loc[carried["label"] == "a", "t_start_ns"].iloc[0])
+    assert abs(start_a - (int(sched["t_ns"].iloc[0]) + 4_000_000_000)) <= 500_000_000

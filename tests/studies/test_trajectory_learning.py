@@ -70,3 +70,79 @@ def test_the_tiny_study_on_the_real_flights_prints_both_result_lines(tmp_path):
     res = run_study("trajectory_learning", inputs, out, {"size": "tiny"}, seed=20261123,
                     align=section(load_config(), "align"))
     assert math.isfinite(float(res.results["align_real_loo_better_pct"]))
+
+
+def _circle(t, radius=80.0, speed=28.0, offset=(0.0, 0.0, 0.0)):
+    w = speed / radius
+    pos = np.column_stack([radius * np.sin(w * t), radius * (1 - np.cos(w * t)), -100.0 + 5.0 * np.sin(0.3 * t)])
+    vel = np.gradient(pos, t, axis=0)
+    return np.hstack([pos + np.asarray(offset), vel, np.gradient(vel, t, axis=0)])
+
+
+def test_one_path_sampled_at_other_times_is_at_zero_distance_in_the_leave_one_out():
+    from pipeline.studies.trajectory_learning import _path_rms
+
+    # 3 Hz at 28 m/s: samples 9 m apart; the same path between the same ends sampled at 5.4 Hz
+    t = np.arange(0.0, 12.0, 0.32)
+    a, b = _circle(t), _circle(np.linspace(0.0, t[-1], 65))
+    assert _path_rms(a, b) < 0.3  # was 2.6 m on the samples themselves
+    assert _path_rms(a, a) == pytest.approx(0.0, abs=1e-9)
+    # a real offset is measured as it is
+    assert _path_rms(a, _circle(t, offset=(0.0, 0.0, 10.0))) == pytest.approx(10.0, abs=0.3)
+
+
+def test_the_trajectory_learned_from_one_demo_is_as_close_to_its_twin_as_that_demo_is():
+    from pipeline.align.demos import Demo
+    from pipeline.studies.trajectory_learning import loo_maneuver
+
+    t = np.arange(0.0, 15.0, 0.32)
+    rng = np.random.default_rng(3)
+    x = _circle(t)
+    x[:, :3] += 0.05 * rng.standard_normal((len(t), 3))
+    t_ns = (t * 1e9).astype(np.int64)
+    demos = [Demo(f"f{k}:a#1", f"f{k}", "a", 0, t_ns, x.copy()) for k in range(2)]
+    rows = loo_maneuver("s", "a", demos, _align({})  , max_iter=5)
+    for r in rows:
+        assert r["status"] == "ok" and r["single_other"] and r["rms_best_other_m"] == pytest.approx(0.0, abs=1e-9)
+        # a smoother of the very demo it is compared with: at most the curve's chord error, not
+        # the 3-5 m the sample-wise path read
+        assert r["rms_learned_m"] < 0.5
+
+
+def test_a_label_flown_twice_in_each_flight_is_one_maneuver_per_occurrence():
+    from pipeline.studies.trajectory_learning import by_occurrence
+
+    class D:
+        def __init__(self, name):
+            self.name = name
+
+    m = {"hB": [D("f1:hB#1"), D("f1:hB#2"), D("f2:hB#1"), D("f2:hB#2")], "loop": [D("f1:loop#1"), D("f2:loop#1")],
+         "rollC": [D("f1:rollC#1"), D("f1:rollC#2"), D("f2:rollC#2")]}
+    out = by_occurrence(m)
+    assert list(out) == ["hB#1", "hB#2", "loop", "rollC#1", "rollC#2"]
+    assert [d.name for d in out["hB#2"]] == ["f1:hB#2", "f2:hB#2"]
+    assert [d.name for d in out["rollC#2"]] == ["f1:rollC#2", "f2:rollC#2"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="issue 15 real-data target missed on faithful code (box 47.1 %, centred 47.1 % of 34 "
+                   "maneuvers): on the 23 two-demo maneuvers the learned trajectory interpolates its one "
+                   "training demo and ties it within 0.3 m (13/23 'better' by that tie); on the 11 with three "
+                   "or more it sits within a few m of the others' DBA average, and the demos differ by where "
+                   "and how each pilot flew (kd0aij-141's rigid fit: 114 m pair RMS), not by independent noise, "
+                   "so the closest single demo mostly wins (3/11)")
+def test_the_trajectory_learned_from_the_other_demos_is_closer_on_80_pct_of_the_real_maneuvers():
+    need_shared("FlightCoach JSON and kd0aij CSV flights")
+    from pipeline.studies.trajectory_learning import DEFAULTS, real_part
+
+    root = Path("results")
+    flights = ["fc-p23-036", "fc-p23-350", "fc-p21-026", "kd0aij-p21", "kd0aij-141"]
+    if not all((root / "state" / f"{f}.parquet").exists() for f in flights):
+        pytest.skip("results/state of the P23/P21 flights not built (snakemake results/state/<flight>.parquet)")
+    inputs = {"states": [str(root / "state" / f"{f}.parquet") for f in flights],
+              "segments": [str(root / "segments" / f"{f}.parquet") for f in flights]}
+    _, summ, _ = real_part(inputs, section(load_config(), "align"), {**DEFAULTS, "frames": ["box"]},
+                           lambda msg: None)
+    assert len(summ) >= 30
+    assert 100.0 * float(summ["better"].mean()) >= 80.0  # RESULT align_real_loo_better_pct

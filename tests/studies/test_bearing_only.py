@@ -91,3 +91,15 @@ def test_the_crlb_table_holds_sample_std_and_bound_for_r_v_omega(tiny):
     assert (c["sqrt_crlb"] > 0).all()
     r = c[c["quantity"] == "r"]
     assert r["sqrt_crlb"].iloc[-1] < r["sqrt_crlb"].iloc[0]     # bearings shrink the range bound
+
+
+def test_the_case_5_removal_drops_the_mpc_diverged_runs_and_as_many_worst_cppv_runs():
+    # digest §10 Case 5: MPC's divergent runs dropped "plus the same number of the worst CPPV runs"
+    mpc_div = np.array([False, True, False, False, True, False, False, False])
+    cppv = np.array([0.1, 0.9, 0.5, np.nan, 0.2, 0.05, 0.7, 0.3])
+    keep = bo.case5_keep(mpc_div, cppv)
+    # runs 1 and 4 (MPC diverged), then the two worst CPPV among the rest: 3 (NaN) and 6 (0.7)
+    assert keep.tolist() == [True, False, True, False, False, True, False, True]
+    assert bo.case5_keep(np.zeros(4, bool), np.arange(4.0)).all()
+    # the CPPV's own divergence flag plays no part: only the MPC's decides how many leave
+    assert (~bo.case5_keep(np.array([True, False, False]), np.array([0.2, 0.1, 0.3]))).sum() == 2

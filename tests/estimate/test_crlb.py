@@ -123,3 +123,28 @@ def test_the_crlb_equals_a_brute_force_fisher_information_of_the_initial_state()
     for k in (100, 300, 599):
         B = Phi[k] @ np.linalg.inv(J[k]) @ Phi[k].T
         assert b.std[k] == pytest.approx(np.sqrt(np.diag(B)), rel=1e-4)
+
+
+def test_an_ekf_started_near_the_truth_without_process_noise_attains_the_crlb():
+    # the bound is reachable by this EKF algebra: 200 realisations of one orbit, each EKF from
+    # x_0 + N(0, P₀) with Q = 0; the sample std of r, v, ω over 30-60 s is √CRLB(P₀) within
+    # the sampling error of 200 runs (the bank's miss of issue 16 is not in the filter algebra)
+    from pipeline.estimate.bank import Components, CppvModel, components_step
+
+    R, T, dt = 200, 1200, 0.05
+    t, X = truth(T=T)
+    rng = np.random.default_rng(7)
+    P0 = np.diag([100.0 ** 2, 100.0 ** 2, 2.0 ** 2, 0.05 ** 2, 0.002 ** 2])
+    z = np.arctan2(X[:, 1], X[:, 0]) + SIG * rng.standard_normal((R, T))
+    comp = Components(X[0] + rng.multivariate_normal(np.zeros(5), P0, R)[:, None, :],
+                      np.broadcast_to(P0, (R, 1, 5, 5)).copy(), np.zeros((R, 1)), np.zeros((R, 1), bool))
+    model = CppvModel(BankSettings(sigma_v2=0.0, sigma_omega_dot2=0.0))
+    E = np.empty((R, T, 3))
+    for k in range(1, T):
+        comp, _ = components_step(model, comp, dt, VO, z[:, k], SIG)
+        m = comp.mean[:, 0]
+        E[:, k] = np.c_[np.hypot(m[:, 0], m[:, 1]) - np.hypot(*X[k, :2]), m[:, 2] - X[k, 2], m[:, 4] - X[k, 4]]
+    b = crlb(X, t, P0, SIG)
+    w = t >= 30.0
+    ratio = E[:, w].std(axis=0, ddof=1).mean(axis=0) / np.c_[b.range_std, b.std[:, 2], b.std[:, 4]][w].mean(axis=0)
+    assert ratio == pytest.approx(np.ones(3), abs=0.12)

@@ -103,3 +103,23 @@ def test_the_case_5_removal_drops_the_mpc_diverged_runs_and_as_many_worst_cppv_r
     assert bo.case5_keep(np.zeros(4, bool), np.arange(4.0)).all()
     # the CPPV's own divergence flag plays no part: only the MPC's decides how many leave
     assert (~bo.case5_keep(np.array([True, False, False]), np.array([0.2, 0.1, 0.3]))).sum() == 2
+
+
+@pytest.mark.slow
+# Issue 16's CRLB target, asserted as stated on a reduced set (60 of the 500 realisations).
+# On the faithful bank it is missed (study, 100 realisations: r/v/ω ratios in report.md, tens of
+# times the band). Not a defect of the bound or of the filter algebra (tests/estimate/test_crlb.py:
+# the CRLB equals a brute-force Fisher information and an EKF from near the truth with Q = 0
+# attains it): the thesis's process noise (σ_ω̇² = 5e-6) alone keeps an EKF started at the truth
+# ~10× above the noise-free bound, and the grid filters lock late onto biased solutions
+# (−0.9 km, −45° at 60 s on the seed orbit). strict: the day it passes, this marker must go.
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="issue-16 CRLB band [0.9, 2] missed by the faithful CPPV bank")
+def test_the_bank_sample_std_lies_within_the_crlb_band_on_one_fixed_orbit():
+    from pipeline.estimate.bank import run_bank
+    from pipeline.simulate.encounter import ScenarioSettings, simulate_encounters
+
+    enc = simulate_encounters("orbit", 60, 0, ScenarioSettings(), fixed_geometry=True)
+    tr = run_bank(bo.BASE, enc.t_s, enc.bearing, enc.sigma_bearing, enc.ownship_vel, store_weights=False)
+    _, ratio = bo.crlb_check(enc.rel[0], enc.t_s, tr.cppv_mean, tr.cppv_cov[0, 0], enc.sigma_bearing, (60.0, 120.0))
+    assert all(0.9 <= ratio[q] <= 2.0 for q in ("r", "v", "omega")), ratio

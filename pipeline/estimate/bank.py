@@ -220,12 +220,16 @@ def _case(coords: str, n_r: int, n_omega: int, n_theta: int, **kw) -> BankSettin
 #: named parameterisations: Table 4.1/4.2 (simulation) and Tables 5.1–5.3 (flight tests)
 PRESETS: dict[str, BankSettings] = {
     s.name: s for s in [
-        _case("cppv", 25, 1, 6),                      # Table 4.1, the chosen bank (Case 4)
+        _case("cppv", 25, 1, 6),                      # Table 4.1, the chosen bank (Cases 3-5)
         _case("mpc", 15, 5, 2),                       # Case 5
-        _case("cppv", 10, 1, 6), _case("cppv", 150, 1, 1),   # Case 1 (N_r) companions
-        _case("cppv", 25, 3, 2), _case("cppv", 25, 6, 1),    # Case 2 (N_ω)
-        _case("cppv", 25, 1, 3), _case("cppv", 25, 1, 1),    # Case 3 (N_θ)
+        # Table 4.2 (seed text: "The heading and angular velocity intervals are kept as 1,
+        # N_θ = 1, N_ω = 1 for each variation" in Case 1; Case 2 keeps N_θ = 1; Case 3 N_ω = 1)
+        _case("cppv", 10, 1, 1), _case("cppv", 25, 1, 1), _case("cppv", 150, 1, 1),   # Case 1 (N_r)
+        _case("cppv", 25, 3, 1), _case("cppv", 25, 6, 1),    # Case 2 (N_ω), with (25,1,1)
+        _case("cppv", 25, 1, 3),                             # Case 3 (N_θ), with (25,1,1), (25,1,6)
         _case("cppv", 25, 2, 3), _case("cppv", 15, 2, 5), _case("cppv", 16, 3, 3),  # Case 4
+        # not Table 4.2 cases: smaller banks the tests use (kept by name)
+        _case("cppv", 10, 1, 6), _case("cppv", 25, 3, 2),
         # Table 5.1: FT20, FT29 (vision bearings); σ_ω² read as the process σ_ω̇²
         _case("cppv", 10, 4, 3, name="table5_1_ft20_ft29", v_init_mps=50.0,
               sigma_v0_mps=50.0 / np.sqrt(12.0), sigma_v2=0.5, sigma_omega_dot2=2.5e-2,

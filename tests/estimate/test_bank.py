@@ -226,3 +226,14 @@ def test_a_two_filter_weight_update_matches_the_hand_computed_gaussian_likelihoo
     w = w0 * np.exp(loglik)
     assert np.exp(post.logw[0]) == pytest.approx(w / w.sum(), rel=1e-9)
     assert st.loglik[0] == pytest.approx(np.log(w.sum()), rel=1e-12)
+
+
+def test_the_table_4_2_presets_are_the_thesis_cases():
+    # seed Table 4.2: Case 1 (N_r, 1, 1); Case 2 (25, N_ω, 1); Case 3 (25, 1, N_θ); Case 4 mixed
+    from pipeline.studies.bearing_only import CASE1, TABLE_4_2
+
+    grids = {n: (PRESETS[n].n_r, PRESETS[n].n_omega, PRESETS[n].n_theta) for n in TABLE_4_2}
+    assert set(grids.values()) == {(10, 1, 1), (25, 1, 1), (150, 1, 1), (25, 3, 1), (25, 6, 1), (25, 1, 3),
+                                   (25, 1, 6), (25, 2, 3), (15, 2, 5), (16, 3, 3)}
+    assert [grids[n] for n in CASE1] == [(25, 1, 1), (10, 1, 1), (150, 1, 1)]
+    assert all(PRESETS[n].coords == "cppv" and PRESETS[n].n_filters <= 150 for n in TABLE_4_2)

@@ -79,6 +79,8 @@ def test_every_trend_is_the_larger_p_of_its_paired_tests_over_the_same_runs(tiny
         assert g["p_trend"].nunique() == 1 and g["p_trend"].iloc[0] == pytest.approx(g["p"].max())
         assert float(tiny.figures[f"bearing_trend_{name}_p"]) == pytest.approx(g["p"].max(), rel=1e-3)
         assert (g["n"] <= 6).all()                              # tiny: 6 shared runs
+    nr = tr[tr["trend"] == "nr25"]["comparison"].tolist()
+    assert nr == ["cppv_25_1_1 < cppv_10_1_1", "cppv_25_1_1 < cppv_150_1_1"]       # Case 1: N_ω = N_θ = 1
     runs = tiny.table("runs")
     orbit = runs[runs["part"].isin(["table_4_2", "cppv_vs_mpc", "sweeps"])]
     assert all(sorted(g["run"]) == list(range(6)) for _, g in orbit.groupby("config"))

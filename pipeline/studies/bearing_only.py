@@ -530,7 +530,9 @@ def run_bearing_only(inputs: Mapping | None, outputs: Mapping, config: Mapping |
           ("cv_ct", "cv_ct", ()), ("cv_ct_cv", "cv_ct_cv", ()))
     if "study3" in parts:
         for label, kind, ov in S3:
-            extra = (("sigma_omega_dot2", float(st["cv_ct_sigma_omega_dot2"])),) if kind == "cv_ct" else ()
+            # seed §4.2.3: "except for the angular velocity noise in the CV-CT and CV-CT-CV
+            # scenarios, which had a value of σ_ω̇² = 1e-4"
+            extra = (("sigma_omega_dot2", float(st["cv_ct_sigma_omega_dot2"])),) if kind in ("cv_ct", "cv_ct_cv") else ()
             run.plan(Job(name=f"study3_{label}", part="study3", estimator="imm", preset=BASE, kind=kind, n_runs=1,
                          overrides=ov, td=td_full, delta=1e-4, cv_from_truth=kind.startswith("cv"), keep=True,
                          bank_fields=extra))

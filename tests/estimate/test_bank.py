@@ -237,3 +237,23 @@ def test_the_table_4_2_presets_are_the_thesis_cases():
                                    (25, 1, 6), (25, 2, 3), (15, 2, 5), (16, 3, 3)}
     assert [grids[n] for n in CASE1] == [(25, 1, 1), (10, 1, 1), (150, 1, 1)]
     assert all(PRESETS[n].coords == "cppv" and PRESETS[n].n_filters <= 150 for n in TABLE_4_2)
+
+
+def test_the_compiled_combination_equals_the_numpy_reference(rng):
+    from pipeline.estimate.bank import combine_numpy
+
+    mean = rng.normal(size=(3, 2, 7, 5)) * [100.0, 100.0, 5.0, 3.0, 0.1]
+    mean[..., 3] += np.pi * rng.choice([-1.0, 1.0], size=(3, 2, 7))      # headings across the ±π cut
+    A = rng.normal(size=(3, 2, 7, 5, 5))
+    cov = A @ np.swapaxes(A, -1, -2) + np.eye(5)
+    logw = rng.normal(size=(3, 2, 7))
+    logw[0, 1, 2:] = -np.inf                                              # excluded components
+    logw -= np.log(np.exp(logw).sum(axis=-1, keepdims=True))
+    for idx in ((), (3,), (2, 3)):
+        m, P = combine(mean, cov, logw, idx)
+        m0, P0 = combine_numpy(mean, cov, logw, idx)
+        assert m.shape == (3, 2, 5) and P.shape == (3, 2, 5, 5)
+        np.testing.assert_allclose(m, m0, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(P, P0, rtol=1e-10, atol=1e-8)
+    m, P = combine(mean[0, 0], cov[0, 0], logw[0, 0], (3,))             # one mixture, no batch
+    np.testing.assert_allclose(P, combine_numpy(mean[0, 0], cov[0, 0], logw[0, 0], (3,))[1], rtol=1e-10)

@@ -83,7 +83,8 @@ SIZES: dict[str, dict[str, Any]] = {
              "table_4_2": list(CASE1), "td_grid_hz": [5.0, 1.0],
              "delta_grid": [1e-2, 1e-4]},
     "small": {"runs": 24, "crlb_runs": 100},
-    # 500 runs: ~9,600 CPU s (20-run fractions × 25; IMM grid 64 %), ≤ 2 h on 2 worker processes
+    # 500 runs: ~7,500 CPU s extrapolated (20-run CPU fractions × 25; the IMM grid ~60 %): ~65 min on
+    # 2 worker processes (not run at this size)
     "thesis": {"runs": 500, "crlb_runs": 500, "workers": 2},
 }
 

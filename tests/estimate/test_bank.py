@@ -196,3 +196,64 @@ def test_the_compiled_algebra_equals_the_extended_kalman_filter_path(preset):
     assert fast.nis[0, 1:] == pytest.approx(ref.nis[0, 1:], rel=1e-8, nan_ok=True)
     with pytest.raises(ValueError, match="algebra"):
         run_bank(preset, t[:3], z[0, :3], SIG, own[:3], algebra="cuda")
+
+
+def test_a_two_filter_weight_update_matches_the_hand_computed_gaussian_likelihoods():
+    # eq. 3.18-3.20: W_k ∝ W_{k-1} det(S)^{-1/2} exp(-ỹ²/2S), ỹ wrapped; S at the predicted
+    # mean and covariance; the prior enters once. Bearings near the ±π cut test the wrap.
+    dt, s2 = 0.05, SIG ** 2
+    mean = np.array([[[-3000.0, 5.0, 70.0, 1.0, 0.05], [-2500.0, -20.0, 60.0, 2.0, -0.03]]])
+    cov = np.stack([np.diag([300.0 ** 2, 50.0 ** 2, 4.0, 0.1, 1e-3]), np.diag([200.0 ** 2, 80.0 ** 2, 9.0, 0.2, 2e-3])])[None]
+    w0 = np.array([0.3, 0.7])
+    z = np.array([np.pi - 0.004])
+    model = CppvModel(BankSettings())
+    Q = cppv_process_noise(dt, 1e-3, 5e-6)
+    post, st = components_step(model, Components(mean, cov, np.log(w0)[None], np.zeros((1, 2), bool)),
+                               dt, VO, z, SIG)
+    loglik = []
+    for i in range(2):
+        F = cppv_jacobian(mean[0, i], dt)
+        xp = cppv_transition(mean[0, i], dt, VO * dt)
+        Pp = F @ cov[0, i] @ F.T + Q
+        r2 = xp[0] ** 2 + xp[1] ** 2
+        H = np.array([-xp[1] / r2, xp[0] / r2, 0.0, 0.0, 0.0])
+        S = H @ Pp @ H + s2
+        y = (z[0] - np.arctan2(xp[1], xp[0]) + np.pi) % (2 * np.pi) - np.pi
+        assert abs(y) < 0.1                                        # wrapped across the cut
+        loglik.append(-0.5 * np.log(2 * np.pi * S) - 0.5 * y * y / S)
+        K = Pp @ H / S
+        assert post.mean[0, i] == pytest.approx(xp + K * y, rel=1e-9)
+    w = w0 * np.exp(loglik)
+    assert np.exp(post.logw[0]) == pytest.approx(w / w.sum(), rel=1e-9)
+    assert st.loglik[0] == pytest.approx(np.log(w.sum()), rel=1e-12)
+
+
+def test_the_table_4_2_presets_are_the_thesis_cases():
+    # seed Table 4.2: Case 1 (N_r, 1, 1); Case 2 (25, N_ω, 1); Case 3 (25, 1, N_θ); Case 4 mixed
+    from pipeline.studies.bearing_only import CASE1, TABLE_4_2
+
+    grids = {n: (PRESETS[n].n_r, PRESETS[n].n_omega, PRESETS[n].n_theta) for n in TABLE_4_2}
+    assert set(grids.values()) == {(10, 1, 1), (25, 1, 1), (150, 1, 1), (25, 3, 1), (25, 6, 1), (25, 1, 3),
+                                   (25, 1, 6), (25, 2, 3), (15, 2, 5), (16, 3, 3)}
+    assert [grids[n] for n in CASE1] == [(25, 1, 1), (10, 1, 1), (150, 1, 1)]
+    assert all(PRESETS[n].coords == "cppv" and PRESETS[n].n_filters <= 150 for n in TABLE_4_2)
+
+
+def test_the_compiled_combination_equals_the_numpy_reference(rng):
+    from pipeline.estimate.bank import combine_numpy
+
+    mean = rng.normal(size=(3, 2, 7, 5)) * [100.0, 100.0, 5.0, 3.0, 0.1]
+    mean[..., 3] += np.pi * rng.choice([-1.0, 1.0], size=(3, 2, 7))      # headings across the ±π cut
+    A = rng.normal(size=(3, 2, 7, 5, 5))
+    cov = A @ np.swapaxes(A, -1, -2) + np.eye(5)
+    logw = rng.normal(size=(3, 2, 7))
+    logw[0, 1, 2:] = -np.inf                                              # excluded components
+    logw -= np.log(np.exp(logw).sum(axis=-1, keepdims=True))
+    for idx in ((), (3,), (2, 3)):
+        m, P = combine(mean, cov, logw, idx)
+        m0, P0 = combine_numpy(mean, cov, logw, idx)
+        assert m.shape == (3, 2, 5) and P.shape == (3, 2, 5, 5)
+        np.testing.assert_allclose(m, m0, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(P, P0, rtol=1e-10, atol=1e-8)
+    m, P = combine(mean[0, 0], cov[0, 0], logw[0, 0], (3,))             # one mixture, no batch
+    np.testing.assert_allclose(P, combine_numpy(mean[0, 0], cov[0, 0], logw[0, 0], (3,))[1], rtol=1e-10)

@@ -97,3 +97,54 @@ def test_the_crlb_with_process_noise_equals_the_ekf_on_the_truth_with_that_noise
         P = ekf.update(GaussianState(X[k], F @ P @ F.T + Qf(0.05)), np.arctan2(X[k, 1:2], X[k, 0:1])).cov
     assert b.bound[-1] == pytest.approx(P, rel=1e-5, abs=1e-10)
     assert np.all(b.std[-1] >= crlb(X, t, P0, SIG).std[-1])  # noise only loosens the bound
+
+
+def test_the_crlb_equals_a_brute_force_fisher_information_of_the_initial_state():
+    # independent of the recursion: on a deterministic trajectory x_k = f^k(x_0), the bound on
+    # x_k is Φ_k J(x_0)⁻¹ Φ_kᵀ with J(x_0) = P₀⁻¹ + Σ_k (H_k Φ_k)ᵀ σ⁻² (H_k Φ_k) and the
+    # sensitivities Φ_k = ∂x_k/∂x_0 by central differences of the whole trajectory
+    t, X = truth(T=600)
+    P0 = np.diag([800.0 ** 2, 900.0 ** 2, 12.0 ** 2, 0.6 ** 2, 0.1 ** 2])
+
+    def traj(x0):
+        out = np.empty((len(t), 5))
+        out[0] = x0
+        for k in range(1, len(t)):
+            out[k] = cppv_transition(out[k - 1], 0.05, VO * 0.05)
+        return out
+
+    eps = np.array([1e-3, 1e-3, 1e-5, 1e-7, 1e-9])
+    Phi = np.stack([(traj(X[0] + e) - traj(X[0] - e)) / (2 * e[i]) for i, e in enumerate(np.diag(eps))], axis=-1)
+    r2 = X[:, 0] ** 2 + X[:, 1] ** 2
+    H = np.stack([-X[:, 1] / r2, X[:, 0] / r2, 0 * r2, 0 * r2, 0 * r2], axis=-1)
+    g = np.einsum("ki,kij->kj", H, Phi)
+    J = np.linalg.inv(P0) + np.cumsum(g[:, :, None] * g[:, None, :], axis=0) / SIG ** 2 - g[0][:, None] * g[0] / SIG ** 2
+    b = crlb(X, t, P0, SIG)
+    for k in (100, 300, 599):
+        B = Phi[k] @ np.linalg.inv(J[k]) @ Phi[k].T
+        assert b.std[k] == pytest.approx(np.sqrt(np.diag(B)), rel=1e-4)
+
+
+def test_an_ekf_started_near_the_truth_without_process_noise_attains_the_crlb():
+    # the bound is reachable by this EKF algebra: 200 realisations of one orbit, each EKF from
+    # x_0 + N(0, P₀) with Q = 0; the sample std of r, v, ω over 30-60 s is √CRLB(P₀) within
+    # the sampling error of 200 runs (the bank's miss of issue 16 is not in the filter algebra)
+    from pipeline.estimate.bank import Components, CppvModel, components_step
+
+    R, T, dt = 200, 1200, 0.05
+    t, X = truth(T=T)
+    rng = np.random.default_rng(7)
+    P0 = np.diag([100.0 ** 2, 100.0 ** 2, 2.0 ** 2, 0.05 ** 2, 0.002 ** 2])
+    z = np.arctan2(X[:, 1], X[:, 0]) + SIG * rng.standard_normal((R, T))
+    comp = Components(X[0] + rng.multivariate_normal(np.zeros(5), P0, R)[:, None, :],
+                      np.broadcast_to(P0, (R, 1, 5, 5)).copy(), np.zeros((R, 1)), np.zeros((R, 1), bool))
+    model = CppvModel(BankSettings(sigma_v2=0.0, sigma_omega_dot2=0.0))
+    E = np.empty((R, T, 3))
+    for k in range(1, T):
+        comp, _ = components_step(model, comp, dt, VO, z[:, k], SIG)
+        m = comp.mean[:, 0]
+        E[:, k] = np.c_[np.hypot(m[:, 0], m[:, 1]) - np.hypot(*X[k, :2]), m[:, 2] - X[k, 2], m[:, 4] - X[k, 4]]
+    b = crlb(X, t, P0, SIG)
+    w = t >= 30.0
+    ratio = E[:, w].std(axis=0, ddof=1).mean(axis=0) / np.c_[b.range_std, b.std[:, 2], b.std[:, 4]][w].mean(axis=0)
+    assert ratio == pytest.approx(np.ones(3), abs=0.12)

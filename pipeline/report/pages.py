@@ -1,19 +1,47 @@
-"""What every report page shares: plotly figures as ``<div>``s, the Jinja2 template, the
-atomic write (a killed job never leaves half a page that a scheduler would take as done)."""
+"""What every report page shares: plotly figures as ``<div>``s drawn when they come near the
+viewport, the Jinja2 template, the atomic write (a killed job never leaves half a page that a
+scheduler would take as done)."""
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
 import jinja2
 
+#: plotly's own height when a figure sets none (the placeholder keeps the page's layout fixed)
+DEFAULT_HEIGHT_PX = 450
+#: plotly.js options of every figure (``responsive``: redraw when the window is resized)
+PLOT_CONFIG = {"responsive": True}
+
+
+def figure_div(fig, div_id: str) -> str:
+    """One figure as an empty ``<div>`` of its final height and a script that registers its
+    drawing function in ``window.uavpipePlots[div_id]``; nothing is drawn here.
+
+    The page's loader (``reports/templates/_linked_axes.html.j2``) calls the function when the
+    ``<div>`` comes near the viewport: a flight page holds 20 figures, and drawing them all at
+    load cost seconds of the browser's main thread that nobody was looking at. The function
+    takes ``(gd, edit)``: ``edit(layout)`` may change the layout before the draw (the linked
+    time axis gives a late panel the range already zoomed to). The figure's JSON is plotly's
+    own (``plotly.io.json.to_json_plotly``: typed arrays as base64, ``<``, ``>`` and ``/``
+    escaped, so it cannot end the ``<script>``)."""
+    from plotly.io.json import to_json_plotly
+
+    d = fig.to_dict()
+    lay = d.get("layout", {})
+    height = lay.get("height") or lay.get("template", {}).get("layout", {}).get("height") or DEFAULT_HEIGHT_PX
+    data, layout = to_json_plotly(d.get("data", [])), to_json_plotly(lay)
+    return (f'<div id="{div_id}" class="plotly-graph-div" style="height:{float(height):g}px; width:100%;"></div>'
+            f'<script>(window.uavpipePlots = window.uavpipePlots || {{}})["{div_id}"] = function (gd, edit) {{ '
+            f'return Plotly.newPlot(gd, {data}, edit({layout}), {json.dumps(PLOT_CONFIG)}); }};</script>')
+
 
 def figure_divs(figs) -> list[tuple[str, str | None]]:
-    """``[(title, figure or None)]`` -> ``[(title, <div> or None)]`` (plotly.js loaded once per page)."""
-    return [(title, None if f is None else f.to_html(full_html=False, include_plotlyjs=False,
-                                                      div_id=f"plot-{i}", config={"responsive": True}))
-            for i, (title, f) in enumerate(figs)]
+    """``[(title, figure or None)]`` -> ``[(title, <div> or None)]`` (:func:`figure_div`, ids
+    ``plot-<i>``; plotly.js loaded once per page)."""
+    return [(title, None if f is None else figure_div(f, f"plot-{i}")) for i, (title, f) in enumerate(figs)]
 
 
 def render(template: str | os.PathLike, **context) -> str:

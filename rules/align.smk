@@ -37,6 +37,7 @@ rule align_report:
         iterations="results/align/{align_set}/iterations.parquet",
         demos="results/align/{align_set}/demos.parquet",
         template="reports/templates/align.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         page=report(

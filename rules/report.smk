@@ -116,6 +116,7 @@ rule model_report:
         meta="results/models/{model_set}/meta.json",
         evaluation="results/models/{model_set}/evaluation.parquet",
         template="reports/templates/model.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         page=report(

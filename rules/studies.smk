@@ -6,6 +6,7 @@ from pipeline.studies.base import FLIGHTCOACH_EKF_HMM_FILES, flightcoach_inputs,
 rule study_seed000_classification:
     input:
         template="reports/templates/study.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         **study_outputs("seed000_classification"),
@@ -34,6 +35,7 @@ rule study_flightcoach_classification:
         # the real FlightCoach logs; when absent the rule stops with one line naming the file
         unpack(lambda wc: flightcoach_inputs(config["realdata_dir"])),
         template="reports/templates/study.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         **study_outputs("flightcoach_classification"),
@@ -64,6 +66,7 @@ rule study_flightcoach_ekf_hmm:
         unpack(lambda wc: flightcoach_inputs(config["realdata_dir"], FLIGHTCOACH_EKF_HMM_FILES,
                                              study="flightcoach_ekf_hmm")),
         template="reports/templates/study.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         **study_outputs("flightcoach_ekf_hmm"),
@@ -90,6 +93,7 @@ rule study_flightcoach_ekf_hmm:
 rule study_seed000_ekf:
     input:
         template="reports/templates/study.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         **study_outputs("seed000_ekf", models=False),
@@ -116,6 +120,7 @@ rule study_seed000_ekf:
 rule study_pf:
     input:
         template="reports/templates/study.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         **study_outputs("pf", models=False),
@@ -146,6 +151,7 @@ rule study_trajectory_learning:
         states=[f"results/state/{f}.parquet" for s in ALIGN_SETS for f in config["align"]["sets"][s]["flights"]],
         segments=[f"results/segments/{f}.parquet" for s in ALIGN_SETS for f in config["align"]["sets"][s]["flights"]],
         template="reports/templates/study.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         **study_outputs("trajectory_learning", models=False),
@@ -172,6 +178,7 @@ rule study_trajectory_learning:
 rule study_bearing_only:
     input:
         template="reports/templates/study.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
         plotly="results/report/assets/plotly.min.js",
     output:
         **study_outputs("bearing_only", models=False),

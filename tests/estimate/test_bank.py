@@ -75,6 +75,7 @@ def test_the_prior_lies_on_the_first_bearing_with_a_rotated_line_of_sight_covari
     assert np.exp(c.logw).sum(axis=1) == pytest.approx([1.0, 1.0])
 
 
+@pytest.mark.slow
 def test_a_one_filter_bank_equals_the_ekf_stepped_by_hand():
     t, X, z, own = orbit(T=60)
     s = BankSettings(n_r=1, n_omega=1, n_theta=1)

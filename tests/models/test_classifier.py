@@ -309,6 +309,7 @@ def test_window_auto_is_half_the_median_training_run(synth, rng, tmp_path):
         ModelsConfig.from_section({"window_s": "long"})
 
 
+@pytest.mark.slow
 def test_background_model_makes_an_unseen_maneuver_unknown(synth, rng, tmp_path):
     """``confidence_bg``: the background GMM is one more rival in V (never a label). A run of a
     class no model was trained on loses to it and is unknown; trained classes keep their

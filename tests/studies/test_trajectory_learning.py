@@ -57,15 +57,20 @@ def test_a_set_whose_flights_are_absent_is_skipped_with_a_notice(tmp_path):
     assert "align_real_loo_better_pct" not in res.results
 
 
-@pytest.mark.slow
-def test_the_tiny_study_on_the_real_flights_prints_both_result_lines(tmp_path):
-    need_shared("FlightCoach JSON and kd0aij CSV flights")
+def _built_real_inputs() -> dict:
+    """The state and segment tables of the P23/P21 flights under results/ (skip when not built)."""
     root = Path("results")
     flights = ["fc-p23-036", "fc-p23-350", "fc-p21-026", "kd0aij-p21", "kd0aij-141"]
     if not all((root / "state" / f"{f}.parquet").exists() for f in flights):
         pytest.skip("results/state of the P23/P21 flights not built (snakemake results/state/<flight>.parquet)")
-    inputs = {"states": [str(root / "state" / f"{f}.parquet") for f in flights],
-              "segments": [str(root / "segments" / f"{f}.parquet") for f in flights]}
+    return {"states": [str(root / "state" / f"{f}.parquet") for f in flights],
+            "segments": [str(root / "segments" / f"{f}.parquet") for f in flights]}
+
+
+@pytest.mark.slow
+def test_the_tiny_study_on_the_real_flights_prints_both_result_lines(tmp_path):
+    need_shared("FlightCoach JSON and kd0aij CSV flights")
+    inputs = _built_real_inputs()
     out = study_outputs("trajectory_learning", results_dir=tmp_path / "results", models=False)
     res = run_study("trajectory_learning", inputs, out, {"size": "tiny"}, seed=20261123,
                     align=section(load_config(), "align"))
@@ -136,12 +141,7 @@ def test_the_trajectory_learned_from_the_other_demos_is_closer_on_80_pct_of_the_
     need_shared("FlightCoach JSON and kd0aij CSV flights")
     from pipeline.studies.trajectory_learning import DEFAULTS, real_part
 
-    root = Path("results")
-    flights = ["fc-p23-036", "fc-p23-350", "fc-p21-026", "kd0aij-p21", "kd0aij-141"]
-    if not all((root / "state" / f"{f}.parquet").exists() for f in flights):
-        pytest.skip("results/state of the P23/P21 flights not built (snakemake results/state/<flight>.parquet)")
-    inputs = {"states": [str(root / "state" / f"{f}.parquet") for f in flights],
-              "segments": [str(root / "segments" / f"{f}.parquet") for f in flights]}
+    inputs = _built_real_inputs()
     _, summ, _ = real_part(inputs, section(load_config(), "align"), {**DEFAULTS, "frames": ["box"]},
                            lambda msg: None)
     assert len(summ) >= 30

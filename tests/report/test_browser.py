@@ -518,8 +518,9 @@ def test_a_real_flight_page_per_format_draws_every_panel_within_the_size_limit(
 
 @pytest.fixture(scope="module")
 def open_times(acceptance_tree, real_pages, browser) -> dict[str, tuple[float, float]]:
-    """``{page kind: (wall seconds, main-thread seconds)}`` to opened, each the best of three
-    fresh loads (a new tab, a new renderer; the page test's visit is the first of them).
+    """``{page kind: (wall seconds, main-thread seconds)}`` to opened, each the best of up to
+    three fresh loads (a new tab, a new renderer; the page test's visit is the first of them; a
+    page under 80 % of the limit on every judged measure is not loaded again).
 
     *Opened* (:data:`_OPENED`): from navigation start until the load event has fired and every
     plot that intersects the initial 1280 × 900 viewport is drawn (its ``Plotly.newPlot``
@@ -529,18 +530,45 @@ def open_times(acceptance_tree, real_pages, browser) -> dict[str, tuple[float, f
     main-thread time is the renderer main thread's busy time until opened (CDP
     ``Performance.getMetrics`` TaskDuration in thread time): what the page costs the browser,
     which other processes on the machine barely change."""
-    import os
+    load = _quiet_load_per_core()
+    best = {"load average per core": load}
+    judged_wall = load <= MAX_LOAD_PER_CORE
 
-    best = {}
+    def settled(runs) -> bool:
+        # a page clearly inside the limits on every judged measure needs no further load; only
+        # the doubtful ones are loaded again (best of up to three), which keeps this fixture short
+        margin = 0.8 * MAX_LOAD_S
+        return bool(runs) and min(r["cpu_s"] for r in runs) < margin and (
+            not judged_wall or min(r["load_s"] for r in runs) < margin)
+
     for kind, page_path in {**acceptance_tree, **real_pages}.items():
         runs = [LOAD_TIMES[kind]] if kind in LOAD_TIMES else []
-        while len(runs) < 3:
+        while len(runs) < 3 and not settled(runs):
             r = _open_time(browser, page_path)
             r.pop("page").close()
             runs.append(r)
         best[kind] = (min(r["load_s"] for r in runs), min(r["cpu_s"] for r in runs))
-    best["load average per core"] = os.getloadavg()[0] / (os.cpu_count() or 1)
     return best
+
+
+def _quiet_load_per_core(max_wait_s: float = 20.0) -> float:
+    """The 1-minute load average per core before the timed loads, after waiting up to
+    ``max_wait_s`` for it to fall to :data:`MAX_LOAD_PER_CORE`.
+
+    Read before the loads, not after: on 2 cores Chromium's own processes lift the average
+    above 1 per core while it loads the pages, and the fixtures built just before (this
+    process) decay out of the 1-minute average within about a minute; what the gate must see
+    is other work competing with the page."""
+    import os
+    import time
+
+    def per_core() -> float:
+        return os.getloadavg()[0] / (os.cpu_count() or 1)
+
+    t0 = time.monotonic()
+    while per_core() > MAX_LOAD_PER_CORE and time.monotonic() - t0 < max_wait_s:
+        time.sleep(3.0)
+    return per_core()
 
 
 def test_every_page_opens_with_under_3_s_of_main_thread_work(open_times, capsys):
@@ -550,7 +578,7 @@ def test_every_page_opens_with_under_3_s_of_main_thread_work(open_times, capsys)
     here at load 7 per core, the simulated flight 3.14 s; the lazily drawn ones 1.0-2.1 s)."""
     times = {k: v for k, v in open_times.items() if k != "load average per core"}
     with capsys.disabled():
-        print("\nopened in [s] (wall, main thread; best of 3): "
+        print("\nopened in [s] (wall, main thread; best of up to 3): "
               + ", ".join(f"{k} {w:.2f}/{c:.2f}" for k, (w, c) in times.items())
               + f" (load average per core {open_times['load average per core']:.1f})")
     busy = {k: round(c, 2) for k, (_, c) in times.items() if c >= MAX_LOAD_S}
@@ -567,7 +595,7 @@ def test_every_page_opens_in_under_3_s_headless(open_times):
     screen's plots drawn, best of 3 fresh loads) in < 3 s of wall-clock time.
 
     Judged when the machine is not oversubscribed (1-minute load average per core ≤
-    :data:`MAX_LOAD_PER_CORE`, read after the loads); above it the wall-clock times say more
+    :data:`MAX_LOAD_PER_CORE` before the loads, see :func:`_quiet_load_per_core`); above it the wall-clock times say more
     about the other processes than about the page, and the main-thread limit of
     :func:`test_every_page_opens_with_under_3_s_of_main_thread_work` is the one judged. Measured
     here (best of 3, load 1.4 per core after the loads): flight pages 2.1-2.8 s (DataFlash demo

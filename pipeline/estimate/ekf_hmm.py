@@ -416,7 +416,9 @@ def q2_from_runs(model_set, truth_state: pd.DataFrame, *, scale: float = 1.0, ru
 
 
 def one_step_q2(x, acc, jerk, dt: float) -> F64:
-    """Second moment of the A_H/B one-step errors for given inputs (the core of :func:`q2_from_runs`).
+    """Second moment of the A_H/B one-step errors for given inputs on one regular grid (the
+    quantity :func:`q2_from_runs` forms from classified runs, without its classification, gate and
+    per-run decimation).
 
     .. math:: e_k = x_{k+1} - (A_H x_k + B [a_k; j_k]), \\qquad Q_2 = \\frac{1}{N}\\sum_k e_k e_k^T
 

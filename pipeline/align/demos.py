@@ -34,7 +34,7 @@ fewer than 2 samples, becomes a :class:`Dropped` record with the reason.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -104,12 +104,18 @@ class RigidFit:
         RMS 3-D distance of the DTW-matched pairs after the fit (m).
     n_pairs : int
         Matched pairs of the last round.
+    altitude_rms_m : float
+        RMS altitude difference of the two airborne tracks after DTW on altitude alone
+        (:func:`altitude_profile_rms`; NaN until :func:`fit_to_reference` fills it). It does not
+        depend on the fit, so it tells a flight that does not fly the reference's schedule from a
+        fit that failed to find it.
     """
 
     heading_rad: float
     translation_m: F64
     rms_m: float
     n_pairs: int
+    altitude_rms_m: float = float("nan")
 
     def apply(self, x: F64) -> F64:
         """The ``(N, 13)`` demo array ``x`` (flight NED) in the reference frame."""
@@ -248,7 +254,8 @@ def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
         diag["box_origin_ned_m"] = [float(v) for v in box_origin_ned_m]
     if fit is not None:
         diag.update(translation_m=[float(v) for v in fit.translation_m], fit_rms_m=fit.rms_m,
-                    fit_pairs=fit.n_pairs)
+                    fit_pairs=fit.n_pairs,
+                    fit_altitude_rms_m=fit.altitude_rms_m if np.isfinite(fit.altitude_rms_m) else None)
     return FlightDemos(flight_id, demos, dropped, frame, psi, diag)
 
 
@@ -347,6 +354,50 @@ def rigid_fit(track_ned: F64, reference: F64, *, headings: int = 24, iterations:
     return RigidFit(psi, np.asarray(t, dtype=np.float64), rms, int(len(path)))
 
 
+#: height above the track's lowest sample (m) from which a track counts as airborne in
+#: :func:`altitude_profile_rms` (taxiing and the ground roll are left out)
+AIRBORNE_HEIGHT_M = 20.0
+
+
+def altitude_profile_rms(track_ned: F64, reference: F64, *, path_fn: PathFn | None = None) -> float:
+    """RMS altitude difference (m) of two tracks after DTW on altitude alone.
+
+    Altitude ``−D`` is unchanged by the rotation about down and the horizontal translation of
+    :func:`rigid_fit`, so this compares the two flights' vertical schedules before any fit: a
+    flight of the same schedule matches closely (kd0aij-p21 against fc-p21-026: 15.5 m at 1 Hz),
+    another schedule does not (the P23 flights against the P21 one: 27.4 and 29.7 m; F23: 35.9 m).
+    kd0aij-141, listed as a P21 flight, gives 27.7 m: its vertical schedule is no closer to P21
+    than a P23 flight's, which is why no rigid fit places it (pair RMS 113.5 m). Each track is cut to its
+    airborne span (first to last sample more than :data:`AIRBORNE_HEIGHT_M` above its lowest
+    sample, the ground); the vertical offset between the two frames is kept, as in the fit.
+
+    Parameters
+    ----------
+    track_ned, reference : ndarray (N, 3), (M, 3)
+        Positions (NED), at the same rate.
+    path_fn : callable, optional
+        ``(x, y) -> (K, 2)`` DTW path; default :func:`warping_path`.
+
+    Returns
+    -------
+    float
+        NaN when either track never gets airborne.
+    """
+    path_fn = path_fn or warping_path
+
+    def airborne(p: F64) -> F64:
+        h = np.max(p[:, 2]) - p[:, 2]
+        up = np.flatnonzero(h > AIRBORNE_HEIGHT_M)
+        return np.zeros((0, 2)) if not len(up) else np.c_[-p[up[0]:up[-1] + 1, 2], np.zeros(up[-1] + 1 - up[0])]
+
+    a = airborne(np.asarray(track_ned, dtype=np.float64))
+    b = airborne(np.asarray(reference, dtype=np.float64))
+    if len(a) < 2 or len(b) < 2:
+        return float("nan")
+    path = path_fn(a, b)
+    return float(np.sqrt(np.mean((a[path[:, 0], 0] - b[path[:, 1], 0]) ** 2)))
+
+
 def transfer_segments(ref_t_ns: NDArray[np.int64], ref_segments: pd.DataFrame,
                       t_ns: NDArray[np.int64], path: NDArray[np.int64]) -> pd.DataFrame:
     """The reference's segments on another flight's clock through a DTW path.
@@ -417,8 +468,11 @@ def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments:
 
     t_src, src = positions(state, fit_hz)
     t_ref, ref = positions(ref_state, fit_hz)
+    # the schedule check is taken on the whole flights in their own NED frames (nothing fitted)
+    alt_rms = altitude_profile_rms(src, ref, path_fn=path_fn)
     ref = ref @ heading_rotation(psi_ref).T + ref_shift
     fit = rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn)
+    fit = replace(fit, altitude_rms_m=alt_rms)
     t_src, src = positions(state, sample_hz)
     t_ref, ref = positions(ref_state, sample_hz)
     ref = ref @ heading_rotation(psi_ref).T + ref_shift
@@ -447,7 +501,8 @@ def fit_to_reference(state: pd.DataFrame, ref_state: pd.DataFrame, ref_segments:
         return fit, carried
     ref = ref @ heading_rotation(psi_ref).T + ref_shift
     first = fit
-    fit = rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn)
+    fit = replace(rigid_fit(src, ref, headings=headings, iterations=iterations, path_fn=path_fn),
+                  altitude_rms_m=alt_rms)
     turn = abs(float(np.angle(np.exp(1j * (fit.heading_rad - first.heading_rad)))))
     if turn > np.radians(SCHEDULE_FIT_MAX_TURN_DEG):
         # the whole-flight fit was too poor to say where the schedule is (its span is then

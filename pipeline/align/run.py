@@ -150,7 +150,7 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
             if not len(seg):
                 seg = carried
             _say(f"set {set_name}: {f} fitted to {ref}: heading {np.degrees(fit.heading_rad):.1f} deg, "
-                 f"pair RMS {fit.rms_m:.1f} m")
+                 f"pair RMS {fit.rms_m:.1f} m, altitude-profile RMS {fit.altitude_rms_m:.1f} m")
         fd = flight_demos(state, seg, flight_id=f, heading_rad=box, fit=fit, sample_hz=hz, exclude=exclude,
                           box_origin_ned_m=origins.get(f))
         per_flight.append(fd)

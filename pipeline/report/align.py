@@ -168,6 +168,10 @@ def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *,
         if info.get("fit_rms_m") is not None:
             s += (f"; rigid fit to the reference: translation {np.round(info.get('translation_m'), 1).tolist()} m, "
                   f"matched-pair RMS {info['fit_rms_m']:.1f} m")
+            if info.get("fit_altitude_rms_m") is not None:
+                # altitude alone, before any fit: a large value says the flight flies another schedule
+                s += f"; altitude-profile RMS against the reference {info['fit_altitude_rms_m']:.1f} m"
+
         facts.append((f"flight {f}", s))
     for n in diag.get("notices") or []:
         facts.append(("notice", n))

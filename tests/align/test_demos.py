@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from helpers_align import synthetic_segments, synthetic_state
 
-from pipeline.align.demos import (DEMO_COLUMNS, fit_to_reference, flight_demos, rigid_fit, to_frame,
-                                  transfer_segments)
+from pipeline.align.demos import (DEMO_COLUMNS, altitude_profile_rms, fit_to_reference, flight_demos,
+                                  rigid_fit, to_frame, transfer_segments)
 from pipeline.frames.rotations import quat_to_dcm
 from pipeline.models.features import heading_rotation
 
@@ -104,6 +104,45 @@ def test_a_boxless_flight_fitted_to_its_reference_gets_the_reference_maneuvers()
     fd = flight_demos(other, carried, flight_id="o", fit=fit)
     assert fd.frame == "rigid" and len(fd.demos) == 3
     np.testing.assert_allclose(fd.demos[1].x[:, 1], 5.0 * np.sin(0.2 * fd.demos[1].t_ns * 1e-9), atol=0.5)
+
+
+def _climb_and_schedule(heights, seconds_each=20, hz=1.0):
+    """Ground roll, then a level-by-level vertical schedule, at ``hz`` (NED, D = -height)."""
+    n = int(seconds_each * hz)
+    h = np.concatenate([np.zeros(n)] + [np.full(n, float(v)) for v in heights] + [np.zeros(n)])
+    t = np.arange(len(h)) / hz
+    return np.column_stack([30 * np.cos(0.05 * t), 30 * np.sin(0.05 * t), -h])
+
+
+def test_the_altitude_profile_check_ignores_rotation_translation_and_timing_but_not_the_schedule(rng):
+    ref = _climb_and_schedule([100, 250, 80, 300, 150])
+    # the same schedule flown slower, in another NED frame (rotated about down, shifted)
+    same = _climb_and_schedule([100, 250, 80, 300, 150], seconds_each=26)
+    same = same @ heading_rotation(np.radians(140.0)).T + np.array([500.0, -300.0, 0.0])
+    other = _climb_and_schedule([250, 100, 300, 80, 150])
+    assert altitude_profile_rms(same + 0.1 * rng.standard_normal(same.shape), ref) < 1.0
+    assert altitude_profile_rms(other, ref) > 40.0
+    # the ground roll is left out: a longer taxi before take-off changes nothing
+    taxi = np.vstack([np.zeros((60, 3)), ref])
+    assert altitude_profile_rms(taxi, ref) == pytest.approx(0.0, abs=1e-9)
+    assert np.isnan(altitude_profile_rms(np.zeros((50, 3)), ref))
+
+
+def test_the_fit_to_a_reference_reports_the_altitude_profile_check():
+    psi_ref = np.radians(20.0)
+    ref = synthetic_state(900, heading_rad=psi_ref)
+    seg = synthetic_segments([(0, 12, "a"), (12, 24, "b"), (24, 36, "c")])
+    other = synthetic_state(900, heading_rad=np.radians(80.0), seed=1)
+    ts = np.arange(900) / 5.0
+    for st in (ref, other):  # take off, climb to 150 m and land again
+        st["pos_d_m"] = -150.0 * np.sin(np.pi * ts / ts[-1]) ** 2
+    fit, _ = fit_to_reference(other, ref, seg, ref_heading_rad=psi_ref, sample_hz=5.0, fit_hz=1.0,
+                              headings=12, iterations=30)
+    p = lambda st: st.loc[::5, ["pos_n_m", "pos_e_m", "pos_d_m"]].to_numpy()
+    assert np.isfinite(fit.altitude_rms_m)
+    assert fit.altitude_rms_m == pytest.approx(altitude_profile_rms(p(other), p(ref)))
+    fd = flight_demos(other, seg, flight_id="o", fit=fit)
+    assert fd.diagnostics["fit_altitude_rms_m"] == pytest.approx(fit.altitude_rms_m)
 
 
 @pytest.mark.parametrize("shape", ["K2", "2K", "pair"])

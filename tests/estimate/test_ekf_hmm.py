@@ -310,3 +310,41 @@ def test_second_differences_of_ekf_posterior_positions_are_a_far_worse_accelerat
                       - truth[:, 1:-1, 6:])
     assert e_true_fd2 < 0.2 * e_ekf                  # on the truth the difference is nearly exact
     assert e_fd2 > 3.0 * e_ekf, (e_fd2, e_ekf)
+
+
+def test_the_output_is_the_ekf_hmm_estimate_after_a_known_classification_and_the_ekf_after_unknown(trained):
+    # seed 000 Ch. 4.1: "if the classification is unknown, the output of the filter is the EKF
+    # estimate"; a classification with V < -1 makes the output the EKF+HMM estimate
+    ms, data = trained
+    Q2 = q2_from_runs(ms, data[data["label"] == "M1"], scale=2.0)
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M1",), np.random.default_rng(3))
+    tr = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2)
+    known = tr.pred != "unknown"
+    assert not tr.switched[:, 0].any()
+    np.testing.assert_array_equal(tr.switched[:, 1:], known[:, :-1])
+    out = tr.output
+    sw = tr.switched
+    np.testing.assert_array_equal(out.mean[sw], tr.hmm.mean[sw])
+    np.testing.assert_array_equal(out.mean[~sw], tr.ekf.mean[~sw])
+    np.testing.assert_array_equal(out.cov[~sw], tr.ekf.cov[~sw])
+    np.testing.assert_array_equal(out.nis[sw], tr.hmm.nis[sw])
+    # after an HMM stretch the EKF+HMM filter keeps its own state (no reset), which differs from
+    # the EKF's: an unknown step then outputs the EKF's estimate, not that state
+    half = np.zeros_like(sw)
+    half[:, : len(t_ns) // 2] = sw[:, : len(t_ns) // 2]
+    assert tr.mode[:, : len(t_ns) // 2].any()
+    later = dataclasses.replace(tr, switched=half).output
+    k = len(t_ns) // 2 + 1
+    assert not np.allclose(tr.hmm.mean[:, k], tr.ekf.mean[:, k])
+    np.testing.assert_array_equal(later.mean[:, k:], tr.ekf.mean[:, k:])
+
+
+def test_the_seed000_study_scores_the_ekf_hmm_output_not_its_internal_state(trained):
+    from pipeline.studies.seed000_ekf import ekf_hmm_errors
+
+    ms, data = trained
+    Q2 = q2_from_runs(ms, data[data["label"] == "M1"], scale=2.0)
+    ekf, _, t_ns, z, truth = _radar_runs(data, ("M1", "M2"), np.random.default_rng(7))
+    tr, e_ekf, e_hmm = ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, None, z)
+    np.testing.assert_array_equal(e_hmm, tr.output.mean - truth)
+    np.testing.assert_array_equal(e_hmm[~tr.switched], e_ekf[~tr.switched])

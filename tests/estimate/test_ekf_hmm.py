@@ -348,3 +348,27 @@ def test_the_seed000_study_scores_the_ekf_hmm_output_not_its_internal_state(trai
     tr, e_ekf, e_hmm = ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, None, z)
     np.testing.assert_array_equal(e_hmm, tr.output.mean - truth)
     np.testing.assert_array_equal(e_hmm[~tr.switched], e_ekf[~tr.switched])
+
+
+def test_gmr_decomposition_reproduces_the_classifiers_gmr_and_splits_nothing_on_exact_input(trained, rng):
+    from pipeline.studies.seed000_ekf import _gmr_acc, gmr_decomposition
+
+    ms, data = trained
+    ms = _with(ms, feature_set="state9h", gate_mps2=1e9)
+    ekf, prior, t_ns, z, truth = _radar_runs(data, ("M1", "M2"), rng)
+    yaw = np.broadcast_to(np.array([0.3, -1.2])[:, None], truth.shape[:2])
+    est = run_filter(ekf, prior, t_ns, z, store="mean").mean
+    # the recomputed GMR (heading frame and back) is the classifier's own, bit for bit
+    c = ms.classify(ekf_state_frame(est, t_ns, yaw_rad=yaw))
+    c0 = c[c["run_id"] == 1]
+    from pipeline.models.features import heading_rotation, rotate_triples
+    obs = ms.normaliser_.transform(rotate_triples(np.diff(est[1], axis=0), heading_rotation(-1.2)))
+    mine = _gmr_acc(ms, obs, c0["best"].to_numpy(dtype=object), c0["state"].to_numpy(), -1.2)
+    np.testing.assert_allclose(mine, c0[[f"acc_hmm_{a}_mps2" for a in "ned"]].to_numpy(), atol=1e-9)
+    # with the truth as "estimate" every part equals the regression's own error
+    d = gmr_decomposition(ms, t_ns, truth, truth.copy(), yaw)
+    assert d["gmr_tt"] == d["gmr_et"] == d["gmr_te"] == d["gmr_ee"]
+    assert d["best_agree_pct"] == d["state_agree_pct"] == 100.0 and d["dr_noise_d_m"] == 0.0
+    assert d["gmr_lag_steps"] in (-2, -1, 0, 1, 2) and d["gain_max_per_s2"] > 0
+    e = gmr_decomposition(ms, t_ns, truth, est, yaw)
+    assert e["dr_noise_d_m"] > 0 and e["gmr_ee"] != e["gmr_tt"]

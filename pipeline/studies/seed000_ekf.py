@@ -829,7 +829,8 @@ def gmr_diagnosis_results(res: Results, gdec: pd.DataFrame) -> None:
     for r in gdec.itertuples():
         m = r.maneuver
         for k, txt in what.items():
-            res.add(f"seed000_ekf_diag_{m}_{k}_acc_rmse_mps2", f"{getattr(r, k):.3f}",
+            name = f"seed000_ekf_diag_{m}_{k}_acc_rmse_mps2" if k != "ekf_acc" else f"seed000_ekf_diag_{m}_ekf_acc_rmse_mps2"
+            res.add(name, f"{getattr(r, k):.3f}",
                     f"{m} test runs (diagnosis): 3-D acceleration RMSE of the GMR from {txt} (m/s², ungated)."
                     if k != "ekf_acc" else f"{m} test runs (diagnosis): 3-D RMSE of {txt} (m/s²).")
         res.add(f"seed000_ekf_diag_{m}_best_agree_pct", f"{r.best_agree_pct:.1f}",

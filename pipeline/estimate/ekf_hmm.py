@@ -18,6 +18,16 @@ Two filters run side by side over the same radar measurements:
    and the CA prediction ``A x, A P Aᵀ + Q`` otherwise (per axis: "fall back to CA per axis where
    the gate dropped a value", §13.7). The radar update is the EKF's, unchanged.
 
+**Output** (:attr:`EkfHmmTrack.output`). The thesis switches the *output*, not only the
+prediction (Ch. 4.1: "if the classification is unknown, the output of the filter is the EKF
+estimate. [...] Classifications with high confidence (less than -1) result in the EKF+HMM
+incorporating HMM information into its estimates and instead outputting the EKF+HMM estimate";
+digest §8 "otherwise use the CA prediction with Q; the output is the EKF estimate"). Step k's
+output is therefore the EKF+HMM filter's posterior when the classification that chose step k's
+prediction (the one at k−1) is a known maneuver (:attr:`EkfHmmTrack.switched`), else the
+baseline EKF's; the EKF+HMM filter itself keeps running through unknown stretches (CA, its own
+state, no reset). The filter's own state is :attr:`EkfHmmTrack.hmm`.
+
 Per step the transition is assembled per run: the rows of a state component take ``A_H`` when
 its axis uses HMM inputs and ``A`` otherwise (both are ``·⊗I₃``, so an axis' rows only touch that
 axis), and the process noise takes ``Q₂`` on the HMM axes, ``Q`` on the CA axes, and no cross
@@ -77,6 +87,9 @@ class EkfHmmTrack:
         GMR acceleration (m/s²) and jerk (m/s³) in NED at step k (NaN where none).
     gated : ndarray of bool, shape (R, T, 3)
         Dropped by the 15 m/s² gate at step k.
+    switched : ndarray of bool, shape (R, T)
+        The classification that chose step k's prediction (at k−1) is a known maneuver
+        (``V_c < −1``): step k outputs the EKF+HMM estimate, else the EKF's (module docstring).
     """
 
     ekf: FilterTrack
@@ -88,11 +101,25 @@ class EkfHmmTrack:
     acc_hmm: F64
     jerk_hmm: F64
     gated: NDArray[np.bool_]
+    switched: NDArray[np.bool_]
 
     @property
     def hmm_share(self) -> F64:
         """Share of steps per run predicted with HMM inputs (any axis), shape (R,)."""
         return self.mode.mean(axis=1)
+
+    @property
+    def output(self) -> FilterTrack:
+        """The EKF+HMM's output (seed 000 Ch. 4.1, Fig. 4.1): the EKF+HMM filter's posterior
+        where :attr:`switched`, the baseline EKF's elsewhere (mean, covariance, NIS and
+        measured scalars alike; covariances only where both tracks kept them)."""
+        sw = self.switched
+        mean = np.where(sw[..., None], self.hmm.mean, self.ekf.mean)
+        cov = None
+        if self.hmm.cov is not None and self.ekf.cov is not None:
+            cov = np.where(sw[..., None, None], self.hmm.cov, self.ekf.cov)
+        return FilterTrack(self.ekf.t_ns, mean, cov, np.where(sw, self.hmm.nis, self.ekf.nis),
+                           np.where(sw, self.hmm.dof, self.ekf.dof))
 
 
 def ekf_state_frame(mean, t_ns, *, yaw_rad=None, run_ids=None) -> pd.DataFrame:
@@ -270,9 +297,14 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
     use = known[..., None] & ~gated & np.isfinite(acc) & np.isfinite(jerk)   # at k−1
     axes = np.zeros_like(use)
     axes[:, 1:] = use[:, :-1]
+    # the output switch follows the classification that chose the step's prediction (at k−1),
+    # gated axes or not: a gated axis falls back to CA inside the EKF+HMM, whose estimate is
+    # still the output (§8 outlier gate, §13.7)
+    switched = np.zeros((R, T), dtype=bool)
+    switched[:, 1:] = known[:, :-1]
 
     hmm = hmm_filter(ekf, prior, t_ns, z, Q2, axes, acc, jerk, store=store)
-    return EkfHmmTrack(base, hmm, axes.any(axis=-1), axes, pred, V, acc, jerk, gated)
+    return EkfHmmTrack(base, hmm, axes.any(axis=-1), axes, pred, V, acc, jerk, gated, switched)
 
 
 def hmm_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, Q2, axes, acc, jerk, *,

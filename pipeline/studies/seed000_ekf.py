@@ -67,6 +67,8 @@ from ..estimate.models import STATE_COLUMNS, RadarModel, initial_cov
 from ..estimate.montecarlo import measure, normalised_rmse, tune_q
 from ..estimate.smoother import rts_smooth
 from ..io.parquet import write_table
+from ..models.features import heading_rotation, observations, raw_features
+from ..models.gmr import fd_velocity_increments, gmr_state9
 from ..models.metrics import is_correct
 from ..report.study import build_study_page, layout
 from ..simulate.seeds import set_rng
@@ -281,9 +283,15 @@ def mc_maneuver(man: str, df: pd.DataFrame, ekf: ExtendedKalmanFilter, radar: Ra
 # -- EKF+HMM ----------------------------------------------------------------------------------------
 
 def ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z):
-    """One EKF+HMM run over ``truth`` (R, T, 9) from the true initial state: ``(track, e_ekf, e_hmm)``."""
+    """One EKF+HMM run over ``truth`` (R, T, 9) from the true initial state: ``(track, e_ekf, e_hmm)``.
+
+    ``e_hmm`` is the error of the EKF+HMM's *output* (:attr:`~pipeline.estimate.ekf_hmm.EkfHmmTrack.output`:
+    the EKF+HMM estimate where a known classification chose the step's prediction, the EKF's
+    elsewhere; seed 000 Ch. 4.1 "if the classification is unknown, the output of the filter is the
+    EKF estimate"), not of the EKF+HMM filter's internal state.
+    """
     tr = run_ekf_hmm(ekf, truth_prior(truth, int(t_ns[0])), t_ns, z, ms, Q2, yaw_rad=yaw, store="filtered")
-    return tr, tr.ekf.mean - truth, tr.hmm.mean - truth
+    return tr, tr.ekf.mean - truth, tr.output.mean - truth
 
 
 def model_variant(ms, **cfg):
@@ -351,7 +359,9 @@ def tune_ekf_hmm(ekf, ms, train, radar, st, seed, progress):
                     for sc in grid:
                         h = hmm_filter(ekf, prior, t_ns, z, Qb * sc, tr.hmm_axes, tr.acc_hmm, tr.jerk_hmm,
                                        store="mean")
-                        rm[(src, sc)][man] = rmse(h.mean - truth)
+                        # scored on the EKF+HMM's output (EKF where the classification is unknown)
+                        out = np.where(tr.switched[..., None], h.mean, tr.ekf.mean)
+                        rm[(src, sc)][man] = rmse(out - truth)
             if ekf_pooled is None:
                 ekf_pooled = pooled_rmse([(ekf_rm[m][None], n_of[m]) for m in KNOWN])[0]
             for (src, sc), per in rm.items():
@@ -405,11 +415,105 @@ def input_quality(tr, t_ns, truth, e_ekf, e_hmm) -> dict[str, float]:
             "ekf_hmm_acc_rmse_on_hmm_steps": r3(e_hmm[:, 1:, 6:])}
 
 
+#: lags (steps) scanned for the GMR's time alignment: estimate at t_k against the truth at t_{k+L}
+GMR_LAGS = (-2, -1, 0, 1, 2)
+
+
+def _gmr_acc(ms, obs, best, state, yaw0: float) -> np.ndarray:
+    """The GMR acceleration (NED, m/s², ungated) of one run's normalised observations ``obs`` with
+    the given per-step model ``best`` (label) and Viterbi ``state``, exactly as
+    ``ManeuverModelSet.classify`` forms it (same input block, alignment and heading undo)."""
+    cfg, dt = ms.config, 1.0 / ms.config.rate_hz
+    if cfg.gmr_input == "pos_fd":
+        obs = fd_velocity_increments(obs, ms.normaliser_, dt)
+    out = np.full((len(obs), 3), np.nan)
+    for m in np.unique(best):
+        if m not in ms.labels_:
+            continue
+        rows = best == m
+        p = ms.models_[ms.labels_.index(m)].params_
+        out[rows], _ = gmr_state9(p.means[:, 0], p.covars[:, 0], obs[rows], state[rows], ms.normaliser_, dt,
+                                  inputs=cfg.gmr_input, align=cfg.gmr_align)
+    if cfg.feature_set == "state9h":
+        out = out @ heading_rotation(yaw0)      # initial-heading frame -> NED: a_NED^T = a_h^T R
+    return out
+
+
+def gmr_decomposition(ms, t_ns, truth, est, yaw) -> dict[str, float]:
+    """Why the GMR acceleration is worse on EKF posteriors than on the truth (diagnosis, issue 14).
+
+    On the same runs, the classifier and the GMR of the model set ``ms`` (its GMR input and
+    alignment; no gate) are fed once with the truth and once with the baseline EKF's posteriors
+    ``est`` (R, T, 9). The GMR acceleration is then recomputed with the observations of one and
+    the per-step model and Viterbi state of the other, which splits its 3-D RMSE (m/s², against
+    the true acceleration at the estimate's own step) into
+
+    - ``gmr_tt`` (truth observations, truth states): the regression's own error;
+    - ``gmr_et`` (EKF observations, the truth's states): + the EKF's increment noise through
+      ``Σ_{va,r}Σ_r⁻¹`` (3.28), with the right model and state;
+    - ``gmr_te`` (truth observations, the EKF's states): + the model/state the EKF's
+      observations select;
+    - ``gmr_ee`` (both from the EKF): what the EKF+HMM gets; ``ekf_acc``: the EKF's own.
+
+    Also: ``best_agree_pct`` (same best model on both inputs), ``state_agree_pct`` (same Viterbi
+    state where the best model agrees), ``dr_noise_{h,d}_m`` (RMS of the EKF's position-increment
+    error, horizontal per axis and down, in the feature frame), ``gain_max_per_s2`` (largest
+    ``‖∂â/∂Δr‖₂`` over the states of the models, physical units, 1/s²) and ``gmr_lag_steps`` (the lag
+    L of :data:`GMR_LAGS` at which the truth-fed GMR at t_k best matches the truth at t_{k+L};
+    0 = aligned with the step the EKF+HMM uses it at).
+    """
+    R, T = truth.shape[:2]
+    fs = ms.config.feature_set
+    cls = {}
+    for nm, x in (("t", truth), ("e", est)):
+        c = ms.classify(ekf_state_frame(x, t_ns, yaw_rad=yaw))
+        cls[nm] = (c["best"].to_numpy(dtype=object).reshape(R, T - 1), c["state"].to_numpy().reshape(R, T - 1))
+    obs, raw = {"t": [], "e": []}, {"t": [], "e": []}
+    for r in range(R):
+        for nm, x in (("t", truth[r]), ("e", est[r])):
+            run = pd.DataFrame(x, columns=list(STATE_COLUMNS)).assign(yaw_rad=yaw[r])
+            d = observations(raw_features(run, fs), True)
+            raw[nm].append(d)
+            obs[nm].append(ms.normaliser_.transform(d))
+    a_true = truth[:, 1:, 6:]
+
+    def r3(e):
+        return float(np.sqrt(np.nanmean(np.sum(e ** 2, axis=-1))))
+
+    out = {}
+    for key, (o, c) in {"tt": ("t", "t"), "et": ("e", "t"), "te": ("t", "e"), "ee": ("e", "e")}.items():
+        acc = np.stack([_gmr_acc(ms, obs[o][r], cls[c][0][r], cls[c][1][r], float(yaw[r, 0])) for r in range(R)])
+        out[f"gmr_{key}"] = r3(acc - a_true)
+        if key == "tt":
+            lag_err = []
+            for L in GMR_LAGS:
+                k = np.arange(1, T) + L
+                ok = (k >= 0) & (k < T)
+                lag_err.append(r3(acc[:, ok] - truth[:, k[ok], 6:]))
+            out["gmr_lag_steps"] = int(GMR_LAGS[int(np.argmin(lag_err))])
+    out["ekf_acc"] = r3(est[:, 1:, 6:] - a_true)
+    same = cls["t"][0] == cls["e"][0]
+    out["best_agree_pct"] = 100.0 * float(same.mean())
+    out["state_agree_pct"] = 100.0 * float((cls["t"][1][same] == cls["e"][1][same]).mean()) if same.any() else float("nan")
+    dr = np.concatenate([e[:, :3] - t[:, :3] for e, t in zip(raw["e"], raw["t"])])
+    out["dr_noise_h_m"] = float(np.sqrt(np.mean(dr[:, :2] ** 2)))
+    out["dr_noise_d_m"] = float(np.sqrt(np.mean(dr[:, 2] ** 2)))
+    span, dt = ms.normaliser_.span, 1.0 / ms.config.rate_hz
+    g = []
+    for m in ms.models_:
+        for C in m.params_.covars[:, 0]:
+            G = C[3:6, 0:3] @ np.linalg.inv(C[0:3, 0:3])
+            g.append(np.linalg.norm(span[3:6, None] * G / span[None, 0:3], 2) / dt)
+    out["gain_max_per_s2"] = float(max(g))
+    return out
+
+
 def hmm_maneuver(man, test_df, ekf, ms, Q2, radar, st, seed):
     """Step 4 for one maneuver: S1/S2 over the test runs, then ``noise_runs`` realisations each."""
     ids, t_ns, truth, yaw, lab = runs_array(test_df)
     z = radar_z(radar, truth, seed, f"select/{man}")
-    _, _, e_sel = ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z)
+    tr_sel, _, e_sel = ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z)
+    diag = {"maneuver": man, **gmr_decomposition(ms, t_ns, truth, tr_sel.ekf.mean, yaw)}
     i1, i2 = best_worst(e_sel)
     n = int(st["noise_runs"])
     t_s = (t_ns - t_ns[0]) * 1e-9
@@ -424,9 +528,10 @@ def hmm_maneuver(man, test_df, ekf, ms, Q2, radar, st, seed):
                      "summed_abs_error": float(np.nansum(np.abs(e_sel[i]))),
                      "n_realisations": n, "MAoT_pct": m, "thesis_MAoT_pct": THESIS_CH4_MAOT[(man, sc)],
                      "hmm_mode_pct": 100.0 * float(np.mean(tr.mode)),
+                     "hmm_output_pct": 100.0 * float(np.mean(tr.switched)),
                      "gated_pct": 100.0 * float(np.mean(tr.gated)),
                      **input_quality(tr, t_ns, tr_n, e_ekf, e_hmm)})
-        for f, e, P in (("ekf", e_ekf, tr.ekf.cov), ("ekf_hmm", e_hmm, tr.hmm.cov)):
+        for f, e, P in (("ekf", e_ekf, tr.ekf.cov), ("ekf_hmm", e_hmm, tr.output.cov)):
             rm.append({"maneuver": man, "scenario": sc, "filter": f, **group_rmse(e)})
             T = e.shape[1]
             times.append(pd.DataFrame({
@@ -436,7 +541,7 @@ def hmm_maneuver(man, test_df, ekf, ms, Q2, radar, st, seed):
                 "err_var": (e.var(axis=0, ddof=1) if n > 1 else np.zeros(e.shape[1:])).ravel(),
                 "filter_var": np.diagonal(P, axis1=-2, axis2=-1).mean(axis=0).ravel(),
                 "mode_pct": np.repeat(100.0 * np.mean(tr.mode, axis=0), 9)}))
-    return scen, rm, pd.concat(times, ignore_index=True)
+    return scen, rm, pd.concat(times, ignore_index=True), diag
 
 
 def change_table(hrm: pd.DataFrame) -> pd.DataFrame:
@@ -464,7 +569,7 @@ def acceptance(ch: pd.DataFrame) -> dict[str, Any]:
 # -- report ------------------------------------------------------------------------------------------
 
 def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=None, q2t=None, scen=None,
-                 hrm=None, ch=None, acc=None, best=None) -> None:
+                 hrm=None, ch=None, acc=None, best=None, gdec=None) -> None:
     """``report.md``: the q search, the Monte Carlo summary, the EKF+HMM tables and the checks."""
     L = [f"# Seed-000 estimation study (size {size}, seed {seed})", "",
          f"Radar: the seed-000 model (Table 2.1 σ = {radar.sigma}, τ_RD = {radar.tau_rd_s} s) at the fixed "
@@ -499,9 +604,12 @@ def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=Non
                                 *[f"hmm_rmse_{g}" for g in HMM_GROUPS], "ekf_rmse_acc"]], "{:.3f}"), "",
               f"S1 (best) / S2 (worst): the test run with the lowest / highest summed absolute EKF+HMM error, "
               f"each re-run {st['noise_runs']}× with new radar noise from its true state. MAoT beside the "
-              f"thesis' Chapter-4 table (digest §11); `hmm_mode_pct` = steps predicted with HMM inputs.", "",
+              f"thesis' Chapter-4 table (digest §11); `hmm_mode_pct` = steps predicted with HMM inputs, "
+              f"`hmm_output_pct` = steps whose output is the EKF+HMM's (a known classification chose the "
+              f"step's prediction; elsewhere the output is the EKF's, Ch. 4.1). The EKF+HMM RMSE below is "
+              f"that output's.", "",
               md_table(scen[["maneuver", "scenario", "run_id", "n_realisations", "MAoT_pct", "thesis_MAoT_pct",
-                             "hmm_mode_pct", "gated_pct"]], "{:.2f}"), "",
+                             "hmm_mode_pct", "hmm_output_pct", "gated_pct"]], "{:.2f}"), "",
               "RMSE per group (pos and acc: 3-D):", "", md_table(hrm, "{:.3f}"), "",
               "EKF+HMM RMSE change against the EKF (%; negative = the EKF+HMM is better):", "",
               md_table(ch, "{:+.1f}"), "",
@@ -518,6 +626,13 @@ def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=Non
               "the steps predicted with HMM inputs on every axis:", "",
               md_table(scen[["maneuver", "scenario", "gmr_input_acc_rmse", "ekf_acc_rmse_on_hmm_steps",
                              "ekf_hmm_acc_rmse_on_hmm_steps"]], "{:.3f}"), ""]
+    if gdec is not None:
+        L += ["Why the GMR input is worse on EKF posteriors (`gmr_decomposition`, the selection realisation of "
+              "every test run, chosen GMR input, no gate): 3-D acceleration RMSE (m/s²) of the GMR with the "
+              "observations (first letter) and the per-step model + Viterbi state (second letter) from the "
+              "truth (t) or the baseline EKF (e); `ekf_acc` the EKF's own. `gmr_lag_steps` = 0: the truth-fed "
+              "GMR at t_k matches the truth at t_k (no time offset).", "",
+              md_table(gdec, "{:.3f}"), ""]
     write_text(path, "\n".join(L) + "\n")
 
 
@@ -628,7 +743,7 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
     write_table(mc_sum, paths["mc_rmse"], name="seed000_ekf_mc_rmse", extra={"q": q})
     say(mc_sum.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
 
-    cfg = q2_scale = q2t = scen = hrm = hmm_time = ch = acc = best = None
+    cfg = q2_scale = q2t = scen = hrm = hmm_time = ch = acc = best = gdec = None
     if "hmm" not in skip:
         progress("training one HMM per known maneuver (truth)")
         cfg, ms = train_models(train, hmm, seed, features=st["features"])
@@ -643,15 +758,17 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
             say(q2t.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
         ms, Q2 = best["model_set"], best["Q2"]  # frozen from here on
 
-        scen, rms, hts = [], [], []
+        scen, rms, hts, dgs = [], [], [], []
         for man in KNOWN:
             progress(f"EKF+HMM {man}: S1/S2 over {test[man]['run_id'].nunique()} test runs, "
                      f"{st['noise_runs']} realisations each")
-            s_, r_, h_ = hmm_maneuver(man, test[man], ekf, ms, Q2, radar, st, seed)
+            s_, r_, h_, d_ = hmm_maneuver(man, test[man], ekf, ms, Q2, radar, st, seed)
             scen += s_
             rms += r_
             hts.append(h_)
+            dgs.append(d_)
         scen, hrm, hmm_time = pd.DataFrame(scen), pd.DataFrame(rms), pd.concat(hts, ignore_index=True)
+        gdec = pd.DataFrame(dgs)
         ch = change_table(hrm)
         acc = acceptance(ch)
         write_table(scen, paths["scenarios"], name="seed000_ekf_scenarios")
@@ -661,12 +778,13 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
             say(scen.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
             say(hrm.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
             say(ch.to_string(index=False, float_format=lambda x: f"{x:+.1f}"))
+            say(gdec.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
     else:  # declared outputs are always written: empty, marked skipped
         for k in ("q2_tuning", "scenarios", "hmm_rmse", "hmm_time"):
             write_table(pd.DataFrame(), paths[k], name=f"seed000_ekf_{k}", extra={"skipped": True})
 
     write_report(paths["report"], size, st, seed, q, qt, mc_sum, radar, cfg=cfg, q2_scale=q2_scale, q2t=q2t,
-                 scen=scen, hrm=hrm, ch=ch, acc=acc, best=best)
+                 scen=scen, hrm=hrm, ch=ch, acc=acc, best=best, gdec=gdec)
 
     res = Results()
     res.add("seed000_ekf_q_tuned", f"{q:g}",
@@ -682,6 +800,7 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
                 f"Monte Carlo {r.maneuver}: share of steps whose run-averaged EKF NEES lies in the 95 % χ² band (%).")
     if hrm is not None:
         hmm_results(res, best, scen, ch, acc)
+        gmr_diagnosis_results(res, gdec)
     res.add("seed000_ekf_study_wall_s", f"{progress.elapsed:.0f}",
             "Wall time of the study (s), simulation to results, page excluded.")
     res.write(paths["results"])
@@ -698,6 +817,35 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
     return StudyResult(name=NAME, status="ok", results=dict(res.values),
                        diagnostics={"size": size, "seed": seed, "settings": st, "q": q, "q2_scale": q2_scale,
                                     "wall_s": round(progress.elapsed, 1)})
+
+
+def gmr_diagnosis_results(res: Results, gdec: pd.DataFrame) -> None:
+    """Diagnosis RESULT lines: the GMR error decomposition of :func:`gmr_decomposition`."""
+    what = {"gmr_tt": "truth observations and the truth's model/Viterbi states",
+            "gmr_et": "EKF observations with the truth's model/Viterbi states (input noise through the regression)",
+            "gmr_te": "truth observations with the EKF's model/Viterbi states (model/state choice)",
+            "gmr_ee": "EKF observations and states (what the EKF+HMM gets)",
+            "ekf_acc": "the baseline EKF's own acceleration"}
+    for r in gdec.itertuples():
+        m = r.maneuver
+        for k, txt in what.items():
+            name = f"seed000_ekf_diag_{m}_{k}_acc_rmse_mps2" if k != "ekf_acc" else f"seed000_ekf_diag_{m}_ekf_acc_rmse_mps2"
+            res.add(name, f"{getattr(r, k):.3f}",
+                    f"{m} test runs (diagnosis): 3-D acceleration RMSE of the GMR from {txt} (m/s², ungated)."
+                    if k != "ekf_acc" else f"{m} test runs (diagnosis): 3-D RMSE of {txt} (m/s²).")
+        res.add(f"seed000_ekf_diag_{m}_best_agree_pct", f"{r.best_agree_pct:.1f}",
+                f"{m} test runs (diagnosis): steps whose best model is the same on EKF and on truth input (%).")
+        res.add(f"seed000_ekf_diag_{m}_state_agree_pct", f"{r.state_agree_pct:.1f}",
+                f"{m} test runs (diagnosis): steps with the same Viterbi state on EKF and truth input, where the "
+                f"best model agrees (%).")
+        res.add(f"seed000_ekf_diag_{m}_dr_noise_down_m", f"{r.dr_noise_d_m:.3f}",
+                f"{m} test runs (diagnosis): RMS error of the EKF's down position increment (m; horizontal "
+                f"{r.dr_noise_h_m:.3f} m per axis).")
+        res.add(f"seed000_ekf_diag_{m}_gmr_lag_steps", int(r.gmr_lag_steps),
+                f"{m} test runs (diagnosis): lag (steps) at which the truth-fed GMR best matches the truth "
+                f"(0 = no time offset).")
+    res.add("seed000_ekf_diag_gmr_gain_max_per_s2", f"{gdec['gain_max_per_s2'].max():.2f}",
+            "Diagnosis: largest ‖∂â/∂Δr‖₂ (1/s²) of the GMR (3.28) over the states of the models.")
 
 
 def hmm_results(res: Results, best, scen, ch, acc) -> None:

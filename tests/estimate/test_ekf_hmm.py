@@ -310,3 +310,65 @@ def test_second_differences_of_ekf_posterior_positions_are_a_far_worse_accelerat
                       - truth[:, 1:-1, 6:])
     assert e_true_fd2 < 0.2 * e_ekf                  # on the truth the difference is nearly exact
     assert e_fd2 > 3.0 * e_ekf, (e_fd2, e_ekf)
+
+
+def test_the_output_is_the_ekf_hmm_estimate_after_a_known_classification_and_the_ekf_after_unknown(trained):
+    # seed 000 Ch. 4.1: "if the classification is unknown, the output of the filter is the EKF
+    # estimate"; a classification with V < -1 makes the output the EKF+HMM estimate
+    ms, data = trained
+    Q2 = q2_from_runs(ms, data[data["label"] == "M1"], scale=2.0)
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M1",), np.random.default_rng(3))
+    tr = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2)
+    known = tr.pred != "unknown"
+    assert not tr.switched[:, 0].any()
+    np.testing.assert_array_equal(tr.switched[:, 1:], known[:, :-1])
+    out = tr.output
+    sw = tr.switched
+    np.testing.assert_array_equal(out.mean[sw], tr.hmm.mean[sw])
+    np.testing.assert_array_equal(out.mean[~sw], tr.ekf.mean[~sw])
+    np.testing.assert_array_equal(out.cov[~sw], tr.ekf.cov[~sw])
+    np.testing.assert_array_equal(out.nis[sw], tr.hmm.nis[sw])
+    # after an HMM stretch the EKF+HMM filter keeps its own state (no reset), which differs from
+    # the EKF's: an unknown step then outputs the EKF's estimate, not that state
+    half = np.zeros_like(sw)
+    half[:, : len(t_ns) // 2] = sw[:, : len(t_ns) // 2]
+    assert tr.mode[:, : len(t_ns) // 2].any()
+    later = dataclasses.replace(tr, switched=half).output
+    k = len(t_ns) // 2 + 1
+    assert not np.allclose(tr.hmm.mean[:, k], tr.ekf.mean[:, k])
+    np.testing.assert_array_equal(later.mean[:, k:], tr.ekf.mean[:, k:])
+
+
+def test_the_seed000_study_scores_the_ekf_hmm_output_not_its_internal_state(trained):
+    from pipeline.studies.seed000_ekf import ekf_hmm_errors
+
+    ms, data = trained
+    Q2 = q2_from_runs(ms, data[data["label"] == "M1"], scale=2.0)
+    ekf, _, t_ns, z, truth = _radar_runs(data, ("M1", "M2"), np.random.default_rng(7))
+    tr, e_ekf, e_hmm = ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, None, z)
+    np.testing.assert_array_equal(e_hmm, tr.output.mean - truth)
+    np.testing.assert_array_equal(e_hmm[~tr.switched], e_ekf[~tr.switched])
+
+
+def test_gmr_decomposition_reproduces_the_classifiers_gmr_and_splits_nothing_on_exact_input(trained, rng):
+    from pipeline.studies.seed000_ekf import _gmr_acc, gmr_decomposition
+
+    ms, data = trained
+    ms = _with(ms, feature_set="state9h", gate_mps2=1e9)
+    ekf, prior, t_ns, z, truth = _radar_runs(data, ("M1", "M2"), rng)
+    yaw = np.broadcast_to(np.array([0.3, -1.2])[:, None], truth.shape[:2])
+    est = run_filter(ekf, prior, t_ns, z, store="mean").mean
+    # the recomputed GMR (heading frame and back) is the classifier's own, bit for bit
+    c = ms.classify(ekf_state_frame(est, t_ns, yaw_rad=yaw))
+    c0 = c[c["run_id"] == 1]
+    from pipeline.models.features import heading_rotation, rotate_triples
+    obs = ms.normaliser_.transform(rotate_triples(np.diff(est[1], axis=0), heading_rotation(-1.2)))
+    mine = _gmr_acc(ms, obs, c0["best"].to_numpy(dtype=object), c0["state"].to_numpy(), -1.2)
+    np.testing.assert_allclose(mine, c0[[f"acc_hmm_{a}_mps2" for a in "ned"]].to_numpy(), atol=1e-9)
+    # with the truth as "estimate" every part equals the regression's own error
+    d = gmr_decomposition(ms, t_ns, truth, truth.copy(), yaw)
+    assert d["gmr_tt"] == d["gmr_et"] == d["gmr_te"] == d["gmr_ee"]
+    assert d["best_agree_pct"] == d["state_agree_pct"] == 100.0 and d["dr_noise_d_m"] == 0.0
+    assert d["gmr_lag_steps"] in (-2, -1, 0, 1, 2) and d["gain_max_per_s2"] > 0
+    e = gmr_decomposition(ms, t_ns, truth, est, yaw)
+    assert e["dr_noise_d_m"] > 0 and e["gmr_ee"] != e["gmr_tt"]

@@ -421,8 +421,11 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
         except ValueError as exc:  # ModelError and numerical failures of the classifier
             reason = f"EKF+HMM failed: {type(exc).__name__}: {exc}"
         else:
-            hm, hc = ht.hmm.mean[0], ht.hmm.cov[0]
-            df = estimate_frame(t, hm, hc, nis=ht.hmm.nis[0], nees=_nees(ref, hm, hc))
+            # the thesis's output (Ch. 4.1): the EKF+HMM estimate after a known classification,
+            # the baseline EKF's after unknown (the filter itself runs on, unreset)
+            out = ht.output
+            hm, hc = out.mean[0], out.cov[0]
+            df = estimate_frame(t, hm, hc, nis=out.nis[0], nees=_nees(ref, hm, hc))
             df["mode"] = np.asarray(ht.mode[0], dtype=bool)
             df["pred"] = pd.array([str(p) for p in ht.pred[0]], dtype="string")
             df["V_best"] = np.asarray(ht.V_best[0], dtype=np.float64)

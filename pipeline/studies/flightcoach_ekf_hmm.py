@@ -190,7 +190,7 @@ def per_maneuver(track: EkfHmmTrack, t_ns: np.ndarray, x: np.ndarray, seg: pd.Da
                  skip=SKIP) -> pd.DataFrame:
     """One row per labelled maneuver: RMSE of both filters per group, HMM share, the verdict."""
     e1 = track.ekf.mean[0] - x
-    e2 = track.hmm.mean[0] - x
+    e2 = track.output.mean[0] - x
     eg = track.acc_hmm[0] - x[:, 6:]
     rows = []
     for _, s in seg.iterrows():
@@ -333,7 +333,7 @@ def _timeline(track: EkfHmmTrack, t_ns: np.ndarray, x: np.ndarray, seg: pd.DataF
     for i, a in enumerate("ned"):
         d[f"ref_acc_{a}_mps2"] = x[:, 6 + i]
         d[f"ekf_acc_{a}_mps2"] = track.ekf.mean[0, :, 6 + i]
-        d[f"ekf_hmm_acc_{a}_mps2"] = track.hmm.mean[0, :, 6 + i]
+        d[f"ekf_hmm_acc_{a}_mps2"] = track.output.mean[0, :, 6 + i]
         d[f"gmr_acc_{a}_mps2"] = track.acc_hmm[0, :, i]
     return pd.DataFrame(d)
 
@@ -527,7 +527,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
           "Median over the test maneuvers of EKF+HMM / EKF acceleration RMSE.")
     r.add("flightcoach_ekf_hmm_ekf_acc_rmse", f"{rmse_norm((trk.ekf.mean[0] - x_te)[inside, 6:]):.3f}",
           "EKF acceleration RMSE (m/s², norm over NED) over all test maneuvers against the reference.")
-    r.add("flightcoach_ekf_hmm_ekf_hmm_acc_rmse", f"{rmse_norm((trk.hmm.mean[0] - x_te)[inside, 6:]):.3f}",
+    r.add("flightcoach_ekf_hmm_ekf_hmm_acc_rmse", f"{rmse_norm((trk.output.mean[0] - x_te)[inside, 6:]):.3f}",
           "EKF+HMM acceleration RMSE (m/s², norm over NED) over all test maneuvers against the reference.")
     r.add("flightcoach_ekf_hmm_gmr_acc_rmse", f"{rmse_norm((trk.acc_hmm[0] - x_te[:, 6:])[used]):.3f}",
           "RMSE (m/s²) of the HMM acceleration input itself on the test-maneuver steps that used it.")

@@ -459,6 +459,11 @@ class CameraLikelihood:
     reinit_sigma_m : float
         On re-initialisation (every weight zero) the particles' N/E are drawn around the mean
         ground intersection of the step's rays with this spread; velocity etc. are kept.
+    collapse_sigma : float or None
+        The collapse test of :meth:`collapsed` (digest 001 §13 item 7: "re-init from the ray
+        intersection when the max log-likelihood collapses"): the step collapses when even the
+        best particle's RMS normalised pixel residual exceeds this many σ_px. None: only the
+        all-zero-weight guard re-initialises.
     """
 
     camera: PinholeCamera
@@ -466,10 +471,36 @@ class CameraLikelihood:
     d_index: int | None = None
     ground_d: float = 0.0
     reinit_sigma_m: float = 10.0
+    collapse_sigma: float | None = None
 
     def __call__(self, x: F64, z: F64) -> F64:
         return camera_loglik(x, z, self.camera, pos_index=self.pos_index, d_index=self.d_index,
                              ground_d=self.ground_d)
+
+    def collapsed(self, ll: ArrayLike, z: ArrayLike) -> bool:
+        """Whether the maximum log-likelihood over the particles has collapsed (§13 item 7).
+
+        With ``m`` detecting observers the log-likelihood of a particle is
+        ``ℓ = Σ_o [−½ r_o² − 2 log σ_o − log 2π]`` (``r_o`` its normalised pixel residual, 2-D),
+        so the best particle's mean squared residual per image coordinate is
+        ``ρ² = −2 (max ℓ − Σ_o [−2 log σ_o − log 2π]) / (2m)``. The step collapses when
+        ``ρ > collapse_sigma``: no particle explains the detections (the cloud has lost the
+        target; with σ-sized noise ``ρ`` is near 1). Without detections or without a threshold
+        it never collapses.
+        """
+        if self.collapse_sigma is None:
+            return False
+        obs = np.asarray(z, dtype=np.float64).reshape(-1, OBS_FIELDS)
+        ok = obs[:, 0] > 0.5
+        m = int(np.count_nonzero(ok))
+        if m == 0:
+            return False
+        best = float(np.max(np.asarray(ll, dtype=np.float64)))
+        if not np.isfinite(best):
+            return True
+        const = float(np.sum(-2.0 * np.log(obs[ok, 3]) - np.log(2.0 * np.pi)))
+        rho2 = -2.0 * (best - const) / (2.0 * m)
+        return bool(rho2 > float(self.collapse_sigma) ** 2)
 
     def ground_fix(self, z: ArrayLike) -> F64:
         """Mean ground-plane intersection of the step's valid rays (N, E, D); NaN if none points down."""

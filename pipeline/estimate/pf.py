@@ -25,7 +25,10 @@ and a log-weight ``ℓ_i``. One step over ``Δt`` with measurement ``z_k``:
 Bad input: a measurement with a NaN component is a **predict-only** step (no weighting, no
 resampling). If every weight underflows to zero (or is −∞/NaN) the particles are
 **re-initialised around z_k** by the likelihood's ``reinit`` (or the ``reinit`` argument) with
-uniform weights and the step is counted in ``n_reinit``.
+uniform weights and the step is counted in ``n_reinit``. A likelihood with a
+``collapsed(ll, z) -> bool`` method can also call a step with some weight left collapsed (the
+camera's, seed 001 §13 item 7); it is re-initialised the same way and counted in ``n_collapse``
+as well.
 
 API
 ---
@@ -283,6 +286,8 @@ class ParticleFilter:
         self.logw: F64 = np.full(self.N, -np.log(self.N))
         self.neff = float(self.N)
         self.n_reinit = 0
+        #: re-initialisations called by the likelihood's collapse test (counted in n_reinit too)
+        self.n_collapse = 0
         #: per-particle side arrays (leading axis N) resampled with the particles, e.g. the
         #: weave classifier's submode and segment counters δ, θ
         self.aux: dict[str, np.ndarray] = {}
@@ -390,6 +395,12 @@ class ParticleFilter:
         lw = self.logw + ll
         lw[np.isnan(lw)] = -np.inf
         tot = _logsumexp(lw)
+        # a likelihood may also call a step collapsed while some weight is left (seed 001 §13
+        # item 7: the best particle explains the measurement no better than a lost track would)
+        collapsed = getattr(self.likelihood, "collapsed", None)
+        if np.isfinite(tot) and collapsed is not None and self._reinit is not None and collapsed(ll, z):
+            self.n_collapse += 1
+            tot = -np.inf
         if not np.isfinite(tot):
             if self._reinit is None:
                 raise ValueError("ParticleFilter: every weight is zero and the likelihood has no reinit")

@@ -111,7 +111,7 @@ class GeolocationConfig:
         "stop_sigma_a": 0.05, "accel_sigma_j": 0.5, "coast_sigma_a": 0.3, "turn_sigma_a": 0.3,
         "turn_sigma_omega": 0.05, "down_sigma": 0.2})
     init: Mapping[str, float] = field(default_factory=lambda: {
-        "sigma_pos_m": 10.0, "sigma_vel_mps": 3.0, "sigma_down_m": 5.0})
+        "sigma_pos_m": 10.0, "sigma_vel_mps": 3.0, "sigma_down_m": 5.0, "collapse_sigma": 5.0})
     observers: Mapping[str, float] = field(default_factory=lambda: {
         "accel_max_mps2": 3.0, "speed_max_mps": 15.0, "orbit_radius_m": 50.0, "orbit_speed_mps": 8.0,
         "stationary_box_m": 100.0, "stationary_height_m": 40.0, "mobile_heights_m": 30.0})
@@ -331,8 +331,10 @@ def make_filter(cfg: GeolocationConfig, *, cv_only: bool, n_particles: int | Non
     """The seed-001 PF: D4 modes + Π_p (or CV only), N_thr = threshold·N, systematic resampling."""
     nz = dict(cfg.noise)
     down = bool(cfg.estimate_down)
+    collapse = cfg.init.get("collapse_sigma")
     lik = CameraLikelihood(cfg.camera, d_index=GEO_IX_DOWN if down else None,
-                           reinit_sigma_m=float(cfg.init["sigma_pos_m"]))
+                           reinit_sigma_m=float(cfg.init["sigma_pos_m"]),
+                           collapse_sigma=None if collapse is None else float(collapse))
     if cv_only:
         cv = PfConstantVelocity(nz["coast_sigma_a"])
         models = [PfDownRandomWalk(cv, nz["down_sigma"]) if down else cv]

@@ -178,6 +178,43 @@ def test_the_filter_reinitialises_at_the_rays_ground_fix_when_every_weight_is_ze
     assert np.allclose(pf.x[:, :2].mean(axis=0), [20.0, 10.0], atol=0.3)
 
 
+def test_the_collapse_test_reads_the_best_particles_pixel_residual_in_sigmas():
+    rng = np.random.default_rng(7)
+    Ts, uv = _scene(rng, 3, sigma=0.0)
+    row = pack_detections(uv, 5.0, Ts)
+    lik = CameraLikelihood(CAM, collapse_sigma=5.0)
+    x = np.zeros((4, 7))
+    x[:, :2] = [20.0, 10.0]                      # the target: residual 0
+    assert not lik.collapsed(lik(x, row), row)
+    x[:, :2] = [220.0, -190.0]                   # every particle 280 m off: far beyond 5 sigma
+    assert lik.collapsed(lik(x, row), row)
+    # the test's scale: it trips exactly where the best particle's RMS residual crosses the threshold
+    x[:, :2] = [23.0, 11.0]
+    ll = lik(x[:1], row)
+    const = 3 * (-2 * np.log(5.0) - np.log(2 * np.pi))
+    rho = np.sqrt(-2 * (ll[0] - const) / 6)
+    assert np.isfinite(rho) and rho > 0
+    assert CameraLikelihood(CAM, collapse_sigma=0.999 * rho).collapsed(ll, row)
+    assert not CameraLikelihood(CAM, collapse_sigma=1.001 * rho).collapsed(ll, row)
+    assert not CameraLikelihood(CAM).collapsed(ll, row)           # off by default in the class
+    assert not lik.collapsed(ll, pack_detections(np.full((3, 2), np.nan), 5.0, Ts))
+
+
+def test_the_filter_reinitialises_from_the_rays_when_the_best_particle_has_lost_the_target():
+    rng = np.random.default_rng(8)
+    Ts, uv = _scene(rng, 3, sigma=0.0)
+    row = pack_detections(uv, 5.0, Ts)
+    for collapse, expect in ((5.0, True), (None, False)):
+        lik = CameraLikelihood(CAM, reinit_sigma_m=1.0, collapse_sigma=collapse)
+        pf = ParticleFilter([PfConstantVelocity(0.3)], None, lik, n_particles=200, rng=9)
+        # a cloud 60 m from the target: in front of every camera, so some weight is left
+        pf.init(mean=[80, 10, 0, 0, 0, 0, 0], cov=np.diag([1, 1, 0, 0, 0, 0, 0]))
+        s = pf.step(0.0, row)
+        assert s.reinit is expect and pf.n_collapse == int(expect) and pf.n_reinit == int(expect)
+        if expect:
+            assert np.allclose(pf.x[:, :2].mean(axis=0), [20.0, 10.0], atol=0.3)
+
+
 def test_a_camera_det_observer_without_a_pose_fails_naming_it():
     det = pd.DataFrame({"t_ns": [0, 0], "instance": [1, 2], "u_px": [640.0, 600.0], "v_px": [480.0, 500.0],
                         "sigma_px": [5.0, 5.0], "gimbal_yaw_rad": [0.0, 0.1], "gimbal_pitch_rad": [-0.5, -0.6]})

@@ -44,10 +44,12 @@ Per particle and step k (digest 003 §5):
    the class probability is the particle fraction).
 
 The detector (§6): ``AF(k)`` is the mean of the weave fraction F over the last N = 80 steps
-(over all steps so far while k < N); a weave is declared while ``AF(k) ≥ τ = 0.269``, never
-during the first 25 steps. k counts the filter's steps 1..T (index 1 on): index 0 is the
-initial cloud (modes uniform, no measurement weighed), which the thesis does not output, so
-it is in neither the average nor the start-up count (its ``af`` is NaN).
+(over all steps so far while fewer than N), a weave declared while ``AF(k) ≥ τ = 0.269``; the
+first 25 steps are left out of the average as well as the output (§6.3: the start-up's F is
+not "take[n] in consideration"), so AF is NaN there and averages F from step 26 on. k counts
+the filter's steps 1..T (index 1 on): index 0 is the initial cloud (modes uniform, no
+measurement weighed), which the thesis does not output, so it is in neither the average nor
+the start-up count (its ``af`` is NaN too).
 
 Vectorised over runs and particles: arrays ``(R, N)``. The per-particle logic (mode and
 submode draws, the leaf's noise, the counters, the guard, the weighted statistics) runs in
@@ -193,18 +195,28 @@ def leaf_of(mode: ArrayLike, submode: ArrayLike) -> NDArray[np.int8]:
 def detector(F: ArrayLike, window: int = 80, tau: float = 0.269, startup: int = 25) -> tuple[F64, NDArray[np.bool_]]:
     """Seed-003 §6 detector over the last axis of the weave fraction ``F`` (..., T).
 
-    ``AF(k) = (1/N) Σ_{i=k−N+1..k} F(i)`` for k ≥ N (1-based), ``(1/k) Σ_{i≤k} F(i)`` before;
-    declared where ``AF ≥ τ`` and k > ``startup`` (the first ``startup`` steps are ignored).
-    Returns ``(AF, declared)``.
+    ``AF(k) = (1/N) Σ_{i=k−N+1..k} F(i)`` for k ≥ N, ``(1/k) Σ_{i≤k} F(i)`` before, counted
+    from the first step after the start-up: the thesis (§6.3) "do[es] not take the fraction of
+    particles in the mode weave in consideration during this startup time" and "disregard[s] the
+    detector output during this period", so F(1..``startup``) enters no average and the
+    average restarts at step ``startup`` + 1 as AF restarts at k = 1 (1-based steps). Declared
+    where ``AF ≥ τ``. Returns ``(AF, declared)``; AF is NaN during the start-up.
     """
     F = np.asarray(F, dtype=np.float64)
     T = F.shape[-1]
-    c = np.cumsum(F, axis=-1)
-    k = np.arange(1, T + 1)
-    lagged = np.concatenate([np.zeros(F.shape[:-1] + (window,)), c[..., :-window]], axis=-1)[..., :T] \
-        if T > window else np.zeros_like(c)
-    af = (c - lagged) / np.minimum(k, window)
-    declared = (af >= tau) & (k > startup)
+    s = min(max(int(startup), 0), T)
+    af = np.full(F.shape, np.nan)
+    G = F[..., s:]
+    n = G.shape[-1]
+    if n:
+        c = np.cumsum(G, axis=-1)
+        j = np.arange(1, n + 1)     # the detector's own step count after the start-up
+        lagged = np.zeros_like(c)
+        if n > window:
+            lagged[..., window:] = c[..., :-window]
+        af[..., s:] = (c - lagged) / np.minimum(j, window)
+    declared = np.zeros(F.shape, dtype=bool)
+    declared[..., s:] = af[..., s:] >= tau
     return af, declared
 
 
@@ -561,9 +573,10 @@ def hmpf_filter(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator)
         logw = np.log(np.maximum(w, 1e-300))
         _fractions(w, m, sm, mode_p[:, k], submode_p[:, k])
     # the detector runs over the filter's outputs F(1..T) (thesis §2.4 algorithm: "Output ... for
-    # all time steps k = 1, 2, ..., T"; §6: AF(k) = (1/k) Σ_{i=1..k} F(i)): index 0 is the initial
-    # cloud, spread uniformly over the modes (F = 1/4 by construction, no measurement weighed),
-    # so it enters neither the average nor the 25 start-up steps; its AF is NaN, never flagged
+    # all time steps k = 1, 2, ..., T"), leaving the start-up steps out of its average (§6.3;
+    # detector()): index 0 is the initial cloud, spread uniformly over the modes (F = 1/4 by
+    # construction, no measurement weighed), so it enters neither the average nor the 25
+    # start-up steps; its AF is NaN, never flagged
     af = np.full((R_, T), np.nan)
     flag = np.zeros((R_, T), dtype=bool)
     af[:, 1:], flag[:, 1:] = detector(mode_p[:, 1:, W], cfg.detector_window, cfg.tau, cfg.startup_steps)

@@ -271,8 +271,9 @@ def write_report(path, size, st, seed, runs: pd.DataFrame, checks: list[tuple[st
           "(digest 003 §7).",
           "", "The detector's false alarms on the straight track start at the first step it may flag "
           "(`pf_hmpf_straight_flagged_at_startup_end_seeds`): the modes start uniform (thesis §2.4), W relaxes "
-          "through its 0.97 self-transition while S and the weave straights share the CM, so AF over steps 1–26 "
-          "averages about 0.2 and the particle drift of resampling every step spreads it across seeds (the spread "
+          "through its 0.97 self-transition while S and the weave straights share the CM, so F is still about "
+          "0.15 at step 26, where the detector's average (the start-up left out, §6.3) holds F(26) alone, and "
+          "the particle drift of resampling every step spreads it across seeds (the spread "
           "shrinks with more particles; the thesis's §6 detector runs used 100,000). On the π turn the weave's "
           "curve particles stay in their curve at 0.97·0.95 per step against a left curve's 0.66, so W peaks in "
           "and after the turn — the thesis's own §4.2.3 reading (it never ran the detector on that track). At 0.8× "

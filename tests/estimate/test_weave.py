@@ -65,8 +65,26 @@ def test_the_detector_averages_80_steps_and_ignores_the_start_up():
     assert af[129] == pytest.approx(0.8 * 30 / 80) and af[209 - 100] == pytest.approx(0.8 * 10 / 80)
     assert flag[129] and not flag[100] and np.flatnonzero(flag)[0] == 126
     af, flag = detector(np.full(50, 0.5), 80, 0.269, 25)
-    np.testing.assert_allclose(af, 0.5)   # (1/k) Σ F before k = N
-    assert not flag[:25].any() and flag[25:].all()
+    np.testing.assert_allclose(af[25:], 0.5)   # (1/k) Σ F before k = N
+    assert np.all(np.isnan(af[:25])) and not flag[:25].any() and flag[25:].all()
+
+
+def test_the_detector_leaves_the_start_up_weave_fraction_out_of_its_average():
+    # thesis §6.3: "we do not take the fraction of particles in the mode weave in consideration
+    # during this startup time. We disregard the detector output during this period." A high F
+    # during the 25 start-up steps must not carry into AF after them.
+    F = np.zeros(150)
+    F[:25] = 1.0
+    F[25:] = 0.1
+    af, flag = detector(F, 80, 0.269, 25)
+    np.testing.assert_allclose(af[25:], 0.1)
+    assert not flag.any()
+    # the average restarts at step 26 as the thesis's AF(k) restarts at k = 1: (1/(k−25)) Σ F(26..k)
+    # until the window is full, then the last 80 steps (still never a start-up step)
+    F = np.arange(1, 201) / 1000.0
+    af, _ = detector(F, 80, 0.269, 25)
+    assert af[25] == pytest.approx(F[25]) and af[35] == pytest.approx(F[25:36].mean())
+    assert af[104] == pytest.approx(F[25:105].mean()) and af[150] == pytest.approx(F[71:151].mean())
 
 
 def test_the_2d_radar_uses_bearing_from_north_toward_east_and_closing_doppler():
@@ -155,17 +173,18 @@ def test_fast_trend_the_radar_filter_tracks_the_weave_near_the_site(cfg):
     assert np.sqrt(np.mean(e ** 2)) < 8.0
 
 
-def test_the_detector_averages_the_filter_outputs_from_step_1_and_never_the_initial_cloud(cfg):
-    # thesis §2.4: the filter outputs k = 1..T and §6 averages F(1..k); index 0 is the initial
-    # cloud (modes uniform by construction), so it is neither averaged nor counted as start-up
+def test_the_detector_averages_the_filter_outputs_after_the_start_up_and_never_the_initial_cloud(cfg):
+    # thesis §2.4: the filter outputs k = 1..T; §6 averages F but leaves the 25 start-up steps out;
+    # index 0 is the initial cloud (modes uniform by construction), neither averaged nor counted
     tr = straight_track(60)
     out = hmpf_filter(gps_measure(tr, 2, np.random.default_rng(4)), GpsSensor(), cfg.with_(n_particles=300),
                       np.random.default_rng(6))
     np.testing.assert_allclose(out.mode_p[:, 0], 0.25, atol=0.1)   # the uniform initial spread
     assert np.all(np.isnan(out.af[:, 0])) and not out.weave_detected[:, 0].any()
     F = out.mode_p[:, 1:, 3]
-    np.testing.assert_allclose(out.af[:, 1], F[:, 0])                      # AF(1) = F(1)
-    np.testing.assert_allclose(out.af[:, 25], F[:, :25].mean(axis=1))      # AF(25) = mean F(1..25)
+    assert np.all(np.isnan(out.af[:, 1:26]))                               # the start-up is not averaged
+    np.testing.assert_allclose(out.af[:, 26], F[:, 25])                    # AF(26) = F(26)
+    np.testing.assert_allclose(out.af[:, 40], F[:, 25:40].mean(axis=1))    # AF(40) = mean F(26..40)
     af, flag = detector(F, cfg.detector_window, cfg.tau, cfg.startup_steps)
     np.testing.assert_allclose(out.af[:, 1:], af)
     np.testing.assert_array_equal(out.weave_detected[:, 1:], flag)

@@ -51,8 +51,15 @@ def test_the_tables_hold_every_scenario_and_seed(tiny):
             "range_10000", "quadrant_4"} <= scen
     assert runs.groupby("scenario").size().eq(3).all()
     np.testing.assert_allclose(tl[[f"mode_p_{m}" for m in "SLRW"]].sum(axis=1), 1.0)
+    d_true, t_true = spf.weave_truth_max({**spf.DEFAULTS, **spf.SIZES["tiny"]})
     w = runs[runs["scenario"] == "weave_gps_0.8x"]
-    assert np.allclose(w["delta_max_m"], 0.8 * spf.weave_truth_max({**spf.DEFAULTS, **spf.SIZES["tiny"]})[0])
+    assert np.allclose(w["delta_max_m"], 0.8 * d_true)
+    # thesis Fig. A.8: on radar, one maximum mis-set at a time, the other at its true value
+    for lab, fd, ft in (("delta_0.8x", 0.8, 1.0), ("delta_1.2x", 1.2, 1.0), ("theta_0.8x", 1.0, 0.8),
+                        ("theta_1.2x", 1.0, 1.2)):
+        a = runs[runs["scenario"] == f"weave_radar_{lab}"]
+        assert len(a) == 3 and set(a["sensor"]) == {"radar"}, lab
+        assert np.allclose(a["delta_max_m"], fd * d_true) and np.allclose(a["theta_max_rad"], ft * t_true), lab
 
 
 @pytest.mark.slow

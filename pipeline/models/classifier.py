@@ -340,6 +340,50 @@ class ManeuverModelSet:
                                 decision=decision, thresholds=thr,
                                 thresholds_stationary=(mode == "windowed"), background=bg)
 
+    def gmr(self, X: np.ndarray, best: np.ndarray, state: np.ndarray, *, yaw_rad: float = 0.0,
+            box_heading_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """HMM acceleration and jerk (NED; m/s², m/s³; ungated) of one run, as :meth:`classify`
+        forms them (seed 000 §3.6, (3.28) with the §13.3 de-normalisation).
+
+        Parameters
+        ----------
+        X : ndarray (n, 9)
+            The run's normalised observations.
+        best : ndarray (n,) of int
+            Index into :attr:`models_` of the model whose Gaussian is used at each step.
+        state : ndarray (n,) of int
+            That model's current (online Viterbi) state at each step.
+        yaw_rad, box_heading_rad : float
+            The run's initial heading (``state9h``) and the box heading (``state9box``): the
+            regression runs in the feature frame, and its outputs are rotated back to NED.
+
+        Returns
+        -------
+        acc, jerk : ndarray (n, 3)
+            NaN where ``best`` names no model.
+        """
+        n, dt = len(X), 1.0 / self.config.rate_hz
+        acc = np.full((n, 3), np.nan)
+        jerk = np.full((n, 3), np.nan)
+        if self.config.gmr_input == "pos_fd":
+            X = fd_velocity_increments(X, self.normaliser_, dt)
+        for m, model in enumerate(self.models_):
+            rows = best == m
+            if rows.any():
+                p = model.params_
+                acc[rows], jerk[rows] = gmr_state9(p.means[:, 0], p.covars[:, 0], X[rows], state[rows],
+                                                   self.normaliser_, dt, inputs=self.config.gmr_input,
+                                                   align=self.config.gmr_align)
+        # the regression ran in the feature frame: rotate its outputs back to NED
+        back = None
+        if self.config.feature_set == "state9h":
+            back = heading_rotation(yaw_rad).T          # initial-heading frame -> NED
+        elif self.config.feature_set == "state9box":
+            back = heading_rotation(box_heading_rad).T  # box frame -> NED
+        if back is not None:
+            acc, jerk = acc @ back.T, jerk @ back.T
+        return acc, jerk
+
     def classify(self, state: pd.DataFrame, *, mode: str | None = None, decision: str | None = None,
                  run_col: str = "run_id", reset_t_ns=None, box_heading_rad: float = 0.0,
                  gmr: bool = True) -> pd.DataFrame:
@@ -399,7 +443,6 @@ class ManeuverModelSet:
         # index M is the background hypothesis when it takes part; -1 is unknown
         labels = np.array([*self.labels_, "background", UNKNOWN], dtype=object)
         frames = []
-        dt = 1.0 / self.config.rate_hz
         for r, rid in enumerate(rids):
             n = len(tks[r])
             lab = res["label"][r, :n]
@@ -420,27 +463,7 @@ class ManeuverModelSet:
             ca = res["change_at"][r, :n]
             d["change_t_ns"] = np.where(ca >= 0, tks[r][np.clip(ca, 0, n - 1)], -1)
             if gmr and self.config.feature_set in GMR_FEATURE_SETS:
-                acc = np.full((n, 3), np.nan)
-                jerk = np.full((n, 3), np.nan)
-                Xg = X[r, :n]
-                if self.config.gmr_input == "pos_fd":
-                    Xg = fd_velocity_increments(Xg, self.normaliser_, dt)
-                for m, model in enumerate(self.models_):
-                    rows = best == m
-                    if rows.any():
-                        p = model.params_
-                        a, j = gmr_state9(p.means[:, 0], p.covars[:, 0], Xg[rows],
-                                          d["state"][rows], self.normaliser_, dt,
-                                          inputs=self.config.gmr_input, align=self.config.gmr_align)
-                        acc[rows], jerk[rows] = a, j
-                # the regression ran in the feature frame: rotate its outputs back to NED
-                back = None
-                if self.config.feature_set == "state9h":
-                    back = heading_rotation(yaws[r]).T          # initial-heading frame -> NED
-                elif self.config.feature_set == "state9box":
-                    back = heading_rotation(box_heading_rad).T  # box frame -> NED
-                if back is not None:
-                    acc, jerk = acc @ back.T, jerk @ back.T
+                acc, jerk = self.gmr(X[r, :n], best, d["state"], yaw_rad=yaws[r], box_heading_rad=box_heading_rad)
                 gated, dropped = gate(acc, self.config.gate_mps2)
                 for i, ax in enumerate("ned"):
                     d[f"acc_hmm_{ax}_mps2"] = acc[:, i]

@@ -67,8 +67,7 @@ from ..estimate.models import STATE_COLUMNS, RadarModel, initial_cov
 from ..estimate.montecarlo import measure, normalised_rmse, tune_q
 from ..estimate.smoother import rts_smooth
 from ..io.parquet import write_table
-from ..models.features import heading_rotation, observations, raw_features
-from ..models.gmr import fd_velocity_increments, gmr_state9
+from ..models.features import observations, raw_features
 from ..models.metrics import is_correct
 from ..report.study import build_study_page, layout
 from ..simulate.seeds import set_rng
@@ -360,8 +359,7 @@ def tune_ekf_hmm(ekf, ms, train, radar, st, seed, progress):
                         h = hmm_filter(ekf, prior, t_ns, z, Qb * sc, tr.hmm_axes, tr.acc_hmm, tr.jerk_hmm,
                                        store="mean")
                         # scored on the EKF+HMM's output (EKF where the classification is unknown)
-                        out = np.where(tr.switched[..., None], h.mean, tr.ekf.mean)
-                        rm[(src, sc)][man] = rmse(out - truth)
+                        rm[(src, sc)][man] = rmse(dataclasses.replace(tr, hmm=h).output.mean - truth)
             if ekf_pooled is None:
                 ekf_pooled = pooled_rmse([(ekf_rm[m][None], n_of[m]) for m in KNOWN])[0]
             for (src, sc), per in rm.items():
@@ -421,22 +419,10 @@ GMR_LAGS = (-2, -1, 0, 1, 2)
 
 def _gmr_acc(ms, obs, best, state, yaw0: float) -> np.ndarray:
     """The GMR acceleration (NED, m/s², ungated) of one run's normalised observations ``obs`` with
-    the given per-step model ``best`` (label) and Viterbi ``state``, exactly as
-    ``ManeuverModelSet.classify`` forms it (same input block, alignment and heading undo)."""
-    cfg, dt = ms.config, 1.0 / ms.config.rate_hz
-    if cfg.gmr_input == "pos_fd":
-        obs = fd_velocity_increments(obs, ms.normaliser_, dt)
-    out = np.full((len(obs), 3), np.nan)
-    for m in np.unique(best):
-        if m not in ms.labels_:
-            continue
-        rows = best == m
-        p = ms.models_[ms.labels_.index(m)].params_
-        out[rows], _ = gmr_state9(p.means[:, 0], p.covars[:, 0], obs[rows], state[rows], ms.normaliser_, dt,
-                                  inputs=cfg.gmr_input, align=cfg.gmr_align)
-    if cfg.feature_set == "state9h":
-        out = out @ heading_rotation(yaw0)      # initial-heading frame -> NED: a_NED^T = a_h^T R
-    return out
+    the given per-step model ``best`` (label) and Viterbi ``state``:
+    :meth:`~pipeline.models.classifier.ManeuverModelSet.gmr`, which ``classify`` uses."""
+    idx = np.array([ms.labels_.index(m) if m in ms.labels_ else -1 for m in best], dtype=np.int64)
+    return ms.gmr(obs, idx, np.asarray(state), yaw_rad=yaw0)[0]
 
 
 def gmr_decomposition(ms, t_ns, truth, est, yaw) -> dict[str, float]:

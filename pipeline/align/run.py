@@ -62,6 +62,16 @@ class AlignResult:
     diagnostics: dict = field(default_factory=dict)
 
 
+def fit_summary(info: Mapping[str, Any]) -> str | None:
+    """``heading … deg, pair RMS … m, altitude-profile RMS … m`` of a flight's diagnostics
+    (:class:`~pipeline.align.demos.FlightDemos`) when it was fitted to the reference, else None."""
+    if info.get("fit_rms_m") is None:
+        return None
+    alt = info.get("fit_altitude_rms_m")
+    return (f"heading {np.degrees(info.get('heading_rad') or 0.0):.1f} deg, pair RMS {info['fit_rms_m']:.1f} m, "
+            f"altitude-profile RMS {'n/a' if alt is None else f'{alt:.1f} m'}")
+
+
 def _say(msg: str) -> None:
     print(f"uavpipe align: {msg}", file=sys.stderr, flush=True)
 
@@ -149,10 +159,10 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
                                             ref_origin_ned_m=origins.get(ref), schedule_exclude=exclude)
             if not len(seg):
                 seg = carried
-            _say(f"set {set_name}: {f} fitted to {ref}: heading {np.degrees(fit.heading_rad):.1f} deg, "
-                 f"pair RMS {fit.rms_m:.1f} m, altitude-profile RMS {fit.altitude_rms_m:.1f} m")
         fd = flight_demos(state, seg, flight_id=f, heading_rad=box, fit=fit, sample_hz=hz, exclude=exclude,
                           box_origin_ned_m=origins.get(f))
+        if fit is not None:
+            _say(f"set {set_name}: {f} fitted to {ref}: {fit_summary(fd.diagnostics)}")
         per_flight.append(fd)
         dropped.extend(fd.dropped)
         info[f] = fd.diagnostics

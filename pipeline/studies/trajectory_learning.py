@@ -52,7 +52,7 @@ import plotly.graph_objects as go
 
 from ..align.anchors import dense_dtw_rms
 from ..align.baselines import dba_average
-from ..align.run import load_demo_set, make_learner, stretchable
+from ..align.run import fit_summary, load_demo_set, make_learner, stretchable
 from ..config import ConfigError, load_config, section
 from ..io.parquet import write_table
 from ..report.study import build_study_page
@@ -146,13 +146,10 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
         ds = load_demo_set(inputs, align_cfg, s)
         notices += ds.notices
         for f, info in ds.flights.items():
-            if info.get("fit_rms_m") is not None:
-                # a box-less flight's fit and the fit-free schedule check, so a poor fit can be told
-                # from a flight of another schedule
-                alt = info.get("fit_altitude_rms_m")
-                notices.append(f"set {s}: {f} fitted to the reference: heading "
-                               f"{np.degrees(info.get('heading_rad') or 0.0):.1f} deg, pair RMS {info['fit_rms_m']:.1f} m, "
-                               f"altitude-profile RMS {'n/a' if alt is None else f'{alt:.1f} m'}")
+            # a box-less flight's fit and the fit-free schedule check, so a poor fit can be told
+            # from a flight of another schedule
+            if (summary := fit_summary(info)) is not None:
+                notices.append(f"set {s}: {f} fitted to the reference: {summary}")
         if not ds.maneuvers:
             notices.append(f"set {s}: no demos (its flights are not available): skipped")
             continue

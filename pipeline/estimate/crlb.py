@@ -14,7 +14,9 @@ taken on the **true** trajectory. The bound is ``E[(x̂−x)(x̂−x)ᵀ] ≥ J�
 check of issue 16 takes ``J₀`` = the inverse of the bank's combined initial covariance.
 
 Public API: ``crlb(x_true (…, T, 5), t_s (T,), P0 (…, 5, 5), sigma_rad, *, update_first=False,
-process_noise=None) -> Crlb(bound (…, T, 5, 5), std (…, T, 5), range_std (…, T))``.
+process_noise=None) -> Crlb(bound (…, T, 5, 5), std (…, T, 5), range_std (…, T))`` and
+``q_floor(x_true, t_s, P0, sigma_rad, process_noise) -> Crlb`` (the error covariance of the best
+filter that carries a process noise Q on the noise-free truth).
 
 With the thesis's Q in the filter and a noise-free truth, the filter cannot approach the
 noise-free bound once its Q dominates (σ_ω̇² = 5e-6 rad²/s³ alone lets ω wander 0.13°/s in
@@ -98,3 +100,68 @@ def crlb(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, *,
     g = x[..., :2] / np.hypot(x[..., 0], x[..., 1])[..., None]
     rvar = np.einsum("...i,...ij,...j->...", g, bound[..., :2, :2], g)
     return Crlb(bound, std, np.sqrt(rvar))
+
+
+def q_floor(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, process_noise, *,
+            update_first: bool = False) -> Crlb:
+    """The actual error covariance of a Kalman filter that assumes ``Q`` on a noise-free truth.
+
+    The filter is linearised on the **true** trajectory (the best case of any EKF that carries
+    ``Q``) and starts with error covariance ``P₀``. Its gain follows its own covariance,
+
+    .. math::
+
+        P^-_{k} = F P_{k-1} F^T + Q,\quad K_k = P^-_k H^T (H P^-_k H^T + R)^{-1},\quad
+        P_k = (I - K_k H) P^-_k,
+
+    while the error it actually makes, with no process noise in the truth, has the covariance
+
+    .. math::
+
+        C^-_k = F C_{k-1} F^T,\quad C_k = (I - K_k H) C^-_k (I - K_k H)^T + K_k R K_k^T .
+
+    With ``Q = 0`` the gain is the optimal one and ``C`` equals :func:`crlb` exactly; with
+    ``Q > 0`` ``C ≥ J⁻¹`` (the bound holds for every estimator) and ``C ≤ P`` (the filter believes
+    in noise the truth has not got). ``C``'s std over √CRLB is therefore the floor of the
+    ratio the issue-16 CRLB check measures for a bank carrying the thesis's Table 4.1 Q (seed
+    002 §7, §9): no tuning of anything else brings a Q-carrying filter below it.
+
+    Parameters are those of :func:`crlb`; ``process_noise`` (``dt -> Q``) is required.
+    Returns a :class:`Crlb` whose ``bound`` is ``C``.
+    """
+    x = np.asarray(x_true, dtype=np.float64)
+    t = np.asarray(t_s, dtype=np.float64)
+    if x.shape[-1] != 5 or x.shape[-2] != len(t):
+        raise ValueError(f"q_floor: x_true shaped {x.shape}, expected (..., {len(t)}, 5)")
+    b = x.shape[:-2]
+    P = np.array(np.broadcast_to(np.asarray(P0, dtype=np.float64), b + (5, 5)))
+    C = P.copy()
+    meas = BearingMeasurement(float(sigma_rad))
+    R = float(sigma_rad) ** 2
+    eye = np.eye(5)
+
+    def update(P, C, xk):
+        h = meas.jacobian(xk)[..., 0, :]                           # (..., 5)
+        ph = np.einsum("...ij,...j->...i", P, h)
+        K = ph / (np.einsum("...i,...i->...", h, ph) + R)[..., None]
+        A = eye - K[..., :, None] * h[..., None, :]
+        P = A @ P
+        C = A @ C @ np.swapaxes(A, -1, -2) + R * K[..., :, None] * K[..., None, :]
+        return 0.5 * (P + np.swapaxes(P, -1, -2)), 0.5 * (C + np.swapaxes(C, -1, -2))
+
+    if update_first:
+        P, C = update(P, C, x[..., 0, :])
+    T = len(t)
+    out = np.empty(b + (T, 5, 5))
+    out[..., 0, :, :] = C
+    for k in range(1, T):
+        F = cppv_jacobian(x[..., k - 1, :], t[k] - t[k - 1])
+        Ft = np.swapaxes(F, -1, -2)
+        P = F @ P @ Ft + np.asarray(process_noise(t[k] - t[k - 1]))
+        C = F @ C @ Ft
+        P, C = update(P, C, x[..., k, :])
+        out[..., k, :, :] = C
+    std = np.sqrt(np.diagonal(out, axis1=-2, axis2=-1))
+    g = x[..., :2] / np.hypot(x[..., 0], x[..., 1])[..., None]
+    rvar = np.einsum("...i,...ij,...j->...", g, out[..., :2, :2], g)
+    return Crlb(out, std, np.sqrt(rvar))

@@ -8,7 +8,8 @@ A ground car (D = 0) in one of the five driving modes :data:`~pipeline.estimate.
 position, heading ψ (from N toward E), speed s. On entering ACCEL or DECEL ``|a| ~ U(accel_mps2)``
 along the heading; on entering TURN ``|Ω| ~ U(omega_radps)`` with a random sign (Ω > 0 right),
 ``|Ω| ≤ s/min_turn_radius_m``. The simulator is not strictly Markov (digest §7): DECEL reaching
-s = 0 is forced to STOP, ACCEL at the 80 km/h cap to COAST.
+s = 0 is forced to STOP, ACCEL at the 80 km/h cap to COAST; a Markov draw of STOP while the car still
+moves is not taken (thesis §3.6: "Stopping may only be reached after decelerating to a stop").
 
 Observers (digest §9)
 ---------------------
@@ -195,6 +196,11 @@ def target_step(s: TargetState, dt: float, Pi: F64 | None, cfg: GeolocationConfi
     if Pi is not None:
         new = int(np.searchsorted(np.cumsum(Pi[s.mode]), rng.random() * Pi[s.mode].sum(), side="right"))
         new = min(new, Pi.shape[0] - 1)
+        if new == STOP and s.speed > 0.0:
+            # thesis §3.6: "Stopping may only be reached after decelerating to a stop" and "the
+            # previous target state is preserved": a DECEL→STOP draw while still moving keeps
+            # braking; STOP is entered by the forced switch below when the speed reaches 0.
+            new = s.mode
         if new != s.mode:
             enter_mode(s, new, cfg, rng)
     if s.mode == ACCEL:

@@ -5,7 +5,7 @@ import pytest
 
 from pipeline.estimate.bank import bank_prior, combine, BankSettings
 from pipeline.estimate.base import GaussianState, LinearTransition
-from pipeline.estimate.crlb import crlb
+from pipeline.estimate.crlb import crlb, q_floor
 from pipeline.estimate.ekf import ExtendedKalmanFilter
 from pipeline.estimate.metrics import (CHI2_5_0999, bearing_errors, bearing_metrics, bearing_nees,
                                        divergence_flag, mean_abs_angle_error, mean_relative_abs_error)
@@ -47,6 +47,24 @@ def test_the_crlb_with_the_bank_initial_covariance_lies_below_the_bank_spread():
     _, P0 = combine(c.mean, c.cov, c.logw, (3,))
     b = crlb(X[None], t, P0, SIG)
     assert b.std.shape == (1, 200, 5) and np.all(b.std[0, -1] < np.sqrt(np.diag(P0[0])))
+
+
+def test_the_q_floor_is_the_crlb_without_process_noise_and_lies_between_the_bound_and_the_filter_belief_with_it():
+    t, X = truth(T=600)
+    P0 = np.diag([400.0 ** 2, 400.0 ** 2, 10.0 ** 2, 0.5 ** 2, 0.05 ** 2])
+    b = crlb(X, t, P0, SIG)
+    zero = q_floor(X, t, P0, SIG, lambda dt: np.zeros((5, 5)))
+    assert zero.bound == pytest.approx(b.bound, rel=1e-6, abs=1e-12)
+    Q = lambda dt: cppv_process_noise(dt, 1e-3, 5e-6)
+    fl = q_floor(X, t, P0, SIG, Q)
+    believed = crlb(X, t, P0, SIG, process_noise=Q)   # the filter's own P is the Q-posterior bound
+    for k in (100, 300, 599):
+        # C − J⁻¹ and P − C are positive semi-definite (relative tolerance on the eigenvalues)
+        for lo, hi in ((b.bound[k], fl.bound[k]), (fl.bound[k], believed.bound[k])):
+            d = np.linalg.eigvalsh(hi - lo)
+            assert d.min() >= -1e-7 * np.abs(d).max()
+    # after 30 s the turn rate is already held at ~1.8× its bound by σ_ω̇² alone
+    assert np.all(fl.std[-1] > b.std[-1]) and fl.std[-1, 4] > 1.5 * b.std[-1, 4]
 
 
 def test_the_thesis_rmse_is_a_mean_relative_absolute_error():

@@ -49,6 +49,24 @@ def test_decel_to_rest_is_forced_to_stop_and_accel_at_the_cap_to_coast():
     assert s.mode == COAST and np.isclose(s.speed, CFG.speed_max_mps)
 
 
+def test_a_markov_draw_of_stop_while_moving_keeps_braking_until_the_car_is_at_rest():
+    # thesis §3.6: "Stopping may only be reached after decelerating to a stop"; the speed never
+    # jumps to 0, it falls by a·dt per step until the forced switch at rest
+    rng = np.random.default_rng(2)
+    always_stop = np.eye(5)
+    always_stop[DECEL] = [1.0, 0.0, 0.0, 0.0, 0.0]
+    s = TargetState(np.zeros(3), 0.0, 10.0, DECEL, accel=2.0)
+    target_step(s, 0.025, always_stop, CFG, rng)
+    assert s.mode == DECEL and np.isclose(s.speed, 9.95)
+    speeds = [s.speed]
+    while s.mode == DECEL and len(speeds) < 1000:
+        target_step(s, 0.025, always_stop, CFG, rng)
+        speeds.append(s.speed)
+    assert s.mode == STOP and s.speed == 0.0
+    assert 195 <= len(speeds) <= 202                      # 10 m/s at 2 m/s² and 40 Hz: 200 steps
+    assert np.all(-np.diff(speeds) <= 2.0 * 0.025 + 1e-12)
+
+
 def test_a_turn_with_positive_rate_turns_right_in_ned():
     rng = np.random.default_rng(1)
     s = TargetState(np.zeros(3), 0.0, 10.0, COAST)

@@ -94,6 +94,10 @@ def test_the_crlb_table_holds_sample_std_and_bound_for_r_v_omega(tiny):
     assert (c["sqrt_crlb"] > 0).all()
     r = c[c["quantity"] == "r"]
     assert r["sqrt_crlb"].iloc[-1] < r["sqrt_crlb"].iloc[0]     # bearings shrink the range bound
+    # the floor of a filter carrying the bank's Q is never below the bound, and is reported
+    assert (c["floor_ratio"] >= 1.0 - 1e-6).all()
+    for q in ("r", "v", "omega", "theta"):
+        assert float(tiny.figures[f"bearing_crlb_floor_ratio_{q}"]) >= 1.0 - 1e-3
 
 
 def test_the_case_5_removal_drops_the_mpc_diverged_scenarios_from_both_sides():

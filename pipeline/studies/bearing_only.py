@@ -656,6 +656,18 @@ def _jsonable(x):
     return x
 
 
+def _trend_arms(comparisons, results: Mapping[str, Any]) -> list[str]:
+    """The configurations named on either side of ``a < b[, note]`` comparisons, in order, that
+    have results (a spread or a δ label is no configuration and is left out)."""
+    arms: list[str] = []
+    for c in comparisons:
+        for side in str(c).split(",")[0].split("<"):
+            a = side.strip()
+            if a in results and a not in arms:
+                arms.append(a)
+    return arms
+
+
 def write_report(path, size, st, seed, scen, run: Runner, tr_df, crlb_sum, switch, cfg) -> None:
     R = run.results
     lines = [f"# Bearing-only passive ranging (seed 002), size {size}", "",
@@ -684,6 +696,15 @@ def write_report(path, size, st, seed, scen, run: Runner, tr_df, crlb_sum, switc
                 f"{c}: {int(b)}/{int(n)} runs better, median effect {e:.3g}, p {p:.3g}"
                 for c, b, n, e, p in zip(g["comparison"], g["n_better"], g["n"], g["median_effect"], g["p"]))
                 + ". Reported as measured (not tuned).")
+            arms = _trend_arms(g["comparison"], R)
+            if arms:
+                lines.append("  Per arm (range score: the run's time-mean relative range error over the score window; "
+                             "a mean far above the median is a heavy tail of runs locked on a wrong branch): " + "; ".join(
+                                 f"{a}: range score median {100 * np.nanmedian(R[a]['range_score']):.2f} %, mean "
+                                 f"{100 * np.nanmean(R[a]['range_score']):.2f} %, 90th percentile "
+                                 f"{100 * np.nanquantile(R[a]['range_score'], 0.9):.2f} %; heading median "
+                                 f"{np.degrees(np.nanmedian(R[a]['heading_score'])):.2f} deg; D8 diverged "
+                                 f"{100 * R[a]['diverged'].mean():.1f} %" for a in arms) + ".")
         lines.append("")
     else:
         lines += ["No trend could be tested with the parts run.", ""]

@@ -116,6 +116,13 @@ def test_a_trend_with_an_undecidable_comparison_does_not_hold():
     assert all(r["p_trend"] == 0.03 and r["holds"] for r in rows)
 
 
+def test_a_failing_trend_names_the_configurations_on_both_sides_of_its_comparisons():
+    R = {"cppv_25_1_6": {}, "mpc_15_5_2": {}, "cppv_10_1_1": {}}
+    comps = ["cppv_25_1_6 < mpc_15_5_2, all runs", "cppv_25_1_6 < mpc_15_5_2, Case-5 removal (3 runs dropped)",
+             "spread_T_d < spread_δ", "δ 0.001 < δ 1e-2", "cppv_10_1_1 < cppv_150_1_1"]
+    assert bo._trend_arms(comps, R) == ["cppv_25_1_6", "mpc_15_5_2", "cppv_10_1_1"]
+
+
 @pytest.mark.slow
 # Issue 16's CRLB target, asserted as stated on a reduced set (60 of the 500 realisations).
 # On the faithful bank it is missed (study at small, 100 realisations: r/v/ω 56.7/21.4/178.7, tens of

@@ -269,12 +269,13 @@ def write_report(path, size, st, seed, runs: pd.DataFrame, checks: list[tuple[st
           f"straight (its nominal std is {cv_kf_steady_state(2.0, 1.0)[1]:.2f} m/s), and the radar is the worse "
           "sensor; the thesis's §3.3 0.2 m/s came from its chapter-3 filter, whose process noise is not given "
           "(digest 003 §7).",
-          "", "The detector's false alarms on the straight track start at the first step it may flag "
-          "(`pf_hmpf_straight_flagged_at_startup_end_seeds`): the modes start uniform (thesis §2.4), W relaxes "
-          "through its 0.97 self-transition while S and the weave straights share the CM, so F is still about "
-          "0.15 at step 26, where the detector's average (the start-up left out, §6.3) holds F(26) alone, and "
-          "the particle drift of resampling every step spreads it across seeds (the spread "
-          "shrinks with more particles; the thesis's §6 detector runs used 100,000). On the π turn the weave's "
+          "", "The detector is the printed AF(k) (§6.2; k the track's step) with the start-up's weave fraction "
+          "left out of its sums (§6.3), so AF(26) = F(26)/26. The modes start uniform (thesis §2.4) and W relaxes "
+          "through its 0.97 self-transition while S and the weave straights share the CM (F is still about 0.15 "
+          "at step 26); a straight track's remaining false alarms come from the particle drift of resampling "
+          "every step, which spreads F across seeds and shrinks with more particles (the thesis's §6 detector "
+          "runs used 100,000; `pf_hmpf_straight_flagged_at_startup_end_seeds` counts those flagged at the first "
+          "step after the start-up). On the π turn the weave's "
           "curve particles stay in their curve at 0.97·0.95 per step against a left curve's 0.66, so W peaks in "
           "and after the turn — the thesis's own §4.2.3 reading (it never ran the detector on that track). At 0.8× "
           "the forced switches (p2 = 0.95 at δ_max, θ_max) fall near the true segment ends for the particles that "
@@ -460,12 +461,11 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
                    n_in80 == R_))
 
     # the straight track's false alarms by when they start: at the first step the detector may
-    # flag (k = startup + 1, AF still the mean over the start-up, whose uniform initial modes relax
-    # through Π_m's 0.97 weave self-transition) or later
+    # flag (k = startup + 1) or later
     at_start = int((s_gps["first_flag_step"] == startup + 1).sum())
     res.add("pf_hmpf_straight_flagged_at_startup_end_seeds", f"{at_start}/{int(s_gps['ever_flagged'].sum())}",
-            "Straight GPS track: flagged seeds whose first flag is the first step after the 25 start-up steps "
-            "(the start-up's weave fraction still in AF), over all flagged seeds.")
+            "Straight GPS track: flagged seeds whose first flag is the first step after the 25 start-up steps, "
+            "over all flagged seeds.")
     for nm, df in (("straight", s_gps), ("pi_turn", p_gps)):
         n_never = int((~df["ever_flagged"]).sum())
         res.add(f"pf_hmpf_{nm}_never_flagged_seeds", f"{n_never}/{R_}",

@@ -64,9 +64,13 @@ def test_the_detector_averages_80_steps_and_ignores_the_start_up():
     af, flag = detector(F, 80, 0.269, 25)
     assert af[129] == pytest.approx(0.8 * 30 / 80) and af[209 - 100] == pytest.approx(0.8 * 10 / 80)
     assert flag[129] and not flag[100] and np.flatnonzero(flag)[0] == 126
-    af, flag = detector(np.full(50, 0.5), 80, 0.269, 25)
-    np.testing.assert_allclose(af[25:], 0.5)   # (1/k) Σ F before k = N
-    assert np.all(np.isnan(af[:25])) and not flag[:25].any() and flag[25:].all()
+    # before k = N the printed (1/k) Σ F(1..k), k the track's step, with the start-up's F left out
+    af, flag = detector(np.full(120, 0.5), 80, 0.269, 25)
+    j = np.arange(25, 80)
+    np.testing.assert_allclose(af[25:80], 0.5 * (j - 24) / (j + 1))
+    np.testing.assert_allclose(af[104:], 0.5)                  # the window holds no start-up step
+    assert np.all(np.isnan(af[:25])) and not flag[:25].any()
+    assert np.flatnonzero(flag)[0] == np.flatnonzero(af >= 0.269)[0] == 54   # 0.5·30/55 ≥ 0.269
 
 
 def test_the_detector_leaves_the_start_up_weave_fraction_out_of_its_average():
@@ -77,14 +81,13 @@ def test_the_detector_leaves_the_start_up_weave_fraction_out_of_its_average():
     F[:25] = 1.0
     F[25:] = 0.1
     af, flag = detector(F, 80, 0.269, 25)
-    np.testing.assert_allclose(af[25:], 0.1)
-    assert not flag.any()
-    # the average restarts at step 26 as the thesis's AF(k) restarts at k = 1: (1/(k−25)) Σ F(26..k)
-    # until the window is full, then the last 80 steps (still never a start-up step)
+    assert np.all(af[25:] <= 0.1 + 1e-12) and not flag.any()
+    # k stays "the current time step" of the printed AF(k): AF(26) = F(26)/26, AF(40) =
+    # Σ F(26..40)/40, and from k = 80 the last 80 steps (start-up steps counted as 0 until k = 105)
     F = np.arange(1, 201) / 1000.0
     af, _ = detector(F, 80, 0.269, 25)
-    assert af[25] == pytest.approx(F[25]) and af[35] == pytest.approx(F[25:36].mean())
-    assert af[104] == pytest.approx(F[25:105].mean()) and af[150] == pytest.approx(F[71:151].mean())
+    assert af[25] == pytest.approx(F[25] / 26) and af[39] == pytest.approx(F[25:40].sum() / 40)
+    assert af[90] == pytest.approx(F[25:91].sum() / 80) and af[150] == pytest.approx(F[71:151].mean())
 
 
 def test_the_2d_radar_uses_bearing_from_north_toward_east_and_closing_doppler():
@@ -183,8 +186,8 @@ def test_the_detector_averages_the_filter_outputs_after_the_start_up_and_never_t
     assert np.all(np.isnan(out.af[:, 0])) and not out.weave_detected[:, 0].any()
     F = out.mode_p[:, 1:, 3]
     assert np.all(np.isnan(out.af[:, 1:26]))                               # the start-up is not averaged
-    np.testing.assert_allclose(out.af[:, 26], F[:, 25])                    # AF(26) = F(26)
-    np.testing.assert_allclose(out.af[:, 40], F[:, 25:40].mean(axis=1))    # AF(40) = mean F(26..40)
+    np.testing.assert_allclose(out.af[:, 26], F[:, 25] / 26)               # AF(26) = F(26)/26
+    np.testing.assert_allclose(out.af[:, 40], F[:, 25:40].sum(axis=1) / 40)  # AF(40) = Σ F(26..40)/40
     af, flag = detector(F, cfg.detector_window, cfg.tau, cfg.startup_steps)
     np.testing.assert_allclose(out.af[:, 1:], af)
     np.testing.assert_array_equal(out.weave_detected[:, 1:], flag)

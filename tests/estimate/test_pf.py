@@ -193,3 +193,26 @@ def test_side_arrays_travel_with_their_particles_through_resampling():
 def test_a_singular_initial_covariance_draws_fixed_components_exactly():
     pf = _cv_pf(500, 12).init(mean=[1.0, 2.0, 3.0, 4.0], cov=np.diag([1.0, 0.0, 1.0, 0.0]))
     assert np.all(pf.x[:, 1] == 2.0) and np.all(pf.x[:, 3] == 4.0) and pf.x[:, 0].std() > 0.5
+
+
+def test_the_compiled_mode_draw_equals_a_searchsorted_per_from_mode_including_ties():
+    from pipeline.estimate.pf import _draw_from_cdf
+
+    rng = np.random.default_rng(11)
+    P = rng.dirichlet(np.ones(5), size=5)
+    P[2] = [0.0, 0.5, 0.0, 0.5, 0.0]                 # zero entries: repeated CDF values
+    F = np.cumsum(P, axis=1)
+    F[:, -1] = 1.0
+    mode = rng.integers(0, 5, 20_000)
+    u = rng.random(20_000)
+    u[:5] = F[mode[:5], 1]                            # u exactly on a CDF value
+    u[5] = 0.0
+    out = np.empty(len(u), dtype=np.int64)
+    _draw_from_cdf(mode, F, u, out)
+    ref = np.empty_like(out)
+    for r in range(5):
+        sel = mode == r
+        ref[sel] = np.searchsorted(F[r], u[sel], side="left")
+    np.testing.assert_array_equal(out, ref)
+    pos = u > 0                                       # a positive u never draws a zero-probability mode
+    assert np.all(P[mode[pos], out[pos]] > 0)

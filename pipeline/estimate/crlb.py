@@ -122,9 +122,11 @@ def q_floor(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, 
 
     With ``Q = 0`` the gain is the optimal one and ``C`` equals :func:`crlb` exactly; with
     ``Q > 0`` ``C ≥ J⁻¹`` (the bound holds for every estimator) and ``C ≤ P`` (the filter believes
-    in noise the truth has not got). ``C``'s std over √CRLB is therefore the floor of the
-    ratio the issue-16 CRLB check measures for a bank carrying the thesis's Table 4.1 Q (seed
-    002 §7, §9): no tuning of anything else brings a Q-carrying filter below it.
+    in noise the truth has not got). ``C``'s std over √CRLB is what the ideal (truth-linearised,
+    unbiased) filter carrying the thesis's Table 4.1 Q reaches in the issue-16 CRLB check (seed
+    002 §7, §9): a bank with that Q meets the band only by doing better than this ideal. (A
+    biased estimator's spread is bounded by neither: on few realisations, or with a shared bias,
+    a bank's sample std can fall below both.)
 
     Parameters are those of :func:`crlb`; ``process_noise`` (``dt -> Q``) is required.
     Returns a :class:`Crlb` whose ``bound`` is ``C``.

@@ -129,10 +129,10 @@ def test_a_failing_trend_names_the_configurations_on_both_sides_of_its_compariso
 # r/v/omega/theta is 6.42/5.70/31.9/6.36, and the error std of the best Kalman filter carrying Table 4.1's Q on
 # that orbit (estimate.crlb.q_floor: gains linearised on the truth, the bank's P0) is
 # 4.66/4.07/30.1/5.96 (RESULT bearing_crlb_floor_ratio_*): the CRLB (App. D) has no process noise,
-# the filter has, and that alone keeps it above the band; with Q = 0 the floor is the CRLB exactly
+# the filter has, and that alone keeps the ideal filter above the band; with Q = 0 it is the CRLB exactly
 # (tests/estimate/test_crlb.py). strict: the day it passes, this marker must go.
 @pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="issue-16 CRLB band [0.9, 2] is below the floor of a filter carrying the thesis's Q")
+                   reason="issue-16 CRLB band [0.9, 2] is below what the ideal filter carrying the thesis's Q reaches")
 def test_the_bank_sample_std_lies_within_the_crlb_band_on_one_fixed_orbit():
     from pipeline.estimate.bank import run_bank
     from pipeline.simulate.encounter import ScenarioSettings, simulate_encounters

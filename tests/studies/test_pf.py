@@ -192,7 +192,8 @@ def test_issue17_the_radar_weave_velocity_rms_is_at_most_0_4_mps():
     "issue 17: pi-turn tracks never flagged in >= 19/20 seeds. Weave curve particles stay in their curve at "
     "0.97*0.95 per step against a left curve's 0.66 (Pi_m (4.2)), so W peaks in and after a long turn (the "
     "thesis's own §4.2.3 reading; it never ran the detector on this track); measured 7/20 at 2,000 particles "
-    "with the printed AF(k) (6/20 with the average restarted after the start-up), 5/20 at 20,000 (before)"))
+    "with the printed AF(k) (6/20 with the average restarted after the start-up), 6/20 at 10,000 (the study's "
+    "detector runs), 5/20 at 20,000 (before)"))
 def test_issue17_pi_turn_tracks_are_never_flagged_in_19_of_20_seeds():
     _, out = _hmpf_scenario("pi_turn", "gps", 200)
     never = int((~out.weave_detected.any(axis=1)).sum())

@@ -202,9 +202,10 @@ def test_issue17_pi_turn_tracks_are_never_flagged_in_19_of_20_seeds():
 
 @pytest.mark.slow
 def test_issue17_straight_tracks_are_never_flagged_in_19_of_20_seeds():
-    # at the study's 2,000 particles; with the printed AF(k) and the start-up's F left out (thesis
-    # §6.2-§6.3, weave.detector) 19/20 (4 s). It depends on the particle count: 11/20 at 200, 9/20 at
-    # 500, 16/20 at 1,000 particles (resampling every step makes F drift from seed to seed)
+    # at 2,000 particles (4 s; the study's detector runs use 10,000: 20/20); with the printed AF(k)
+    # and the start-up's F left out (thesis §6.2-§6.3, weave.detector) 19/20. It depends on the
+    # particle count: 11/20 at 200, 9/20 at 500, 16/20 at 1,000 particles (resampling every step
+    # makes F drift from seed to seed)
     _, out = _hmpf_scenario("straight", "gps", 2000)
     never = int((~out.weave_detected.any(axis=1)).sum())
     assert never >= 19, never

@@ -68,10 +68,7 @@ def crlb(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, *,
         this Q can do (e.g. :func:`~pipeline.estimate.models.cppv_process_noise` with the
         bank's σ_v², σ_ω̇²), a diagnostic beside the noise-free bound.
     """
-    x = np.asarray(x_true, dtype=np.float64)
-    t = np.asarray(t_s, dtype=np.float64)
-    if x.shape[-1] != 5 or x.shape[-2] != len(t):
-        raise ValueError(f"crlb: x_true shaped {x.shape}, expected (..., {len(t)}, 5)")
+    x, t = _track(x_true, t_s, "crlb")
     b = x.shape[:-2]
     J = np.linalg.inv(np.broadcast_to(np.asarray(P0, dtype=np.float64), b + (5, 5)))
     meas = BearingMeasurement(float(sigma_rad))
@@ -96,10 +93,25 @@ def crlb(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, *,
             J = np.linalg.inv(Pp) + info(x[..., k, :])
         J = 0.5 * (J + np.swapaxes(J, -1, -2))
         bound[..., k, :, :] = np.linalg.inv(J)
-    std = np.sqrt(np.diagonal(bound, axis1=-2, axis2=-1))
+    return _result(x, bound)
+
+
+def _track(x_true: ArrayLike, t_s: ArrayLike, who: str) -> tuple[F64, F64]:
+    """``x_true`` (…, T, 5) and ``t_s`` (T,) as float arrays, or one error naming ``who``."""
+    x = np.asarray(x_true, dtype=np.float64)
+    t = np.asarray(t_s, dtype=np.float64)
+    if x.shape[-1] != 5 or x.shape[-2] != len(t):
+        raise ValueError(f"{who}: x_true shaped {x.shape}, expected (..., {len(t)}, 5)")
+    return x, t
+
+
+def _result(x: F64, cov: F64) -> Crlb:
+    """:class:`Crlb` of covariances ``cov`` (…, T, 5, 5) along ``x``: the std and the range std
+    ``√(gᵀ cov_pos g)``, ``g = [r_N, r_E]/r``."""
+    std = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
     g = x[..., :2] / np.hypot(x[..., 0], x[..., 1])[..., None]
-    rvar = np.einsum("...i,...ij,...j->...", g, bound[..., :2, :2], g)
-    return Crlb(bound, std, np.sqrt(rvar))
+    rvar = np.einsum("...i,...ij,...j->...", g, cov[..., :2, :2], g)
+    return Crlb(cov, std, np.sqrt(rvar))
 
 
 def q_floor(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, process_noise, *,
@@ -131,10 +143,7 @@ def q_floor(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, 
     Parameters are those of :func:`crlb`; ``process_noise`` (``dt -> Q``) is required.
     Returns a :class:`Crlb` whose ``bound`` is ``C``.
     """
-    x = np.asarray(x_true, dtype=np.float64)
-    t = np.asarray(t_s, dtype=np.float64)
-    if x.shape[-1] != 5 or x.shape[-2] != len(t):
-        raise ValueError(f"q_floor: x_true shaped {x.shape}, expected (..., {len(t)}, 5)")
+    x, t = _track(x_true, t_s, "q_floor")
     b = x.shape[:-2]
     P = np.array(np.broadcast_to(np.asarray(P0, dtype=np.float64), b + (5, 5)))
     C = P.copy()
@@ -163,7 +172,4 @@ def q_floor(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, 
         C = F @ C @ Ft
         P, C = update(P, C, x[..., k, :])
         out[..., k, :, :] = C
-    std = np.sqrt(np.diagonal(out, axis1=-2, axis2=-1))
-    g = x[..., :2] / np.hypot(x[..., 0], x[..., 1])[..., None]
-    rvar = np.einsum("...i,...ij,...j->...", g, out[..., :2, :2], g)
-    return Crlb(out, std, np.sqrt(rvar))
+    return _result(x, out)

@@ -462,19 +462,22 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
 
     res.add("pf_hmpf_detector_particles", str(nd),
             "Particles of the detector checks' GPS runs (thesis §4-5: 10,000; §6: 100,000 in one run).")
-    for tag, wdf, sdf, pdf in (("", w_det, s_det, p_det), ("_at_study_particles", w_gps, s_gps, p_gps)):
+    # the detector counts at the detector's particle count (the checks) and at the study's
+    counts: dict[str, dict[str, int]] = {}
+    for tag, npart, wdf, sdf, pdf in (("", nd, w_det, s_det, p_det),
+                                      ("_at_study_particles", base.n_particles, w_gps, s_gps, p_gps)):
         dl = wdf["flag_delay_steps"].to_numpy(dtype=float)
-        nn = int(np.sum(np.isfinite(dl) & (dl <= 80)))
-        npart = nd if not tag else base.n_particles
-        res.add(f"pf_hmpf_weave_flagged_within_80_seeds{tag}", f"{nn}/{R_}",
+        c = counts[tag] = {"within_80": int(np.sum(np.isfinite(dl) & (dl <= 80))),
+                           "straight": int((~sdf["ever_flagged"]).sum()), "pi_turn": int((~pdf["ever_flagged"]).sum())}
+        res.add(f"pf_hmpf_weave_flagged_within_80_seeds{tag}", f"{c['within_80']}/{R_}",
                 f"Weave GPS track at {npart} particles: seeds flagged (once the weave has begun) at or before 80 "
                 "steps after the end of the 3rd alternating turn.")
-        for nm, df in (("straight", sdf), ("pi_turn", pdf)):
-            res.add(f"pf_hmpf_{nm}_never_flagged_seeds{tag}", f"{int((~df['ever_flagged']).sum())}/{R_}",
+        for nm in ("straight", "pi_turn"):
+            res.add(f"pf_hmpf_{nm}_never_flagged_seeds{tag}", f"{c[nm]}/{R_}",
                     f"{nm.replace('_', ' ').capitalize()} GPS track at {npart} particles: seeds never flagged after "
                     "start-up (target ≥ 19/20).")
     delay = w_det["flag_delay_steps"].to_numpy(dtype=float)
-    n_in80 = int(np.sum(np.isfinite(delay) & (delay <= 80)))
+    n_in80 = counts[""]["within_80"]
     res.add("pf_hmpf_weave_flag_delay_median_steps", f"{np.nanmedian(delay) if np.isfinite(delay).any() else np.nan:.0f}",
             "Weave GPS track: median over flagged seeds of (first flag in the weave − end of the 3rd turn); "
             "negative = earlier.")
@@ -489,8 +492,8 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     res.add("pf_hmpf_straight_flagged_at_startup_end_seeds", f"{at_start}/{int(s_det['ever_flagged'].sum())}",
             "Straight GPS track: flagged seeds whose first flag is the first step after the 25 start-up steps, "
             "over all flagged seeds.")
-    for nm, df in (("straight", s_det), ("pi_turn", p_det)):
-        n_never = int((~df["ever_flagged"]).sum())
+    for nm in ("straight", "pi_turn"):
+        n_never = counts[""][nm]
         checks.append((f"{nm.replace('_', '-')} never flagged (GPS, {nd} particles)", f"{n_never}/{R_} seeds",
                        "≥ 95 % of seeds", n_never >= 0.95 * R_))
 

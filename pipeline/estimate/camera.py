@@ -333,74 +333,86 @@ def pack_detections(uv: ArrayLike, sigma_px: ArrayLike, T_wc: ArrayLike) -> F64:
 PARALLEL_FROM = 50_000
 
 
+@njit(cache=True, inline="always")
+def _half_r2(dn, de, dd, p, f, cu, cv):
+    """½ r² of a particle at offset (dn, de, dd) from the camera (normalised pixel residual);
+    +∞ behind it. ``p`` holds the observer's hoisted constants: R_wc's columns (p^C = R_wcᵀ d),
+    the detection (u0, v0) and 1/σ_px."""
+    zc = p[6] * dn + p[7] * de + p[8] * dd
+    if zc <= 0.0:
+        return np.inf
+    iz = f / zc
+    ru = (cu + (p[0] * dn + p[1] * de + p[2] * dd) * iz - p[9]) * p[11]
+    rv = (cv + (p[3] * dn + p[4] * de + p[5] * dd) * iz - p[10]) * p[11]
+    return 0.5 * (ru * ru + rv * rv)
+
+
+@njit(cache=True)
+def _observer_constants(obs, o):
+    """Camera centre and :func:`_half_r2`'s constants of observer ``o`` (row-major R_wc at 7 + 3r + j)."""
+    p = np.empty(12)
+    p[0], p[1], p[2] = obs[o, 7], obs[o, 10], obs[o, 13]
+    p[3], p[4], p[5] = obs[o, 8], obs[o, 11], obs[o, 14]
+    p[6], p[7], p[8] = obs[o, 9], obs[o, 12], obs[o, 15]
+    p[9], p[10], p[11] = obs[o, 1], obs[o, 2], 1.0 / obs[o, 3]
+    return obs[o, 4], obs[o, 5], obs[o, 6], p
+
+
+@njit(cache=True)
+def _loglik_const(obs):
+    """Σ over detecting observers of −2 log σ − log 2π, and the first detecting observer (−1: none)."""
+    const = 0.0
+    first = -1
+    for o in range(obs.shape[0]):
+        if obs[o, 0] > 0.5:
+            const += -2.0 * np.log(obs[o, 3]) - np.log(2.0 * np.pi)
+            if first < 0:
+                first = o
+    return const, first
+
+
 @njit(cache=True)
 def _camera_loglik_serial(x, ip, ie, idd, ground_d, obs, f, cu, cv, out):
     # observers outer, particles inner: one streaming pass per observer, so the cost is
-    # proportional to the observer count (the thesis's weight update, Fig. 6.19)
+    # proportional to the observer count (the thesis's weight update, Fig. 6.19); the first
+    # detecting observer's pass writes ``out``, so there is no separate fill pass either
     n = x.shape[0]
-    O = obs.shape[0]
-    const = 0.0
-    for o in range(O):
-        if obs[o, 0] > 0.5:
-            const += -2.0 * np.log(obs[o, 3]) - np.log(2.0 * np.pi)
-    for i in range(n):
-        out[i] = const
-    for o in range(O):
-        if obs[o, 0] <= 0.5:
-            continue
-        cn, ce, cd = obs[o, 4], obs[o, 5], obs[o, 6]
-        # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
-        r00, r10, r20 = obs[o, 7], obs[o, 10], obs[o, 13]
-        r01, r11, r21 = obs[o, 8], obs[o, 11], obs[o, 14]
-        r02, r12, r22 = obs[o, 9], obs[o, 12], obs[o, 15]
-        u0, v0, isg = obs[o, 1], obs[o, 2], 1.0 / obs[o, 3]
+    const, first = _loglik_const(obs)
+    if first < 0:
         for i in range(n):
-            dn = x[i, ip] - cn
-            de = x[i, ie] - ce
-            dd = (x[i, idd] if idd >= 0 else ground_d) - cd
-            zc = r02 * dn + r12 * de + r22 * dd
-            if zc <= 0.0:
-                out[i] = -np.inf
-            else:
-                iz = f / zc
-                ru = (cu + (r00 * dn + r10 * de + r20 * dd) * iz - u0) * isg
-                rv = (cv + (r01 * dn + r11 * de + r21 * dd) * iz - v0) * isg
-                out[i] -= 0.5 * (ru * ru + rv * rv)
+            out[i] = 0.0
+        return
+    cn, ce, cd, p = _observer_constants(obs, first)
+    for i in range(n):
+        dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+        out[i] = const - _half_r2(x[i, ip] - cn, x[i, ie] - ce, dd, p, f, cu, cv)
+    for o in range(first + 1, obs.shape[0]):
+        if obs[o, 0] > 0.5:
+            cn, ce, cd, p = _observer_constants(obs, o)
+            for i in range(n):
+                dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+                out[i] -= _half_r2(x[i, ip] - cn, x[i, ie] - ce, dd, p, f, cu, cv)
 
 
 @njit(cache=True, parallel=True)
 def _camera_loglik_parallel(x, ip, ie, idd, ground_d, obs, f, cu, cv, out):
-    # observers outer, particles inner: one streaming pass per observer, so the cost is
-    # proportional to the observer count (the thesis's weight update, Fig. 6.19)
+    # the serial kernel on numba's thread pool (the same arithmetic in the same order per particle)
     n = x.shape[0]
-    O = obs.shape[0]
-    const = 0.0
-    for o in range(O):
-        if obs[o, 0] > 0.5:
-            const += -2.0 * np.log(obs[o, 3]) - np.log(2.0 * np.pi)
-    for i in prange(n):
-        out[i] = const
-    for o in range(O):
-        if obs[o, 0] <= 0.5:
-            continue
-        cn, ce, cd = obs[o, 4], obs[o, 5], obs[o, 6]
-        # p^C = R_wcᵀ (p − c): column j of R_wc (row-major at 7 + 3r + j) dotted with d
-        r00, r10, r20 = obs[o, 7], obs[o, 10], obs[o, 13]
-        r01, r11, r21 = obs[o, 8], obs[o, 11], obs[o, 14]
-        r02, r12, r22 = obs[o, 9], obs[o, 12], obs[o, 15]
-        u0, v0, isg = obs[o, 1], obs[o, 2], 1.0 / obs[o, 3]
+    const, first = _loglik_const(obs)
+    if first < 0:
         for i in prange(n):
-            dn = x[i, ip] - cn
-            de = x[i, ie] - ce
-            dd = (x[i, idd] if idd >= 0 else ground_d) - cd
-            zc = r02 * dn + r12 * de + r22 * dd
-            if zc <= 0.0:
-                out[i] = -np.inf
-            else:
-                iz = f / zc
-                ru = (cu + (r00 * dn + r10 * de + r20 * dd) * iz - u0) * isg
-                rv = (cv + (r01 * dn + r11 * de + r21 * dd) * iz - v0) * isg
-                out[i] -= 0.5 * (ru * ru + rv * rv)
+            out[i] = 0.0
+        return
+    cn, ce, cd, p = _observer_constants(obs, first)
+    for i in prange(n):
+        dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+        out[i] = const - _half_r2(x[i, ip] - cn, x[i, ie] - ce, dd, p, f, cu, cv)
+    for o in range(first + 1, obs.shape[0]):
+        if obs[o, 0] > 0.5:
+            cn, ce, cd, p = _observer_constants(obs, o)
+            for i in prange(n):
+                dd = (x[i, idd] if idd >= 0 else ground_d) - cd
+                out[i] -= _half_r2(x[i, ip] - cn, x[i, ie] - ce, dd, p, f, cu, cv)
 
 
 def camera_loglik(x: ArrayLike, row: ArrayLike, camera: PinholeCamera, *, pos_index: tuple[int, int] = (0, 1),

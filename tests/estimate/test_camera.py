@@ -138,6 +138,28 @@ def test_the_likelihood_is_the_sum_of_the_per_observer_log_likelihoods():
     assert np.allclose(camera_loglik(x, row2, CAM, d_index=7), np.delete(per, 2, axis=0).sum(axis=0))
 
 
+def test_the_weighting_skips_leading_observers_without_detections_and_gives_zero_without_any():
+    # the kernel's first detecting observer writes the output (no fill pass): an undetected first
+    # observer, a particle behind a camera and a step without detections must all still be right
+    rng = np.random.default_rng(5)
+    Ts, uv = _scene(rng, 4)
+    x = np.zeros((300, 7))
+    x[:, :2] = [20.0, 10.0] + rng.normal(0, 5, (300, 2))
+    per = camera_loglik_per_observer(x, pack_detections(uv, 6.0, Ts), CAM)
+    uv[0] = uv[1] = np.nan
+    for par in (False, True):
+        got = camera_loglik(x, pack_detections(uv, 6.0, Ts), CAM, parallel=par)
+        assert np.allclose(got, per[2:].sum(axis=0))
+        none = camera_loglik(x, pack_detections(np.full((4, 2), np.nan), 6.0, Ts), CAM, parallel=par)
+        assert np.array_equal(none, np.zeros(300))
+    # ground points 1 km behind observer 2 (against its optical axis) are behind its camera: −∞
+    xb = np.vstack([x, np.zeros((3, 7))])
+    axis = Ts[2][:2, 2] / np.linalg.norm(Ts[2][:2, 2])
+    xb[-3:, 0:2] = Ts[2][:2, 3] - np.array([[1000.0], [1100.0], [1200.0]]) * axis
+    ll = camera_loglik(xb, pack_detections(uv, 6.0, Ts), CAM)
+    assert np.all(np.isneginf(ll[-3:])) and np.all(np.isfinite(ll[:-3]))
+
+
 def test_the_parallel_weighting_equals_the_serial_one():
     rng = np.random.default_rng(2)
     Ts, uv = _scene(rng, 16)

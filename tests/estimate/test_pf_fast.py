@@ -52,6 +52,7 @@ def _cv_kalman_from_predict(m0, P0, Z):
     return out
 
 
+@pytest.mark.slow  # 5-6 s on a cold numba cache; the full suite keeps the thread-count check
 def test_kernel_results_do_not_depend_on_the_thread_count():
     rng = np.random.default_rng(0)
     n = 3 * pf_fast.BLOCK + 17

@@ -95,6 +95,7 @@ def test_decimation_keeps_the_minimum_and_maximum_of_every_bucket():
     assert plots.decimate(small, max_points) is small  # short series untouched
 
 
+@pytest.mark.slow  # renders a whole long-flight page (about 3 s); the full suite keeps it
 def test_a_long_flight_page_stays_under_3_mb_with_every_panel_drawn_or_said_absent(tmp_path):
     from pipeline.io.ingest import outputs_for, run_ingest
     from pipeline.report.flight import build_flight_report

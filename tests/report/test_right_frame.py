@@ -14,6 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.realdata
+@pytest.mark.slow  # renders the husky flight page (about 3 s); the full suite keeps it
 def test_the_husky_page_plots_the_mount_corrected_state_attitude_with_roll_near_zero(tmp_path):
     from pipeline.config import load_config
     from pipeline.io.ingest import outputs_for, run_ingest

@@ -18,6 +18,13 @@ Two filters run side by side over the same radar measurements:
    and the CA prediction ``A x, A P Aᵀ + Q`` otherwise (per axis: "fall back to CA per axis where
    the gate dropped a value", §13.7). The radar update is the EKF's, unchanged.
 
+**Classifier input** (:data:`INCREMENTS`). The digest (§13.4) feeds the classifier the posterior
+increments ``x̂⁺_{k+1} − x̂⁺_k`` (default ``posterior``). The thesis text reads otherwise (§4.1:
+"After each dynamic update, x̂⁻_{k+1} and x̂⁺_k are passed to the pre-processing block", (4.1)
+their difference); ``increments: prior`` follows the printed text through
+:func:`prior_increment_track`. The two differ in what the radar update adds: a posterior
+increment carries the update's correction, a predicted one is ``(A − I) x̂⁺_k``, smooth.
+
 **Output** (:attr:`EkfHmmTrack.output`). The thesis switches the *output*, not only the
 prediction (Ch. 4.1: "if the classification is unknown, the output of the filter is the EKF
 estimate. [...] Classifications with high confidence (less than -1) result in the EKF+HMM
@@ -161,6 +168,61 @@ def ekf_state_frame(mean, t_ns, *, yaw_rad=None, run_ids=None) -> pd.DataFrame:
     return pd.DataFrame(d)
 
 
+#: what the classifier sees of the baseline EKF (module docstring "Classifier input")
+INCREMENTS = ("posterior", "prior")
+
+
+def prior_increment_track(mean, t_ns) -> F64:
+    """A pseudo-track whose increments are the EKF's predicted ones, ``x̂⁻_{k+1} − x̂⁺_k``.
+
+    Seed 000 §4.1 as printed: "After each dynamic update, x̂⁻_{k+1} and x̂⁺_k are passed to the
+    pre-processing block", whose observation (4.1) is their difference. Under the CA model that
+    difference is ``(A(dt_k) − I) x̂⁺_k``: ``Δr = v̂ dt + â dt²/2``, ``Δv = â dt``, ``Δa = 0``. The
+    digest (§13.4) reads (4.1) as ``x̂⁺_{k+1} − x̂⁺_k`` instead, which is the default
+    (``increments: posterior``); this is the printed alternative (``increments: prior``).
+
+    The track is :math:`q_k = \hat x^+_0 + \sum_{j \le k} (A(dt_j) − I)\hat x^+_j`, stamped at
+    ``t_k``, so a differenced feature at ``t_k`` is ``(A − I) x̂⁺_k``: it depends on the posterior
+    at ``k`` only (as causal as the posterior increments) and describes the motion predicted
+    over ``[t_k, t_{k+1}]``, which is the step the EKF+HMM predicts with the inputs of ``t_k``.
+    Its absolute values are not estimates (only increments are meaningful); every GMR
+    conditioning block (``pos``, ``pos_fd``, ``pos_vel``) reads increments only.
+
+    Parameters
+    ----------
+    mean : array_like, shape (R, T, 9) or (T, 9)
+        Posterior means ``[r, v, a]`` (NED).
+    t_ns : array_like of int, shape (T,)
+        Step times; ``dt_k = t_{k+1} − t_k`` (the last step reuses the one before it).
+
+    Returns
+    -------
+    ndarray, the shape of ``mean``
+    """
+    mean = np.asarray(mean, dtype=np.float64)
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    if mean.shape[-1] != len(STATE_COLUMNS) or mean.shape[-2:-1] != t_ns.shape:
+        raise EkfHmmError(f"prior_increment_track: states {mean.shape} do not fit {len(t_ns)} times")
+    if len(t_ns) < 2:
+        return mean.copy()
+    dt = np.diff(t_ns) * 1e-9
+    dt = np.append(dt, dt[-1])
+    inc = np.empty_like(mean)
+    for d in np.unique(dt):                        # regular grids: one matrix
+        m = dt == d
+        inc[..., m, :] = mean[..., m, :] @ (ca_transition(float(d)) - np.eye(9)).T
+    return mean[..., :1, :] + np.cumsum(inc, axis=-2)
+
+
+def classifier_state(mean, t_ns, increments: str = "posterior") -> F64:
+    """What the classifier reads of the baseline EKF's posteriors ``mean`` (shape (R, T, 9) or
+    (T, 9)): the posteriors themselves (``posterior``, digest §13.4) or
+    :func:`prior_increment_track` (``prior``, the thesis's printed (4.1))."""
+    if increments not in INCREMENTS:
+        raise EkfHmmError(f"increments must be one of {', '.join(INCREMENTS)}, not {increments!r}")
+    return np.asarray(mean, dtype=np.float64) if increments == "posterior" else prior_increment_track(mean, t_ns)
+
+
 def _check_gmr(model_set) -> None:
     fs = model_set.config.feature_set
     if fs not in GMR_FEATURE_SETS:
@@ -252,7 +314,7 @@ def hmm_step(axes, A, Q, A_H, B, Q2, acc, jerk) -> tuple[F64, F64, F64]:
 
 def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_set, Q2, *,
                 yaw_rad=None, box_heading_rad: float = 0.0, reset_t_ns=None,
-                store: str = "filtered") -> EkfHmmTrack:
+                store: str = "filtered", increments: str = "posterior") -> EkfHmmTrack:
     """Run the baseline EKF, classify its posteriors, and run the EKF+HMM (module docstring).
 
     Parameters
@@ -277,19 +339,26 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
         Restart the classifier's forward passes at these times (segment starts).
     store : {"filtered", "mean"}
         What both filter tracks keep (the covariances of a large Monte Carlo are big).
+    increments : {"posterior", "prior"}
+        What the classifier sees (:func:`classifier_state`): the posterior increments
+        ``x̂⁺_{k+1} − x̂⁺_k`` (digest §13.4, default) or the predicted ones ``x̂⁻_{k+1} − x̂⁺_k``
+        (the thesis's printed (4.1)). Either way the inputs of step ``k`` depend on posteriors up
+        to ``k`` and drive the prediction into ``k + 1``.
 
     Returns
     -------
     EkfHmmTrack
     """
     _check_gmr(model_set)
+    if increments not in INCREMENTS:
+        raise EkfHmmError(f"run_ekf_hmm: increments must be one of {', '.join(INCREMENTS)}, not {increments!r}")
     if store not in ("filtered", "mean"):
         raise EkfHmmError(f"run_ekf_hmm: store must be 'filtered' or 'mean', not {store!r}")
     t_ns = np.asarray(t_ns, dtype=np.int64)
     prior, Q2 = _batched(prior), _q2(Q2, "run_ekf_hmm")   # before the costly baseline and classification
     base = run_filter(ekf, prior, t_ns, z, store=store)
     R, T = base.mean.shape[:2]
-    frame = ekf_state_frame(base.mean, t_ns, yaw_rad=yaw_rad)
+    frame = ekf_state_frame(classifier_state(base.mean, t_ns, increments), t_ns, yaw_rad=yaw_rad)
     cls = model_set.classify(frame, reset_t_ns=reset_t_ns, box_heading_rad=box_heading_rad)
     pred, V, acc, jerk, gated = _classified_arrays(cls, t_ns, R, {i: i for i in range(R)})
     # inputs for the prediction into step k come from step k−1 (causal)

@@ -333,7 +333,8 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     fid = flight_id or meta.get("flight_id")
     ekf_cfg = {"q": 1.0, "p0_sigma": [1.0, 0.1, 0.01], "joseph": True, "init": "reference",
                **dict(config.get("ekf") or {})}
-    hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, **dict(config.get("ekf_hmm") or {})}
+    hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, "increments": "posterior",
+               **dict(config.get("ekf_hmm") or {})}
     synth = config.get("synthetic_radar")
     state_path = declared(inputs, "state")
     state = read_table(state_path) if state_path and Path(state_path).exists() else None
@@ -417,7 +418,8 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
         box = float((meta.get("params") or {}).get("box_rotation_rad") or st_meta.get("box_rotation_rad") or 0.0)
         try:
             ht = run_ekf_hmm(ekf, prior, t, zz, ms, Q2, yaw_rad=None if yaw is None else yaw[None],
-                             box_heading_rad=box, reset_t_ns=resets, store="filtered")
+                             box_heading_rad=box, reset_t_ns=resets, store="filtered",
+                             increments=hmm_cfg["increments"])
         except ValueError as exc:  # ModelError and numerical failures of the classifier
             reason = f"EKF+HMM failed: {type(exc).__name__}: {exc}"
         else:
@@ -433,6 +435,7 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
             n_mode = int(df["mode"].sum())
             write_table(df, paths["ekf_hmm"], schema.ESTIMATE_HMM, name="estimate_hmm",
                         extra={**extra, "estimator": "ekf_hmm", "n_hmm_steps": n_mode,
+                               "increments": hmm_cfg["increments"],
                                "n_predict_only": int(ht.hmm.n_predict_only[0])})
             diag["n_hmm_steps"] = n_mode
             if ref is not None:

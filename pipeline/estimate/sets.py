@@ -60,6 +60,7 @@ from ..io.parquet import read_table, write_table
 from ..io.stage import declared_list
 from .base import ConstantAcceleration, GaussianState
 from .ekf import ExtendedKalmanFilter, run_filter
+from .ekf_hmm import prior_increment_track
 from .models import STATE_COLUMNS, RadarModel, initial_cov
 
 #: the bulk-set columns (``simulate.datasets.SET_COLUMNS`` is this very tuple)
@@ -184,6 +185,23 @@ def ekf_set(truth: pd.DataFrame, *, radar: RadarModel, q: float, rng: np.random.
     for g, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6)), ("acc", slice(6, 9))):
         diag[f"rmse_{g}"] = float(np.sqrt(np.mean(err[..., sl] ** 2)))
     return out, diag
+
+
+def prior_increment_set(estimate: pd.DataFrame, *, where: str = "set") -> pd.DataFrame:
+    """An EKF set (:func:`ekf_set`) with its ``pos/vel/acc`` replaced, run by run, by the pseudo-track
+    of the EKF's predicted increments ``x̂⁻_{k+1} − x̂⁺_k`` (the thesis's printed (4.1),
+    :func:`~pipeline.estimate.ekf_hmm.prior_increment_track`): what the classifier sees with
+    ``increments: prior``. ``alt_cal_m`` follows ``pos_d``; the rest is unchanged."""
+    df, x, t_ns = truth_runs(estimate, where=where)
+    out = df.copy()
+    if x.size == 0:
+        return out
+    p = prior_increment_track(x, t_ns).reshape(-1, 9)
+    for i, c in enumerate(STATE_COLUMNS):
+        out[c] = p[:, i]
+    if "alt_cal_m" in out.columns:
+        out["alt_cal_m"] = -out["pos_d_m"]
+    return out
 
 
 @dataclass(frozen=True, kw_only=True)

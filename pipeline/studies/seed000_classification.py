@@ -35,6 +35,10 @@ Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
    (``trained_on``: truth | ekf); Tables 3.13–3.15: the switch cells on EKF estimates
    (``ekf_rng(seed, "switch_<K>_<t>s")``), confidence classifier, cumulative (thesis) and
    windowed (ours), both trainings. Thesis values: digest §11 (truth-trained on EKF input).
+   With ``printed_increments`` (default) Tables 3.5–3.8 are also computed, truth-trained, on
+   the thesis text's (4.1) — the predicted increments ``x̂⁻_{k+1} − x̂⁺_k`` of the same EKF runs
+   (:func:`~pipeline.estimate.sets.prior_increment_set`) — as a diagnosis beside the digest's
+   posterior increments (§13.4); column ``increments`` (``posterior`` | ``prior``).
 
 Outputs (:data:`OUTPUT_TABLES` under ``results/studies/seed000_classification/``):
 ``report.md`` (every table beside the thesis, the acceptance checks, and where our
@@ -67,7 +71,7 @@ import plotly.graph_objects as go
 from ..config import ROOT, ConfigError, load_config, section
 from ..io.parquet import write_table
 from ..models import ManeuverModelSet, ModelsConfig
-from ..estimate.sets import SetsSettings, ekf_rng, ekf_set
+from ..estimate.sets import SetsSettings, ekf_rng, ekf_set, prior_increment_set
 from ..models.metrics import (SCENARIOS, SWITCH_TABLE, SWITCH_TABLE_EKF, THESIS_SWITCH, THESIS_SWITCH_EKF, confusion,
                               is_correct, per_maneuver_table, thesis_side_by_side)
 from ..report.study import build_study_page, layout
@@ -93,6 +97,7 @@ DEFAULTS: dict[str, Any] = {
     "n_states": None,        # override models.n_states for every maneuver: an int or "auto"
     "skip": [],              # parts left out: "switch", "gmr" (their tables are written empty)
     "ekf_input": False,      # also classify EKF estimates: Tables 3.5-3.8, 3.13-3.15 (ekf_* tables)
+    "printed_increments": True,  # with ekf_input: Tables 3.5-3.8 also on the printed (4.1) increments
 }
 #: per-size settings
 SIZES: dict[str, dict[str, Any]] = {
@@ -497,9 +502,12 @@ def ekf_of(sets: Mapping[str, pd.DataFrame], part: str, seed: int, es: SetsSetti
     return out
 
 
-def ekf_tables(models: Mapping[str, ManeuverModelSet], train: Mapping, test: Mapping) -> pd.DataFrame:
+def ekf_tables(models: Mapping[str, ManeuverModelSet], train: Mapping, test: Mapping,
+               increments: str = "posterior") -> pd.DataFrame:
     """Tables 3.5–3.8 (cumulative mode, EKF input) for every model set of ``models``
-    (``{"truth": truth-trained (the thesis setup), "ekf": EKF-trained}``)."""
+    (``{"truth": truth-trained (the thesis setup), "ekf": EKF-trained}``); ``increments`` names
+    what ``train``/``test`` hold (``posterior``: the EKF sets; ``prior``: their
+    :func:`~pipeline.estimate.sets.prior_increment_set`), written to the ``increments`` column."""
     tabs = []
     for trained_on, ms in models.items():
         for table, (split_name, decision) in EKF_TABLES.items():
@@ -511,6 +519,7 @@ def ekf_tables(models: Mapping[str, ManeuverModelSet], train: Mapping, test: Map
             t.insert(1, "classifier", decision)
             t.insert(2, "split", split_name)
             t.insert(3, "trained_on", trained_on)
+            t.insert(4, "increments", increments)
             tabs.append(t)
     return pd.concat(tabs, ignore_index=True)
 
@@ -537,7 +546,11 @@ def ekf_switch_tables(models: Mapping[str, ManeuverModelSet], run: _Run, es: Set
 
 
 def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse: pd.DataFrame) -> None:
-    """The EKF-input ``RESULT`` figures (Tables 3.5–3.8, 3.13–3.15)."""
+    """The EKF-input ``RESULT`` figures (Tables 3.5–3.8, 3.13–3.15; the printed-(4.1) rows,
+    ``increments: prior``, as ``seed000_ekf_printed_*``)."""
+    pr = et[et.increments == "prior"].set_index("maneuver") if "increments" in et else et.iloc[:0]
+    et = et[et.increments == "posterior"] if "increments" in et else et
+
     def rows(table, trained_on, mans=KNOWN):
         return et[(et.table == table) & (et.trained_on == trained_on) & et.maneuver.isin(mans)].set_index("maneuver")
 
@@ -593,6 +606,25 @@ def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse:
             res.add(f"seed000_ekf_cfbg_{trained_on}_trained_M5_unknown_FA_pct", f"{m5['FA_pct'].iloc[0]:.2f}",
                     f"% of M5's EKF-estimated test runs called unknown at the end with the background rival "
                     f"(3.8+bg, ours), {trained_on}-trained models.")
+    if len(pr):
+        p8 = pr[(pr.table == "3.8")]
+        p68 = pr[pr.table.isin(["3.6", "3.8"]) & pr.index.isin(KNOWN)]
+        res.add("seed000_ekf_printed_cf_min_FA_pct", f"{p68['FA_pct'].min():.2f}",
+                "Lowest FA over M1–M4 of the truth-trained confidence classifier on the printed (4.1) "
+                "increments x̂⁻_{k+1} − x̂⁺_k of the same EKF runs, train and test (Tables 3.6, 3.8; diagnosis).")
+        res.add("seed000_ekf_printed_cf_min_MAoT_minus_thesis_pct",
+                f"{(p68['MAoT_pct'] - p68['thesis_MAoT_pct']).min():.2f}",
+                "Lowest of our MAoT minus the thesis's over M1–M4 in Tables 3.6 and 3.8 on the printed (4.1) "
+                "increments (truth-trained; diagnosis).")
+        for man in ALL:
+            if man in p8.index:
+                r = p8.loc[man]
+                res.add(f"seed000_ekf_printed_cf_test_{man}_MAoT_pct", f"{r['MAoT_pct']:.2f}",
+                        f"{man} test-run MAoT of the truth-trained confidence classifier on the printed (4.1) "
+                        f"increments (Table 3.8 setup; thesis {r['thesis_MAoT_pct']:.2f}).")
+                res.add(f"seed000_ekf_printed_cf_test_{man}_FA_pct", f"{r['FA_pct']:.2f}",
+                        f"{man} test-run FA of the truth-trained confidence classifier on the printed (4.1) "
+                        f"increments (Table 3.8 setup).")
     if esw is not None and len(esw):
         for trained_on in sorted(set(esw.trained_on), key=lambda x: x != "truth"):
             for mode in EKF_SWITCH_MODES:
@@ -622,7 +654,19 @@ def ekf_report(et: pd.DataFrame, esw: pd.DataFrame | None, es: SetsSettings, rms
          "EKF error (RMSE over all samples of the test runs; diverged: final position error > 10 m, "
          "mostly runs near the radar's horizontal plane tracked as their mirror image below it — range "
          "and two direction cosines do not give the sign of the third):", "", md_table(rmse, "{:.3f}"), "",
-         md_table(et), ""]
+         md_table(et[et.increments == "posterior"]), ""]
+    pr = et[et.increments == "prior"]
+    if len(pr):
+        L += ["### Diagnosis: the printed (4.1) increments", "",
+              "The thesis text (§4.1: \"After each dynamic update, x̂⁻_{k+1} and x̂⁺_k are passed to the "
+              "pre-processing block\") gives the classifier the *predicted* increments x̂⁻_{k+1} − x̂⁺_k = "
+              "(A − I) x̂⁺_k; the digest (§13.4), which the tables above follow, reads (4.1) as the posterior "
+              "increments x̂⁺_{k+1} − x̂⁺_k. Below: the same EKF runs and truth-trained models, classifying the "
+              "predicted increments (`increments: prior`, pipeline/estimate/ekf_hmm.py `prior_increment_track`). "
+              "A predicted increment carries no radar-update correction, so it is as smooth as the EKF's "
+              "velocity and acceleration; the thesis's EKF-input tables lie near its truth tables, which "
+              "this reading reproduces and the digest's does not.", "",
+              md_table(pr), ""]
     if esw is not None and len(esw):
         L += ["## EKF input: Tables 3.13–3.15 (switch scenarios, confidence)", "",
               "Thesis values: cumulative mode, truth-trained models.", "",
@@ -637,9 +681,13 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
     figs = []
     if et is not None and len(et):
         fig = go.Figure()
-        for (table, trained_on), g in et[et["maneuver"].isin(ALL)].groupby(["table", "trained_on"], sort=False):
-            fig.add_trace(go.Bar(x=g["maneuver"], y=g["MAoT_pct"], name=f"{table} ours, {trained_on}-trained"))
-        th = et[et["trained_on"] == "truth"].dropna(subset=["thesis_MAoT_pct"])
+        keys = ["table", "trained_on", "increments"]
+        for (table, trained_on, inc), g in et[et["maneuver"].isin(ALL)].groupby(keys, sort=False):
+            if inc == "prior" and table != "3.8":
+                continue
+            name = f"{table} ours, {trained_on}-trained" + (", printed (4.1)" if inc == "prior" else "")
+            fig.add_trace(go.Bar(x=g["maneuver"], y=g["MAoT_pct"], name=name))
+        th = et[(et["trained_on"] == "truth") & (et["increments"] == "posterior")].dropna(subset=["thesis_MAoT_pct"])
         for table, g in th.groupby("table", sort=False):
             fig.add_trace(go.Scatter(x=g["maneuver"], y=g["thesis_MAoT_pct"], mode="markers",
                                      marker=dict(symbol="x", size=9), name=f"{table} thesis"))
@@ -866,6 +914,14 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
         models = {"truth": ms, "ekf": ms_ekf}
         progress("EKF input: Tables 3.5-3.8")
         et = ekf_tables(models, ekf_train, ekf_test)
+        if st["printed_increments"]:
+            # the thesis text's (4.1), x̂⁻_{k+1} − x̂⁺_k, beside the digest's x̂⁺_{k+1} − x̂⁺_k (§13.4):
+            # the same EKF runs, truth-trained models (the thesis setup)
+            progress("EKF input: Tables 3.5-3.8 on the printed (4.1) increments x-(k+1) - x+(k)")
+            pr_train = {m: prior_increment_set(d, where=f"{m}_train") for m, d in ekf_train.items()}
+            pr_test = {m: prior_increment_set(d, where=f"{m}_test") for m, d in ekf_test.items()}
+            et = pd.concat([et, ekf_tables({"truth": ms}, pr_train, pr_test, increments="prior")],
+                           ignore_index=True)
         write_table(et, paths["ekf_tables"], name="seed000_tables_3_5_3_8",
                     extra={"runs_per_maneuver": run.runs, "seed": run.seed, "size": size, "q": es.q,
                            "p0_sigma": list(es.p0_sigma)})

@@ -32,6 +32,10 @@ Steps (seed 000 §2, §3, §8, §9, §11–§13; issue 14 item 5):
    re-run ``noise_runs`` times with new radar noise from its true initial state. Reported: RMSE
    per group (pos, v_N, v_E, v_D, acc) EKF vs EKF+HMM, their mean error / error variance /
    filter variance against time, and the classifier MAoT beside the thesis' Chapter-4 table.
+   ``increments`` picks what the classifier sees of the baseline EKF: the posterior increments
+   (digest §13.4, default) or the predicted ones of the thesis's printed (4.1)
+   (:func:`~pipeline.estimate.ekf_hmm.prior_increment_track`); the GMR diagnosis
+   (``gmr_decomposition``) always reads the posteriors.
 
 Outputs (:data:`OUTPUT_TABLES` under ``results/studies/seed000_ekf/``): ``q_tuning``,
 ``mc_time``, ``mc_rmse``, ``q2_tuning``, ``scenarios``, ``hmm_rmse``, ``hmm_time``, plus
@@ -61,7 +65,7 @@ import plotly.graph_objects as go
 from ..config import ROOT, ConfigError, load_config, section
 from ..estimate.base import ConstantAcceleration, GaussianState
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
-from ..estimate.ekf_hmm import ekf_state_frame, hmm_filter, q2_from_runs, run_ekf_hmm
+from ..estimate.ekf_hmm import INCREMENTS, classifier_state, ekf_state_frame, hmm_filter, q2_from_runs, run_ekf_hmm
 from ..estimate.metrics import best_worst, chi2_band, fraction_in_band, nees, rmse, rmse_groups
 from ..estimate.models import STATE_COLUMNS, RadarModel, initial_cov
 from ..estimate.montecarlo import measure, normalised_rmse, tune_q
@@ -97,6 +101,7 @@ DEFAULTS: dict[str, Any] = {
     "features": None,        # override hmm.feature_set (state9, state9h)
     "chunk_runs": 250,       # Monte Carlo runs filtered at once (memory: ~1 MB per run with RTS)
     "skip": [],              # parts left out: "hmm" (the EKF+HMM; its tables are written empty)
+    "increments": "posterior",  # what the classifier sees: posterior (digest §13.4) or prior (printed 4.1)
 }
 #: per-size settings
 SIZES: dict[str, dict[str, Any]] = {
@@ -281,15 +286,17 @@ def mc_maneuver(man: str, df: pd.DataFrame, ekf: ExtendedKalmanFilter, radar: Ra
 
 # -- EKF+HMM ----------------------------------------------------------------------------------------
 
-def ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z):
+def ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z, increments: str = "posterior"):
     """One EKF+HMM run over ``truth`` (R, T, 9) from the true initial state: ``(track, e_ekf, e_hmm)``.
 
     ``e_hmm`` is the error of the EKF+HMM's *output* (:attr:`~pipeline.estimate.ekf_hmm.EkfHmmTrack.output`:
     the EKF+HMM estimate where a known classification chose the step's prediction, the EKF's
     elsewhere; seed 000 Ch. 4.1 "if the classification is unknown, the output of the filter is the
-    EKF estimate"), not of the EKF+HMM filter's internal state.
+    EKF estimate"), not of the EKF+HMM filter's internal state. ``increments``: what the classifier
+    sees of the EKF (:func:`~pipeline.estimate.ekf_hmm.classifier_state`).
     """
-    tr = run_ekf_hmm(ekf, truth_prior(truth, int(t_ns[0])), t_ns, z, ms, Q2, yaw_rad=yaw, store="filtered")
+    tr = run_ekf_hmm(ekf, truth_prior(truth, int(t_ns[0])), t_ns, z, ms, Q2, yaw_rad=yaw, store="filtered",
+                     increments=increments)
     return tr, tr.ekf.mean - truth, tr.output.mean - truth
 
 
@@ -301,9 +308,11 @@ def model_variant(ms, **cfg):
     return out
 
 
-def estimated_frames(ekf, train: dict, radar, seed: int, n: int) -> tuple[pd.DataFrame, pd.DataFrame]:
+def estimated_frames(ekf, train: dict, radar, seed: int, n: int,
+                     increments: str = "posterior") -> tuple[pd.DataFrame, pd.DataFrame]:
     """Truth and baseline-EKF state tables of ``n`` training runs per known maneuver (same run ids
-    and times; truth initialisation, one radar realisation each): ``q2_from_runs``' inputs."""
+    and times; truth initialisation, one radar realisation each): ``q2_from_runs``' inputs. The
+    EKF table is what the classifier sees of it (``increments``, :func:`classifier_state`)."""
     tt, ee = [], []
     for man in KNOWN:
         ids, t_ns, truth, yaw, _ = runs_array(first_runs(train[man], n))
@@ -311,7 +320,7 @@ def estimated_frames(ekf, train: dict, radar, seed: int, n: int) -> tuple[pd.Dat
         tr = run_filter(ekf, truth_prior(truth, int(t_ns[0])), t_ns, z, store="mean")
         rid = np.array([f"{man}-{i}" for i in ids], dtype=object)
         tt.append(ekf_state_frame(truth, t_ns, yaw_rad=yaw, run_ids=rid))
-        ee.append(ekf_state_frame(tr.mean, t_ns, yaw_rad=yaw, run_ids=rid))
+        ee.append(ekf_state_frame(classifier_state(tr.mean, t_ns, increments), t_ns, yaw_rad=yaw, run_ids=rid))
     return pd.concat(tt, ignore_index=True), pd.concat(ee, ignore_index=True)
 
 
@@ -339,7 +348,7 @@ def tune_ekf_hmm(ekf, ms, train, radar, st, seed, progress):
         _, t_ns, truth, yaw, _ = runs_array(first_runs(train[man], int(st["tune_runs"])))
         data[man] = (t_ns, truth, yaw, radar_z(radar, truth, seed, f"tune_q2/{man}"))
     n_of = {m: d[1].shape[0] * d[1].shape[1] for m, d in data.items()}
-    truth_q2, ekf_q2 = estimated_frames(ekf, train, radar, seed, int(st["q2_runs"]))
+    truth_q2, ekf_q2 = estimated_frames(ekf, train, radar, seed, int(st["q2_runs"]), st["increments"])
     recs, cands = [], []
     ekf_pooled = None
     for gi in st["gmr_inputs"]:
@@ -352,7 +361,8 @@ def tune_ekf_hmm(ekf, ms, train, radar, st, seed, progress):
             ekf_rm = {}
             for man, (t_ns, truth, yaw, z) in data.items():
                 prior = truth_prior(truth, int(t_ns[0]))
-                tr = run_ekf_hmm(ekf, prior, t_ns, z, msv, first, yaw_rad=yaw, store="mean")
+                tr = run_ekf_hmm(ekf, prior, t_ns, z, msv, first, yaw_rad=yaw, store="mean",
+                                 increments=st["increments"])
                 ekf_rm[man] = rmse(tr.ekf.mean - truth)
                 for src, Qb in bases.items():
                     for sc in grid:
@@ -498,7 +508,7 @@ def hmm_maneuver(man, test_df, ekf, ms, Q2, radar, st, seed):
     """Step 4 for one maneuver: S1/S2 over the test runs, then ``noise_runs`` realisations each."""
     ids, t_ns, truth, yaw, lab = runs_array(test_df)
     z = radar_z(radar, truth, seed, f"select/{man}")
-    tr_sel, _, e_sel = ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z)
+    tr_sel, _, e_sel = ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z, st["increments"])
     diag = {"maneuver": man, **gmr_decomposition(ms, t_ns, truth, tr_sel.ekf.mean, yaw)}
     i1, i2 = best_worst(e_sel)
     n = int(st["noise_runs"])
@@ -508,7 +518,7 @@ def hmm_maneuver(man, test_df, ekf, ms, Q2, radar, st, seed):
         tr_n = np.repeat(truth[i:i + 1], n, axis=0)
         yaw_n = np.repeat(yaw[i:i + 1], n, axis=0)
         zn = radar_z(radar, tr_n, seed, f"noise/{man}/{sc}")
-        tr, e_ekf, e_hmm = ekf_hmm_errors(ekf, ms, Q2, t_ns, tr_n, yaw_n, zn)
+        tr, e_ekf, e_hmm = ekf_hmm_errors(ekf, ms, Q2, t_ns, tr_n, yaw_n, zn, st["increments"])
         m = maot(np.asarray(tr.pred, dtype=object), np.repeat(lab[i:i + 1], n, axis=0))
         scen.append({"maneuver": man, "scenario": sc, "run_id": int(ids[i]),
                      "summed_abs_error": float(np.nansum(np.abs(e_sel[i]))),
@@ -696,6 +706,8 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
     for key, known in (("gmr_inputs", ("pos", "pos_fd", "pos_vel")), ("q2_inputs", ("truth", "ekf"))):
         if not st[key] or set(st[key]) - set(known):
             raise ConfigError(f"studies.{NAME}.{key}: {st[key]!r} must be a non-empty list of {', '.join(known)}")
+    if st["increments"] not in INCREMENTS:
+        raise ConfigError(f"studies.{NAME}.increments: {st['increments']!r} is not one of {', '.join(INCREMENTS)}")
     bad = sorted(set(st["mc_maneuvers"]) - set(ALL))
     if bad:
         raise ConfigError(f"studies.{NAME}.mc_maneuvers: unknown maneuver(s) {bad}; known: {', '.join(ALL)}")
@@ -795,7 +807,8 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
              ("q", f"{q:g}")]
     if hrm is not None:
         facts += [("features", cfg.feature_set), ("GMR input", str(best["gmr_input"])),
-                  ("gate", f"{best['gate_mps2']:g} m/s²"), ("Q₂", f"{best['q2_input']} inputs × {q2_scale:g}")]
+                  ("gate", f"{best['gate_mps2']:g} m/s²"), ("Q₂", f"{best['q2_input']} inputs × {q2_scale:g}"),
+                  ("classifier input", f"{st['increments']} increments")]
     build_study_page(NAME, paths["page"], results=paths["results"], report_md=paths["report"], template=template,
                      definitions=res.definitions, figures=figures(qt, mc_time, hmm_time, hrm),
                      title=f"Study: seed-000 EKF, RTS and EKF+HMM ({size})",

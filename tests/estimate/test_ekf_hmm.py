@@ -11,8 +11,8 @@ import pytest
 from helpers_maneuvers import synth_bulk
 from pipeline.estimate.base import ConstantAcceleration, GaussianState
 from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
-from pipeline.estimate.ekf_hmm import (EkfHmmError, ekf_state_frame, hmm_filter, hmm_step, q2_from_runs,
-                                       run_ekf_hmm)
+from pipeline.estimate.ekf_hmm import (EkfHmmError, classifier_state, ekf_state_frame, hmm_filter, hmm_step,
+                                       prior_increment_track, q2_from_runs, run_ekf_hmm)
 from pipeline.estimate.models import (STATE_COLUMNS, RadarModel, ca_transition, hmm_input,
                                       hmm_transition, initial_cov, white_jerk_q)
 from pipeline.models.base import ModelsConfig
@@ -372,3 +372,48 @@ def test_gmr_decomposition_reproduces_the_classifiers_gmr_and_splits_nothing_on_
     assert d["gmr_lag_steps"] in (-2, -1, 0, 1, 2) and d["gain_max_per_s2"] > 0
     e = gmr_decomposition(ms, t_ns, truth, est, yaw)
     assert e["dr_noise_d_m"] > 0 and e["gmr_ee"] != e["gmr_tt"]
+
+
+def test_the_printed_increments_are_the_ekfs_predicted_ones_x_minus_next_minus_x_plus():
+    rng = np.random.default_rng(11)
+    t_ns = np.r_[0, np.cumsum(np.r_[[200_000_000] * 5, 100_000_000, [200_000_000] * 3])]   # one short step
+    x = rng.standard_normal((2, len(t_ns), 9))
+    p = prior_increment_track(x, t_ns)
+    assert p.shape == x.shape
+    np.testing.assert_allclose(p[:, 0], x[:, 0] @ ca_transition(0.2).T)   # q₀ = x̂⁻₁ = A x̂⁺₀
+    dts = np.r_[np.diff(t_ns), t_ns[-1] - t_ns[-2]] * 1e-9
+    for k in range(len(t_ns)):
+        # increment stamped at t_k: x̂⁻_{k+1} − x̂⁺_k = (A(dt_k) − I) x̂⁺_k, the CA prediction's step
+        inc = p[:, k] - (x[:, 0] if k == 0 else p[:, k - 1])
+        want = x[:, k] @ ca_transition(dts[k]).T - x[:, k]
+        np.testing.assert_allclose(inc, want, atol=1e-12)
+        np.testing.assert_array_equal(want[:, 6:], 0.0)                # CA: the acceleration is carried over
+    np.testing.assert_allclose(prior_increment_track(x[0], t_ns), p[0])   # one run as (T, 9)
+    np.testing.assert_array_equal(classifier_state(x, t_ns, "posterior"), x)
+    np.testing.assert_array_equal(classifier_state(x, t_ns, "prior"), p)
+    with pytest.raises(EkfHmmError, match="increments must be one of posterior, prior"):
+        classifier_state(x, t_ns, "predicted")
+    with pytest.raises(EkfHmmError, match="do not fit"):
+        prior_increment_track(x[:, :-1], t_ns)
+
+
+def test_the_printed_increments_feed_the_classifier_causally_and_run_ekf_hmm_checks_the_choice(trained):
+    ms, data = trained
+    Q2 = q2_from_runs(ms, data[data["label"] == "M1"], scale=2.0)
+    ekf, prior, t_ns, z, truth = _radar_runs(data, ("M1",), np.random.default_rng(3))
+    out = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2, increments="prior")
+    base = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2)
+    np.testing.assert_array_equal(out.ekf.mean, base.ekf.mean)         # the baseline EKF is the same
+    assert out.mode.mean() > 0.3 and not np.array_equal(out.acc_hmm, base.acc_hmm, equal_nan=True)
+    # the classification of step k is that of the predicted-increment track
+    want = ms.classify(ekf_state_frame(prior_increment_track(out.ekf.mean, t_ns), t_ns))
+    np.testing.assert_array_equal(out.pred[0, 1:], want[want.run_id == 0]["pred"].to_numpy(dtype=object))
+    # radar after step k changes nothing at or before k
+    k = len(t_ns) // 2
+    z2 = z.copy()
+    z2[k + 1:] += 5.0
+    out2 = run_ekf_hmm(ekf, prior, t_ns, z2, ms, Q2, increments="prior")
+    np.testing.assert_array_equal(out2.hmm.mean[:, :k + 1], out.hmm.mean[:, :k + 1])
+    np.testing.assert_array_equal(out2.mode[:, :k + 1], out.mode[:, :k + 1])
+    with pytest.raises(EkfHmmError, match="run_ekf_hmm: increments must be one of"):
+        run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2, increments="x")

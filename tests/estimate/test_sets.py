@@ -9,7 +9,9 @@ import pytest
 
 from pipeline.config import ConfigError
 from pipeline.estimate.models import STATE_COLUMNS, RadarModel
-from pipeline.estimate.sets import JERK_COLUMNS, SET_COLUMNS, SetsSettings, ekf_rng, ekf_set, run_ekf_sets
+from pipeline.estimate.ekf_hmm import prior_increment_track
+from pipeline.estimate.sets import (JERK_COLUMNS, SET_COLUMNS, SetsSettings, ekf_rng, ekf_set, prior_increment_set,
+                                  run_ekf_sets)
 from pipeline.io.parquet import read_table, read_table_meta, write_table
 
 SEED = 20261123
@@ -146,3 +148,18 @@ def test_a_bad_estimate_sets_key_or_mismatched_outputs_fail_naming_them(tmp_path
                      seed=1)
     st = SetsSettings.from_config({"q": 0.5, "radar": {"sigma_range_m": 2.0}})
     assert st.q == 0.5 and st.p0_sigma == (1.0, 0.1, 0.01) and st.radar.sigma[0] == 2.0
+
+
+def test_the_printed_increment_set_replaces_each_runs_states_by_its_predicted_increment_track(truth):
+    est, _ = ekf_set(truth, radar=RadarModel(), q=3.0, rng=ekf_rng(SEED, "M1"))
+    shuffled = est.sample(frac=1.0, random_state=0)                  # run and time order restored
+    pr = prior_increment_set(shuffled, where="M1_test")
+    assert list(pr.columns) == list(est.columns) and len(pr) == len(est)
+    for rid, g in pr.groupby("run_id"):
+        e = est[est.run_id == rid]
+        want = prior_increment_track(e[list(STATE_COLUMNS)].to_numpy(), e["t_ns"].to_numpy())
+        np.testing.assert_allclose(g[list(STATE_COLUMNS)].to_numpy(), want)
+        np.testing.assert_array_equal(g["label"].to_numpy(), e["label"].to_numpy())
+        np.testing.assert_array_equal(g["alt_cal_m"].to_numpy(), -g["pos_d_m"].to_numpy())
+    with pytest.raises(ValueError, match="^M1_test: not a bulk set"):
+        prior_increment_set(est.drop(columns="acc_d_mps2"), where="M1_test")

@@ -333,7 +333,7 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     fid = flight_id or meta.get("flight_id")
     ekf_cfg = {"q": 1.0, "p0_sigma": [1.0, 0.1, 0.01], "joseph": True, "init": "reference",
                **dict(config.get("ekf") or {})}
-    hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, "increments": "posterior",
+    hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, "increments": "prior",
                **dict(config.get("ekf_hmm") or {})}
     synth = config.get("synthetic_radar")
     state_path = declared(inputs, "state")

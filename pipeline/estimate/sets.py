@@ -36,8 +36,13 @@ depends only on the master seed, its name and its truth, never on which other se
 filtered. The ``ekf/`` prefix keeps it apart from the simulator's own generators
 (``[seed, crc32(name), chunk]``).
 
-Config (``estimate.sets``): ``q`` (jerk spectral density, m²/s⁵) and ``p0_sigma`` (the P₀
-standard deviations of position, velocity, acceleration). The radar is the simulated flights'
+Config (``estimate.sets``): ``q`` (jerk spectral density, m²/s⁵), ``p0_sigma`` (the P₀
+standard deviations of position, velocity, acceleration) and ``increments``: with ``prior``
+(default) the written ``pos/vel/acc`` are :func:`prior_increment_set`'s pseudo-track of the
+EKF's predicted increments — what the EKF+HMM's classifier sees with
+``estimate.ekf_hmm.increments: prior`` (the thesis's printed (4.1)) — and with ``posterior`` the
+posteriors themselves; the two settings should agree. The RMSE diagnostics are always the
+posteriors'. The radar is the simulated flights'
 radar, ``simulate.sensors.radar`` (site, τ_RD, σ: seed 000 Table 2.1), passed as
 ``config["radar"]``: one radar for the sets and the log flights, so a model trained on these
 sets sees the noise the flights' radar stream has.
@@ -211,6 +216,7 @@ class SetsSettings:
     q: float
     p0_sigma: tuple[float, float, float]
     radar: RadarModel
+    increments: str = "prior"
 
     @classmethod
     def from_config(cls, config: Mapping | None) -> "SetsSettings":
@@ -220,7 +226,7 @@ class SetsSettings:
         radar_sec = cfg.pop("radar", None)
         sec = validate_section("estimate.sets", cfg)
         return cls(q=float(sec["q"]), p0_sigma=tuple(float(s) for s in sec["p0_sigma"]),
-                   radar=RadarModel.from_config(radar_sec))
+                   radar=RadarModel.from_config(radar_sec), increments=str(sec["increments"]))
 
 
 def run_ekf_sets(inputs, outputs, config: Mapping | None, *, seed: int) -> EkfSetsResult:
@@ -257,8 +263,11 @@ def run_ekf_sets(inputs, outputs, config: Mapping | None, *, seed: int) -> EkfSe
         truth = read_table(i, SET_COLUMNS)
         est, diag = ekf_set(truth, radar=st.radar, q=st.q, rng=ekf_rng(seed, name), p0_sigma=st.p0_sigma,
                             where=str(i))
+        if st.increments == "prior":
+            est = prior_increment_set(est, where=str(i))
         write_table(est, o, SET_COLUMNS, name=name,
                     extra={"seed": int(seed), "input": "ekf", "truth": str(i), "q": st.q,
+                           "increments": st.increments,
                            "p0_sigma": list(st.p0_sigma), "radar_site_ned_m": list(st.radar.site_ned_m),
                            "runs": diag["runs"], "n_diverged": diag.get("n_diverged", 0),
                            **{k: v for k, v in diag.items() if k.startswith("rmse")}})

@@ -32,7 +32,8 @@ logged, acceleration differentiated from it) is the **reference** every error is
 4. **Test** on ``manual_F3A_P23_22_05_31_00000350.json`` (same pilot and schedule, 3 months
    later): :func:`pipeline.estimate.ekf_hmm.run_ekf_hmm` from the reference state at the first
    radar step (P₀ = ``initial_cov()``), classifier (the models' confidence decision,
-   ``V_c < −1``, cumulative) reset at each segment start. Per maneuver (17, take-off and landing
+   ``V_c < −1``, cumulative) reset at each segment start, fed ``increments`` of the baseline EKF
+   (default ``prior``, the thesis's printed (4.1), as ``estimate.ekf_hmm.increments``). Per maneuver (17, take-off and landing
    excluded): position, velocity and acceleration RMSE of both filters against the reference
    (norm over the three axes), the share of steps predicted with HMM inputs, the classifier's
    label. A maneuver counts as **better** when the EKF+HMM acceleration RMSE is below 0.95 × the
@@ -73,10 +74,10 @@ import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 
-from ..config import ROOT
+from ..config import ROOT, ConfigError
 from ..estimate.base import ConstantAcceleration, GaussianState
 from ..estimate.ekf import ExtendedKalmanFilter
-from ..estimate.ekf_hmm import EkfHmmTrack, hmm_filter, one_step_q2, q2_from_runs, run_ekf_hmm
+from ..estimate.ekf_hmm import INCREMENTS, EkfHmmTrack, hmm_filter, one_step_q2, q2_from_runs, run_ekf_hmm
 from ..estimate.models import STATE_COLUMNS, RadarModel, initial_cov
 from ..estimate.montecarlo import tune_q
 from ..io.parquet import write_table
@@ -115,6 +116,7 @@ DEFAULTS: dict[str, Any] = {
     "q_grid": [1, 3, 10, 30, 100, 300, 1000],        # EKF jerk PSD (m²/s⁵), tuned on the training flight
     "q2_scale_grid": [0.25, 0.5, 1, 2, 4, 8, 16, 32, 64],   # Q₂ scale, tuned on the training flight
     "radar_site_ned_m": [0.0, 0.0, 0.0],             # the FlightCoach origin (module docstring)
+    "increments": "prior",          # classifier input: prior (printed (4.1)) | posterior (digest §13.4)
 }
 #: per-size settings (the flights are fixed; tiny only shortens training and the grids)
 SIZES: dict[str, dict[str, Any]] = {
@@ -421,6 +423,9 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
         A FlightCoach file is missing, or has no box rotation (one line naming it).
     """
     size, opt = study_settings(config, NAME, DEFAULTS, SIZES)
+    inc = str(opt["increments"])
+    if inc not in INCREMENTS:
+        raise ConfigError(f"studies.{NAME}.increments: {inc!r} is not one of {', '.join(INCREMENTS)}")
     flights_in = _flight_paths(inputs)
     template = input_path(inputs, "template", ROOT / "reports" / "templates" / "study.html.j2")
     paths = {k: output_path(outputs, k) for k in ("report", "results", "page", *OUTPUT_TABLES,
@@ -465,7 +470,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     tuning = [{"parameter": "q", "value": g, "score": s, "chosen": g == q} for g, s in zip(tq.grid, tq.score)]
     best = None
     for s in sorted({float(v) for v in opt["q2_scale_grid"]}):
-        trk = run_ekf_hmm(ekf, prior_tr, t_tr, z_tr, ms, s * Q2_unit, box_heading_rad=box_tr, reset_t_ns=starts_tr)
+        trk = run_ekf_hmm(ekf, prior_tr, t_tr, z_tr, ms, s * Q2_unit, box_heading_rad=box_tr, reset_t_ns=starts_tr,
+                          increments=inc)
         man_s = per_maneuver(trk, t_tr, x_tr, seg_tr)
         score = float(man_s["acc_ratio"].mean())
         tuning.append({"parameter": "q2_scale", "value": s, "score": score, "chosen": False})
@@ -486,7 +492,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     t_te, x_te, z_te = synthesise_radar(st_te, radar, noise(1))
     prior = GaussianState(x_te[0], initial_cov(), int(t_te[0]))
     trk = run_ekf_hmm(ekf, prior, t_te, z_te, ms, Q2, box_heading_rad=box_te,
-                      reset_t_ns=seg_te["t_start_ns"].to_numpy())
+                      reset_t_ns=seg_te["t_start_ns"].to_numpy(), increments=inc)
     man = per_maneuver(trk, t_te, x_te, seg_te)
     tl = _timeline(trk, t_te, x_te, seg_te)
     n_better = int(man["better"].sum())
@@ -554,6 +560,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
                      definitions=r.definitions, figures=figures(man, tl),
                      title="Study: FlightCoach F3A, EKF vs EKF+HMM (train P23 #36, test P23 #350)",
                      facts=[("size", size), ("seed", str(int(seed))), ("features", opt["features"]),
+                            ("classifier input", f"{inc} increments"),
                             ("GMR input", f"{opt['gmr_input']} ({opt['gmr_align']})"), ("Baum-Welch iterations ≤", str(opt["n_iter"])),
                             ("q grid", ", ".join(f"{float(v):g}" for v in opt["q_grid"])),
                             ("Q₂ scale grid", ", ".join(f"{float(v):g}" for v in opt["q2_scale_grid"])),

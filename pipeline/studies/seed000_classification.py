@@ -35,10 +35,13 @@ Steps (seed 000 §2, §3.3–§3.6, §5, §11; corrections §13):
    (``trained_on``: truth | ekf); Tables 3.13–3.15: the switch cells on EKF estimates
    (``ekf_rng(seed, "switch_<K>_<t>s")``), confidence classifier, cumulative (thesis) and
    windowed (ours), both trainings. Thesis values: digest §11 (truth-trained on EKF input).
-   With ``printed_increments`` (default) Tables 3.5–3.8 are also computed, truth-trained, on
-   the thesis text's (4.1) — the predicted increments ``x̂⁻_{k+1} − x̂⁺_k`` of the same EKF runs
-   (:func:`~pipeline.estimate.sets.prior_increment_set`) — as a diagnosis beside the digest's
-   posterior increments (§13.4); column ``increments`` (``posterior`` | ``prior``).
+   What the classifier sees of the EKF runs is ``increments`` (column ``increments``): ``prior``
+   (default) — the thesis text's (4.1), "After each dynamic update, x̂⁻_{k+1} and x̂⁺_k are passed
+   to the pre-processing block": the predicted increments ``x̂⁻_{k+1} − x̂⁺_k``
+   (:func:`~pipeline.estimate.sets.prior_increment_set`), as the EKF+HMM's classifier sees them
+   — or ``posterior``, the digest's reading (§13.4), ``x̂⁺_{k+1} − x̂⁺_k``. The EKF-trained models
+   train on the same reading. With ``other_increments`` (default) Tables 3.5–3.8 are also
+   computed on the other reading, both trainings, as a diagnosis (``RESULT seed000_ekf_other_*``).
 
 Outputs (:data:`OUTPUT_TABLES` under ``results/studies/seed000_classification/``):
 ``report.md`` (every table beside the thesis, the acceptance checks, and where our
@@ -71,6 +74,7 @@ import plotly.graph_objects as go
 from ..config import ROOT, ConfigError, load_config, section
 from ..io.parquet import write_table
 from ..models import ManeuverModelSet, ModelsConfig
+from ..estimate.ekf_hmm import INCREMENTS
 from ..estimate.sets import SetsSettings, ekf_rng, ekf_set, prior_increment_set
 from ..models.metrics import (SCENARIOS, SWITCH_TABLE, SWITCH_TABLE_EKF, THESIS_SWITCH, THESIS_SWITCH_EKF, confusion,
                               is_correct, per_maneuver_table, thesis_side_by_side)
@@ -97,7 +101,8 @@ DEFAULTS: dict[str, Any] = {
     "n_states": None,        # override models.n_states for every maneuver: an int or "auto"
     "skip": [],              # parts left out: "switch", "gmr" (their tables are written empty)
     "ekf_input": False,      # also classify EKF estimates: Tables 3.5-3.8, 3.13-3.15 (ekf_* tables)
-    "printed_increments": True,  # with ekf_input: Tables 3.5-3.8 also on the printed (4.1) increments
+    "increments": "prior",   # with ekf_input: what the classifier sees (prior: printed (4.1); posterior: §13.4)
+    "other_increments": True,  # with ekf_input: Tables 3.5-3.8 also on the other reading (diagnosis)
 }
 #: per-size settings
 SIZES: dict[str, dict[str, Any]] = {
@@ -488,6 +493,14 @@ def ekf_settings(estimate: Mapping | None, simulate: Mapping) -> SetsSettings:
     return SetsSettings.from_config({**dict((estimate or {}).get("sets") or {}), "radar": radar})
 
 
+def increments_view(sets: Mapping[str, pd.DataFrame], increments: str, part: str) -> dict[str, pd.DataFrame]:
+    """What the classifier sees of EKF sets (:func:`ekf_of`): the sets themselves
+    (``posterior``) or their :func:`~pipeline.estimate.sets.prior_increment_set` (``prior``)."""
+    if increments == "posterior":
+        return dict(sets)
+    return {m: prior_increment_set(d, where=f"{m}_{part}") for m, d in sets.items()}
+
+
 def ekf_of(sets: Mapping[str, pd.DataFrame], part: str, seed: int, es: SetsSettings,
            diagnostics: dict | None = None) -> dict[str, pd.DataFrame]:
     """EKF estimates of the per-maneuver sets, each drawn as the ``ekf_sets`` rule draws
@@ -525,10 +538,11 @@ def ekf_tables(models: Mapping[str, ManeuverModelSet], train: Mapping, test: Map
 
 
 def ekf_switch_tables(models: Mapping[str, ManeuverModelSet], run: _Run, es: SetsSettings,
-                      progress=None) -> pd.DataFrame:
+                      progress=None, increments: str = "prior") -> pd.DataFrame:
     """Tables 3.13–3.15: the switch cells on EKF estimates (each cell's runs simulated as for
     3.10–3.12, then filtered as the ``ekf_sets`` rule filters ``switch_<K>_<t>s``), confidence
-    classifier, :data:`EKF_SWITCH_MODES`, for every model set of ``models``."""
+    classifier, :data:`EKF_SWITCH_MODES`, for every model set of ``models``; the classifier sees
+    ``increments`` (:func:`increments_view`)."""
     cells = []
     for ts in (3.0, 8.0, 13.0):
         for key in "ABCD":
@@ -536,6 +550,7 @@ def ekf_switch_tables(models: Mapping[str, ManeuverModelSet], run: _Run, es: Set
             df = simulate_runs("switch", key, run.switch_runs, run.seed, name, run.sim, t_switch=ts)
             est, _ = ekf_set(df, radar=es.radar, q=es.q, p0_sigma=es.p0_sigma, rng=ekf_rng(run.seed, name),
                              where=name)
+            est = increments_view({name: est}, increments, "switch")[name]
             for trained_on, ms in models.items():
                 for mode in EKF_SWITCH_MODES:
                     if progress is not None:
@@ -545,11 +560,25 @@ def ekf_switch_tables(models: Mapping[str, ManeuverModelSet], run: _Run, es: Set
     return pd.DataFrame(cells)
 
 
-def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse: pd.DataFrame) -> None:
-    """The EKF-input ``RESULT`` figures (Tables 3.5–3.8, 3.13–3.15; the printed-(4.1) rows,
-    ``increments: prior``, as ``seed000_ekf_printed_*``)."""
-    pr = et[et.increments == "prior"].set_index("maneuver") if "increments" in et else et.iloc[:0]
-    et = et[et.increments == "posterior"] if "increments" in et else et
+def other_reading(increments: str) -> str:
+    """The reading of (4.1) that ``increments`` is not."""
+    return "posterior" if increments == "prior" else "prior"
+
+
+#: what each reading of (4.1) means, for reports and RESULT definitions
+READING = {"prior": "the printed (4.1) predicted increments x̂⁻_{k+1} − x̂⁺_k",
+           "posterior": "the digest's (§13.4) posterior increments x̂⁺_{k+1} − x̂⁺_k"}
+
+
+def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse: pd.DataFrame,
+                 increments: str = "prior") -> None:
+    """The EKF-input ``RESULT`` figures (Tables 3.5–3.8, 3.13–3.15) on the ``increments`` reading;
+    the other reading's rows as ``seed000_ekf_other_*``."""
+    other = other_reading(increments)
+    pr = et[et.increments == other].set_index("maneuver")
+    et = et[et.increments == increments]
+    res.add("seed000_ekf_increments", increments,
+            f"What the classifier sees of the EKF runs in the seed000_ekf_* figures: {READING[increments]}.")
 
     def rows(table, trained_on, mans=KNOWN):
         return et[(et.table == table) & (et.trained_on == trained_on) & et.maneuver.isin(mans)].set_index("maneuver")
@@ -607,24 +636,29 @@ def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse:
                     f"% of M5's EKF-estimated test runs called unknown at the end with the background rival "
                     f"(3.8+bg, ours), {trained_on}-trained models.")
     if len(pr):
-        p8 = pr[(pr.table == "3.8")]
-        p68 = pr[pr.table.isin(["3.6", "3.8"]) & pr.index.isin(KNOWN)]
-        res.add("seed000_ekf_printed_cf_min_FA_pct", f"{p68['FA_pct'].min():.2f}",
-                "Lowest FA over M1–M4 of the truth-trained confidence classifier on the printed (4.1) "
-                "increments x̂⁻_{k+1} − x̂⁺_k of the same EKF runs, train and test (Tables 3.6, 3.8; diagnosis).")
-        res.add("seed000_ekf_printed_cf_min_MAoT_minus_thesis_pct",
+        pt = pr[pr.trained_on == "truth"]
+        p8 = pt[(pt.table == "3.8")]
+        p68 = pt[pt.table.isin(["3.6", "3.8"]) & pt.index.isin(KNOWN)]
+        what = f"{READING[other]} of the same EKF runs (the other reading; diagnosis)"
+        res.add("seed000_ekf_other_cf_min_FA_pct", f"{p68['FA_pct'].min():.2f}",
+                f"Lowest FA over M1–M4 of the truth-trained confidence classifier on {what}, train and test "
+                f"(Tables 3.6, 3.8).")
+        res.add("seed000_ekf_other_cf_min_MAoT_minus_thesis_pct",
                 f"{(p68['MAoT_pct'] - p68['thesis_MAoT_pct']).min():.2f}",
-                "Lowest of our MAoT minus the thesis's over M1–M4 in Tables 3.6 and 3.8 on the printed (4.1) "
-                "increments (truth-trained; diagnosis).")
+                f"Lowest of our MAoT minus the thesis's over M1–M4 in Tables 3.6 and 3.8 on {what} (truth-trained).")
         for man in ALL:
             if man in p8.index:
                 r = p8.loc[man]
-                res.add(f"seed000_ekf_printed_cf_test_{man}_MAoT_pct", f"{r['MAoT_pct']:.2f}",
-                        f"{man} test-run MAoT of the truth-trained confidence classifier on the printed (4.1) "
-                        f"increments (Table 3.8 setup; thesis {r['thesis_MAoT_pct']:.2f}).")
-                res.add(f"seed000_ekf_printed_cf_test_{man}_FA_pct", f"{r['FA_pct']:.2f}",
-                        f"{man} test-run FA of the truth-trained confidence classifier on the printed (4.1) "
-                        f"increments (Table 3.8 setup).")
+                res.add(f"seed000_ekf_other_cf_test_{man}_MAoT_pct", f"{r['MAoT_pct']:.2f}",
+                        f"{man} test-run MAoT of the truth-trained confidence classifier on {what} (Table 3.8 "
+                        f"setup; thesis {r['thesis_MAoT_pct']:.2f}).")
+                res.add(f"seed000_ekf_other_cf_test_{man}_FA_pct", f"{r['FA_pct']:.2f}",
+                        f"{man} test-run FA of the truth-trained confidence classifier on {what} (Table 3.8 setup).")
+        pe = pr[(pr.trained_on == "ekf") & (pr.table == "3.8") & pr.index.isin(KNOWN)]
+        if len(pe):
+            res.add("seed000_ekf_other_cf_test_mean_MAoT_gain_pct",
+                    f"{pe['MAoT_pct'].mean() - p8.loc[p8.index.isin(KNOWN), 'MAoT_pct'].mean():.2f}",
+                    f"EKF-trained minus truth-trained mean MAoT over M1–M4 on EKF test runs (Table 3.8) on {what}.")
     if esw is not None and len(esw):
         for trained_on in sorted(set(esw.trained_on), key=lambda x: x != "truth"):
             for mode in EKF_SWITCH_MODES:
@@ -641,8 +675,11 @@ def ekf_headline(res: Results, et: pd.DataFrame, esw: pd.DataFrame | None, rmse:
                         f"{np.mean([v[2] for v in THESIS_SWITCH_EKF.values()]):.2f}).")
 
 
-def ekf_report(et: pd.DataFrame, esw: pd.DataFrame | None, es: SetsSettings, rmse: pd.DataFrame) -> list[str]:
-    """The EKF-input section of ``report.md``."""
+def ekf_report(et: pd.DataFrame, esw: pd.DataFrame | None, es: SetsSettings, rmse: pd.DataFrame,
+               increments: str = "prior") -> list[str]:
+    """The EKF-input section of ``report.md`` (headline reading ``increments``, the other one as a
+    diagnosis)."""
+    other = other_reading(increments)
     L = ["", "## EKF input: Tables 3.5–3.8 (cumulative), truth- and EKF-trained models", "",
          f"Radar synthesised from the truth (site {list(es.radar.site_ned_m)} m NED, σ = "
          f"{list(es.radar.sigma)}; `simulate.sensors.radar`), CA EKF with white-jerk q = {es.q:g} m²/s⁵, "
@@ -654,18 +691,18 @@ def ekf_report(et: pd.DataFrame, esw: pd.DataFrame | None, es: SetsSettings, rms
          "EKF error (RMSE over all samples of the test runs; diverged: final position error > 10 m, "
          "mostly runs near the radar's horizontal plane tracked as their mirror image below it — range "
          "and two direction cosines do not give the sign of the third):", "", md_table(rmse, "{:.3f}"), "",
-         md_table(et[et.increments == "posterior"]), ""]
-    pr = et[et.increments == "prior"]
+         f"The classifier sees {READING[increments]} (`increments: {increments}`); the EKF-trained models "
+         f"train on the same.", "", md_table(et[et.increments == increments]), ""]
+    pr = et[et.increments == other]
     if len(pr):
-        L += ["### Diagnosis: the printed (4.1) increments", "",
+        L += [f"### Diagnosis: the other reading of (4.1), `increments: {other}`", "",
               "The thesis text (§4.1: \"After each dynamic update, x̂⁻_{k+1} and x̂⁺_k are passed to the "
               "pre-processing block\") gives the classifier the *predicted* increments x̂⁻_{k+1} − x̂⁺_k = "
-              "(A − I) x̂⁺_k; the digest (§13.4), which the tables above follow, reads (4.1) as the posterior "
-              "increments x̂⁺_{k+1} − x̂⁺_k. Below: the same EKF runs and truth-trained models, classifying the "
-              "predicted increments (`increments: prior`, pipeline/estimate/ekf_hmm.py `prior_increment_track`). "
-              "A predicted increment carries no radar-update correction, so it is as smooth as the EKF's "
-              "velocity and acceleration; the thesis's EKF-input tables lie near its truth tables, which "
-              "this reading reproduces and the digest's does not.", "",
+              "(A − I) x̂⁺_k (`prior`, pipeline/estimate/ekf_hmm.py `prior_increment_track`); the digest (§13.4) "
+              "reads (4.1) as the posterior increments x̂⁺_{k+1} − x̂⁺_k (`posterior`). A predicted increment "
+              "carries no radar-update correction, so it is as smooth as the EKF's velocity and acceleration; "
+              "the thesis's EKF-input tables lie near its truth tables. Below: the same EKF runs classified on "
+              f"{READING[other]}, truth-trained and trained on that reading.", "",
               md_table(pr), ""]
     if esw is not None and len(esw):
         L += ["## EKF input: Tables 3.13–3.15 (switch scenarios, confidence)", "",
@@ -675,7 +712,7 @@ def ekf_report(et: pd.DataFrame, esw: pd.DataFrame | None, es: SetsSettings, rms
 
 
 def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | None,
-            et: pd.DataFrame | None = None) -> list:
+            et: pd.DataFrame | None = None, increments: str = "prior") -> list:
     """The page's plots: MAoT beside the thesis, switch-cell final MAoT, GMR error over time and,
     with EKF input, Tables 3.5–3.8."""
     figs = []
@@ -683,11 +720,11 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
         fig = go.Figure()
         keys = ["table", "trained_on", "increments"]
         for (table, trained_on, inc), g in et[et["maneuver"].isin(ALL)].groupby(keys, sort=False):
-            if inc == "prior" and table != "3.8":
+            if inc != increments and (table != "3.8" or trained_on != "truth"):
                 continue
-            name = f"{table} ours, {trained_on}-trained" + (", printed (4.1)" if inc == "prior" else "")
+            name = f"{table} ours, {trained_on}-trained" + (f", {inc} increments" if inc != increments else "")
             fig.add_trace(go.Bar(x=g["maneuver"], y=g["MAoT_pct"], name=name))
-        th = et[(et["trained_on"] == "truth") & (et["increments"] == "posterior")].dropna(subset=["thesis_MAoT_pct"])
+        th = et[(et["trained_on"] == "truth") & (et["increments"] == increments)].dropna(subset=["thesis_MAoT_pct"])
         for table, g in th.groupby("table", sort=False):
             fig.add_trace(go.Scatter(x=g["maneuver"], y=g["thesis_MAoT_pct"], mode="markers",
                                      marker=dict(symbol="x", size=9), name=f"{table} thesis"))
@@ -768,6 +805,9 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
         hmm = section(cfg_file, "hmm") if hmm is None else hmm
         estimate = section(cfg_file, "estimate") if estimate is None else estimate
     es = ekf_settings(estimate, simulate) if st["ekf_input"] else None  # a bad key fails before any work
+    inc = str(st["increments"])
+    if inc not in INCREMENTS:
+        raise ConfigError(f"studies.{NAME}.increments: {inc!r} is not one of {', '.join(INCREMENTS)}")
     run = _Run(runs=int(st["runs"]), switch_runs=int(st["switch_runs"]), seed=int(seed), sim=dict(simulate))
     sets = input_path(inputs, "sets")
     template = input_path(inputs, "template", ROOT / "reports" / "templates" / "study.html.j2")
@@ -909,26 +949,27 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
                               "diverged_runs": d_test[m]["n_diverged"],
                               "diverged_train_runs": d_train[m]["n_diverged"]} for m in ALL])
         say(rmse.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
-        progress("EKF input: training one HMM per known maneuver on the EKF estimates")
-        ms_ekf = ManeuverModelSet(config=cfg).fit(pd.concat([tag(ekf_train[m], m) for m in KNOWN], ignore_index=True))
-        models = {"truth": ms, "ekf": ms_ekf}
-        progress("EKF input: Tables 3.5-3.8")
-        et = ekf_tables(models, ekf_train, ekf_test)
-        if st["printed_increments"]:
-            # the thesis text's (4.1), x̂⁻_{k+1} − x̂⁺_k, beside the digest's x̂⁺_{k+1} − x̂⁺_k (§13.4):
-            # the same EKF runs, truth-trained models (the thesis setup)
-            progress("EKF input: Tables 3.5-3.8 on the printed (4.1) increments x-(k+1) - x+(k)")
-            pr_train = {m: prior_increment_set(d, where=f"{m}_train") for m, d in ekf_train.items()}
-            pr_test = {m: prior_increment_set(d, where=f"{m}_test") for m, d in ekf_test.items()}
-            et = pd.concat([et, ekf_tables({"truth": ms}, pr_train, pr_test, increments="prior")],
-                           ignore_index=True)
+        # what the classifier sees: the printed (4.1) x̂⁻_{k+1} − x̂⁺_k (prior) or the digest's
+        # x̂⁺_{k+1} − x̂⁺_k (posterior, §13.4); the other reading is tabulated as a diagnosis
+        readings = [inc] + ([other_reading(inc)] if st["other_increments"] else [])
+        tabs = []
+        for k, reading in enumerate(readings):
+            v_train, v_test = increments_view(ekf_train, reading, "train"), increments_view(ekf_test, reading, "test")
+            progress(f"EKF input ({reading} increments): training one HMM per known maneuver on the EKF estimates")
+            ms_ekf = ManeuverModelSet(config=cfg).fit(pd.concat([tag(v_train[m], m) for m in KNOWN],
+                                                                ignore_index=True))
+            if k == 0:
+                models = {"truth": ms, "ekf": ms_ekf}
+            progress(f"EKF input ({reading} increments): Tables 3.5-3.8")
+            tabs.append(ekf_tables({"truth": ms, "ekf": ms_ekf}, v_train, v_test, increments=reading))
+        et = pd.concat(tabs, ignore_index=True)
         write_table(et, paths["ekf_tables"], name="seed000_tables_3_5_3_8",
                     extra={"runs_per_maneuver": run.runs, "seed": run.seed, "size": size, "q": es.q,
                            "p0_sigma": list(es.p0_sigma)})
         with pd.option_context("display.width", 200, "display.max_columns", 20):
             say(et.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
         if "switch" not in skip:
-            esw = ekf_switch_tables(models, run, es, progress)
+            esw = ekf_switch_tables(models, run, es, progress, increments=inc)
             write_table(esw, paths["ekf_switch_tables"], name="seed000_tables_3_13_3_15",
                         extra={"switch_runs": run.switch_runs, "seed": run.seed, "size": size, "q": es.q})
             with pd.option_context("display.width", 250, "display.max_columns", 30):
@@ -937,13 +978,13 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
             write_table(pd.DataFrame(), paths["ekf_switch_tables"], name="seed000_tables_3_13_3_15",
                         extra={"skipped": True})
         with open(paths["report"], "a") as fh:
-            fh.write("\n".join(ekf_report(et, esw, es, rmse)) + "\n")
+            fh.write("\n".join(ekf_report(et, esw, es, rmse, inc)) + "\n")
     say(f"report: {paths['report']}")
 
     res = Results()
     headline(res, run, cfg, ms, tables, m5_diag, st["alt_mode"], sw=sw, sh=sh, grmse=grmse)
     if et is not None:
-        ekf_headline(res, et, esw, rmse)
+        ekf_headline(res, et, esw, rmse, inc)
     res.add("seed000_m4_as_m2_test_samples_pct", f"{m4m2['samples_pct']:.2f}",
             "Share of the M4 test samples the confidence rule labels M2 (Table 3.4 run; thesis §3.4.2).")
     res.add("seed000_m4_as_m2_in_first_10s_pct", f"{m4m2['in_first_pct']:.1f}",
@@ -954,11 +995,12 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
             "Wall time of the study (s), simulation to results, page excluded.")
     res.write(paths["results"])
     build_study_page(NAME, paths["page"], results=paths["results"], report_md=paths["report"], template=template,
-                     definitions=res.definitions, figures=figures(tables, sw, gerr, et),
+                     definitions=res.definitions, figures=figures(tables, sw, gerr, et, inc),
                      title=f"Study: seed-000 classification ({run.runs} runs per maneuver)",
                      facts=[("size", size), ("seed", str(run.seed)), ("runs per maneuver", str(run.runs)),
                             ("runs per switch cell", str(run.switch_runs)), ("features", cfg.feature_set),
-                            ("input", "truth" if es is None else f"truth and EKF estimates (q = {es.q:g} m²/s⁵)"),
+                            ("input", "truth" if es is None else f"truth and EKF estimates (q = {es.q:g} m²/s⁵, "
+                                                                 f"{inc} increments)"),
                             ("tables", ", ".join(f"{t}.parquet" for t in OUTPUT_TABLES))])
     return StudyResult(name=NAME, status="ok", results=dict(res.values),
                        diagnostics={"size": size, "seed": run.seed, "settings": st,

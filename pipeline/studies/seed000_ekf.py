@@ -32,9 +32,9 @@ Steps (seed 000 §2, §3, §8, §9, §11–§13; issue 14 item 5):
    re-run ``noise_runs`` times with new radar noise from its true initial state. Reported: RMSE
    per group (pos, v_N, v_E, v_D, acc) EKF vs EKF+HMM, their mean error / error variance /
    filter variance against time, and the classifier MAoT beside the thesis' Chapter-4 table.
-   ``increments`` picks what the classifier sees of the baseline EKF: the posterior increments
-   (digest §13.4, default) or the predicted ones of the thesis's printed (4.1)
-   (:func:`~pipeline.estimate.ekf_hmm.prior_increment_track`); the GMR diagnosis
+   ``increments`` picks what the classifier sees of the baseline EKF: the predicted increments
+   of the thesis's printed (4.1) (:func:`~pipeline.estimate.ekf_hmm.prior_increment_track`,
+   default) or the posterior ones (digest §13.4); the GMR diagnosis
    (``gmr_decomposition``) always reads the posteriors.
 
 Outputs (:data:`OUTPUT_TABLES` under ``results/studies/seed000_ekf/``): ``q_tuning``,
@@ -101,7 +101,7 @@ DEFAULTS: dict[str, Any] = {
     "features": None,        # override hmm.feature_set (state9, state9h)
     "chunk_runs": 250,       # Monte Carlo runs filtered at once (memory: ~1 MB per run with RTS)
     "skip": [],              # parts left out: "hmm" (the EKF+HMM; its tables are written empty)
-    "increments": "posterior",  # what the classifier sees: posterior (digest §13.4) or prior (printed 4.1)
+    "increments": "prior",  # what the classifier sees: prior (printed (4.1), default) or posterior (digest §13.4)
 }
 #: per-size settings
 SIZES: dict[str, dict[str, Any]] = {
@@ -286,7 +286,7 @@ def mc_maneuver(man: str, df: pd.DataFrame, ekf: ExtendedKalmanFilter, radar: Ra
 
 # -- EKF+HMM ----------------------------------------------------------------------------------------
 
-def ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z, increments: str = "posterior"):
+def ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z, increments: str = "prior"):
     """One EKF+HMM run over ``truth`` (R, T, 9) from the true initial state: ``(track, e_ekf, e_hmm)``.
 
     ``e_hmm`` is the error of the EKF+HMM's *output* (:attr:`~pipeline.estimate.ekf_hmm.EkfHmmTrack.output`:
@@ -309,7 +309,7 @@ def model_variant(ms, **cfg):
 
 
 def estimated_frames(ekf, train: dict, radar, seed: int, n: int,
-                     increments: str = "posterior") -> tuple[pd.DataFrame, pd.DataFrame]:
+                     increments: str = "prior") -> tuple[pd.DataFrame, pd.DataFrame]:
     """Truth and baseline-EKF state tables of ``n`` training runs per known maneuver (same run ids
     and times; truth initialisation, one radar realisation each): ``q2_from_runs``' inputs. The
     EKF table is what the classifier sees of it (``increments``, :func:`classifier_state`)."""

@@ -190,7 +190,7 @@ BAD = [
     ("estimate", {"estimate": {"ekf": {"qq": 1.0}}}, "estimate.ekf.qq: unknown key"),
     ("estimate", {"estimate": {"ekf_hmm": {"q2_scale": "big"}}}, "estimate.ekf_hmm.q2_scale: 'big' is not a number"),
     ("estimate", {"estimate": {"ekf_hmm": {"increments": "predicted"}}},
-     "estimate.ekf_hmm.increments: 'predicted' is not one of posterior, prior"),
+     "estimate.ekf_hmm.increments: 'predicted' is not one of prior, posterior"),
     ("estimate", {"estimate": {"synthetic_radar": {"v": {"sigma_rnage_m": 1}}}},
      "estimate.synthetic_radar.v.sigma_rnage_m: unknown key"),
     ("model_sets", {"model_sets": {"s": {"data": "simulated", "vehicles": ["q"], "input": "gps"}}},

@@ -391,7 +391,7 @@ def test_the_printed_increments_are_the_ekfs_predicted_ones_x_minus_next_minus_x
     np.testing.assert_allclose(prior_increment_track(x[0], t_ns), p[0])   # one run as (T, 9)
     np.testing.assert_array_equal(classifier_state(x, t_ns, "posterior"), x)
     np.testing.assert_array_equal(classifier_state(x, t_ns, "prior"), p)
-    with pytest.raises(EkfHmmError, match="increments must be one of posterior, prior"):
+    with pytest.raises(EkfHmmError, match="increments must be one of prior, posterior"):
         classifier_state(x, t_ns, "predicted")
     with pytest.raises(EkfHmmError, match="do not fit"):
         prior_increment_track(x[:, :-1], t_ns)
@@ -402,7 +402,7 @@ def test_the_printed_increments_feed_the_classifier_causally_and_run_ekf_hmm_che
     Q2 = q2_from_runs(ms, data[data["label"] == "M1"], scale=2.0)
     ekf, prior, t_ns, z, truth = _radar_runs(data, ("M1",), np.random.default_rng(3))
     out = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2, increments="prior")
-    base = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2)
+    base = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2, increments="posterior")
     np.testing.assert_array_equal(out.ekf.mean, base.ekf.mean)         # the baseline EKF is the same
     assert out.mode.mean() > 0.3 and not np.array_equal(out.acc_hmm, base.acc_hmm, equal_nan=True)
     # the classification of step k is that of the predicted-increment track

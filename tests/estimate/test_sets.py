@@ -82,6 +82,23 @@ def test_a_set_does_not_depend_on_which_other_sets_are_filtered(written, tmp_pat
     pd.testing.assert_frame_equal(read_table(alone, SET_COLUMNS), read_table(out["M1_test"], SET_COLUMNS))
 
 
+def test_the_sets_hold_the_predicted_increment_track_by_default_and_the_posteriors_on_request(written, tmp_path):
+    paths, out, _ = written
+    post = tmp_path / "M1_test.parquet"
+    run_ekf_sets({"sets": [paths["M1_test"]]}, {"sets": [post]}, {"increments": "posterior"}, seed=SEED)
+    posterior = read_table(post, SET_COLUMNS)
+    # the same radar draw filtered: the posteriors are ekf_set's, the default is their predicted-increment track
+    want, _ = ekf_set(read_table(paths["M1_test"], SET_COLUMNS), radar=RadarModel(), q=3.0,
+                      rng=ekf_rng(SEED, "M1_test"))
+    np.testing.assert_array_equal(posterior[list(STATE_COLUMNS)].to_numpy(), want[list(STATE_COLUMNS)].to_numpy())
+    pd.testing.assert_frame_equal(read_table(out["M1_test"], SET_COLUMNS),
+                                  prior_increment_set(posterior), check_dtype=False)
+    assert read_table_meta(post)["increments"] == "posterior"
+    assert read_table_meta(out["M1_test"])["increments"] == "prior"
+    with pytest.raises(ConfigError, match="estimate.sets.increments"):
+        SetsSettings.from_config({"increments": "both"})
+
+
 def _radar_only_position(radar: RadarModel, z: np.ndarray, below: np.ndarray) -> np.ndarray:
     """The position one radar measurement gives alone: ``R_n + ρ [u, v, ±√(1 − u² − v²)]``
     (τ_RD = 0; the sign of the third direction cosine from the truth)."""

@@ -95,7 +95,7 @@ def test_a_bad_setting_is_refused_in_one_line(tmp_path):
     with pytest.raises(ConfigError, match=r"studies.seed000_ekf.mc_maneuvers: unknown maneuver"):
         s0e.run_seed000_ekf(None, s0e.outputs_for(str(tmp_path)), {"size": "tiny", NAME: {"mc_maneuvers": ["M9"]}},
                             seed=1)
-    with pytest.raises(ConfigError, match=r"studies.seed000_ekf.increments: 'predicted' is not one of posterior, prior"):
+    with pytest.raises(ConfigError, match=r"studies.seed000_ekf.increments: 'predicted' is not one of prior, posterior"):
         s0e.run_seed000_ekf(None, s0e.outputs_for(str(tmp_path)), {"size": "tiny", NAME: {"increments": "predicted"}},
                             seed=1)
 

@@ -102,7 +102,7 @@ def test_the_old_file_with_the_renames_validates_to_the_same_dict_as_the_new_one
     assert added and all({**v, "doc": ""} == {**vehicles["default"], "doc": ""} for v in added.values())
     # issue 14: the simekf model set, sim's maneuvers on the EKF estimates of the sets
     simekf = new["model_sets"].pop("simekf")
-    assert simekf == {**new["model_sets"]["sim"], "input": "ekf", "hmm": {"gmr_input": "pos", "gate_mps2": 2.0}}
+    assert simekf == {**new["model_sets"]["sim"], "input": "ekf", "hmm": {"gmr_input": "pos_vel", "gate_mps2": 2.0}}
     # ... which the EKF+HMM classifies with (the schema default is sim)
     assert new["estimate"]["ekf_hmm"].pop("model") == "simekf"
     new["estimate"]["ekf_hmm"]["model"] = "sim"

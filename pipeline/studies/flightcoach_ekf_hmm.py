@@ -25,8 +25,10 @@ logged, acceleration differentiated from it) is the **reference** every error is
    one scalar ``q`` by :func:`pipeline.estimate.montecarlo.tune_q` (normalised RMSE over the
    flight, grid ``q_grid``); ``Q₂`` by :func:`pipeline.estimate.ekf_hmm.q2_from_runs` on the
    training segments' reference state (classifier reset at each segment start) times the scale
-   of ``q2_scale_grid`` that minimises the mean over the training maneuvers of the EKF+HMM/EKF
-   acceleration-RMSE ratio, the EKF+HMM run on the training flight's own synthesised radar. The
+   of ``q2_scale_grid``, and the GMR conditioning block of ``gmr_inputs`` (``pos_fd``, ``pos``,
+   ``pos_vel``: a classification-time setting, the HMMs are unchanged), jointly the pair that
+   minimises the mean over the training maneuvers of the EKF+HMM/EKF acceleration-RMSE ratio,
+   the EKF+HMM run on the training flight's own synthesised radar. The
    models classify their own training flight there, so this choice is optimistic, never informed
    by the test flight.
 4. **Test** on ``manual_F3A_P23_22_05_31_00000350.json`` (same pilot and schedule, 3 months
@@ -89,6 +91,7 @@ from ..report.study import build_study_page, layout
 from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, STUDY_TABLES, Progress, Results, StudyError,
                    StudyResult, flightcoach_defaults, flightcoach_paths, input_path, md_table, output_path, say, study_outputs, study_settings,
                    write_text)
+from .seed000_ekf import model_variant
 
 NAME = "flightcoach_ekf_hmm"
 SUBDIR = FLIGHTCOACH_DIR
@@ -111,7 +114,7 @@ DEFAULTS: dict[str, Any] = {
     "n_states": 6,                  # an int or "auto"
     "min_covar": 1.0e-4,            # the hmm section's default (normalised units)
     "n_iter": 50,
-    "gmr_input": "pos_fd",          # pos_fd | pos | pos_vel (ModelsConfig.gmr_input)
+    "gmr_inputs": ["pos_fd", "pos", "pos_vel"],      # GMR conditioning blocks, tuned on the training flight
     "gmr_align": "sample",          # sample | interval (ModelsConfig.gmr_align)
     "q_grid": [1, 3, 10, 30, 100, 300, 1000],        # EKF jerk PSD (m²/s⁵), tuned on the training flight
     "q2_scale_grid": [0.25, 0.5, 1, 2, 4, 8, 16, 32, 64],   # Q₂ scale, tuned on the training flight
@@ -120,7 +123,7 @@ DEFAULTS: dict[str, Any] = {
 }
 #: per-size settings (the flights are fixed; tiny only shortens training and the grids)
 SIZES: dict[str, dict[str, Any]] = {
-    "tiny": {"n_iter": 3, "q_grid": [10, 30, 100], "q2_scale_grid": [1]},
+    "tiny": {"n_iter": 3, "q_grid": [10, 30, 100], "q2_scale_grid": [1], "gmr_inputs": ["pos_fd"]},
     "small": {},
     "thesis": {},
 }
@@ -348,11 +351,12 @@ def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, q
     site = ", ".join(f"{float(v):g}" for v in st["radar_site_ned_m"])
     L = [f"# FlightCoach F3A EKF vs EKF+HMM study (size {size}, seed {seed})", "",
          f"{len(ms.labels_)} maneuver HMMs (features `{st['features']}`, {st['n_states']} states, covariance floor "
-         f"{st['min_covar']:g}, ≤ {st['n_iter']} Baum-Welch iterations, GMR input `{st['gmr_input']}`, alignment `{st['gmr_align']}`) trained on "
+         f"{st['min_covar']:g}, ≤ {st['n_iter']} Baum-Welch iterations, GMR input `{ms.config.gmr_input}` (of {', '.join(st['gmr_inputs'])}, tuned), alignment `{st['gmr_align']}`) trained on "
          f"the {n_train} labelled segments of `{TRAIN}` (reference state, 5 Hz). Radar synthesised from each "
          f"flight's reference with the seed-000 noise at the NED site ({site}) m. Written by "
          f"`pipeline/studies/flightcoach_ekf_hmm.py` (`snakemake study_{NAME}`).", "",
-         f"Tuned on the training flight only: EKF q = {q:g} m²/s⁵ (normalised RMSE), Q₂ scale = {scale:g} "
+         f"Tuned on the training flight only: EKF q = {q:g} m²/s⁵ (normalised RMSE), GMR input "
+         f"`{ms.config.gmr_input}` and Q₂ scale = {scale:g} "
          f"(mean EKF+HMM/EKF acceleration-RMSE ratio over the training maneuvers).", "",
          f"## Test flight `{TEST}` (classifier reset at each segment start)", "",
          f"A maneuver is better when its EKF+HMM acceleration RMSE < {BETTER_RATIO} × the EKF's with HMM inputs "
@@ -440,7 +444,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     # the thesis classifier (confidence decision, V_c < −1, cumulative forward passes): the
     # EKF+HMM switches to HMM inputs exactly when it names a maneuver; no background model
     cfg = ModelsConfig(feature_set=opt["features"], n_states=ns, min_covar=float(opt["min_covar"]),
-                       n_iter=int(opt["n_iter"]), gmr_input=str(opt["gmr_input"]),
+                       n_iter=int(opt["n_iter"]), gmr_input=str(opt["gmr_inputs"][0]),
                        gmr_align=str(opt["gmr_align"]), mode="cumulative",
                        decision="confidence", background=0, seed=int(seed))
     radar = RadarModel(site_ned_m=tuple(float(v) for v in opt["radar_site_ned_m"]))
@@ -453,7 +457,6 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     st_tr, seg_tr, box_tr = load(flights_in["train"])
     train = labelled(st_tr, seg_tr)
     ms = ManeuverModelSet(config=cfg).fit(train, box_heading_rad=box_tr)
-    ms.save(mdir)
     n_train = train["run_id"].nunique()
     say(f"trained {len(ms.labels_)} {opt['features']} models on {n_train} segments in {progress.elapsed:.0f} s "
         f"(box rotation {box_tr:.3f} rad)")
@@ -463,27 +466,33 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     ekf = ExtendedKalmanFilter(ConstantAcceleration(q), radar)
     say(f"EKF q = {q:g} m²/s⁵ (normalised RMSE on the training flight: "
         + ", ".join(f"{g:g}: {s:.3f}" for g, s in zip(tq.grid, tq.score)) + ")")
-    progress("Q₂ from the training segments; its scale on the training flight")
+    progress("GMR input and Q₂ scale on the training flight (Q₂ from the training segments)")
     starts_tr = seg_tr["t_start_ns"].to_numpy()
-    Q2_unit = q2_from_runs(ms, train, box_heading_rad=box_tr, reset_t_ns=starts_tr)
     prior_tr = GaussianState(x_tr[0], initial_cov(), int(t_tr[0]))
-    tuning = [{"parameter": "q", "value": g, "score": s, "chosen": g == q} for g, s in zip(tq.grid, tq.score)]
+    tuning = [{"parameter": "q", "gmr_input": "", "value": g, "score": s, "chosen": g == q}
+              for g, s in zip(tq.grid, tq.score)]
     best = None
-    for s in sorted({float(v) for v in opt["q2_scale_grid"]}):
-        trk = run_ekf_hmm(ekf, prior_tr, t_tr, z_tr, ms, s * Q2_unit, box_heading_rad=box_tr, reset_t_ns=starts_tr,
-                          increments=inc)
-        man_s = per_maneuver(trk, t_tr, x_tr, seg_tr)
-        score = float(man_s["acc_ratio"].mean())
-        tuning.append({"parameter": "q2_scale", "value": s, "score": score, "chosen": False})
-        if best is None or score < best[1]:
-            best = (s, score, man_s, trk)
-    scale, _, man_tr, trk_tr = best
+    for gi in dict.fromkeys(str(v) for v in opt["gmr_inputs"]):
+        # the GMR's conditioning block is a classification-time setting: the HMMs are unchanged
+        msv = model_variant(ms, gmr_input=gi)
+        Q2_unit = q2_from_runs(msv, train, box_heading_rad=box_tr, reset_t_ns=starts_tr)
+        for s in sorted({float(v) for v in opt["q2_scale_grid"]}):
+            trk = run_ekf_hmm(ekf, prior_tr, t_tr, z_tr, msv, s * Q2_unit, box_heading_rad=box_tr,
+                              reset_t_ns=starts_tr, increments=inc)
+            man_s = per_maneuver(trk, t_tr, x_tr, seg_tr)
+            score = float(man_s["acc_ratio"].mean())
+            tuning.append({"parameter": "q2_scale", "gmr_input": gi, "value": s, "score": score, "chosen": False})
+            if best is None or score < best[2]:
+                best = (gi, s, score, man_s, trk, msv, Q2_unit)
+    gmr_input, scale, _, man_tr, trk_tr, ms, Q2_unit = best
+    ms.save(mdir)
     for row in tuning:
         if row["parameter"] == "q2_scale":
-            row["chosen"] = row["value"] == scale
+            row["chosen"] = (row["gmr_input"], row["value"]) == (gmr_input, scale)
     tuning = pd.DataFrame(tuning)
-    say(f"Q₂ scale = {scale:g} (mean training acc-RMSE ratio "
-        + ", ".join(f"{r.value:g}: {r.score:.3f}" for r in tuning[tuning.parameter == "q2_scale"].itertuples()) + ")")
+    say(f"GMR input {gmr_input}, Q₂ scale = {scale:g} (mean training acc-RMSE ratio "
+        + ", ".join(f"{r.gmr_input} {r.value:g}: {r.score:.3f}"
+                    for r in tuning[tuning.parameter == "q2_scale"].itertuples()) + ")")
     Q2 = scale * Q2_unit
 
     # -- test flight ----------------------------------------------------------------------------
@@ -553,6 +562,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
         r.add(f"flightcoach_ekf_hmm_{key}", f"{diag[key]:.3f}", what)
     r.add("flightcoach_ekf_hmm_q", f"{q:g}", "EKF jerk PSD q (m²/s⁵), tuned on the training flight.")
     r.add("flightcoach_ekf_hmm_q2_scale", f"{scale:g}", "Scale of Q₂, tuned on the training flight.")
+    r.add("flightcoach_ekf_hmm_gmr_input", ms.config.gmr_input,
+          "GMR conditioning block (of gmr_inputs), tuned on the training flight with the Q₂ scale.")
     r.add("flightcoach_ekf_hmm_study_wall_s", f"{progress.elapsed:.0f}",
           "Wall time of the study (s), reading the flights to results, page excluded.")
     r.write(paths["results"])
@@ -561,7 +572,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
                      title="Study: FlightCoach F3A, EKF vs EKF+HMM (train P23 #36, test P23 #350)",
                      facts=[("size", size), ("seed", str(int(seed))), ("features", opt["features"]),
                             ("classifier input", f"{inc} increments"),
-                            ("GMR input", f"{opt['gmr_input']} ({opt['gmr_align']})"), ("Baum-Welch iterations ≤", str(opt["n_iter"])),
+                            ("GMR input", f"{ms.config.gmr_input} ({opt['gmr_align']}; tuned)"), ("Baum-Welch iterations ≤", str(opt["n_iter"])),
                             ("q grid", ", ".join(f"{float(v):g}" for v in opt["q_grid"])),
                             ("Q₂ scale grid", ", ".join(f"{float(v):g}" for v in opt["q2_scale_grid"])),
                             ("radar site (NED, m)", ", ".join(f"{float(v):g}" for v in opt["radar_site_ned_m"])),

@@ -67,6 +67,12 @@ def test_the_maneuver_table_follows_the_acceptance_rule(tiny):
     assert (man[["ekf_acc_rmse", "ekf_hmm_acc_rmse", "ekf_pos_rmse", "ekf_vel_rmse"]] > 0).all().all()
     tuning = tiny.table("tuning")
     assert tuning.groupby("parameter")["chosen"].sum().to_dict() == {"q": 1, "q2_scale": 1}
+    # the GMR input is tuned jointly with the Q₂ scale: the chosen pair has the lowest training score
+    q2 = tuning[tuning.parameter == "q2_scale"]
+    chosen = q2[q2.chosen].iloc[0]
+    assert chosen["score"] == q2["score"].min()
+    assert chosen["gmr_input"] == tiny.figures["flightcoach_ekf_hmm_gmr_input"]
+    assert float(chosen["value"]) == float(tiny.figures["flightcoach_ekf_hmm_q2_scale"])
     tl = tiny.table("timeline")
     assert tl["mode"].dtype == bool and set(tl["pred"]) - {"unknown"} <= set(man["label"])
 
@@ -74,7 +80,8 @@ def test_the_maneuver_table_follows_the_acceptance_rule(tiny):
 @pytest.mark.realdata
 @pytest.mark.slow
 # Issue 14's real-data target, asserted as stated. On the faithful data it is missed (measured
-# 0/17: the EKF+HMM acceleration RMSE is 1.2–2.3× the EKF's on every maneuver, median 1.58, seed 0;
+# 0/17: the EKF+HMM acceleration RMSE is above 0.95× the EKF's on every maneuver, median ratio 1.70 with
+# the printed (4.1) increments and the GMR input tuned on the training flight (pos), seed 20261123;
 # because the GMR acceleration and jerk of HMMs trained on one flight are worse on the other than
 # the EKF's own acceleration; see the study's report.md). The diagnosis (seed 0, small): the A_H/B
 # filter fed the reference's current acceleration and jerk reaches 2.34 m/s² against the EKF's

@@ -37,6 +37,7 @@ def test_tables_3_5_to_3_8_are_written_for_truth_and_ekf_trained_models_beside_t
             assert np.isnan(r.thesis_FA_pct) and np.isnan(r.thesis_MAoT_pct)
     assert set(et[et.split == "test"]["maneuver"]) == {"M1", "M2", "M3", "M4", "M5"}   # M5 reported
     assert et["n_runs"].gt(0).all() and et["MAoT_pct"].between(0, 100).all()
+    assert et["MAoT_after_5s_pct"].between(0, 100).all()      # ours: without the EKF's first 5 s
     meta = read_table_meta(tiny_ekf.outputs["ekf_tables"])
     assert meta["q"] == 3.0 and meta["runs_per_maneuver"] == 40
 

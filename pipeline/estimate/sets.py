@@ -65,7 +65,7 @@ from ..io.parquet import read_table, write_table
 from ..io.stage import declared_list
 from .base import ConstantAcceleration, GaussianState
 from .ekf import ExtendedKalmanFilter, run_filter
-from .ekf_hmm import prior_increment_track
+from .ekf_hmm import INCREMENTS, prior_increment_track
 from .models import STATE_COLUMNS, RadarModel, initial_cov
 
 #: the bulk-set columns (``simulate.datasets.SET_COLUMNS`` is this very tuple)
@@ -209,6 +209,15 @@ def prior_increment_set(estimate: pd.DataFrame, *, where: str = "set") -> pd.Dat
     return out
 
 
+def classifier_set(estimate: pd.DataFrame, increments: str, *, where: str = "set") -> pd.DataFrame:
+    """What the classifier reads of an EKF set (the set-table twin of
+    :func:`~pipeline.estimate.ekf_hmm.classifier_state`): :func:`prior_increment_set` (``prior``,
+    the thesis's printed (4.1)) or the set itself (``posterior``, digest §13.4)."""
+    if increments not in INCREMENTS:
+        raise ConfigError(f"{where}: increments must be one of {', '.join(INCREMENTS)}, not {increments!r}")
+    return prior_increment_set(estimate, where=where) if increments == "prior" else estimate
+
+
 @dataclass(frozen=True, kw_only=True)
 class SetsSettings:
     """``estimate.sets`` (validated and defaulted by the config schema) and the radar."""
@@ -263,8 +272,7 @@ def run_ekf_sets(inputs, outputs, config: Mapping | None, *, seed: int) -> EkfSe
         truth = read_table(i, SET_COLUMNS)
         est, diag = ekf_set(truth, radar=st.radar, q=st.q, rng=ekf_rng(seed, name), p0_sigma=st.p0_sigma,
                             where=str(i))
-        if st.increments == "prior":
-            est = prior_increment_set(est, where=str(i))
+        est = classifier_set(est, st.increments, where=str(i))
         write_table(est, o, SET_COLUMNS, name=name,
                     extra={"seed": int(seed), "input": "ekf", "truth": str(i), "q": st.q,
                            "increments": st.increments,

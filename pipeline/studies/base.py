@@ -20,6 +20,8 @@ and an offline page ``results/report/studies/<name>.html``.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import os
 import sys
 import time
@@ -274,3 +276,12 @@ def input_path(inputs: Mapping | None, key: str, default: str | os.PathLike | No
     if v is None or (isinstance(v, (list, tuple)) and not v):
         return Path(default) if default is not None else None
     return Path(v[0] if isinstance(v, (list, tuple)) else v)
+
+
+def model_variant(ms, **cfg):
+    """A shallow copy of a trained model set with config fields replaced (``gmr_input``,
+    ``gmr_align``, ``gate_mps2``: what the GMR and the gate do at classification; the HMMs are
+    unchanged)."""
+    out = copy.copy(ms)
+    out.config = dataclasses.replace(ms.config, **cfg)
+    return out

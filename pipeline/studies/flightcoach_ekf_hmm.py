@@ -89,9 +89,8 @@ from ..models.features import decimate
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
 from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, STUDY_TABLES, Progress, Results, StudyError,
-                   StudyResult, flightcoach_defaults, flightcoach_paths, input_path, md_table, output_path, say, study_outputs, study_settings,
-                   write_text)
-from .seed000_ekf import model_variant
+                   StudyResult, flightcoach_defaults, flightcoach_paths, input_path, md_table, model_variant, output_path, say,
+                   study_outputs, study_settings, write_text)
 
 NAME = "flightcoach_ekf_hmm"
 SUBDIR = FLIGHTCOACH_DIR

@@ -64,7 +64,6 @@ Seed: the master ``seed`` draws every simulated set (``[seed, crc32(set name), c
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from collections.abc import Mapping
 from pathlib import Path
@@ -78,15 +77,15 @@ from ..config import ROOT, ConfigError, load_config, section
 from ..io.parquet import write_table
 from ..models import ManeuverModelSet, ModelsConfig
 from ..estimate.ekf_hmm import INCREMENTS
-from ..estimate.sets import SetsSettings, ekf_rng, ekf_set, prior_increment_set
+from ..estimate.sets import SetsSettings, classifier_set, ekf_rng, ekf_set
 from ..models.metrics import (SCENARIOS, SWITCH_TABLE, SWITCH_TABLE_EKF, THESIS_SWITCH, THESIS_SWITCH_EKF, confusion,
                               is_correct, per_maneuver_table, thesis_side_by_side)
 from ..report.study import build_study_page, layout
 from ..simulate.datasets import DatasetSettings, set_rng, simulate_set
 from ..simulate.scenarios import SimSettings
 from ..simulate.sensors import SensorSettings
-from .base import (STUDY_TABLES, Progress, Results, StudyResult, input_path, md_table, output_path, say,
-                   study_outputs, study_settings, write_text)
+from .base import (STUDY_TABLES, Progress, Results, StudyResult, input_path, md_table, model_variant, output_path,
+                   say, study_outputs, study_settings, write_text)
 
 NAME = "seed000_classification"
 KNOWN = ("M1", "M2", "M3", "M4")
@@ -254,9 +253,7 @@ def gmr_errors(ms, test):
     for suffix, over in GMR_VARIANTS:
         if all(getattr(ms.config, k) == v for k, v in over.items()):
             continue
-        v = copy.copy(ms)
-        v.config = dataclasses.replace(ms.config, **over)
-        variants.append((suffix, v))
+        variants.append((suffix, model_variant(ms, **over)))
     for man in KNOWN:
         truth = test[man].assign(run_id=test[man]["run_id"].astype(str))
         truth = truth.sort_values(["run_id", "t_ns"], kind="stable")
@@ -500,11 +497,9 @@ def ekf_settings(estimate: Mapping | None, simulate: Mapping) -> SetsSettings:
 
 
 def increments_view(sets: Mapping[str, pd.DataFrame], increments: str, part: str) -> dict[str, pd.DataFrame]:
-    """What the classifier sees of EKF sets (:func:`ekf_of`): the sets themselves
-    (``posterior``) or their :func:`~pipeline.estimate.sets.prior_increment_set` (``prior``)."""
-    if increments == "posterior":
-        return dict(sets)
-    return {m: prior_increment_set(d, where=f"{m}_{part}") for m, d in sets.items()}
+    """What the classifier sees of EKF sets (:func:`ekf_of`), set by set
+    (:func:`~pipeline.estimate.sets.classifier_set`)."""
+    return {m: classifier_set(d, increments, where=f"{m}_{part}") for m, d in sets.items()}
 
 
 def ekf_of(sets: Mapping[str, pd.DataFrame], part: str, seed: int, es: SetsSettings,
@@ -522,7 +517,7 @@ def ekf_of(sets: Mapping[str, pd.DataFrame], part: str, seed: int, es: SetsSetti
 
 
 def ekf_tables(models: Mapping[str, ManeuverModelSet], train: Mapping, test: Mapping,
-               increments: str = "posterior") -> pd.DataFrame:
+               increments: str = "prior") -> pd.DataFrame:
     """Tables 3.5–3.8 (cumulative mode, EKF input) for every model set of ``models``
     (``{"truth": truth-trained (the thesis setup), "ekf": EKF-trained}``); ``increments`` names
     what ``train``/``test`` hold (``posterior``: the EKF sets; ``prior``: their
@@ -967,17 +962,16 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
         # what the classifier sees: the printed (4.1) x̂⁻_{k+1} − x̂⁺_k (prior) or the digest's
         # x̂⁺_{k+1} − x̂⁺_k (posterior, §13.4); the other reading is tabulated as a diagnosis
         readings = [inc] + ([other_reading(inc)] if st["other_increments"] else [])
-        tabs = []
-        for k, reading in enumerate(readings):
+        tabs, ekf_trained = [], {}
+        for reading in readings:
             v_train, v_test = increments_view(ekf_train, reading, "train"), increments_view(ekf_test, reading, "test")
             progress(f"EKF input ({reading} increments): training one HMM per known maneuver on the EKF estimates")
-            ms_ekf = ManeuverModelSet(config=cfg).fit(pd.concat([tag(v_train[m], m) for m in KNOWN],
-                                                                ignore_index=True))
-            if k == 0:
-                models = {"truth": ms, "ekf": ms_ekf}
+            ekf_trained[reading] = ManeuverModelSet(config=cfg).fit(pd.concat([tag(v_train[m], m) for m in KNOWN],
+                                                                              ignore_index=True))
             progress(f"EKF input ({reading} increments): Tables 3.5-3.8")
-            tabs.append(ekf_tables({"truth": ms, "ekf": ms_ekf}, v_train, v_test, increments=reading))
+            tabs.append(ekf_tables({"truth": ms, "ekf": ekf_trained[reading]}, v_train, v_test, increments=reading))
         et = pd.concat(tabs, ignore_index=True)
+        models = {"truth": ms, "ekf": ekf_trained[inc]}
         write_table(et, paths["ekf_tables"], name="seed000_tables_3_5_3_8",
                     extra={"runs_per_maneuver": run.runs, "seed": run.seed, "size": size, "q": es.q,
                            "p0_sigma": list(es.p0_sigma)})

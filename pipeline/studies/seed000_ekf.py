@@ -55,7 +55,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import copy
 import dataclasses
 
 import numpy as np
@@ -75,8 +74,8 @@ from ..models.features import observations, raw_features
 from ..models.metrics import is_correct
 from ..report.study import build_study_page, layout
 from ..simulate.seeds import set_rng
-from .base import (STUDY_TABLES, Progress, Results, StudyError, StudyResult, input_path, md_table, output_path, say,
-                   study_outputs, study_settings, write_text)
+from .base import (STUDY_TABLES, Progress, Results, StudyError, StudyResult, input_path, md_table, model_variant,
+                   output_path, say, study_outputs, study_settings, write_text)
 from .seed000_classification import KNOWN, simulate_runs, split, train_models
 
 NAME = "seed000_ekf"
@@ -298,14 +297,6 @@ def ekf_hmm_errors(ekf, ms, Q2, t_ns, truth, yaw, z, increments: str = "prior"):
     tr = run_ekf_hmm(ekf, truth_prior(truth, int(t_ns[0])), t_ns, z, ms, Q2, yaw_rad=yaw, store="filtered",
                      increments=increments)
     return tr, tr.ekf.mean - truth, tr.output.mean - truth
-
-
-def model_variant(ms, **cfg):
-    """A shallow copy of a trained model set with config fields replaced (``gmr_input``,
-    ``gate_mps2``: what the GMR and the gate do at classification; the HMMs are unchanged)."""
-    out = copy.copy(ms)
-    out.config = dataclasses.replace(ms.config, **cfg)
-    return out
 
 
 def estimated_frames(ekf, train: dict, radar, seed: int, n: int,

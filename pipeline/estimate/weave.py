@@ -33,8 +33,11 @@ Per particle and step k (digest 003 §5):
    **min-method** (``p = min((x/x_max)^n, cap)``).
 3. The leaf's dynamics draw the new state; entering a curve leaf draws ``|ω| ~ U[ω_lo, ω_hi]``
    signed by the leaf (digest A2); in a curve ω random-walks by σ_α per step.
-4. δ and θ: both reset on every leaf change and on entering W (digest A4), otherwise
-   ``δ += |Δ(N, E)|`` (eq. 2.3) and ``θ += ω T`` (eq. 2.4).
+4. δ and θ: ``δ += |Δ(N, E)|`` (eq. 2.3) and ``θ += ω T`` (eq. 2.4), restarting (``counters``)
+   on every leaf change and on entering W (``leaf``, the default: digest A4's suggestion), or
+   only when the particle's path begins a straight or enters a curve (``segment``: (2.3) as
+   printed, "0 when beginning a straight segment, δ_k + … while already on a straight
+   segment", so S → SL/SR continues the straight's δ; the study measures both).
 5. Log-weight += ``log p(z_k | s_k)`` (GPS: Gaussian on (N, E); radar:
    :class:`~.models.Radar2DModel`, bearing residual wrapped); the **turn-sign guard** sets the
    weight of a curve particle whose ω has left its leaf's sign to zero (digest §2, A11).
@@ -123,6 +126,7 @@ class HmpfConfig:
     omega_init_radps: tuple = cfield(_h, "omega_init_radps", convert=lambda v: tuple(float(x) for x in v))
     init_k_sigma: float = cfield(_h, "init_k_sigma")
     enter_submode: str = cfield(_h, "enter_submode")
+    counters: str = cfield(_h, "counters")
     resample: str = cfield(_h, "resample")
     ess_fraction: float = cfield(_h, "ess_fraction")
     detector_window: int = cfield(_h, "detector_window")
@@ -347,10 +351,12 @@ def _switch_p(x, x_max, method_min, p1, p2, n, cap):
 
 @njit(cache=True)
 def _k_modes(m, sm, leaf, delta, theta, omega, u, Pi, leaf_sign, enter, method_min, p1, p2, n_exp, cap,
-             delta_max, theta_max, w_lo, w_hi):
+             delta_max, theta_max, w_lo, w_hi, segment):
     """Steps 1–3 of the module docstring per particle, in place: mode, submode (with the A3/A4
     entry rules), leaf and the turn rate this step uses. ``u`` (4, R, N) uniforms from the
-    caller's generator. Returns the per-particle 'leaf changed' flags."""
+    caller's generator. Returns the per-particle 'counters restart' flags: the leaf changed
+    (``segment`` False, digest A4) or its segment kind did (``segment`` True: straight ↔ curve
+    or the turn's sign, thesis (2.3)/(2.4))."""
     R_, N = m.shape
     changed = np.zeros((R_, N), dtype=np.bool_)
     for r in range(R_):
@@ -369,8 +375,9 @@ def _k_modes(m, sm, leaf, delta, theta, omega, u, Pi, leaf_sign, enter, method_m
                     s_ = min(int(u[3, r, i] * 4.0), 3)
                 elif enter == 2:
                     s_ = 2 * min(int(u[3, r, i] * 2.0), 1)
-                delta[r, i] = 0.0
-                theta[r, i] = 0.0
+                if not segment:
+                    delta[r, i] = 0.0
+                    theta[r, i] = 0.0
             if mn == 3:
                 if s_ == 0 or s_ == 2:
                     p = _switch_p(theta[r, i], theta_max, method_min, p1, p2, n_exp, cap)
@@ -389,8 +396,8 @@ def _k_modes(m, sm, leaf, delta, theta, omega, u, Pi, leaf_sign, enter, method_m
                 omega[r, i] = 0.0
             m[r, i] = mn
             sm[r, i] = s_
+            changed[r, i] = (sg != leaf_sign[leaf[r, i]]) if segment else ch
             leaf[r, i] = lf
-            changed[r, i] = ch
     return changed
 
 
@@ -534,7 +541,7 @@ def hmpf_filter(z: ArrayLike, sensor, cfg: HmpfConfig, rng: np.random.Generator)
         omega = np.ascontiguousarray(x[..., 4])
         changed = _k_modes(m, sm, leaf, delta, theta, omega, rng.random((4, R_, N)), Pi_m, sign_tab, enter,
                            cfg.method == "min", cfg.p1, cfg.p2, float(cfg.min_exponent), cfg.min_cap,
-                           cfg.delta_max_m, cfg.theta_max_rad, lo, hi)
+                           cfg.delta_max_m, cfg.theta_max_rad, lo, hi, cfg.counters == "segment")
         x[..., 4] = omega
         pos_old = x[..., 0:2].copy()
         x = ct_transition(x, dt)

@@ -192,3 +192,20 @@ def test_the_detector_averages_the_filter_outputs_after_the_start_up_and_never_t
     np.testing.assert_allclose(out.af[:, 1:], af)
     np.testing.assert_array_equal(out.weave_detected[:, 1:], flag)
     assert not out.weave_detected[:, :26].any()   # steps 1..25 ignored
+
+
+def test_with_segment_counters_a_straight_continued_into_the_weave_keeps_its_length():
+    # thesis (2.3): δ is "the already traveled length of the current straight segment"; a particle
+    # that goes S -> W on a straight track stays on that straight (SL/SR), so with `segment` its δ
+    # is past δ_max and its straight submode turns (p2) and dies at once, while with `leaf` (digest
+    # A4: restart on entering W) it lives ~δ_max / v more steps as a weave straight
+    a = 0.05
+    pi = ((1 - a, 0.0, 0.0, a), (1.0, 0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (a, 0.0, 0.0, 1 - a))
+    tr = straight_track(90, vel_ne=(10.0, 10.0))   # fast enough for 1 m GPS to see a curve at once
+    z = gps_measure(tr, 20, np.random.default_rng(7))
+    c = HmpfConfig.from_config({}).with_(n_particles=1000, pi_m=pi, delta_max_m=100.0, omega_init_radps=(0.2, 0.3))
+    # the weave's straight submodes (SL + SR) after δ has passed δ_max on the track
+    w = {k: hmpf_filter(z, GpsSensor(), c.with_(counters=k), np.random.default_rng(8)).submode_p[:, 40:, [1, 3]]
+         .sum(axis=-1).mean() for k in ("leaf", "segment")}
+    assert w["segment"] < 0.6 * w["leaf"], w
+    assert HmpfConfig.from_config({}).counters == "leaf"   # the digest's A4, the default

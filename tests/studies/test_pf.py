@@ -132,16 +132,19 @@ def test_the_ideal_likelihood_straight_fraction_bound_matches_the_two_state_clos
     np.testing.assert_allclose(f[[0, 3]], v / v.sum(), atol=0.004)
 
 
-def test_with_pi_m_4_2_even_an_ideal_likelihood_keeps_the_straight_fraction_near_0_95():
+def test_with_pi_m_4_2_an_ideal_likelihood_caps_the_straight_fraction_near_0_95_only_on_leaf_counters():
+    # leaf counters (digest A4): a particle entering W restarts δ, so its weave straight outlives
+    # any likelihood for ~δ_max / v steps; segment counters (thesis (2.3)): the straight's δ is
+    # already past δ_max and the particle turns at once, so only the curves' lifetime is left
     from pipeline.estimate.weave import HmpfConfig
     st = {**spf.DEFAULTS}
     d, t = spf.weave_truth_max(st)
     c = HmpfConfig.from_config({}).with_(delta_max_m=1.2 * d, theta_max_rad=1.2 * t)
-    f1 = spf.straight_fraction_bound(c, st["speed_mps"], kill_after=1, steps=200, n=20000,
-                                     rng=np.random.default_rng(2))
-    f2 = spf.straight_fraction_bound(c, st["speed_mps"], kill_after=2, steps=200, n=20000,
-                                     rng=np.random.default_rng(3))
-    assert 0.94 < f1[0] < 0.96 and f2[0] < f1[0] - 0.01
+    f = {(k, n): spf.straight_fraction_bound(c.with_(counters=k), st["speed_mps"], kill_after=n, steps=200,
+                                             n=20000, rng=np.random.default_rng(n))
+         for k in ("leaf", "segment") for n in (1, 2)}
+    assert 0.94 < f["leaf", 1][0] < 0.96 and f["leaf", 2][0] < f["leaf", 1][0] - 0.01
+    assert f["segment", 1][0] > 0.995 and 0.95 < f["segment", 2][0] < f["segment", 1][0] - 0.02
     with pytest.raises(ValueError, match="theta"):
         spf.straight_fraction_bound(c.with_(theta_max_rad=0.2), 1.0, kill_after=1)
 
@@ -169,7 +172,8 @@ def _hmpf_scenario(name, sensor, n_particles, seeds=20, seed=20261123):
     "issue 17: straight fraction >= 0.95 over steps 25-end in >= 19/20 seeds (GPS). Pi_m (4.2) caps it: "
     "the mode chains alone under an ideal likelihood that kills every curve particle at its first weighting "
     "give 0.950 (0.926 at the second; pf_hmpf_straight_frac_bound_*); measured 0.845 mean, 0/20 seeds, at "
-    "2,000 particles (0.874 at 20,000)"))
+    "2,000 particles (0.874 at 20,000). With segment counters (thesis (2.3) as printed) the cap is ~1 but the "
+    "filter reads 0.880, 0/20: slow curves outlive their weighting"))
 def test_issue17_straight_tracks_keep_a_straight_fraction_of_0_95_in_19_of_20_seeds():
     _, out = _hmpf_scenario("straight", "gps", 200)
     frac = out.mode_p[:, 25:, 0].mean(axis=1)

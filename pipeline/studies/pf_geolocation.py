@@ -113,6 +113,13 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
                      f"mean percent error eta% of the §6.{('base', 'maneuvering', 'mobile').index(name) + 1} setup "
                      f"({s['n_runs']} runs, size {size}); thesis {THESIS_ETA[name]}"))
         rows.append((f"geo_eps_m_{name}", round(s["eps_m"], 2), f"mean 3-D error (m), {name}; median {s['median_eps_m']:.2f} m"))
+        rows.append((f"geo_lost_runs_{name}", f"{s['n_lost']}/{s['n_runs']}",
+                     f"{name}: runs that end with no observer detecting the target (the cameras, aimed at the "
+                     "estimate, lost it; the error then grows unchecked)"))
+        rows.append((f"geo_eta_pct_{name}_not_lost", round(s["eta_pct_not_lost"], 2),
+                     f"eta% of the {name} setup over the runs not lost (diagnosis; the target is geo_eta_pct_{name})"))
+        rows.append((f"geo_eta_pct_{name}_run_median", round(s["median_run_eta_pct"], 2),
+                     f"median over runs of each run's mean eta%, {name} (diagnosis)"))
     for name, s in (("base", base), ("maneuvering", man)):
         rows.append((f"geo_eta_{name}_met", int(s["eta_pct"] <= ETA_LIMIT_PCT), f"eta% <= {ETA_LIMIT_PCT:g} % in the {name} setup"))
     for n, e in eps_n.items():

@@ -133,6 +133,21 @@ def test_runs_are_seeded_and_deterministic():
     assert s["n_runs"] == 2 and np.isfinite(s["eps_m"]) and np.isfinite(s["eta_pct"])
 
 
+def test_a_run_that_ends_undetected_counts_as_lost_and_leaves_the_not_lost_eta():
+    import dataclasses
+    a, b = run_scenario("base", CFG, n_runs=2, seed=7, duration_s=1.5)
+    assert a.n_detect[-1] > 0 and b.n_detect[-1] > 0
+    lost = dataclasses.replace(b, n_detect=np.where(np.arange(len(b.n_detect)) > 30, 0, b.n_detect),
+                               eta=b.eta + 5.0)
+    s = summarise([a, lost])
+    keep = a.t_s >= 1.0
+    assert s["n_lost"] == 1 and summarise([a, b])["n_lost"] == 0
+    assert s["eta_pct_not_lost"] == pytest.approx(100 * np.nanmean(a.eta[keep]))
+    eta_a, eta_l = np.nanmean(a.eta[keep]), np.nanmean(lost.eta[keep])
+    assert s["median_run_eta_pct"] == pytest.approx(100 * (eta_a + eta_l) / 2)
+    assert s["eta_pct"] > s["eta_pct_not_lost"]
+
+
 def test_with_small_bearing_noise_and_enough_particles_the_base_setup_tracks_to_a_metre():
     cfg = GeolocationConfig(sigma_psi_rad=0.02, n_particles=500)
     r = run_once("base", cfg, np.random.default_rng(11), duration_s=4.0)

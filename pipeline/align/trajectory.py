@@ -60,6 +60,12 @@ Dynamics: the generic kinematic model (linear, so the EKF is the exact Kalman fi
 NED position, velocity and acceleration with ``p += v Δt + a Δt²/2``, ``v += a Δt`` and a
 random-walk acceleration, and (13-D) the attitude quaternion (scalar first) as a random walk,
 made sign-continuous in the demos before fitting (q ≡ −q, §11). The hidden step is ``Δt/2``.
+Or (``dynamics="yak54"``, simulated demos only) the seed's airframe model z = [s; u] (§2:
+"Hidden trajectory: z_t=[s_t;u_t]"): NED position and velocity, attitude quaternion, body rates
+and the four controls (:mod:`pipeline.estimate.aircraft`), Euler-integrated, without the lift
+that the thesis never gives a formula for ("Either model it ... or let β absorb it"): the bias
+terms β on the six accelerations absorb it (§3.4: "Without providing the bias terms the learning
+algorithm was unable to learn the intended trajectory"); A_t = Df(μ_t) per step.
 """
 
 from __future__ import annotations
@@ -73,6 +79,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..frames.rotations import quat_continuity
+from ..estimate.aircraft import YAK54_COLUMNS, YAK54_DRIVEN, Yak54Params, Yak54Transition, yak54_jacobian, yak54_step
 from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
 from ..estimate.smoother import rts_smooth
@@ -90,6 +97,9 @@ COLUMNS: tuple[str, ...] = (
     "pos_n_m", "pos_e_m", "pos_d_m", "vel_n_mps", "vel_e_mps", "vel_d_mps",
     "acc_n_mps2", "acc_e_mps2", "acc_d_mps2", "q_w", "q_x", "q_y", "q_z",
 )
+#: the hidden-state models: the generic kinematic one, and the seed's Yak54 airframe (simulated
+#: demos with its 17 columns only; no lift term, β absorbs it)
+DYNAMICS: tuple[str, ...] = ("kinematic", "yak54")
 #: observed columns (of :data:`COLUMNS`) by demo width D: position only, position–velocity–
 #: acceleration, everything
 DIMS: dict[int, tuple[int, ...]] = {3: (0, 1, 2), 9: tuple(range(9)), 13: tuple(range(13))}
@@ -204,8 +214,12 @@ class TrajectoryLearner:
         Stop at a relative objective change below this.
     ridge : float
         Ridge penalty of the bias terms, ``β = MPE/(1 + ridge)``.
-    dynamics : {"kinematic"}
-        The generic kinematic model (9-D hidden state for 3/9-D demos, 13-D for 13-D demos).
+    dynamics : {"kinematic", "yak54"}
+        The generic kinematic model (9-D hidden state for 3/9-D demos, 13-D for 13-D demos), or
+        the seed's Yak54 airframe (:mod:`pipeline.estimate.aircraft`, §4 eqs. 3.15, 4.1–4.3 with
+        the §12 errata, no lift term: β absorbs it) for 17-column demos (state and controls,
+        :data:`~pipeline.estimate.aircraft.YAK54_COLUMNS`); its E-step is an EKF and extended RTS
+        smoother and its M-step linearises at each smoothed step.
     fix_tau : bool
         Keep τ at its initial value (``init_tau``, or ``fit(..., tau=)``), d fitted once from it.
     use_bias : bool
@@ -277,8 +291,9 @@ class TrajectoryLearner:
     def _check(self, demos) -> list[F64]:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise TrajectoryError(f"TrajectoryLearner: dt must be a positive number, not {self.dt!r}")
-        if self.dynamics != "kinematic":
-            raise TrajectoryError(f"TrajectoryLearner: dynamics {self.dynamics!r} is not known; known: kinematic")
+        if self.dynamics not in DYNAMICS:
+            raise TrajectoryError(f"TrajectoryLearner: dynamics {self.dynamics!r} is not known; known: "
+                                  f"{', '.join(DYNAMICS)}")
         if self.init_tau not in ("dtw", "linear"):
             raise TrajectoryError(f"TrajectoryLearner: init_tau must be 'dtw' or 'linear', not {self.init_tau!r}")
         if self.cov_type not in ("diag", "full"):
@@ -291,7 +306,10 @@ class TrajectoryLearner:
         out = []
         for k, y in enumerate(demos):
             y = np.asarray(y, dtype=np.float64)
-            if y.ndim != 2 or y.shape[1] not in DIMS:
+            if self.dynamics == "yak54" and (y.ndim != 2 or y.shape[1] != len(YAK54_COLUMNS)):
+                raise TrajectoryError(f"TrajectoryLearner.fit: demo {k} shaped {y.shape}; the yak54 dynamics "
+                                      f"need (N, {len(YAK54_COLUMNS)}) demos (columns {', '.join(YAK54_COLUMNS)})")
+            if self.dynamics == "kinematic" and (y.ndim != 2 or y.shape[1] not in DIMS):
                 raise TrajectoryError(f"TrajectoryLearner.fit: demo {k} shaped {y.shape}; expected (N, D) "
                                       f"with D in {sorted(DIMS)} (columns {', '.join(COLUMNS)})")
             if y.shape[1] != np.shape(demos[0])[1]:
@@ -313,23 +331,26 @@ class TrajectoryLearner:
         z = np.full((T, 1, M, D), np.nan)
         for k in range(M):
             z[tau[k], 0, k] = Y[k]
-        ekf = ExtendedKalmanFilter(LinearTransition(self._F, Qz), LinearMeasurement(self._H, Ry))
+        trans = (LinearTransition(self._F, Qz) if self._F is not None
+                 else Yak54Transition(Qz, self._params, lift=False))
+        ekf = ExtendedKalmanFilter(trans, LinearMeasurement(self._H, Ry))
         t_ns = np.arange(T, dtype=np.int64) * self._step_ns
         track = run_filter(ekf, prior, t_ns, z, store="all", bu=np.vstack([np.zeros((1, self._n_x)), beta]))
         sm = rts_smooth(track)
         return _Fit(sm.mean[0], sm.cov[0], sm.gain[0], float(track.loglik()[0]))
 
     def _mstep(self, Y, tau, fit: _Fit, beta_on: bool) -> tuple[F64, F64, F64]:
-        F, H = self._F, self._H
         mu, P, L = fit.mean, fit.cov, fit.gain
-        mpe = mu[1:] - mu[:-1] @ F.T  # model-prediction error μ_{t+1} − f(μ_t)
+        mpe = mu[1:] - self._f(mu[:-1])  # model-prediction error μ_{t+1} − f(μ_t)
+        F = self._jac(mu[:-1])            # A_t = Df(μ_{t|T−1}), (n, n) shared or (T−1, n, n)
         beta = np.zeros_like(mpe)
         if beta_on:
             beta[:, self._driven] = mpe[:, self._driven] / (1.0 + float(self.ridge))
         dmu = mpe - beta
         # Σ_{t+1} L_tᵀ Aᵀ: the smoothed cross-covariance Cov(z_{t+1}, z_t) times Aᵀ
-        cross = P[1:] @ np.swapaxes(L[:-1], -1, -2) @ F.T
-        APA = F @ P[:-1] @ F.T
+        Ft = np.swapaxes(F, -1, -2)
+        cross = P[1:] @ np.swapaxes(L[:-1], -1, -2) @ Ft
+        APA = F @ P[:-1] @ Ft
         terms = dmu[:, :, None] * dmu[:, None, :] + APA + P[1:] - cross - np.swapaxes(cross, -1, -2)
         Qz = terms.mean(axis=0)
         # Σ^(y): every observation δy δyᵀ + C Σ_τ Cᵀ, over the count of observations
@@ -465,15 +486,19 @@ class TrajectoryLearner:
         """
         Y = self._check(demos)
         D = Y[0].shape[1]
-        if D == 13:
+        yak = self.dynamics == "yak54"
+        qc = slice(6, 10) if yak else slice(9, 13)   # the quaternion columns
+        if yak or D == 13:
             ref = None
             for k in range(len(Y)):
                 Y[k] = Y[k].copy()
-                Y[k][:, 9:13] = quaternion_continuous(Y[k][:, 9:13], ref)
-                ref = Y[0][0, 9:13]
-        self._obs = DIMS[D]
-        n_x = self._n_x = 13 if D == 13 else 9
-        self._driven = np.arange(6, n_x)
+                Y[k][:, qc] = quaternion_continuous(Y[k][:, qc], ref)
+                ref = Y[0][0, qc]
+        self._obs = tuple(range(D)) if yak else DIMS[D]
+        n_x = self._n_x = D if yak else (13 if D == 13 else 9)
+        # β on the driven components: the kinematic model's accelerations (and quaternion), the
+        # Yak54's six accelerations u̇..ṙ (seed §3.4: "β=(β_u,β_v,β_w,β_p,β_q,β_r)")
+        self._driven = np.asarray(YAK54_DRIVEN) if yak else np.arange(6, n_x)
         T = int(round(self.hidden_factor * np.mean([len(y) for y in Y])))
         if tau is not None:
             # a given τ (e.g. the truth) may reach past 2 × mean N: the axis then ends at its end
@@ -484,7 +509,8 @@ class TrajectoryLearner:
                                   f"(lengths {[len(y) for y in Y]})")
         self.dt_hidden_ = dth = float(self.dt) / self.hidden_factor
         self._step_ns = max(int(round(dth * 1e9)), 1)
-        self._F = kinematic_transition(dth, n_x)
+        self._params = Yak54Params()
+        self._F = None if yak else kinematic_transition(dth, n_x)
         self._H = np.eye(n_x)[list(self._obs)]
         tau = self._initial_taus(Y) if tau is None else self._check_tau(tau, Y)
 
@@ -496,7 +522,7 @@ class TrajectoryLearner:
         self._rfloor = VAR_FLOOR * np.maximum(scale, 1e-12)
         R0 = np.maximum(d2.var(axis=0) / 6.0, self._rfloor)
         z0 = self._initial_trajectory(Y, tau)
-        mpe0 = z0[1:] - z0[:-1] @ self._F.T
+        mpe0 = z0[1:] - self._f(z0[:-1])
         q0 = np.maximum(mpe0.var(axis=0), 1e-12)
         self._qfloor = VAR_FLOOR * q0
         Qz, Ry = np.diag(q0), np.diag(R0)
@@ -537,19 +563,31 @@ class TrajectoryLearner:
         self.state_mean_ = fit.mean
         self.state_var_ = np.diagonal(fit.cov, axis1=-2, axis2=-1).copy()
         mean = fit.mean[:, list(self._obs)].copy()
-        if D == 13:
-            mean[:, 9:13] /= np.linalg.norm(mean[:, 9:13], axis=1, keepdims=True)
+        if yak or D == 13:
+            mean[:, qc] /= np.linalg.norm(mean[:, qc], axis=1, keepdims=True)
         self.mean_ = mean
         self.var_ = self.state_var_[:, list(self._obs)]
         self.tau_ = tau
         self.d_ = d
         self.sigma_z_ = self.sigma_z_trace_[-1]
         self.sigma_y_ = self.sigma_y_trace_[-1]
-        self.model_error_ = fit.mean[1:] - fit.mean[:-1] @ self._F.T
+        self.model_error_ = fit.mean[1:] - self._f(fit.mean[:-1])
         self.beta_ = beta
         self.demos_ = Y
         self.T_ = T
         return self
+
+    def _f(self, z: F64) -> F64:
+        """The model's one-step prediction f(z) of hidden states ``z`` (..., n_x), without β."""
+        if self._F is not None:
+            return z @ self._F.T
+        return yak54_step(z, self.dt_hidden_, self._params, lift=False)
+
+    def _jac(self, z: F64) -> F64:
+        """Df at hidden states ``z`` (T, n_x): the shared F of the linear model, or per step."""
+        if self._F is not None:
+            return self._F
+        return yak54_jacobian(z, self.dt_hidden_, self._params, lift=False)
 
     def _initial_trajectory(self, Y, tau) -> F64:
         T, n_x, obs = self._T, self._n_x, list(self._obs)

@@ -72,6 +72,19 @@ class TransitionModel(Protocol):
 
 
 @runtime_checkable
+class NonlinearTransitionModel(Protocol):
+    """``x_{k+1} = f(x_k, dt) + w``, ``w ~ N(0, Q(dt))``, linearised about the posterior:
+    ``F_k = ∂f/∂x`` (``jacobian``, ``(..., n_x, n_x)``), ``P⁻ = F_k P F_kᵀ + Q``.
+    :class:`~pipeline.estimate.aircraft.Yak54Transition` is one."""
+
+    def f(self, x: ArrayLike, dt: float) -> F64: ...
+
+    def jacobian(self, x: ArrayLike, dt: float) -> F64: ...
+
+    def noise(self, dt: float) -> F64: ...
+
+
+@runtime_checkable
 class MeasurementModel(Protocol):
     """``z = h(x) + ν``, ``ν ~ N(0, R)``; ``jacobian`` is ∂h/∂x (``(..., n_z, n_x)``).
     :class:`~pipeline.estimate.models.RadarModel` is one."""

@@ -346,8 +346,9 @@ class FilterTrack:
     pred_mean, pred_cov : ndarray or None
         Predicted (prior) estimates at each step (step 0: the initial state); kept for the
         RTS smoother (``store="all"``).
-    F : ndarray, shape (T, n_x, n_x) or None
-        ``F[k]`` maps step k−1 to step k (``F[0] = I``).
+    F : ndarray, shape (T, n_x, n_x), (R, T, n_x, n_x) or None
+        ``F[k]`` maps step k−1 to step k (``F[0] = I``); per run (the Jacobians at each run's
+        posterior) for a nonlinear transition.
     nis : ndarray, shape (R, T)
     dof : ndarray of int, shape (R, T)
         Measured scalars per step (0: predict only, a radar gap).
@@ -404,6 +405,11 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     Returns
     -------
     FilterTrack
+        With a nonlinear transition (one with ``f`` and ``jacobian``,
+        :class:`~pipeline.estimate.base.NonlinearTransitionModel`) the prediction is
+        ``x⁻_k = f(x⁺_{k−1}) + bu[k]``, ``P⁻_k = F_k P⁺_{k−1} F_kᵀ + Q`` with ``F_k`` the Jacobian at
+        ``x⁺_{k−1}``, and ``F`` holds each run's ``F_k`` (``(R, T, n_x, n_x)``: the extended RTS
+        smoother's).
 
     Notes
     -----
@@ -427,7 +433,8 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     cov = np.empty((T, R_, n_x, n_x)) if store != "mean" else None
     pm = np.empty((T, R_, n_x)) if store == "all" else None
     pc = np.empty((T, R_, n_x, n_x)) if store == "all" else None
-    Fs = np.empty((T, n_x, n_x)) if store == "all" else None
+    nonlinear = callable(getattr(ekf.transition, "f", None)) and callable(getattr(ekf.transition, "jacobian", None))
+    Fs = (np.empty((T, R_, n_x, n_x)) if nonlinear else np.empty((T, n_x, n_x))) if store == "all" else None
     nis = np.empty((T, R_))
     dof = np.empty((T, R_), dtype=np.int64)
     logdet = np.empty((T, R_))
@@ -441,10 +448,16 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     for k in range(T):
         if int(t_ns[k]) != state.t_ns:
             step = int(t_ns[k]) - state.t_ns
-            if step not in models:
-                models[step] = (ekf.transition.matrix(step * 1e-9), ekf.transition.noise(step * 1e-9))
-            F, Q = models[step]
-            state = ekf.predict(state, int(t_ns[k]), F=F, Q=Q, bu=None if bu is None else bu[k])
+            if nonlinear:
+                dt = step * 1e-9
+                F = ekf.transition.jacobian(state.mean, dt)
+                state = ekf.predict(state, int(t_ns[k]), F=F, Q=ekf.transition.noise(dt),
+                                    bu=None if bu is None else bu[k], fx=ekf.transition.f(state.mean, dt))
+            else:
+                if step not in models:
+                    models[step] = (ekf.transition.matrix(step * 1e-9), ekf.transition.noise(step * 1e-9))
+                F, Q = models[step]
+                state = ekf.predict(state, int(t_ns[k]), F=F, Q=Q, bu=None if bu is None else bu[k])
         else:
             F = eye
         if store == "all":
@@ -457,4 +470,5 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     def rt(a):
         return None if a is None else np.swapaxes(a, 0, 1)
 
-    return FilterTrack(t_ns, rt(mean), rt(cov), rt(nis), rt(dof), rt(pm), rt(pc), Fs, rt(logdet))
+    return FilterTrack(t_ns, rt(mean), rt(cov), rt(nis), rt(dof), rt(pm), rt(pc), rt(Fs) if nonlinear else Fs,
+                       rt(logdet))

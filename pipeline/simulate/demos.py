@@ -75,6 +75,15 @@ class DemoSimSettings:
         Its time constant (s, ≥ 1).
     pilot_knot_s : float
         Knot spacing of the band-limited process (s; :func:`~pipeline.simulate.quadcopter.gauss_markov`).
+    yak54_speed_mps : float
+        Trimmed airspeed of the Yak54 references (m/s).
+    yak54_sensor_sigma : tuple of 3 floats
+        The Yak54 demos' extra white noise std: body rates (rad/s), control surfaces (rad) and
+        thrust (N); position, velocity and quaternion take ``sensor_sigma``'s.
+    yak54_elevator_rad : float
+        Peak elevator of the Yak54 pull-up (rad). The model has no pitch stiffness (pitch is
+        neutrally stable), so (4.1)'s moment, 0.009 N m at 0.002 rad and 12 m/s, against (4.2)'s
+        damping alone pitches the 12 s reference up to ~75° and over the top (50 → 100 m).
     """
 
     dt_s: float = 0.1
@@ -86,6 +95,9 @@ class DemoSimSettings:
     pilot_sigma_m: float = 1.0
     pilot_tau_s: float = 2.0
     pilot_knot_s: float = 0.5
+    yak54_speed_mps: float = 12.0
+    yak54_sensor_sigma: tuple[float, float, float] = (0.05, 0.002, 0.05)
+    yak54_elevator_rad: float = 0.002
 
     def __post_init__(self):
         p = np.asarray(self.step_probs, dtype=float)
@@ -93,7 +105,9 @@ class DemoSimSettings:
             raise ValueError(f"align.simulate.step_probs: must be 3 non-negative numbers summing to 1, got {self.step_probs}")
         if not self.pilot_tau_s >= 1.0:
             raise ValueError(f"align.simulate.pilot_tau_s: the pilot deviation's time constant must be >= 1 s, got {self.pilot_tau_s}")
-        for name in ("dt_s", "duration_s", "speed_mps", "pilot_knot_s"):
+        if len(self.yak54_sensor_sigma) != 3 or min(self.yak54_sensor_sigma) < 0:
+            raise ValueError("align.simulate.yak54_sensor_sigma: 3 non-negative stds (rates, surfaces, thrust)")
+        for name in ("dt_s", "duration_s", "speed_mps", "pilot_knot_s", "yak54_speed_mps"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"align.simulate.{name}: must be > 0, got {getattr(self, name)}")
         if len(self.sensor_sigma) != 4 or min(self.sensor_sigma) < 0 or self.pilot_sigma_m < 0:
@@ -232,3 +246,97 @@ def simulate_demos(reference: str, *, n_demos: int = 5, rng: np.random.Generator
         demos.append(y)
         taus.append(tau.astype(np.int64))
     return DemoSet(z, demos, taus, float(settings.dt_s), dth, reference)
+
+
+# -- the seed's airframe: references flown by the Yak54 model ---------------------------------------
+
+#: references flown by the Yak54 model of seed 004 §4 (lift on, :mod:`pipeline.estimate.aircraft`)
+#: from a control schedule, for the learner's ``dynamics="yak54"``: the thesis's "straight level
+#: flight" (§7) and a pull-up into a climb
+YAK54_REFERENCES: tuple[str, ...] = ("yak54_level", "yak54_pull_up")
+#: integration substeps per hidden step of the Yak54 references (Euler at dt/20 = 5 ms)
+YAK54_SUBSTEPS = 10
+
+
+def _yak54_controls(reference: str, t: F64, duration: float, trim: F64, settings: DemoSimSettings) -> F64:
+    """The control schedule (L, 4): aileron, elevator, rudder (rad), thrust (N) about the trim."""
+    u = np.tile(trim[13:17], (len(t), 1))
+    if reference == "yak54_level":
+        return u
+    if reference == "yak54_pull_up":
+        # an elevator pulse (up, positive by the (4.1) polynomial) over 0.25–0.45 of the run, the
+        # thrust raised smoothly for the climb that follows
+        x = t / duration
+        u[:, 1] += settings.yak54_elevator_rad * (_smooth((x - 0.25) / 0.1) - _smooth((x - 0.35) / 0.1))
+        u[:, 3] *= 1.0 + 0.8 * _smooth((x - 0.25) / 0.2)
+        return u
+    raise ValueError(f"simulate_demos: unknown reference {reference!r}; known: "
+                     f"{', '.join(REFERENCES + YAK54_REFERENCES)}")
+
+
+def yak54_intended(reference: str, settings: DemoSimSettings = DemoSimSettings()) -> tuple[F64, float]:
+    """The intended (L, 17) Yak54 trajectory of ``reference`` on the hidden grid and its step (s).
+
+    From straight-and-level trim at ``yak54_speed_mps`` (:func:`~pipeline.estimate.aircraft.yak54_trim`,
+    heading north at ``altitude_m``), the model of seed §4 *with* our lift term is Euler-integrated
+    at ``dt/2/YAK54_SUBSTEPS`` under the reference's control schedule; row i holds the state and
+    the controls applied over the next hidden step.
+    """
+    from ..estimate.aircraft import Yak54Params, yak54_step, yak54_trim
+
+    params = Yak54Params()
+    dth = settings.dt_s / 2.0
+    L = int(round(settings.duration_s / dth)) + 1
+    t = np.arange(L) * dth
+    x = yak54_trim(settings.yak54_speed_mps, params, altitude_m=settings.altitude_m)
+    ctrl = _yak54_controls(reference, t, settings.duration_s, x, settings)
+    out = np.empty((L, len(x)))
+    h = dth / YAK54_SUBSTEPS
+    for i in range(L):
+        x = x.copy()
+        x[13:17] = ctrl[i]
+        out[i] = x
+        for _ in range(YAK54_SUBSTEPS):
+            x = yak54_step(x, h, params, lift=True)
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"simulate_demos: the Yak54 reference {reference!r} diverged (check yak54_elevator_rad)")
+    out[:, 6:10] = quat_continuity(out[:, 6:10])
+    return out, dth
+
+
+def simulate_yak54_demos(reference: str, *, n_demos: int = 5, rng: np.random.Generator,
+                         settings: DemoSimSettings = DemoSimSettings()) -> DemoSet:
+    """``n_demos`` demos of a Yak54 reference (17 columns,
+    :data:`~pipeline.estimate.aircraft.YAK54_COLUMNS`), by the generative model of
+    :func:`simulate_demos`: time warp by τ steps drawn from ``step_probs``, the Gauss–Markov
+    pilot deviation in position (its derivative in velocity) and white sensor noise
+    (``sensor_sigma`` for position, velocity and quaternion; ``yak54_sensor_sigma`` for the body
+    rates, surfaces and thrust)."""
+    from ..estimate.aircraft import YAK54_COLUMNS
+
+    if int(n_demos) < 1:
+        raise ValueError(f"simulate_yak54_demos: n_demos must be >= 1, got {n_demos}")
+    z, dth = yak54_intended(reference, settings)
+    L = len(z)
+    p = np.asarray(settings.step_probs, dtype=float)
+    sp, sv, _, sq = settings.sensor_sigma
+    sr, ss, sf = settings.yak54_sensor_sigma
+    demos, taus = [], []
+    for _ in range(int(n_demos)):
+        steps = rng.choice(np.array([1, 2, 3]), size=L, p=p)
+        tau = np.concatenate([[0], np.cumsum(steps)])
+        tau = tau[tau <= L - 1]
+        N = len(tau)
+        dev = gauss_markov(1, N, settings.dt_s, settings.pilot_tau_s, settings.pilot_sigma_m, rng,
+                           knot_s=settings.pilot_knot_s)[0]
+        y = z[tau].copy()
+        y[:, 0:3] += dev + sp * rng.standard_normal((N, 3))
+        y[:, 3:6] += np.gradient(dev, settings.dt_s, axis=0) + sv * rng.standard_normal((N, 3))
+        q = y[:, 6:10] + sq * rng.standard_normal((N, 4))
+        y[:, 6:10] = quat_continuity(q / np.linalg.norm(q, axis=1, keepdims=True))
+        y[:, 10:13] += sr * rng.standard_normal((N, 3))
+        y[:, 13:16] += ss * rng.standard_normal((N, 3))
+        y[:, 16] += sf * rng.standard_normal(N)
+        demos.append(y)
+        taus.append(tau.astype(np.int64))
+    return DemoSet(z, demos, taus, float(settings.dt_s), dth, reference, tuple(YAK54_COLUMNS))

@@ -21,6 +21,16 @@ against the true intended trajectory** is taken sample by sample, each demo samp
 The headline ``align_sim_refs_learned_best`` counts the references on which the learned
 trajectory's mean RMSE over the seeds is below that of every baseline (best single demo, DBA,
 smoothed DBA, best per-demo smoother).
+
+**The seed's airframe** (issue 15 Build item 2, "Optionally, on simulated demos only, the seed-004
+Yak54 model with the §12 errata and no lift term (β absorbs it)"): the references of
+:data:`~pipeline.simulate.demos.YAK54_REFERENCES` are flown by the Yak54 model *with* a lift term
+(:func:`~pipeline.simulate.demos.simulate_yak54_demos`, 17 columns: state and controls) and learned
+with ``dynamics="yak54"`` (no lift), beside two more candidates: ``learned_no_bias`` (the same
+without β: §6.1.3, "Without providing the bias terms the learning algorithm was unable to learn
+the intended trajectory") and ``learned_kinematic`` (the generic kinematic model on the demos'
+positions). ``align_sim_yak54_refs_learned_best`` counts those references where the learned
+trajectory beats every baseline.
 """
 
 from __future__ import annotations
@@ -36,7 +46,8 @@ import pandas as pd
 from ..align.baselines import dba_average, per_demo_smooth, smooth
 from ..align.dtw import dtw
 from ..align.trajectory import TrajectoryLearner
-from ..simulate.demos import REFERENCES, DemoSet, DemoSimSettings, simulate_demos
+from ..simulate.demos import (REFERENCES, YAK54_REFERENCES, DemoSet, DemoSimSettings, simulate_demos,
+                              simulate_yak54_demos)
 
 #: the simulated study's settings and their defaults (``small``); ``simulate`` overrides
 #: :class:`~pipeline.simulate.demos.DemoSimSettings` fields, ``learner`` the learner's keywords
@@ -51,16 +62,22 @@ SIM_DEFAULTS: dict[str, Any] = {
     "dba_iter": 10,
     "simulate": {},
     "learner": {},
+    "yak54_references": list(YAK54_REFERENCES),
+    "yak54_duration_s": 12.0,
+    "yak54_n_seeds": 10,
 }
 #: per-size overrides (tiny: short references, few iterations; still ≥ 10 seeds)
 SIM_SIZES: dict[str, dict[str, Any]] = {
-    "tiny": {"duration_s": 6.0, "max_iter": 8, "window_C": 10, "dba_iter": 5},
+    "tiny": {"duration_s": 6.0, "max_iter": 8, "window_C": 10, "dba_iter": 5, "yak54_duration_s": 4.0,
+             "yak54_n_seeds": 4},
     "small": {},
-    "thesis": {"duration_s": 60.0},
+    "thesis": {"duration_s": 60.0, "yak54_duration_s": 20.0},
 }
 #: the candidates, in table order; the baselines the learned trajectory must beat
 METHODS = ("learned", "best_demo", "mean_demo", "dba", "dba_smoothed", "best_smoothed_demo", "mean_smoothed_demo")
 BASELINES = ("best_demo", "dba", "dba_smoothed", "best_smoothed_demo")
+#: the Yak54 references' extra candidates
+YAK54_METHODS = METHODS + ("learned_no_bias", "learned_kinematic")
 
 
 def _rmse(e: np.ndarray) -> float:
@@ -114,6 +131,10 @@ def _settings(settings: Mapping | None) -> dict[str, Any]:
     bad = sorted(set(s["references"]) - set(REFERENCES))
     if bad:
         raise ValueError(f"study_trajectory_learning.references: unknown {bad}; known: {', '.join(REFERENCES)}")
+    bad = sorted(set(s["yak54_references"]) - set(YAK54_REFERENCES))
+    if bad:
+        raise ValueError(f"study_trajectory_learning.yak54_references: unknown {bad}; known: "
+                         f"{', '.join(YAK54_REFERENCES)}")
     known = {f.name for f in fields(DemoSimSettings)}
     bad = sorted(set(s["simulate"] or {}) - known)
     if bad:
@@ -166,25 +187,55 @@ def simulated_study(settings: Mapping | None, *, seed: int,
                              "n_iter": L.n_iter_, "converged": bool(L.converged_)})
         if progress is not None:
             progress(f"trajectory sim: {ref}: {s['n_seeds']} seeds in {time.perf_counter() - t0:.1f} s")
+    ysim = DemoSimSettings(**{**dict(s["simulate"] or {}), "duration_s": float(s["yak54_duration_s"])})
+    for r_i, ref in enumerate(YAK54_REFERENCES):
+        if ref not in s["yak54_references"]:
+            continue
+        t0 = time.perf_counter()
+        for i in range(int(s["yak54_n_seeds"])):
+            rng = np.random.default_rng([int(seed), len(REFERENCES) + r_i, i])
+            ds = simulate_yak54_demos(ref, n_demos=int(s["n_demos"]), rng=rng, settings=ysim)
+            lk = {"window_C": int(s["window_C"]), "max_iter": int(s["max_iter"]), "tol": float(s["tol"]),
+                  **dict(s["learner"] or {})}
+            rm, L = evaluate_case(ds, learner=TrajectoryLearner(dt=ds.dt, **{**lk, "dynamics": "yak54"}),
+                                  dba_iter=int(s["dba_iter"]))
+            rm["learned_no_bias"] = evaluate_case(
+                ds, learner=TrajectoryLearner(dt=ds.dt, **{**lk, "dynamics": "yak54", "use_bias": False}),
+                dba_iter=1)[0]["learned"]
+            pos = DemoSet(ds.intended, [y[:, :3] for y in ds.demos], ds.tau_true, ds.dt, ds.dt_hidden, ref)
+            rm["learned_kinematic"] = evaluate_case(pos, learner=TrajectoryLearner(dt=ds.dt, **lk), dba_iter=1)[0]["learned"]
+            for m in YAK54_METHODS:
+                rows.append({"reference": ref, "seed": i, "method": m, "rmse_m": rm[m],
+                             "n_iter": L.n_iter_, "converged": bool(L.converged_)})
+        if progress is not None:
+            progress(f"trajectory sim: {ref}: {s['yak54_n_seeds']} seeds in {time.perf_counter() - t0:.1f} s")
     cases = pd.DataFrame(rows)
     g = cases.groupby(["reference", "method"], sort=False)["rmse_m"]
     summ = g.agg(["mean", "std", "min", "max", "count"]).reset_index()
     summ = summ.rename(columns={"mean": "rmse_mean_m", "std": "rmse_std_m", "min": "rmse_min_m",
                                 "max": "rmse_max_m", "count": "n_seeds"})
     results: list[tuple[str, Any, str]] = []
-    n_best = 0
     flags = {}
     for ref in summ["reference"].unique():
         m = summ[summ["reference"] == ref].set_index("method")["rmse_mean_m"]
         best_base = float(min(m[b] for b in BASELINES))
-        ok = bool(m["learned"] < best_base)
-        flags[ref] = ok
-        n_best += ok
+        flags[ref] = bool(m["learned"] < best_base)
         results.append((f"align_sim_{ref}_learned_rmse_m", round(float(m["learned"]), 4),
                         f"{ref}: mean position RMSE (m) of the learned trajectory vs the intended one"))
         results.append((f"align_sim_{ref}_best_baseline_rmse_m", round(best_base, 4),
                         f"{ref}: the best baseline's mean position RMSE (m) ({', '.join(BASELINES)})"))
+        for extra, what in (("learned_no_bias", "the Yak54 learner without the bias terms β"),
+                            ("learned_kinematic", "the kinematic learner on the demos' positions")):
+            if extra in m:
+                results.append((f"align_sim_{ref}_{extra}_rmse_m", round(float(m[extra]), 4),
+                                f"{ref}: mean position RMSE (m) of {what}"))
     summ["learned_best"] = summ["reference"].map(flags)
-    results.insert(0, ("align_sim_refs_learned_best", int(n_best),
-                       f"references (of {len(flags)}) where the learned trajectory's mean RMSE beats every baseline"))
+    kin = [r for r in flags if r in REFERENCES]
+    yak = [r for r in flags if r in YAK54_REFERENCES]
+    results.insert(0, ("align_sim_refs_learned_best", int(sum(flags[r] for r in kin)),
+                       f"references (of {len(kin)}) where the learned trajectory's mean RMSE beats every baseline"))
+    if yak:
+        results.insert(1, ("align_sim_yak54_refs_learned_best", int(sum(flags[r] for r in yak)),
+                           f"Yak54 references (of {len(yak)}; learned with dynamics=yak54, no lift, β) where the "
+                           "learned trajectory's mean RMSE beats every baseline"))
     return {"sim_cases": cases, "sim_summary": summ}, results

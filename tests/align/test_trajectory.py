@@ -158,3 +158,25 @@ def test_quaternion_signs_are_made_continuous_and_the_model_matrix_integrates_ac
     np.testing.assert_allclose((F @ x)[:3], x[:3] + 0.5 * x[3:6] + 0.125 * x[6:9])
     np.testing.assert_allclose((F @ x)[9:], x[9:])
     assert len(COLUMNS) == 13
+
+
+def test_with_yak54_dynamics_em_learns_17_column_demos_with_bias_on_the_six_accelerations_only():
+    from pipeline.estimate.aircraft import YAK54_DRIVEN
+    from pipeline.simulate.demos import simulate_yak54_demos
+    ds = simulate_yak54_demos("yak54_pull_up", n_demos=3, rng=np.random.default_rng(2),
+                              settings=DemoSimSettings(duration_s=4.0))
+    L = TrajectoryLearner(dt=ds.dt, dynamics="yak54", max_iter=6, window_C=10).fit(ds.demos)
+    T = L.T_
+    assert L.mean_.shape == L.state_mean_.shape == (T, 17) and L.beta_.shape == (T - 1, 17)
+    assert L.loglik_[-1] > L.loglik_[0] and np.all(np.isfinite(L.loglik_))
+    other = np.setdiff1d(np.arange(17), YAK54_DRIVEN)
+    assert np.all(L.beta_[:, other] == 0) and np.all(np.any(L.beta_[:, list(YAK54_DRIVEN)] != 0, axis=0))
+    np.testing.assert_allclose(np.linalg.norm(L.mean_[:, 6:10], axis=1), 1.0)
+    # closer to the intent than the demos themselves (sample by sample through the true τ)
+    e_l = np.concatenate([L.mean_[L.tau_[k], :3] - ds.intended[tk, :3] for k, tk in enumerate(ds.tau_true)])
+    e_d = np.concatenate([y[:, :3] - ds.intended[tk, :3] for y, tk in zip(ds.demos, ds.tau_true)])
+    assert np.mean(e_l ** 2) < np.mean(e_d ** 2)
+    with pytest.raises(TrajectoryError, match="yak54 dynamics need \\(N, 17\\)"):
+        TrajectoryLearner(dt=ds.dt, dynamics="yak54").fit([y[:, :13] for y in ds.demos])
+    with pytest.raises(TrajectoryError, match="known: kinematic, yak54"):
+        TrajectoryLearner(dt=ds.dt, dynamics="f22").fit(ds.demos)

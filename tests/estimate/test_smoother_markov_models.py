@@ -123,3 +123,74 @@ def test_a_h_and_b_have_the_seed_shapes_and_predict_a_constant_jerk_step():
 
 def test_p0_is_diag_of_1_01_001_squared_per_axis_group():
     np.testing.assert_array_equal(np.diag(initial_cov()), [1.0] * 3 + [0.1**2] * 3 + [0.01**2] * 3)
+
+
+class _Pendulum:
+    """A nonlinear transition (θ, ω) -> (θ + ω dt, ω − (g/L) sin θ dt) for the nonlinear path."""
+
+    def __init__(self, q):
+        self.q = q
+
+    def f(self, x, dt):
+        x = np.asarray(x, dtype=float)
+        return np.stack([x[..., 0] + x[..., 1] * dt, x[..., 1] - 9.81 * np.sin(x[..., 0]) * dt], axis=-1)
+
+    def jacobian(self, x, dt):
+        x = np.asarray(x, dtype=float)
+        J = np.zeros(x.shape[:-1] + (2, 2))
+        J[..., 0, 0] = 1.0
+        J[..., 0, 1] = dt
+        J[..., 1, 0] = -9.81 * np.cos(x[..., 0]) * dt
+        J[..., 1, 1] = 1.0
+        return J
+
+    def noise(self, dt):
+        return self.q * np.diag([dt ** 3 / 3, dt])
+
+
+def test_a_nonlinear_transition_runs_the_ekf_and_extended_rts_as_filterpy_steps_them(rng):
+    from filterpy.kalman import ExtendedKalmanFilter as FpEKF
+    from pipeline.estimate.base import LinearMeasurement, NonlinearTransitionModel
+    dt, n_steps, n_runs = 0.05, 120, 2
+    model = _Pendulum(0.5)
+    assert isinstance(model, NonlinearTransitionModel)
+    meas = LinearMeasurement(np.array([[1.0, 0.0]]), np.array([[0.05 ** 2]]))
+    x = np.array([1.0, 0.0])
+    truth = [x]
+    for _ in range(n_steps - 1):
+        x = model.f(x, dt)
+        truth.append(x)
+    truth = np.array(truth)
+    z = truth[:, None, :1] + 0.05 * rng.standard_normal((n_steps, n_runs, 1))
+    z[40:45, 0] = np.nan   # predict-only steps
+    x0, P0 = np.array([0.8, 0.3]), np.diag([0.2, 0.5])
+    bu = 1e-3 * rng.standard_normal((n_steps, 2))
+    track = run_filter(ExtendedKalmanFilter(model, meas), GaussianState(np.tile(x0, (n_runs, 1)),
+                       np.broadcast_to(P0, (n_runs, 2, 2)), 0), np.arange(n_steps) * 50_000_000, z, bu=bu)
+    assert track.F.shape == (n_runs, n_steps, 2, 2)
+    sm = rts_smooth(track)
+    for r in range(n_runs):
+        ek = FpEKF(dim_x=2, dim_z=1)
+        ek.x, ek.P, ek.R, ek.Q = x0.copy(), P0.copy(), meas.R, model.noise(dt)
+        xs, Ps, xp, Pp, Fs = [], [], [], [], []
+        for k in range(n_steps):
+            F = np.eye(2)
+            if k:
+                F = model.jacobian(ek.x, dt)
+                ek.x = model.f(ek.x, dt) + bu[k]
+                ek.P = F @ ek.P @ F.T + ek.Q
+            xp.append(ek.x.copy()), Pp.append(ek.P.copy()), Fs.append(F)
+            if np.isfinite(z[k, r, 0]):
+                ek.update(z[k, r], lambda s: np.array([[1.0, 0.0]]), lambda s: s[:1])
+            xs.append(ek.x.copy()), Ps.append(ek.P.copy())
+        np.testing.assert_allclose(track.mean[r], np.array(xs), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(track.cov[r], np.array(Ps), rtol=1e-7, atol=1e-14)
+        # the extended RTS pass: C_k = P_k F_{k+1}ᵀ (P⁻_{k+1})⁻¹ with each step's own Jacobian
+        m, P = np.array(xs), np.array(Ps)
+        for k in range(n_steps - 2, -1, -1):
+            C = P[k] @ Fs[k + 1].T @ np.linalg.inv(Pp[k + 1])
+            m[k] = m[k] + C @ (m[k + 1] - xp[k + 1])
+            P[k] = P[k] + C @ (P[k + 1] - Pp[k + 1]) @ C.T
+        np.testing.assert_allclose(sm.mean[r], m, rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(sm.cov[r], P, rtol=1e-6, atol=1e-12)
+    assert np.mean((sm.mean[:, 5:, 0] - truth[None, 5:, 0]) ** 2) < np.mean((track.mean[:, 5:, 0] - truth[None, 5:, 0]) ** 2)

@@ -83,3 +83,31 @@ def test_bad_settings_and_references_are_refused_with_one_clear_line():
         DemoSimSettings(step_probs=(0.5, 0.5, 0.5))
     with pytest.raises(ValueError, match="unknown reference 'barrel'"):
         simulate_demos("barrel", rng=np.random.default_rng(0))
+
+
+def test_the_yak54_references_fly_from_trim_and_their_demos_keep_17_columns_and_the_true_warp():
+    from pipeline.estimate.aircraft import YAK54_COLUMNS
+    from pipeline.simulate.demos import YAK54_REFERENCES, simulate_yak54_demos, yak54_intended
+    s = DemoSimSettings(duration_s=12.0)
+    level, dth = yak54_intended("yak54_level", s)
+    assert dth == s.dt_s / 2 and level.shape == (int(round(12.0 / dth)) + 1, 17)
+    # trimmed straight and level: height and speed hold (the simulator's lift balances weight)
+    np.testing.assert_allclose(-level[:, 2], s.altitude_m, atol=0.05)
+    np.testing.assert_allclose(np.linalg.norm(level[:, 3:6], axis=1), s.yak54_speed_mps, atol=0.01)
+    up, _ = yak54_intended("yak54_pull_up", s)
+    height = -up[:, 2]
+    assert height.min() > s.altitude_m - 1.0 and height.max() > s.altitude_m + 30.0   # it climbs
+    np.testing.assert_allclose(np.linalg.norm(up[:, 6:10], axis=1), 1.0, atol=1e-12)
+    assert set(YAK54_REFERENCES) == {"yak54_level", "yak54_pull_up"}
+    a = simulate_yak54_demos("yak54_pull_up", n_demos=3, rng=np.random.default_rng(4), settings=s)
+    b = simulate_yak54_demos("yak54_pull_up", n_demos=3, rng=np.random.default_rng(4), settings=s)
+    assert a.columns == YAK54_COLUMNS and a.intended.shape == up.shape
+    for y, yb, tau in zip(a.demos, b.demos, a.tau_true):
+        np.testing.assert_array_equal(y, yb)
+        assert y.shape == (len(tau), 17) and tau[0] == 0 and set(np.unique(np.diff(tau))) <= {1, 2, 3}
+        assert np.linalg.norm(y[:, :3] - up[tau, :3], axis=1).max() < 6.0
+        np.testing.assert_allclose(y[:, 13:17].mean(axis=0), up[tau, 13:17].mean(axis=0), atol=0.01)
+    with pytest.raises(ValueError, match="unknown reference 'barrel'"):
+        simulate_yak54_demos("barrel", rng=np.random.default_rng(0), settings=s)
+    with pytest.raises(ValueError, match="yak54_sensor_sigma"):
+        DemoSimSettings(yak54_sensor_sigma=(0.1, 0.1))

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
 
-from pipeline.simulate.demos import REFERENCES
-from pipeline.studies.trajectory_sim import BASELINES, METHODS, SIM_DEFAULTS, SIM_SIZES, simulated_study
+from pipeline.simulate.demos import REFERENCES, YAK54_REFERENCES
+from pipeline.studies.trajectory_sim import (BASELINES, METHODS, SIM_DEFAULTS, SIM_SIZES, YAK54_METHODS,
+                                             simulated_study)
 
 SEED = 20261123
 
@@ -28,20 +29,31 @@ def test_at_tiny_size_the_learned_trajectory_beats_every_baseline_on_all_three_r
     tables, results, lines = tiny
     cases, summ = tables["sim_cases"], tables["sim_summary"]
     assert SIM_DEFAULTS["n_seeds"] >= 10 and "n_seeds" not in SIM_SIZES["tiny"]
-    assert set(cases["reference"]) == set(REFERENCES) and set(cases["method"]) == set(METHODS)
-    assert (cases.groupby(["reference", "method"]).size() == SIM_DEFAULTS["n_seeds"]).all()
+    assert set(cases["reference"]) == set(REFERENCES) | set(YAK54_REFERENCES)
+    kin = cases[cases["reference"].isin(REFERENCES)]
+    assert set(kin["method"]) == set(METHODS)
+    assert (kin.groupby(["reference", "method"]).size() == SIM_DEFAULTS["n_seeds"]).all()
+    yak = cases[cases["reference"].isin(YAK54_REFERENCES)]
+    assert set(yak["method"]) == set(YAK54_METHODS)
+    assert (yak.groupby(["reference", "method"]).size() == SIM_SIZES["tiny"]["yak54_n_seeds"]).all()
     assert np.isfinite(cases["rmse_m"]).all() and (cases["rmse_m"] > 0).all()
     assert {"rmse_mean_m", "rmse_std_m", "rmse_min_m", "rmse_max_m", "n_seeds", "learned_best"} <= set(summ.columns)
     name, value, definition = results[0]
     assert name == "align_sim_refs_learned_best" and value == 3 and definition
+    # the optional airframe part is reported, not a target: its headline and candidates are there
+    assert results[1][0] == "align_sim_yak54_refs_learned_best" and 0 <= results[1][1] <= 2
+    names = {r[0] for r in results}
+    for ref in YAK54_REFERENCES:
+        assert {f"align_sim_{ref}_learned_no_bias_rmse_m", f"align_sim_{ref}_learned_kinematic_rmse_m"} <= names
     for ref in REFERENCES:
         m = summ[summ["reference"] == ref].set_index("method")["rmse_mean_m"]
         assert all(m["learned"] < m[b] for b in BASELINES), (ref, m.to_dict())
-    assert len(lines) == 3 and all(line.startswith("trajectory sim: ") for line in lines)
+    assert len(lines) == 5 and all(line.startswith("trajectory sim: ") for line in lines)
 
 
 def test_one_seed_gives_every_method_and_reference_and_the_same_seed_the_same_numbers():
-    s = {**SIM_DEFAULTS, **SIM_SIZES["tiny"], "n_seeds": 1, "max_iter": 3, "references": ["loop"]}
+    s = {**SIM_DEFAULTS, **SIM_SIZES["tiny"], "n_seeds": 1, "max_iter": 3, "references": ["loop"],
+         "yak54_references": []}
     with threadpool_limits(1):
         a, ra = simulated_study(s, seed=5)
         b, rb = simulated_study(s, seed=5)
@@ -51,7 +63,21 @@ def test_one_seed_gives_every_method_and_reference_and_the_same_seed_the_same_nu
                                                 "align_sim_loop_best_baseline_rmse_m"]
 
 
+def test_a_yak54_reference_gives_the_airframe_candidates_beside_the_baselines():
+    s = {**SIM_DEFAULTS, **SIM_SIZES["tiny"], "max_iter": 3, "references": [], "yak54_n_seeds": 1,
+         "yak54_references": ["yak54_pull_up"]}
+    with threadpool_limits(1):
+        t, r = simulated_study(s, seed=5)
+    assert list(t["sim_cases"]["method"]) == list(YAK54_METHODS) and np.isfinite(t["sim_cases"]["rmse_m"]).all()
+    assert [x[0] for x in r] == ["align_sim_refs_learned_best", "align_sim_yak54_refs_learned_best",
+                                 "align_sim_yak54_pull_up_learned_rmse_m", "align_sim_yak54_pull_up_best_baseline_rmse_m",
+                                 "align_sim_yak54_pull_up_learned_no_bias_rmse_m",
+                                 "align_sim_yak54_pull_up_learned_kinematic_rmse_m"]
+
+
 def test_bad_study_settings_name_the_key():
+    with pytest.raises(ValueError, match="yak54_references: unknown \['barrel'\]"):
+        simulated_study({"yak54_references": ["barrel"]}, seed=0)
     with pytest.raises(ValueError, match="references: unknown \\['barrel'\\]"):
         simulated_study({"references": ["barrel"]}, seed=0)
     with pytest.raises(ValueError, match="simulate: unknown key\\(s\\) \\['wind'\\]"):

@@ -512,7 +512,7 @@ def summarise(runs: list[RunResult], *, skip_s: float = 1.0) -> dict[str, float]
     """Pooled over time (after ``skip_s``) and runs: mean ε, mean η%, mean distance, µs per step;
     and, because a run whose cameras lose the target diverges for good and dominates the pooled
     mean, the median over runs of each run's mean η%, the runs lost for good
-    (:func:`lost_for_good`) and the pooled η% of the others."""
+    (:func:`lost_for_good`) and the pooled η% and ε of the others."""
     if not any(np.any(r.t_s >= skip_s) for r in runs):
         skip_s = 0.0          # runs shorter than the skipped start (tests): keep every step
     keep = [r.t_s >= skip_s for r in runs]
@@ -523,13 +523,15 @@ def summarise(runs: list[RunResult], *, skip_s: float = 1.0) -> dict[str, float]
     lost = np.array([lost_for_good(r) for r in runs])
     run_eta = np.array([np.nanmean(r.eta[k]) if np.any(k) else np.nan for r, k in zip(runs, keep)])
     held = np.concatenate([r.eta[k] for r, k, lo in zip(runs, keep, lost) if not lo] or [np.array([np.nan])])
+    held_err = np.concatenate([r.err_m[k] for r, k, lo in zip(runs, keep, lost) if not lo] or [np.array([np.nan])])
     return {"eps_m": float(np.nanmean(err)), "eta_pct": float(100 * np.nanmean(eta)),
             "median_eps_m": float(np.nanmedian(err)), "mean_dist_m": float(np.nanmean(dist)),
             "step_us": float(np.nanmean(step)), "n_runs": len(runs),
             "n_reinit": int(sum(r.n_reinit for r in runs)),
             "median_run_eta_pct": float(100 * np.nanmedian(run_eta)) if np.isfinite(run_eta).any() else float("nan"),
             "n_lost": int(lost.sum()),
-            "eta_pct_not_lost": float(100 * np.nanmean(held)) if np.isfinite(held).any() else float("nan")}
+            "eta_pct_not_lost": float(100 * np.nanmean(held)) if np.isfinite(held).any() else float("nan"),
+            "eps_m_not_lost": float(np.nanmean(held_err)) if np.isfinite(held_err).any() else float("nan")}
 
 
 def per_step_frame(runs: list[RunResult], **labels: Any) -> pd.DataFrame:

@@ -99,10 +99,12 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
     base = one("base", "base", n_runs=run["runs"], duration=run["base_s"])
     man = one("maneuvering", "maneuvering", n_runs=run["runs"], duration=run["maneuvering_s"])
     mob = one("mobile", "mobile", n_runs=run["runs"], duration=run["mobile_s"])
-    eps_n = {n: one(f"particles_{n}", "mobile", n_runs=run["sweep_runs"], duration=run["sweep_s"],
-                    n_particles=int(n), tag=f"N{n}")["eps_m"] for n in run["particles"]}
-    eps_o = {o: one(f"observers_{o}", "mobile", n_runs=run["sweep_runs"], duration=run["sweep_s"],
-                    n_obs=int(o), tag=f"O{o}")["eps_m"] for o in run["observers"]}
+    sw_n = {n: one(f"particles_{n}", "mobile", n_runs=run["sweep_runs"], duration=run["sweep_s"],
+                   n_particles=int(n), tag=f"N{n}") for n in run["particles"]}
+    sw_o = {o: one(f"observers_{o}", "mobile", n_runs=run["sweep_runs"], duration=run["sweep_s"],
+                   n_obs=int(o), tag=f"O{o}") for o in run["observers"]}
+    eps_n = {n: s["eps_m"] for n, s in sw_n.items()}
+    eps_o = {o: s["eps_m"] for o, s in sw_o.items()}
 
     rows: list[Row] = []
     bound = 100.0 * float(np.sin(cfg.sigma_psi_rad))
@@ -126,6 +128,13 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
         rows.append((f"geo_eps_m_particles_{n}", round(e, 2), f"mean 3-D error (m) with N = {n} particles (§6.3 setup, §6.4)"))
     for o, e in eps_o.items():
         rows.append((f"geo_eps_m_observers_{o}", round(e, 2), f"mean 3-D error (m) with {o} observers (§6.3 setup, §6.5)"))
+    # the sweeps' means are over few runs, so one run whose cameras lose the target moves a point
+    for kind, sw in (("particles", sw_n), ("observers", sw_o)):
+        for k, st in sw.items():
+            rows.append((f"geo_lost_runs_{kind}_{k}", f"{st['n_lost']}/{st['n_runs']}",
+                         f"{kind} sweep at {k}: runs that end with no observer detecting the target"))
+            rows.append((f"geo_eps_m_{kind}_{k}_not_lost", round(st["eps_m_not_lost"], 2),
+                         f"{kind} sweep at {k}: mean 3-D error (m) over the runs not lost (diagnosis)"))
     if 1 in eps_o and 2 in eps_o:
         rows.append(("geo_obs_1_to_2_met", int(eps_o[2] <= eps_o[1] / 2), "eps(2) <= eps(1)/2"))
     if 2 in eps_o and 4 in eps_o:

@@ -203,6 +203,18 @@ def intended_trajectory(reference: str, settings: DemoSimSettings = DemoSimSetti
     return np.hstack([pos, vel, acc, _attitude(vel, acc)]), dth
 
 
+def _warp_and_pilot(L: int, p: F64, rng: np.random.Generator, settings: DemoSimSettings) -> tuple[F64, F64]:
+    """One demo's time warp over ``L`` hidden steps (τ₀ = 0, steps 1–3 drawn with probabilities
+    ``p``, eq. 3.3) and its Gauss–Markov pilot deviation in position (N, 3) on the demo's own
+    clock."""
+    steps = rng.choice(np.array([1, 2, 3]), size=L, p=p)
+    tau = np.concatenate([[0], np.cumsum(steps)])
+    tau = tau[tau <= L - 1]
+    dev = gauss_markov(1, len(tau), settings.dt_s, settings.pilot_tau_s, settings.pilot_sigma_m, rng,
+                       knot_s=settings.pilot_knot_s)[0]
+    return tau, dev
+
+
 def simulate_demos(reference: str, *, n_demos: int = 5, rng: np.random.Generator,
                    settings: DemoSimSettings = DemoSimSettings()) -> DemoSet:
     """Simulate ``n_demos`` demos of ``reference`` (see the module docstring).
@@ -228,13 +240,8 @@ def simulate_demos(reference: str, *, n_demos: int = 5, rng: np.random.Generator
     sp, sv, sa, sq = settings.sensor_sigma
     demos, taus = [], []
     for _ in range(int(n_demos)):
-        steps = rng.choice(np.array([1, 2, 3]), size=L, p=p)
-        tau = np.concatenate([[0], np.cumsum(steps)])
-        tau = tau[tau <= L - 1]
+        tau, dev = _warp_and_pilot(L, p, rng, settings)
         N = len(tau)
-        # pilot deviation in position on the demo's own clock, its derivatives in vel/acc
-        dev = gauss_markov(1, N, settings.dt_s, settings.pilot_tau_s, settings.pilot_sigma_m, rng,
-                           knot_s=settings.pilot_knot_s)[0]
         dvel = np.gradient(dev, settings.dt_s, axis=0)
         dacc = np.gradient(dvel, settings.dt_s, axis=0)
         y = z[tau].copy()
@@ -323,12 +330,8 @@ def simulate_yak54_demos(reference: str, *, n_demos: int = 5, rng: np.random.Gen
     sr, ss, sf = settings.yak54_sensor_sigma
     demos, taus = [], []
     for _ in range(int(n_demos)):
-        steps = rng.choice(np.array([1, 2, 3]), size=L, p=p)
-        tau = np.concatenate([[0], np.cumsum(steps)])
-        tau = tau[tau <= L - 1]
+        tau, dev = _warp_and_pilot(L, p, rng, settings)
         N = len(tau)
-        dev = gauss_markov(1, N, settings.dt_s, settings.pilot_tau_s, settings.pilot_sigma_m, rng,
-                           knot_s=settings.pilot_knot_s)[0]
         y = z[tau].copy()
         y[:, 0:3] += dev + sp * rng.standard_normal((N, 3))
         y[:, 3:6] += np.gradient(dev, settings.dt_s, axis=0) + sv * rng.standard_normal((N, 3))

@@ -79,7 +79,8 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..frames.rotations import quat_continuity
-from ..estimate.aircraft import YAK54_COLUMNS, YAK54_DRIVEN, Yak54Params, Yak54Transition, yak54_jacobian, yak54_step
+from ..estimate.aircraft import (YAK54_COLUMNS, YAK54_DRIVEN, Yak54Params, Yak54Transition, yak54_linearise,
+                                 yak54_step)
 from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
 from ..estimate.smoother import rts_smooth
@@ -341,8 +342,8 @@ class TrajectoryLearner:
 
     def _mstep(self, Y, tau, fit: _Fit, beta_on: bool) -> tuple[F64, F64, F64]:
         mu, P, L = fit.mean, fit.cov, fit.gain
-        mpe = mu[1:] - self._f(mu[:-1])  # model-prediction error μ_{t+1} − f(μ_t)
-        F = self._jac(mu[:-1])            # A_t = Df(μ_{t|T−1}), (n, n) shared or (T−1, n, n)
+        fmu, F = self._lin(mu[:-1])       # f(μ_t) and A_t = Df(μ_{t|T−1}): (n, n) shared or (T−1, n, n)
+        mpe = mu[1:] - fmu                # model-prediction error μ_{t+1} − f(μ_t)
         beta = np.zeros_like(mpe)
         if beta_on:
             beta[:, self._driven] = mpe[:, self._driven] / (1.0 + float(self.ridge))
@@ -583,11 +584,12 @@ class TrajectoryLearner:
             return z @ self._F.T
         return yak54_step(z, self.dt_hidden_, self._params, lift=False)
 
-    def _jac(self, z: F64) -> F64:
-        """Df at hidden states ``z`` (T, n_x): the shared F of the linear model, or per step."""
+    def _lin(self, z: F64) -> tuple[F64, F64]:
+        """``f(z)`` and ``Df`` at hidden states ``z`` (T, n_x): the shared F of the linear model,
+        or one per step."""
         if self._F is not None:
-            return self._F
-        return yak54_jacobian(z, self.dt_hidden_, self._params, lift=False)
+            return z @ self._F.T, self._F
+        return yak54_linearise(z, self.dt_hidden_, self._params, lift=False)
 
     def _initial_trajectory(self, Y, tau) -> F64:
         T, n_x, obs = self._T, self._n_x, list(self._obs)

@@ -42,7 +42,7 @@ from ..frames.rotations import (
     euler_to_quat,
     quat_multiply,
     quat_rotate,
-    quat_rotate_inverse,
+    quat_to_dcm,
 )
 
 F64 = NDArray[np.float64]
@@ -130,14 +130,15 @@ def _state(x: ArrayLike) -> F64:
     return x
 
 
-def _accelerations(x: F64, vb: F64, p: Yak54Params, lift: bool) -> F64:
-    """(3.15) given the body velocity ``vb`` (so :func:`yak54_step` rotates only once)."""
+def _accelerations(x: F64, vb: F64, down_b: F64, p: Yak54Params, lift: bool) -> F64:
+    """(3.15) given the body velocity ``vb`` and the body components of NED down ``down_b``
+    (``Rᵀ e_D``, the third row of R), so that :func:`yak54_step` builds R only once."""
     u, v, w = np.moveaxis(vb, -1, 0)
     pr, qr, rr = np.moveaxis(x[..., 10:13], -1, 0)
     da, de, dr = np.moveaxis(x[..., 13:16], -1, 0)
     m = p.mass_kg
     # (3.16) with the erratum (φ, not ψ): gravity is NED down seen from the body
-    gb = quat_rotate_inverse(x[..., 6:10], np.array([0.0, 0.0, p.g_mps2]))
+    gb = p.g_mps2 * down_b
     du = v * rr - w * qr - p.drag_x * u * np.abs(u) / m + gb[..., 0] + x[..., 16] / m
     dv = w * pr - u * rr - p.drag_y * v * np.abs(v) / m + gb[..., 1]
     dw = u * qr - v * pr - p.drag_z * w * np.abs(w) / m + gb[..., 2]
@@ -179,7 +180,8 @@ def yak54_accelerations(x: ArrayLike, params: Yak54Params = Yak54Params(), *, li
         transport terms included) and ``(ṗ, q̇, ṙ)`` in rad/s².
     """
     x = _state(x)
-    return _accelerations(x, quat_rotate_inverse(x[..., 6:10], x[..., 3:6]), params, lift)
+    R = quat_to_dcm(x[..., 6:10])
+    return _accelerations(x, np.einsum("...ji,...j->...i", R, x[..., 3:6]), R[..., 2, :], params, lift)
 
 
 def yak54_step(x: ArrayLike, dt: float, params: Yak54Params = Yak54Params(), *, lift: bool = False) -> F64:
@@ -218,8 +220,9 @@ def yak54_step(x: ArrayLike, dt: float, params: Yak54Params = Yak54Params(), *, 
     """
     x = _state(x)
     q = x[..., 6:10]
-    vb = quat_rotate_inverse(q, x[..., 3:6])
-    acc = _accelerations(x, vb, params, lift)
+    R = quat_to_dcm(q)
+    vb = np.einsum("...ji,...j->...i", R, x[..., 3:6])
+    acc = _accelerations(x, vb, R[..., 2, :], params, lift)
     omega = x[..., 10:13]
     dq = np.concatenate([np.ones_like(omega[..., :1]), 0.5 * dt * omega], axis=-1)
     q_new = quat_multiply(q, dq)
@@ -256,13 +259,20 @@ def yak54_jacobian(x: ArrayLike, dt: float, params: Yak54Params = Yak54Params(),
     ndarray, shape (..., 17, 17)
         ``J[..., i, j] = ∂f_i/∂x_j``.
     """
+    return yak54_linearise(x, dt, params, lift=lift, eps=eps)[1]
+
+
+def yak54_linearise(x: ArrayLike, dt: float, params: Yak54Params = Yak54Params(), *, lift: bool = False,
+                    eps: ArrayLike | None = None) -> tuple[F64, F64]:
+    """``(yak54_step(x), yak54_jacobian(x))`` from one batched call of 2×17 + 1 states (the EKF
+    needs both at every step; one call halves the per-step overhead)."""
     x = _state(x)
     h = 1e-6 * np.maximum(1.0, np.abs(x)) if eps is None else np.broadcast_to(np.asarray(eps, float), x.shape)
     d = h[..., :, None] * np.eye(_N)  # row j: h_j e_j
     plus, minus = x[..., None, :] + d, x[..., None, :] - d
-    fs = yak54_step(np.concatenate([plus, minus], axis=-2), dt, params, lift=lift)
+    fs = yak54_step(np.concatenate([plus, minus, x[..., None, :]], axis=-2), dt, params, lift=lift)
     den = np.diagonal(plus - minus, axis1=-2, axis2=-1)[..., :, None]
-    return np.swapaxes((fs[..., :_N, :] - fs[..., _N:, :]) / den, -1, -2)
+    return fs[..., 2 * _N, :], np.swapaxes((fs[..., :_N, :] - fs[..., _N:2 * _N, :]) / den, -1, -2)
 
 
 def yak54_trim(speed_mps: float, params: Yak54Params = Yak54Params(), *, heading_rad: float = 0.0,
@@ -334,6 +344,9 @@ class Yak54Transition:
 
     def jacobian(self, x: ArrayLike, dt: float) -> F64:  # (R, 17) -> (R, 17, 17)
         return yak54_jacobian(x, dt, self.params, lift=self.lift)
+
+    def linearise(self, x: ArrayLike, dt: float) -> tuple[F64, F64]:  # f and its Jacobian at once
+        return yak54_linearise(x, dt, self.params, lift=self.lift)
 
     def noise(self, dt: float) -> F64:  # Q, read-only
         return self.Q

@@ -450,9 +450,12 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
             step = int(t_ns[k]) - state.t_ns
             if nonlinear:
                 dt = step * 1e-9
-                F = ekf.transition.jacobian(state.mean, dt)
+                # a model that gives f and its Jacobian from one evaluation (``linearise``) saves a call
+                lin = getattr(ekf.transition, "linearise", None)
+                fx, F = (lin(state.mean, dt) if callable(lin)
+                         else (ekf.transition.f(state.mean, dt), ekf.transition.jacobian(state.mean, dt)))
                 state = ekf.predict(state, int(t_ns[k]), F=F, Q=ekf.transition.noise(dt),
-                                    bu=None if bu is None else bu[k], fx=ekf.transition.f(state.mean, dt))
+                                    bu=None if bu is None else bu[k], fx=fx)
             else:
                 if step not in models:
                     models[step] = (ekf.transition.matrix(step * 1e-9), ekf.transition.noise(step * 1e-9))

@@ -198,6 +198,13 @@ def test_batched_jacobians_equal_the_per_state_ones():
             np.testing.assert_allclose(J[i, j], yak54_jacobian(x[i, j], 0.05, P), rtol=1e-13, atol=1e-13)
     # controls are held: their rows are identity
     np.testing.assert_allclose(J[..., 13:, :], np.broadcast_to(np.eye(17)[13:], (2, 3, 4, 17)), atol=1e-9)
+    # f and its Jacobian from one batched call are the two separate ones, for the transition too
+    from pipeline.estimate.aircraft import yak54_linearise, yak54_step
+    f, J2 = yak54_linearise(x, 0.05, P)
+    np.testing.assert_array_equal(J2, J)
+    np.testing.assert_allclose(f, yak54_step(x, 0.05, P), rtol=1e-15, atol=1e-15)
+    f3, J3 = Yak54Transition(np.eye(17), P).linearise(x[0], 0.05)
+    np.testing.assert_array_equal(J3, J[0]) and np.testing.assert_array_equal(f3, f[0])
 
 
 def test_the_transition_is_nonlinear_and_batches_over_runs():

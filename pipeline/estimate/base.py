@@ -74,7 +74,9 @@ class TransitionModel(Protocol):
 @runtime_checkable
 class NonlinearTransitionModel(Protocol):
     """``x_{k+1} = f(x_k, dt) + w``, ``w ~ N(0, Q(dt))``, linearised about the posterior:
-    ``F_k = ∂f/∂x`` (``jacobian``, ``(..., n_x, n_x)``), ``P⁻ = F_k P F_kᵀ + Q``.
+    ``F_k = ∂f/∂x`` (``jacobian``, ``(..., n_x, n_x)``), ``P⁻ = F_k P F_kᵀ + Q``. A model may also
+    offer ``linearise(x, dt) -> (f(x), F)`` from one evaluation, which
+    :func:`~pipeline.estimate.ekf.run_filter` then prefers.
     :class:`~pipeline.estimate.aircraft.Yak54Transition` is one."""
 
     def f(self, x: ArrayLike, dt: float) -> F64: ...

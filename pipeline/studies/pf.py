@@ -458,10 +458,13 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
             "Straight GPS track: seeds whose mean straight fraction over steps 25–end is ≥ 0.95 (target ≥ 19/20).")
     # what Π_m (4.2) allows at all: the mode chain alone under an ideal likelihood that removes
     # every curve particle after 1 (or 2) weightings (straight_fraction_bound)
-    bounds = {k: straight_fraction_bound(sim, float(st["speed_mps"]), kill_after=k,
-                                         steps=int(st["straight_steps_total"]), n=int(st["bound_particles"]),
-                                         startup=startup, rng=set_rng(seed, f"pf/bound/{k}"))
-              for k in (1, 2)}
+    def bound_pair(cfg: HmpfConfig, key: str) -> dict[int, np.ndarray]:
+        return {k: straight_fraction_bound(cfg, float(st["speed_mps"]), kill_after=k,
+                                           steps=int(st["straight_steps_total"]), n=int(st["bound_particles"]),
+                                           startup=startup, rng=set_rng(seed, f"{key}/{k}"))
+                for k in (1, 2)}
+
+    bounds = bound_pair(sim, "pf/bound")
     res.add("pf_hmpf_straight_frac_bound_ideal", f"{bounds[1][0]:.3f}",
             "Oracle: straight fraction over steps 25–end on a straight track when every curve particle dies at its "
             "first weighting (the mode and submode chains alone, Π_m (4.2), the study's δ_max): the most any "
@@ -470,10 +473,7 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
             "The same bound when curve particles die at their second weighting.")
     # the other reading of when δ restarts (digest A4 vs thesis (2.3); estimate.pf.hmpf.counters),
     # on the same noise: the ideal-likelihood bound and the filter's straight fraction
-    b_oth = {k: straight_fraction_bound(sim.with_(counters=other), float(st["speed_mps"]), kill_after=k,
-                                        steps=int(st["straight_steps_total"]), n=int(st["bound_particles"]),
-                                        startup=startup, rng=set_rng(seed, f"pf/bound/{other}/{k}"))
-             for k in (1, 2)}
+    b_oth = bound_pair(sim.with_(counters=other), f"pf/bound/{other}")
     res.add("pf_hmpf_counters", sim.counters, "When δ and θ restart (estimate.pf.hmpf.counters): leaf - on entering W "
             "and on every leaf change (digest A4); segment - when a straight begins or a curve is entered (thesis (2.3)).")
     res.add(f"pf_hmpf_straight_frac_mean_{other}_counters", f"{s_oth['straight_frac'].mean():.3f}",

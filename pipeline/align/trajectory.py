@@ -79,8 +79,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from ..frames.rotations import quat_continuity
-from ..estimate.aircraft import (YAK54_COLUMNS, YAK54_DRIVEN, Yak54Params, Yak54Transition, yak54_linearise,
-                                 yak54_step)
+from ..estimate.aircraft import YAK54_COLUMNS, YAK54_DRIVEN, Yak54Params, Yak54Transition, yak54_linearise
 from ..estimate.base import GaussianState, LinearMeasurement, LinearTransition
 from ..estimate.ekf import ExtendedKalmanFilter, run_filter
 from ..estimate.smoother import rts_smooth
@@ -523,7 +522,7 @@ class TrajectoryLearner:
         self._rfloor = VAR_FLOOR * np.maximum(scale, 1e-12)
         R0 = np.maximum(d2.var(axis=0) / 6.0, self._rfloor)
         z0 = self._initial_trajectory(Y, tau)
-        mpe0 = z0[1:] - self._f(z0[:-1])
+        mpe0 = z0[1:] - self._lin(z0[:-1])[0]
         q0 = np.maximum(mpe0.var(axis=0), 1e-12)
         self._qfloor = VAR_FLOOR * q0
         Qz, Ry = np.diag(q0), np.diag(R0)
@@ -572,17 +571,11 @@ class TrajectoryLearner:
         self.d_ = d
         self.sigma_z_ = self.sigma_z_trace_[-1]
         self.sigma_y_ = self.sigma_y_trace_[-1]
-        self.model_error_ = fit.mean[1:] - self._f(fit.mean[:-1])
+        self.model_error_ = fit.mean[1:] - self._lin(fit.mean[:-1])[0]
         self.beta_ = beta
         self.demos_ = Y
         self.T_ = T
         return self
-
-    def _f(self, z: F64) -> F64:
-        """The model's one-step prediction f(z) of hidden states ``z`` (..., n_x), without β."""
-        if self._F is not None:
-            return z @ self._F.T
-        return yak54_step(z, self.dt_hidden_, self._params, lift=False)
 
     def _lin(self, z: F64) -> tuple[F64, F64]:
         """``f(z)`` and ``Df`` at hidden states ``z`` (T, n_x): the shared F of the linear model,

@@ -434,6 +434,11 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     pm = np.empty((T, R_, n_x)) if store == "all" else None
     pc = np.empty((T, R_, n_x, n_x)) if store == "all" else None
     nonlinear = callable(getattr(ekf.transition, "f", None)) and callable(getattr(ekf.transition, "jacobian", None))
+    # a model that gives f and its Jacobian from one evaluation (``linearise``) saves a call a step
+    lin = getattr(ekf.transition, "linearise", None) if nonlinear else None
+    if nonlinear and not callable(lin):
+        def lin(x, dt):
+            return ekf.transition.f(x, dt), ekf.transition.jacobian(x, dt)
     Fs = (np.empty((T, R_, n_x, n_x)) if nonlinear else np.empty((T, n_x, n_x))) if store == "all" else None
     nis = np.empty((T, R_))
     dof = np.empty((T, R_), dtype=np.int64)
@@ -450,10 +455,7 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
             step = int(t_ns[k]) - state.t_ns
             if nonlinear:
                 dt = step * 1e-9
-                # a model that gives f and its Jacobian from one evaluation (``linearise``) saves a call
-                lin = getattr(ekf.transition, "linearise", None)
-                fx, F = (lin(state.mean, dt) if callable(lin)
-                         else (ekf.transition.f(state.mean, dt), ekf.transition.jacobian(state.mean, dt)))
+                fx, F = lin(state.mean, dt)
                 state = ekf.predict(state, int(t_ns[k]), F=F, Q=ekf.transition.noise(dt),
                                     bu=None if bu is None else bu[k], fx=fx)
             else:

@@ -100,6 +100,19 @@ def test_the_crlb_table_holds_sample_std_and_bound_for_r_v_omega(tiny):
         assert float(tiny.figures[f"bearing_crlb_floor_ratio_{q}"]) >= 1.0 - 1e-3
 
 
+@pytest.mark.slow
+def test_the_crlb_part_reruns_the_same_orbit_with_the_other_q_form_as_a_diagnostic(tiny):
+    # the setting is the corrected B_θω block: the second arm carries the printed one
+    other = {q: float(tiny.figures[f"bearing_crlb_other_q_floor_ratio_{q}"]) for q in ("r", "v", "omega", "theta")}
+    assert all(v >= 1.0 - 1e-3 for v in other.values())
+    assert other["omega"] != pytest.approx(float(tiny.figures["bearing_crlb_floor_ratio_omega"]), rel=1e-3)
+    for q in ("r", "v", "omega", "theta"):
+        assert np.isfinite(float(tiny.figures[f"bearing_crlb_other_q_ratio_{q}"]))
+    assert "faithful B_θω block" in Path(tiny.outputs["report"]).read_text()
+    # the target's check reads the setting's arm only
+    assert "crlb_cppv_25_1_6_other_q" in tiny.result.diagnostics["configs"]
+
+
 def test_the_case_5_removal_drops_the_mpc_diverged_scenarios_from_both_sides():
     # seed Case 5: MPC's divergent scenarios removed, and as many CPPV scenarios (paired: the same)
     mpc_div = np.array([False, True, False, False, True, False])

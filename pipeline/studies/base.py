@@ -190,6 +190,32 @@ def flightcoach_paths(inputs: Mapping | None, files: Mapping[str, str], study: s
     return paths
 
 
+#: FlightCoach segments the studies leave out: take-off and landing are no schedule maneuvers
+FLIGHTCOACH_SKIP = ("tkOf", "tkoff", "lnd")
+
+
+def flightcoach_labelled(state: pd.DataFrame, seg: pd.DataFrame, skip=FLIGHTCOACH_SKIP) -> pd.DataFrame:
+    """Rows of every labelled segment except take-off/landing, ``run_id`` = segment id."""
+    parts = []
+    for _, s in seg.iterrows():
+        if s["label"] in skip:
+            continue
+        g = state[(state["t_ns"] >= s["t_start_ns"]) & (state["t_ns"] < s["t_end_ns"])]
+        parts.append(g.assign(run_id=int(s["segment_id"]), label=str(s["label"])))
+    return pd.concat(parts, ignore_index=True)
+
+
+def model_dir(paths: Mapping[str, Path]) -> Path:
+    """The folder of a study's trained set: its ``model_params``/``model_meta`` outputs must be
+    ``<dir>/params.npz`` and ``<dir>/meta.json`` (the layout :meth:`ManeuverModelSet.save` writes)."""
+    mdir = paths["model_params"].parent
+    if paths["model_meta"].parent != mdir or (paths["model_params"].name, paths["model_meta"].name) != (
+            "params.npz", "meta.json"):
+        raise ValueError(f"study outputs: model_params/model_meta must be <dir>/params.npz and <dir>/meta.json, "
+                         f"got {paths['model_params']} and {paths['model_meta']}")
+    return mdir
+
+
 def output_path(outputs: Mapping, key: str) -> Path:
     """One declared output (Snakemake namedlist or dict), its folder created."""
     try:

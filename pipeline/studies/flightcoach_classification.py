@@ -95,15 +95,16 @@ from ..io.registry import read_log
 from ..models import ManeuverModelSet, ModelsConfig
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
-from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_FILES, STUDY_TABLES, Progress, Results, StudyResult, flightcoach_defaults, flightcoach_paths, input_path, md_table, output_path, say,
-                   study_outputs, study_settings, write_text)
+from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_FILES, FLIGHTCOACH_SKIP, STUDY_TABLES, Progress, Results, StudyResult,
+                   flightcoach_defaults, flightcoach_labelled, flightcoach_paths, input_path, md_table, model_dir,
+                   output_path, say, study_outputs, study_settings, write_text)
 
 NAME = "flightcoach_classification"
 SUBDIR = FLIGHTCOACH_DIR
 #: the study's input files: ``{input name: file name under <realdata_dir>/flightcoach_f3a_json}``
 FLIGHTS = FLIGHTCOACH_FILES
 TRAIN, TEST_P23, TEST_F23, CALIB = (FLIGHTS[k] for k in ("train", "test_p23", "test_f23", "calib"))
-SKIP = ("tkOf", "tkoff", "lnd")
+SKIP = FLIGHTCOACH_SKIP
 F23_NEW = ("keLoop", "stall", "8roll", "shark", "SqLC", "h8", "ke45", "rShark", "r2FT", "rThat",
            "spin", "hC8", "rCir", "Av")
 #: resolution (nats/sample) of the P21 slack calibration around the coarse grid's maximisers
@@ -161,17 +162,6 @@ def load(path: Path):
     log = read_log(path)
     state, seg, _ = preprocess_log(log).tables
     return state, seg
-
-
-def labelled(state: pd.DataFrame, seg: pd.DataFrame, skip=SKIP) -> pd.DataFrame:
-    """Rows of every labelled segment except take-off/landing, ``run_id`` = segment id."""
-    parts = []
-    for _, s in seg.iterrows():
-        if s["label"] in skip:
-            continue
-        g = state[(state["t_ns"] >= s["t_start_ns"]) & (state["t_ns"] < s["t_end_ns"])]
-        parts.append(g.assign(run_id=int(s["segment_id"]), label=str(s["label"])))
-    return pd.concat(parts, ignore_index=True)
 
 
 def flight_with_truth(state: pd.DataFrame, seg: pd.DataFrame) -> pd.DataFrame:
@@ -369,11 +359,7 @@ def run_flightcoach_classification(inputs: Mapping | None, outputs: Mapping, con
     template = input_path(inputs, "template", ROOT / "reports" / "templates" / "study.html.j2")
     paths = {k: output_path(outputs, k) for k in ("report", "results", "page", *OUTPUT_TABLES,
                                                    "model_params", "model_meta")}
-    mdir = paths["model_params"].parent
-    if paths["model_meta"].parent != mdir or (paths["model_params"].name, paths["model_meta"].name) != (
-            "params.npz", "meta.json"):
-        raise ValueError(f"study outputs: model_params/model_meta must be <dir>/params.npz and <dir>/meta.json, "
-                         f"got {paths['model_params']} and {paths['model_meta']}")
+    mdir = model_dir(paths)
     progress = Progress()
     ns = opt["n_states"] if opt["n_states"] == "auto" else int(opt["n_states"])
     cfg = ModelsConfig(feature_set=opt["features"], n_states=ns, min_covar=float(opt["min_covar"]),
@@ -383,7 +369,7 @@ def run_flightcoach_classification(inputs: Mapping | None, outputs: Mapping, con
 
     progress(f"reading and preprocessing {flights_in['train'].name}")
     st_tr, seg_tr = load(flights_in["train"])
-    train = labelled(st_tr, seg_tr)
+    train = flightcoach_labelled(st_tr, seg_tr)
     ms = ManeuverModelSet(config=cfg).fit(train)
     ms.save(mdir)
     known = list(ms.labels_)

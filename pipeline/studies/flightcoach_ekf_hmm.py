@@ -88,16 +88,16 @@ from ..models import ManeuverModelSet, ModelsConfig
 from ..models.features import decimate
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
-from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, STUDY_TABLES, Progress, Results, StudyError,
-                   StudyResult, flightcoach_defaults, flightcoach_paths, input_path, md_table, model_variant, output_path, say,
-                   study_outputs, study_settings, write_text)
+from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, FLIGHTCOACH_SKIP, STUDY_TABLES, Progress, Results,
+                   StudyError, StudyResult, flightcoach_defaults, flightcoach_labelled, flightcoach_paths, input_path,
+                   md_table, model_dir, model_variant, output_path, say, study_outputs, study_settings, write_text)
 
 NAME = "flightcoach_ekf_hmm"
 SUBDIR = FLIGHTCOACH_DIR
 #: the study's input files: ``{input name: file name under <realdata_dir>/flightcoach_f3a_json}``
 FLIGHTS = FLIGHTCOACH_EKF_HMM_FILES
 TRAIN, TEST = FLIGHTS["train"], FLIGHTS["test"]
-SKIP = ("tkOf", "tkoff", "lnd")
+SKIP = FLIGHTCOACH_SKIP
 #: the acceptance rule of issue 14 (not settings: the headline counts by it)
 BETTER_RATIO = 0.95
 MIN_HMM_SHARE = 0.20
@@ -152,17 +152,6 @@ def load(path: Path) -> tuple[pd.DataFrame, pd.DataFrame, float]:
     if box is None:
         raise StudyError(f"{path}: no parameters.rotation (box rotation), which the state9box features need")
     return state, seg, float(box)
-
-
-def labelled(state: pd.DataFrame, seg: pd.DataFrame, skip=SKIP) -> pd.DataFrame:
-    """Rows of every labelled segment except take-off/landing, ``run_id`` = segment id."""
-    parts = []
-    for _, s in seg.iterrows():
-        if s["label"] in skip:
-            continue
-        g = state[(state["t_ns"] >= s["t_start_ns"]) & (state["t_ns"] < s["t_end_ns"])]
-        parts.append(g.assign(run_id=int(s["segment_id"]), label=str(s["label"])))
-    return pd.concat(parts, ignore_index=True)
 
 
 def synthesise_radar(state: pd.DataFrame, radar: RadarModel, rng: np.random.Generator):
@@ -433,11 +422,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     template = input_path(inputs, "template", ROOT / "reports" / "templates" / "study.html.j2")
     paths = {k: output_path(outputs, k) for k in ("report", "results", "page", *OUTPUT_TABLES,
                                                    "model_params", "model_meta")}
-    mdir = paths["model_params"].parent
-    if paths["model_meta"].parent != mdir or (paths["model_params"].name, paths["model_meta"].name) != (
-            "params.npz", "meta.json"):
-        raise ValueError(f"study outputs: model_params/model_meta must be <dir>/params.npz and <dir>/meta.json, "
-                         f"got {paths['model_params']} and {paths['model_meta']}")
+    mdir = model_dir(paths)
     progress = Progress()
     ns = opt["n_states"] if opt["n_states"] == "auto" else int(opt["n_states"])
     # the thesis classifier (confidence decision, V_c < −1, cumulative forward passes): the
@@ -454,7 +439,7 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     # -- training flight: models, q, Q₂ (frozen before the test flight is read) -------------------
     progress(f"reading and preprocessing {flights_in['train'].name}")
     st_tr, seg_tr, box_tr = load(flights_in["train"])
-    train = labelled(st_tr, seg_tr)
+    train = flightcoach_labelled(st_tr, seg_tr)
     ms = ManeuverModelSet(config=cfg).fit(train, box_heading_rad=box_tr)
     n_train = train["run_id"].nunique()
     say(f"trained {len(ms.labels_)} {opt['features']} models on {n_train} segments in {progress.elapsed:.0f} s "

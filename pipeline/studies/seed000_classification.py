@@ -84,8 +84,8 @@ from ..report.study import build_study_page, layout
 from ..simulate.datasets import DatasetSettings, set_rng, simulate_set
 from ..simulate.scenarios import SimSettings
 from ..simulate.sensors import SensorSettings
-from .base import (STUDY_TABLES, Progress, Results, StudyResult, input_path, md_table, model_variant, output_path,
-                   say, study_outputs, study_settings, write_text)
+from .base import (STUDY_TABLES, Progress, Results, StudyResult, input_path, md_table, model_dir, model_variant,
+                   output_path, say, study_outputs, study_settings, write_text)
 
 NAME = "seed000_classification"
 KNOWN = ("M1", "M2", "M3", "M4")
@@ -831,11 +831,7 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
     progress(f"simulating {run.runs} runs of each of {', '.join(ALL)}" if sets is None else f"reading {sets}")
     train, test = load_sets(run, sets)
     progress("training one HMM per known maneuver")
-    mdir = paths["model_params"].parent
-    if paths["model_meta"].parent != mdir or (paths["model_params"].name, paths["model_meta"].name) != (
-            "params.npz", "meta.json"):
-        raise ValueError(f"study outputs: model_params/model_meta must be <dir>/params.npz and <dir>/meta.json, "
-                         f"got {paths['model_params']} and {paths['model_meta']}")
+    mdir = model_dir(paths)
     cfg, ms = train_models(train, hmm, run.seed, features=st["features"], n_states=st["n_states"])
     ms.save(mdir)
     say(f"trained {ms.labels_} on {sum(train[m]['run_id'].nunique() for m in KNOWN)} runs in "

@@ -62,6 +62,24 @@ def test_the_tables_hold_every_scenario_and_seed(tiny):
         assert np.allclose(a["delta_max_m"], fd * d_true) and np.allclose(a["theta_max_rad"], ft * t_true), lab
 
 
+def test_the_ncv_third_noise_is_a_third_of_the_weaves_centripetal_acceleration():
+    # seed 003 §4.2.2: "1/3 times the maximal acceleration"; the weave turns at 0.1 rad/s at 1.414 m/s
+    assert spf.ncv_third_noise(spf.DEFAULTS) == pytest.approx(np.sqrt(2.0) * 0.1 / 3.0)
+
+
+@pytest.mark.slow
+def test_the_ncv_third_diagnostic_reruns_the_weave_on_both_sensors_with_the_same_noise(tiny):
+    runs, f = tiny.table("hmpf_runs"), tiny.figures
+    sig = spf.ncv_third_noise({**spf.DEFAULTS, **spf.SIZES["tiny"]})
+    for sens in ("radar", "gps"):
+        g = runs[runs["scenario"] == f"weave_{sens}_ncv_third"]
+        assert len(g) == 3 and set(g["sensor"]) == {sens}
+        assert float(f[f"pf_hmpf_{sens}_weave_vel_rmse_mps_ncv_third"]) == pytest.approx(
+            g["vel_rmse_mps"].mean(), abs=6e-4)
+        assert int(f[f"pf_hmpf_{sens}_weave_reinit_ncv_third"]) == int(g["n_reinit"].sum())
+    assert f"{sig:.4f} m/s²" in Path(tiny.outputs["report"]).read_text()
+
+
 @pytest.mark.slow
 def test_the_report_has_both_seed_parts_and_the_page_has_the_panels_of_both_digests(tiny):
     report = Path(tiny.outputs["report"]).read_text()
@@ -184,7 +202,9 @@ def test_issue17_straight_tracks_keep_a_straight_fraction_of_0_95_in_19_of_20_se
     "issue 17: velocity RMS <= 0.4 m/s on the simulated radar weave (digest 003 §8: the thesis's chapter-3 "
     "filter, whose process noise is not given). With the §4.2.2 CM noise sigma_aT = 2 m/s^2 a CV Kalman filter "
     "has an actual velocity error of 0.946 m/s even with a 1 m GPS on a noise-free straight "
-    "(pf_hmpf_cv_kf_vel_error_cv_truth_mps); measured 1.02 m/s at 2,000 particles (position 3.61 m, <= 4 met)"))
+    "(pf_hmpf_cv_kf_vel_error_cv_truth_mps); measured 1.02 m/s at 2,000 particles (position 3.61 m, <= 4 met). "
+    "With the NCV rule §4.2.2 reports (sigma = a_max/3 = 0.047 m/s^2) GPS reaches 0.195 m/s but radar loses "
+    "the track (1.59 m/s, 42 m; pf_hmpf_*_ncv_third)"))
 def test_issue17_the_radar_weave_velocity_rms_is_at_most_0_4_mps():
     tr, out = _hmpf_scenario("weave", "radar", 300, seeds=4)
     ev = out.mean[:, 25:, 2:4] - tr.state[None, 25:, 2:4]

@@ -129,8 +129,13 @@ def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_it
         mu = np.asarray(model.mean_)  # the whole hidden axis (step dt/2); compared as a curve
         d_other = [_path_rms(o, lx) for o in ox]
         dba = dba_average([o[:, :3] for o in ox]) if len(ox) >= 2 else ox[0][:, :3]
+        # how far apart the training demos are from each other: a learned path between them can
+        # beat the closest one only where the left-out demo is not already beside one of them
+        between = [_path_rms(ox[i], ox[j]) for i in range(len(ox)) for j in range(i + 1, len(ox))]
         row.update(status="ok", rms_learned_m=_path_rms(mu, lx), rms_best_other_m=float(min(d_other)),
                    rms_worst_other_m=float(max(d_other)), rms_dba_m=_path_rms(dba, lx),
+                   closest_other=others[int(np.argmin(d_other))].name,
+                   rms_between_others_m=float(np.mean(between)) if between else np.nan,
                    n_iter=int(getattr(model, "n_iter_", 0)))
         rows.append(row)
     return rows
@@ -277,6 +282,17 @@ def run_trajectory_learning(inputs: Mapping | None, outputs: Mapping, config: Ma
         if len(multi):
             res.add("align_real_loo_better_pct_3plus_demos", f"{100.0 * float(multi['better'].mean()):.1f}",
                     "The same share over the maneuvers with at least 3 demos (at least 2 left to learn from) (%).")
+        folds = loo[(loo["status"] == "ok") & (loo["frame"] == "box") & ~loo["single_other"].astype(bool)]
+        if len(folds):
+            res.add("align_real_loo_folds_better_3plus_demos",
+                    f"{int((folds['rms_learned_m'] < folds['rms_best_other_m']).sum())}/{len(folds)}",
+                    "Box-frame folds of the maneuvers with at least 3 demos where the learned trajectory is closer "
+                    "to the left-out demo than the closest other demo.")
+            res.add("align_real_loo_closest_over_between_3plus_demos",
+                    f"{float(np.median(folds['rms_best_other_m'] / folds['rms_between_others_m'])):.3f}",
+                    "Those folds, median of (left-out demo to its closest other) / (the other demos to each other), "
+                    "RMS after DTW: below 1 the left-out demo lies beside one other demo rather than among them, "
+                    "where a path between the others is farther than that demo.")
         res.add("align_real_loo_maneuvers", len(summ), "Real maneuvers in the leave-one-out.")
     res.add("align_trajectory_learning_wall_s", f"{progress.elapsed:.0f}", "Wall time of the study (s), page excluded.")
     res.write(paths["results"])

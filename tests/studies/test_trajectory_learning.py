@@ -41,7 +41,12 @@ def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_pa
     assert len(loo) == 12 and set(loo["status"]) == {"ok"}  # 2 maneuvers x 3 folds x (box, centred)
     assert loo.groupby("frame").size().to_dict() == {"box": 6, "centred": 6}
     assert "align_real_loo_better_pct_centred" in res.results
-    assert np.isfinite(loo[["rms_learned_m", "rms_best_other_m", "rms_dba_m"]].to_numpy()).all()
+    assert np.isfinite(loo[["rms_learned_m", "rms_best_other_m", "rms_dba_m", "rms_between_others_m"]].to_numpy()).all()
+    assert all(c.split(":")[0] in {"f0", "f1", "f2"} - {lo.split(":")[0]}
+               for c, lo in zip(loo["closest_other"], loo["left_out"]))
+    n, d = map(int, res.results["align_real_loo_folds_better_3plus_demos"].split("/"))
+    assert d == 6 and 0 <= n <= d                            # 2 maneuvers x 3 folds, box frame
+    assert float(res.results["align_real_loo_closest_over_between_3plus_demos"]) > 0
     pct = float(res.results["align_real_loo_better_pct"])
     assert 0.0 <= pct <= 100.0
     assert "RESULT align_real_loo_better_pct" in Path(out["results"]).read_text()
@@ -112,6 +117,23 @@ def test_the_trajectory_learned_from_one_demo_is_as_close_to_its_twin_as_that_de
         # a smoother of the very demo it is compared with: at most the curve's chord error, not
         # the 3-5 m the sample-wise path read
         assert r["rms_learned_m"] < 0.5
+
+
+def test_each_fold_names_its_closest_other_demo_and_how_far_apart_the_others_are():
+    from pipeline.align.demos import Demo
+    from pipeline.studies.trajectory_learning import loo_maneuver
+
+    # three copies of one path offset along down by 0, 4 and 12 m: left-out A's closest other is B
+    # (4 m), and B and C are 8 m apart, so A lies beside B rather than among B and C (ratio 0.5)
+    t = np.arange(0.0, 15.0, 0.32)
+    t_ns = (t * 1e9).astype(np.int64)
+    demos = [Demo(f"f{k}:a#1", f"f{k}", "a", 0, t_ns, _circle(t, offset=(0.0, 0.0, dz)))
+             for k, dz in enumerate((0.0, 4.0, 12.0))]
+    rows = {r["left_out"]: r for r in loo_maneuver("s", "a", demos, _align({}), max_iter=3)}
+    a = rows["f0:a#1"]
+    assert a["closest_other"] == "f1:a#1" and a["rms_best_other_m"] == pytest.approx(4.0, abs=0.3)
+    assert a["rms_between_others_m"] == pytest.approx(8.0, abs=0.3)
+    assert rows["f2:a#1"]["closest_other"] == "f1:a#1" and rows["f1:a#1"]["closest_other"] == "f0:a#1"
 
 
 def test_a_label_flown_twice_in_each_flight_is_one_maneuver_per_occurrence():

@@ -199,11 +199,12 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     if align_links:
         models_html += f"<h2>Trajectory learning</h2><ul>{align_links}</ul>"
     here = Path(out_html).parent
-    # studies are built by their own targets, not by the main job: list each, linked once built
+    # studies are built by their own targets, not by the main job, and building one does not
+    # rewrite this page: link each always, and say which target builds those absent now
     study_links = "".join(
-        f'<li><a href="{html.escape(u)}">{html.escape(s)}</a></li>' if (here / u).exists() else
-        f'<li>{html.escape(s)} <span class="absent">(not built yet: <code>snakemake study_{html.escape(s)}'
-        f'</code>)</span></li>' for s, u in (studies or {}).items())
+        f'<li><a href="{html.escape(u)}">{html.escape(s)}</a>' + ("" if (here / u).exists() else
+        f' <span class="absent">(not built when this index was written: <code>snakemake '
+        f'study_{html.escape(s)}</code> builds it)</span>') + "</li>" for s, u in (studies or {}).items())
     if study_links:
         models_html += f"<h2>Studies</h2><ul>{study_links}</ul>"
     if compare:

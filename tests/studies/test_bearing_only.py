@@ -143,7 +143,9 @@ def test_a_failing_trend_names_the_configurations_on_both_sides_of_its_compariso
 # that orbit (estimate.crlb.q_floor: gains linearised on the truth, the bank's P0) is
 # 4.66/4.07/30.1/5.96 (RESULT bearing_crlb_floor_ratio_*): the CRLB (App. D) has no process noise,
 # the filter has, and that alone keeps the ideal filter above the band; with Q = 0 it is the CRLB exactly
-# (tests/estimate/test_crlb.py). strict: the day it passes, this marker must go.
+# (tests/estimate/test_crlb.py). With the printed B_θω block (q_form: faithful) instead, bank 4.71/4.01/9.35/3.10
+# and floor 2.94/2.59/8.44/2.85 (RESULT bearing_crlb_other_q_*): still above the band.
+# strict: the day it passes, this marker must go.
 @pytest.mark.xfail(strict=True, raises=AssertionError,
                    reason="issue-16 CRLB band [0.9, 2] is below what the ideal filter carrying the thesis's Q reaches")
 def test_the_bank_sample_std_lies_within_the_crlb_band_on_one_fixed_orbit():

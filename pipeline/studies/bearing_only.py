@@ -12,7 +12,8 @@ compared run by run. Parts (``parts``):
 * ``imm_grid`` — the CT→CV scenario (120 + 70 s) with the IMM over T_d × δ;
 * ``crlb`` — one fixed orbit, ``crlb_runs`` noise realisations, the CPPV bank against the CRLB
   (digest §7, :func:`pipeline.estimate.crlb.crlb`; ``J₀`` the inverse of the bank's combined
-  initial covariance, no process noise);
+  initial covariance, no process noise), and the same realisations again with the other B_θω
+  form of ``estimate.bearing_only.bank.q_form`` (a diagnostic, ``bearing_crlb_other_q_*``);
 * ``study3`` — single runs of CT-CV-CT (same and redrawn second ω), CV-CT (the CV EKF from the
   truth, σ_ω̇² = 1e-4) and CV-CT-CV with the IMM (δ = 1e-4, 20 Hz).
 

@@ -10,7 +10,9 @@ seed, all runs of a scenario filtered in one batch by :func:`pipeline.estimate.w
 The filter's δ_max and θ_max on the simulated weave are 1.2× the weave's own straight length
 and turn angle — the thesis's "slightly overestimated" simulation practice (§3.3, App. A) —
 unless a scenario says otherwise; the §4.3 final values (500 m, π; the config defaults, used on
-real logs) are run once as well. Every trend of issue 17 is a ``RESULT`` line with its numbers
+real logs) are run once as well, and the weave once more on both sensors with the NCV noise
+rule §4.2.2 reports for the thesis's chapter-3 filter (:func:`ncv_third_noise`; a diagnostic of
+the velocity target, ``*_ncv_third``). Every trend of issue 17 is a ``RESULT`` line with its numbers
 and a 0/1 ``…_met`` line; nothing is tuned to meet a target.
 
 **Seed 001 part** (camera geo-location, digest 001 §10–§13): :func:`.pf_geolocation.geolocation_study`

@@ -111,10 +111,19 @@ def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_it
     cfg = {**dict(align_cfg), "max_iter": int(max_iter)}
     dt = float(np.median(np.concatenate([np.diff(d.t_ns) for d in demos]))) * 1e-9
     xs = [_centred(d.x) if frame == "centred" else d.x for d in demos]
+    dist: dict[tuple[int, int], float] = {}
+
+    def path_rms(i: int, j: int) -> float:
+        # demo i to demo j, each ordered pair's DTW once per frame: a fold's distances to the
+        # left-out demo are the other folds' distances between their training demos
+        if (i, j) not in dist:
+            dist[(i, j)] = _path_rms(xs[i], xs[j])
+        return dist[(i, j)]
+
     rows = []
     for k, left in enumerate(demos):
-        others = [d for i, d in enumerate(demos) if i != k]
-        ox = [x for i, x in enumerate(xs) if i != k]
+        oi = [i for i in range(len(demos)) if i != k]
+        others, ox = [demos[i] for i in oi], [xs[i] for i in oi]
         lx = xs[k]
         train = ox if len(ox) >= 2 else [ox[0], ox[0]]
         row = {"set": set_name, "maneuver": label, "frame": frame, "left_out": left.name, "n_others": len(others),
@@ -127,11 +136,11 @@ def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_it
             rows.append(row)
             continue
         mu = np.asarray(model.mean_)  # the whole hidden axis (step dt/2); compared as a curve
-        d_other = [_path_rms(o, lx) for o in ox]
+        d_other = [path_rms(i, k) for i in oi]
         dba = dba_average([o[:, :3] for o in ox]) if len(ox) >= 2 else ox[0][:, :3]
         # how far apart the training demos are from each other: a learned path between them can
         # beat the closest one only where the left-out demo is not already beside one of them
-        between = [_path_rms(ox[i], ox[j]) for i in range(len(ox)) for j in range(i + 1, len(ox))]
+        between = [path_rms(i, j) for a, i in enumerate(oi) for j in oi[a + 1:]]
         row.update(status="ok", rms_learned_m=_path_rms(mu, lx), rms_best_other_m=float(min(d_other)),
                    rms_worst_other_m=float(max(d_other)), rms_dba_m=_path_rms(dba, lx),
                    closest_other=others[int(np.argmin(d_other))].name,

@@ -325,6 +325,32 @@ def load_config(path: str | os.PathLike | None = None) -> dict[str, Any]:
     return validate_config(data, source=p)
 
 
+def command_line_overrides(cli: Mapping[str, Any] | None) -> dict[str, Any]:
+    """Snakemake ``--config key=VALUE`` overrides with their scalars typed as the config file's.
+
+    Snakemake reads a nested ``VALUE`` (``studies='{pf: {particles: 500}}'``) with YAML's
+    BaseLoader, which keeps every scalar a string, so ``true`` or ``500`` would fail the schema
+    as ``'true'``/``'500'``. Each string scalar is read again with the loader of
+    :func:`load_config`, so an override means what the same text means in
+    ``datasets/config.yaml`` (``true`` a boolean, ``500`` an integer, ``null`` null, a path a
+    string); top-level ``key=VALUE`` numbers, which Snakemake already types, pass unchanged.
+    """
+
+    def typed(v: Any) -> Any:
+        if isinstance(v, Mapping):
+            return {k: typed(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [typed(x) for x in v]
+        if isinstance(v, str):
+            try:
+                return yaml.load(v, Loader=_Loader) if v.strip() else v
+            except yaml.YAMLError:
+                return v        # not a YAML scalar on its own (e.g. 'a: b: c'): the schema names it
+        return v
+
+    return typed(dict(cli or {}))
+
+
 def section(cfg: Mapping[str, Any] | None, name: str) -> dict[str, Any]:
     """One section (``ingest``, ``simulate``, ``preprocess``, ``hmm``, ...), validated and
     defaulted (all defaults when absent)."""

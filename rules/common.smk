@@ -4,10 +4,10 @@ import sys
 from pathlib import Path
 
 import pandas as pd
-from snakemake.utils import validate
+from snakemake.utils import update_config, validate
 
 import pipeline
-from pipeline.config import ConfigError, validate_config
+from pipeline.config import ConfigError, command_line_overrides, validate_config
 from pipeline.estimate.run import job_config as estimate_job_config
 from pipeline.estimate.pf_run import job_config as pf_job_config
 from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest
@@ -20,9 +20,12 @@ from pipeline.studies.base import STUDY_TABLES
 PIPELINE_VERSION = pipeline.__version__
 
 # one schema for the workflow and the CLI: every key typed and defaulted, unknown keys rejected;
-# a bad key or value stops the run here with one line naming it
+# a bad key or value stops the run here with one line naming it. `--config` overrides first get
+# their nested scalars typed as in the config file (Snakemake leaves them strings: 'true', '500')
+update_config(config, command_line_overrides(workflow.config_settings.config))
 try:
-    _validated = validate_config(config, source=" + ".join(map(str, workflow.configfiles)) or "config")
+    _sources = [*map(str, workflow.configfiles), *(["--config"] if workflow.config_settings.config else [])]
+    _validated = validate_config(config, source=" + ".join(_sources) or "config")
 except ConfigError as _exc:
     sys.exit(f"uavpipe: {_exc}")
 config.clear()

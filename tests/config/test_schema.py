@@ -316,3 +316,22 @@ def test_every_schema_key_is_documented_in_datasets_readme():
 def test_the_shipped_file_points_users_to_the_schema_and_the_readme():
     text = (ROOT / "datasets" / "config.yaml").read_text()
     assert "rules/schemas/config.schema.yaml" in text and "datasets/README.md" in text
+
+
+def test_command_line_overrides_read_their_nested_scalars_as_the_config_file_does():
+    # what Snakemake's parse_config hands over for
+    # --config seed=7 studies='{size: thesis, seed000_classification: {ekf_input: true, n_states: 6}}'
+    cli = {"seed": 7, "realdata_dir": "/data/real", "studies": {
+        "size": "thesis", "seed000_classification": {"ekf_input": "true", "n_states": "6", "skip": ["gmr"]},
+        "pf": {"seeds": "null"}}}
+    out = C.command_line_overrides(cli)
+    assert out == {"seed": 7, "realdata_dir": "/data/real", "studies": {
+        "size": "thesis", "seed000_classification": {"ekf_input": True, "n_states": 6, "skip": ["gmr"]},
+        "pf": {"seeds": None}}}
+    assert C.command_line_overrides(None) == {}
+    # still validated: a typed override passes, a wrong one is still one line naming its key
+    ok = validate_config({"studies": {"size": "thesis",
+                                      "seed000_classification": out["studies"]["seed000_classification"]}})
+    assert ok["studies"]["seed000_classification"]["ekf_input"] is True
+    with pytest.raises(ConfigError, match=r"studies\.seed000_classification\.ekf_input: 'maybe'"):
+        validate_config(C.command_line_overrides({"studies": {"seed000_classification": {"ekf_input": "maybe"}}}))

@@ -73,3 +73,26 @@ def test_a_bearing_pair_without_its_flights_is_skipped_with_a_notice_and_the_mai
     jobs = _jobs(p)
     assert "estimate_bearing" not in jobs and "all" in jobs
     assert "skipping bearing pair austin-p23" in p.stderr
+
+
+def _readme_config_commands() -> list[list[str]]:
+    """The README's study commands that pass ``--config`` (the rest are planned above), split."""
+    import shlex
+
+    cmds = []
+    for ln in (ROOT / "README.md").read_text().splitlines():
+        ln = ln.strip()
+        if ln.startswith(".venv/bin/snakemake") and " study_" in ln and "--config" in ln:
+            cmds.append(shlex.split(ln.split(" #", 1)[0]))
+    return cmds
+
+
+def test_the_readme_study_commands_with_config_overrides_plan_their_study():
+    # Snakemake leaves a nested --config value's scalars strings ('true'); the workflow types
+    # them as the config file would (pipeline.config.command_line_overrides), so these validate
+    cmds = _readme_config_commands()
+    assert len(cmds) >= 2, "README.md should show study commands with --config overrides"
+    for cmd in cmds:
+        target = next(a for a in cmd if a.startswith("study_"))
+        jobs = _jobs(_dry(*cmd[1:]))
+        assert jobs.get(target) == 1, (cmd, jobs)

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -299,7 +300,7 @@ def initial_cov(sigma: tuple[float, float, float] = (1.0, 0.1, 0.01), n_axes: in
 
 #: below this |ω T| (rad) the turn coefficients use their Taylor series: the closed forms lose
 #: all digits there (1 − cos ωT cancels) while the 4-term series is exact to round-off
-_TURN_SERIES_BELOW = 1e-3
+TURN_SERIES_BELOW = 1e-3
 
 
 def turn_coefficients(omega: ArrayLike, dt: float | ArrayLike) -> tuple[F64, F64]:
@@ -317,12 +318,23 @@ def turn_coefficients(omega: ArrayLike, dt: float | ArrayLike) -> tuple[F64, F64
     w = np.asarray(omega, dtype=np.float64)
     T = np.asarray(dt, dtype=np.float64)
     wT = w * T
-    small = np.abs(wT) < _TURN_SERIES_BELOW
+    small = np.abs(wT) < TURN_SERIES_BELOW
     safe = np.where(small, 1.0, w)
     wT2 = wT * wT
     s = np.where(small, T * (1.0 - wT2 / 6.0 + wT2 * wT2 / 120.0), np.sin(wT) / safe)
     c = np.where(small, T * wT * (0.5 - wT2 / 24.0 + wT2 * wT2 / 720.0), (1.0 - np.cos(wT)) / safe)
     return s, c
+
+
+def turn_coefficients_one(w: float, T: float) -> tuple[float, float]:
+    """:func:`turn_coefficients` of one scalar ``ω``, ``T``, in plain arithmetic that numba
+    compiles (the particle kernels of ``estimate.pf_fast`` inline it): the same closed forms,
+    and the same Taylor series below :data:`TURN_SERIES_BELOW`."""
+    wT = w * T
+    if abs(wT) < TURN_SERIES_BELOW:
+        wT2 = wT * wT
+        return T * (1.0 - wT2 / 6.0 + wT2 * wT2 / 120.0), T * wT * (0.5 - wT2 / 24.0 + wT2 * wT2 / 720.0)
+    return math.sin(wT) / w, (1.0 - math.cos(wT)) / w
 
 
 def turn_coefficient_derivatives(omega: ArrayLike, dt: float | ArrayLike) -> tuple[F64, F64]:
@@ -340,7 +352,7 @@ def turn_coefficient_derivatives(omega: ArrayLike, dt: float | ArrayLike) -> tup
     w = np.asarray(omega, dtype=np.float64)
     T = np.asarray(dt, dtype=np.float64)
     wT = w * T
-    small = np.abs(wT) < _TURN_SERIES_BELOW
+    small = np.abs(wT) < TURN_SERIES_BELOW
     safe = np.where(small, 1.0, w)
     s, c = turn_coefficients(w, T)
     wT2 = wT * wT
@@ -548,7 +560,7 @@ def cppv_predict(x: ArrayLike, dt: float, u: ArrayLike | None = None) -> tuple[F
     shape = x.shape[:-1]
     U = _ownship_step(u, shape)
     fx, F = _cppv_predict_kernel(np.ascontiguousarray(x.reshape(-1, 5)), float(dt),
-                                 np.ascontiguousarray(U.reshape(-1, 2)), _TURN_SERIES_BELOW)
+                                 np.ascontiguousarray(U.reshape(-1, 2)), TURN_SERIES_BELOW)
     return fx.reshape(shape + (5,)), F.reshape(shape + (5, 5))
 
 def cppv_process_noise(dt: float, sigma_v2: float, sigma_omega_dot2: float, *,

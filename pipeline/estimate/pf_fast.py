@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
-from .models import turn_coefficients
+from .models import turn_coefficients_one
 
 F64 = NDArray[np.float64]
 
@@ -311,8 +311,12 @@ def _jm_modes(X, mode, F, kind, init, seed, k, kn, wn, fn):
                     X[4, i] = a * init[j]
 
 
+#: the shared ω → 0-safe turn coefficients (models.turn_coefficients, scalar form), inlined
+_turn_one = njit(cache=True, inline="always")(turn_coefficients_one)
+
+
 @njit(cache=True, parallel=True)
-def _jm_propagate_weigh(X, mode, kind, sig, sigw, S, C, CW, SW, ll, blkmax, zn, ze, dt, inv2s2,
+def _jm_propagate_weigh(X, mode, kind, sig, sigw, ll, blkmax, zn, ze, dt, inv2s2,
                         seed, k, has_z, kn, wn, fn):
     n = mode.shape[0]
     nb = blkmax.shape[0]
@@ -352,12 +356,16 @@ def _jm_propagate_weigh(X, mode, kind, sig, sigw, S, C, CW, SW, ll, blkmax, zn, 
                 X[6, i] = ae + dt * e2
                 X[4, i] = 0.0
             else:
-                # the shared ct_transition, with its ω→0-safe coefficients precomputed by
-                # models.turn_coefficients for the CT particles (S, C, CW, SW)
-                X[0, i] += S[i] * vn - C[i] * ve + h * e1
-                X[1, i] += C[i] * vn + S[i] * ve + h * e2
-                X[2, i] = CW[i] * vn - SW[i] * ve + dt * e1
-                X[3, i] = SW[i] * vn + CW[i] * ve + dt * e2
+                # the shared ct_transition with models.turn_coefficients' ω→0-safe s, c;
+                # cos ωT = 1 − ω c and sin ωT = ω s exactly: no second pair of trig calls
+                w = X[4, i]
+                s, c = _turn_one(w, dt)
+                cw = 1.0 - w * c
+                sw = w * s
+                X[0, i] += s * vn - c * ve + h * e1
+                X[1, i] += c * vn + s * ve + h * e2
+                X[2, i] = cw * vn - sw * ve + dt * e1
+                X[3, i] = sw * vn + cw * ve + dt * e2
                 state, e3 = _normal(state, kn, wn, fn)
                 X[4, i] += sigw[r] * rdt * e3
                 X[5, i] = 0.0
@@ -426,26 +434,19 @@ def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: Arra
     init = np.asarray(enter_sigma, dtype=np.float64)
     n = mode.size
     nb = (n + BLOCK - 1) // BLOCK
-    ll, S, C, CW, SW = (np.zeros(n) for _ in range(5))
+    ll = np.zeros(n)
     blkmax, blksum = np.empty(nb), np.empty(nb)
     blkmom, blkmode = np.empty((nb, 7)), np.empty((nb, K))
     Y = np.empty_like(X)
     idx = np.empty(n, dtype=np.int64)
     inv2s2 = 0.5 / (sigma_z * sigma_z)
-    is_ct = kind == KIND_CT
     mode_y = np.empty_like(mode)
     mean = np.empty((len(Z), 7))
     mode_p = np.empty((len(Z), K))
     for k in range(len(Z)):
         has_z = bool(np.all(np.isfinite(Z[k])))
         _jm_modes(X, mode, F, kind, init, seed, k, _KN, _WN, _FN)
-        ct = np.flatnonzero(is_ct[mode])
-        if ct.size:
-            w = X[4, ct]
-            s, c = turn_coefficients(w, dt)
-            # cos ωT = 1 − ω c and sin ωT = ω s exactly: no second pair of trig calls
-            S[ct], C[ct], CW[ct], SW[ct] = s, c, 1.0 - w * c, w * s
-        _jm_propagate_weigh(X, mode, kind, sig, sigw, S, C, CW, SW, ll, blkmax,
+        _jm_propagate_weigh(X, mode, kind, sig, sigw, ll, blkmax,
                             Z[k, 0] if has_z else 0.0, Z[k, 1] if has_z else 0.0, dt, inv2s2,
                             seed, k, has_z, _KN, _WN, _FN)
         if not has_z:

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pipeline.estimate.models import (ct_jacobian, ct_transition, turn_coefficient_derivatives,
-                                      turn_coefficients, wrap_angle)
+from pipeline.estimate.models import (TURN_SERIES_BELOW, ct_jacobian, ct_transition,
+                                      turn_coefficient_derivatives, turn_coefficients, turn_coefficients_one,
+                                      wrap_angle)
 
 
 @pytest.mark.parametrize("w", [0.0, 1e-9, -1e-6, 3e-4, -0.02, 0.3, -1.2])
@@ -19,6 +20,17 @@ def test_turn_coefficients_match_the_closed_forms_and_their_limit(w):
     t = np.linspace(0, T, 20001)
     assert s == pytest.approx(np.trapezoid(np.cos(w * t), t), abs=1e-9)
     assert c == pytest.approx(np.trapezoid(np.sin(w * t), t), abs=1e-9)
+
+
+def test_the_scalar_turn_coefficients_equal_the_vectorised_ones_on_both_sides_of_the_series_switch():
+    # the particle kernels of estimate.pf_fast inline the scalar form, compiled by numba
+    T = 0.025
+    edge = TURN_SERIES_BELOW / T
+    w = np.r_[0.0, -0.0, 1e-12, edge * np.array([0.5, 0.999999, 1.0, 1.000001, 2.0]), -edge, 0.3, -1.7, 12.0]
+    s, c = turn_coefficients(w, T)
+    for wi, si, ci in zip(w, s, c):
+        a, b = turn_coefficients_one(float(wi), T)
+        assert a == pytest.approx(si, rel=1e-15, abs=0) and b == pytest.approx(ci, rel=1e-14, abs=1e-300)
 
 
 @pytest.mark.parametrize("w", [0.0, 2e-4, -5e-4, 0.01, -0.4, 1.1])

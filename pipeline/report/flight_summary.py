@@ -97,6 +97,18 @@ def _max(a, fmt: str, unit: str, why: str) -> str:
     return f"{a.max():{fmt}} {unit}" if len(a) else f"{_NONE} ({why})"
 
 
+def timestamp_anomalies(diag: Mapping) -> list[str]:
+    """One phrase per stream with timestamp anomalies in the ingest diagnostics, naming only the
+    non-zero counts: ``"gps: 2 duplicate timestamps"``, ``"imu: 1 backwards, 3 duplicate timestamps"``."""
+    out = []
+    for stream, a in (diag.get("timestamp_anomalies") or {}).items():
+        parts = [f"{a[k]} {word}{'s' * (k == 'duplicate' and a[k] != 1)}"
+                 for k, word in (("backwards", "backwards"), ("duplicate", "duplicate timestamp")) if a.get(k)]
+        if parts:
+            out.append(f"{stream}: {', '.join(parts)}")
+    return out
+
+
 def worst_warning(meta: Mapping, preprocess: Mapping | None = None) -> str:
     """The most severe warning of ingest and preprocess, with how many others there are.
 
@@ -112,10 +124,7 @@ def worst_warning(meta: Mapping, preprocess: Mapping | None = None) -> str:
     for reason, n in (diag.get("records_dropped") or {}).items():
         ranked.append((4, f"ingest: {n} records dropped ({reason})"))
     ranked += [(3, f"ingest: {w}") for w in diag.get("warnings") or []]
-    for stream, a in (diag.get("timestamp_anomalies") or {}).items():
-        if a.get("backwards") or a.get("duplicate"):
-            ranked.append((2, f"ingest: {stream} {a.get('backwards', 0)} backwards, "
-                              f"{a.get('duplicate', 0)} duplicate timestamps"))
+    ranked += [(2, f"ingest: {w}") for w in timestamp_anomalies(diag)]
     pre = preprocess or {}
     if pre.get("status") == "failed":
         ranked.append((5, f"preprocess failed: {pre.get('error') or 'unknown reason'}"))

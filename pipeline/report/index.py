@@ -17,7 +17,7 @@ import pandas as pd
 from ..frames.geodesy import geodetic_to_ned
 from ..io.parquet import read_table
 from ..io import schema
-from .flight_summary import utc_date
+from .flight_summary import timestamp_anomalies, utc_date
 from .pages import write_page
 
 
@@ -82,8 +82,7 @@ def flight_summary(flight_id: str, meta_path: str | os.PathLike) -> dict:
         warn.append(f"{diag['bytes_skipped']} bytes skipped")
     for reason, n in (diag.get("records_dropped") or {}).items():
         warn.append(f"{n} dropped ({reason})")
-    for stream, a in (diag.get("timestamp_anomalies") or {}).items():
-        warn.append(f"{stream}: {a.get('backwards', 0)} backwards, {a.get('duplicate', 0)} duplicate t")
+    warn += timestamp_anomalies(diag)
     row["warnings"] = "; ".join(warn[:6]) + (" …" if len(warn) > 6 else "")
     return row
 

@@ -75,6 +75,14 @@ def test_the_worst_warning_ranks_lost_data_above_reader_notes_above_preprocess_n
     assert fs.worst_warning({}) == "none"
 
 
+def test_timestamp_anomalies_name_only_the_nonzero_counts_of_the_streams_that_have_any():
+    diag = {"timestamp_anomalies": {"gps": {"backwards": 0, "duplicate": 2}, "imu": {"backwards": 0, "duplicate": 0},
+                                    "baro": {"backwards": 1, "duplicate": 1}}}
+    assert fs.timestamp_anomalies(diag) == ["gps: 2 duplicate timestamps", "baro: 1 backwards, 1 duplicate timestamp"]
+    assert fs.timestamp_anomalies({}) == []
+    assert fs.worst_warning({"diagnostics": diag}) == "ingest: gps: 2 duplicate timestamps (+1 more)"
+
+
 def test_the_spectrogram_puts_a_sine_at_its_frequency_and_keeps_the_page_bounded():
     from scipy.signal import welch
 

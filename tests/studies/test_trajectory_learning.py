@@ -62,36 +62,34 @@ def test_a_set_whose_flights_are_absent_is_skipped_with_a_notice(tmp_path):
     assert "align_real_loo_better_pct" not in res.results
 
 
-#: the align sets' flights and their files under ../shared/realdata (datasets/flights.tsv)
-REAL_FLIGHTS = {"fc-p23-036": "flightcoach_f3a_json/manual_F3A_P23_22_02_18_00000036.json",
-                "fc-p23-350": "flightcoach_f3a_json/manual_F3A_P23_22_05_31_00000350.json",
-                "fc-p21-026": "flightcoach_f3a_json/UK_England_Bristol_AMARC2002_F3A_P21_21_08_12_00000026.json",
-                "kd0aij-p21": "kd0aij_f3a_csv/P21.csv", "kd0aij-141": "kd0aij_f3a_csv/141.csv"}
-
-
 @pytest.fixture(scope="module")
 def built_real_inputs(tmp_path_factory) -> dict:
-    """The state and segment tables of the P23/P21 flights: the main job's under results/ when
-    it has built them, else made here by the workflow's own ingest and preprocess entry points
-    (a clean clone, as in CI, has no results/: the real-data tests run there too)."""
+    """The state and segment tables of the align sets' flights (P23/P21): the main job's under
+    results/ when it has built them, else made here from their manifest rows by the workflow's
+    own ingest and preprocess entry points (a clean clone, as in CI, has no results/: the
+    real-data tests run there too)."""
     need_shared("FlightCoach JSON and kd0aij CSV flights")
+    cfg = load_config()
+    flights = list(dict.fromkeys(f for s in cfg["align"]["sets"].values() for f in s["flights"]))
     root = Path("results")
-    if not all((root / "state" / f"{f}.parquet").exists() for f in REAL_FLIGHTS):
-        from helpers import realdata_file
+    if not all((root / "state" / f"{f}.parquet").exists() for f in flights):
+        from helpers import REALDATA
 
         from pipeline.io.ingest import outputs_for, run_ingest
+        from pipeline.io.manifest import check_manifest, expand_path
         from pipeline.preprocess.run import run_preprocess
 
+        rows = {r["flight_id"]: r for r in check_manifest(cfg["manifest"], cfg)}
         root = tmp_path_factory.mktemp("results")
-        pre_cfg = load_config()["preprocess"]
-        for f, rel in REAL_FLIGHTS.items():
+        for f in flights:
             ing = root / "ingest" / f
-            run_ingest({"log": realdata_file(rel)}, outputs_for(ing), None, flight_id=f)
+            run_ingest({"log": expand_path(rows[f]["path"], str(REALDATA))}, outputs_for(ing), cfg["ingest"],
+                       flight_id=f, fmt=rows[f]["format"] or None)
             out = {k: root / k / f"{f}.parquet" for k in ("state", "segments", "calibration")}
             run_preprocess({"meta": ing / "meta.json"}, {**out, "info": root / "state" / f"{f}.json"},
-                           pre_cfg, vehicle="f3a-plane")
-    return {"states": [str(root / "state" / f"{f}.parquet") for f in REAL_FLIGHTS],
-            "segments": [str(root / "segments" / f"{f}.parquet") for f in REAL_FLIGHTS]}
+                           cfg["preprocess"], vehicle=rows[f]["vehicle"])
+    return {"states": [str(root / "state" / f"{f}.parquet") for f in flights],
+            "segments": [str(root / "segments" / f"{f}.parquet") for f in flights]}
 
 
 @pytest.mark.slow

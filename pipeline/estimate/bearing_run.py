@@ -45,6 +45,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from ..io import schema
+from ..io.atomic import write_text_atomic
 from ..io.parquet import read_table, write_table
 from ..io.stage import declared
 from .models import wrap_angle
@@ -449,6 +450,4 @@ def _write_page(path: Path, pair: str, bp: BearingPair | None, tracks: Mapping[s
         body.append(fig.to_html(full_html=False, include_plotlyjs="../assets/plotly.min.js"))
     html = ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>bearing " + pair + "</title></head><body>"
             + "\n".join(body) + "</body></html>")
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(html)
-    tmp.replace(path)
+    write_text_atomic(path, html)

@@ -17,7 +17,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -27,17 +26,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from . import schema
+from .atomic import atomic_output, write_text_atomic
 from .base import FlightLog
 from .lazy import pandas as pd  # imported on first use: the FlightLog path needs none
 
 META_KEY = b"uavpipe"
-
-
-def _atomic_path(target: Path) -> Path:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
-    os.close(fd)
-    return Path(tmp)
 
 
 def _write_arrow(table: pa.Table, path: Path, meta: dict) -> None:
@@ -45,13 +38,8 @@ def _write_arrow(table: pa.Table, path: Path, meta: dict) -> None:
     md = dict(table.schema.metadata or {})
     md[META_KEY] = json.dumps(meta, default=_json_default).encode()
     table = table.replace_schema_metadata(md)
-    tmp = _atomic_path(path)
-    try:
+    with atomic_output(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Column, ...] | None = None,
@@ -115,14 +103,7 @@ def _json_default(o: Any):
 
 def write_json(obj: Any, path: str | os.PathLike) -> None:
     """Atomic, deterministic (sorted keys) JSON write."""
-    path = Path(path)
-    tmp = _atomic_path(path)
-    try:
-        tmp.write_text(json.dumps(obj, indent=1, sort_keys=True, default=_json_default, allow_nan=False))
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    write_text_atomic(path, json.dumps(obj, indent=1, sort_keys=True, default=_json_default, allow_nan=False))
 
 
 def write_flightlog(log: FlightLog, out_dir: str | os.PathLike | None = None, *,

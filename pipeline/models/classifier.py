@@ -50,6 +50,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from .. import __version__
+from ..io.atomic import atomic_output
 from ..io.parquet import write_json
 from .base import ModelError, ModelsConfig
 from .features import (GMR_FEATURE_SETS, MinMaxNormaliser, decimation_factor, get_feature_set,
@@ -488,9 +489,8 @@ class ManeuverModelSet:
         arrays["impostor_ll"] = self.impostor_ll_
         if self.background_ is not None:
             arrays.update(self.background_.to_arrays(prefix="bg_"))
-        tmp = out / ".params.tmp.npz"
-        np.savez(tmp, **arrays)
-        os.replace(tmp, out / "params.npz")
+        with atomic_output(out / "params.npz", suffix=".npz") as tmp:
+            np.savez(tmp, **arrays)
         meta = {"format_version": FORMAT_VERSION, "code_version": __version__,
                 "labels": self.labels_, "threshold_slack": self.threshold_slack_,
                 "threshold_fraction": self.threshold_fraction_, "config": self.config.to_dict(),

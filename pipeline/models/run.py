@@ -41,6 +41,7 @@ import numpy as np
 import pandas as pd
 
 from .. import __version__
+from ..io.atomic import atomic_output
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
@@ -160,9 +161,8 @@ def flight_runs(states: Sequence, segments: Sequence) -> pd.DataFrame:
 
 def _write_failed_model(out_dir: Path, spec: Mapping, reason: str) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    tmp = out_dir / ".params.tmp.npz"
-    np.savez(tmp, failed=np.zeros(0))
-    os.replace(tmp, out_dir / "params.npz")
+    with atomic_output(out_dir / "params.npz", suffix=".npz") as tmp:
+        np.savez(tmp, failed=np.zeros(0))
     write_json({"status": "failed", "error": reason, "labels": [], "spec": dict(spec),
                 "code_version": __version__}, out_dir / "meta.json")
 

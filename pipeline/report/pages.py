@@ -10,6 +10,8 @@ from pathlib import Path
 
 import jinja2
 
+from ..io.atomic import write_text_atomic
+
 #: plotly's own height when a figure sets none (the placeholder keeps the page's layout fixed)
 DEFAULT_HEIGHT_PX = 450
 #: plotly.js options of every figure (``responsive``: redraw when the window is resized)
@@ -52,9 +54,5 @@ def render(template: str | os.PathLike, **context) -> str:
 
 
 def write_page(page: str, out_html: str | os.PathLike) -> None:
-    """Write ``page`` to ``out_html`` atomically (temporary file beside it, then rename)."""
-    out = Path(out_html)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_text(page)
-    os.replace(tmp, out)
+    """Write ``page`` to ``out_html`` atomically (:func:`pipeline.io.atomic.write_text_atomic`)."""
+    write_text_atomic(out_html, page)

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from ..config import ROOT, ConfigError
+from ..io.atomic import write_text_atomic
 
 #: the study sizes, smallest first
 SIZES = ("tiny", "small", "thesis")
@@ -274,12 +275,8 @@ class Results:
 
 
 def write_text(path: str | os.PathLike, text: str) -> None:
-    """Atomic text write (temp file in the same folder, then rename)."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(f".{p.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, p)
+    """Atomic text write (:func:`pipeline.io.atomic.write_text_atomic`)."""
+    write_text_atomic(path, text)
 
 
 def md_table(df: pd.DataFrame, fmt: str = "{:.2f}") -> str:

@@ -317,9 +317,15 @@ def load_config(path: str | os.PathLike | None = None) -> dict[str, Any]:
     """Load, validate and default the dataset config (default ``datasets/config.yaml``)."""
     p = Path(path) if path else DEFAULT_CONFIG
     try:
-        data = yaml.load(p.read_text(), Loader=_Loader)
+        data = yaml.load(p.read_text(encoding="utf-8"), Loader=_Loader)
     except FileNotFoundError:
         raise ConfigError(f"{p}: config file not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the config: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"{p}:{line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x}); save the "
+                          f"config as UTF-8") from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: invalid YAML: {' '.join(str(exc).split())}") from None
     return validate_config(data, source=p)

@@ -1,7 +1,6 @@
 # Helpers shared by all rules: config + manifest validation, flight selection, wildcards, the
 # declared inputs and outputs of every stage.
 import sys
-from pathlib import Path
 
 import pandas as pd
 from snakemake.utils import update_config, validate
@@ -10,7 +9,7 @@ import pipeline
 from pipeline.config import ConfigError, command_line_overrides, validate_config
 from pipeline.estimate.run import job_config as estimate_job_config
 from pipeline.estimate.pf_run import job_config as pf_job_config
-from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest
+from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest, expand_path, log_available
 from pipeline.io.schema import STREAM_NAMES
 from pipeline.models.run import model_set_config
 from pipeline.report.summary import run_summary
@@ -31,11 +30,17 @@ except ConfigError as _exc:
 config.clear()
 config.update(_validated)
 
+# simulated outputs are fixed by the config (static DAG): sets and log-file flights
+SIM_SETS = planned_sets(config["simulate"])
+SIM_LOGS = planned_logs(config["simulate"])
+
 # the manifest: one line per bad row (file, line, flight id, reason) before any job is planned
-# (pipeline/io/manifest.py: vehicles, labels, duplicate ids, reader names); then its schema
+# (pipeline/io/manifest.py: vehicles, labels, duplicate ids, reader names, simulated logs this
+# config does not write); then its schema
 try:
     _manifest = pd.DataFrame(
-        check_manifest(config["manifest"], config), columns=list(MANIFEST_COLUMNS), dtype=str
+        check_manifest(config["manifest"], config, simulated_logs={s["log"] for s in SIM_LOGS}),
+        columns=list(MANIFEST_COLUMNS), dtype=str,
     )
 except ConfigError as _exc:
     sys.exit(f"uavpipe: {_exc}")
@@ -43,36 +48,22 @@ validate(_manifest, schema="schemas/flights.schema.yaml", set_default=True)
 
 
 def _expand_path(p):
-    """Manifest paths may start with {realdata} (the config's realdata_dir)."""
-    return p.replace("{realdata}", config["realdata_dir"].rstrip("/"))
+    """A manifest path with {realdata} (the config's realdata_dir) and a leading ~ expanded."""
+    return expand_path(p, config["realdata_dir"])
 
 
-# simulated outputs are fixed by the config (static DAG): sets and log-file flights
-SIM_SETS = planned_sets(config["simulate"])
-SIM_LOGS = planned_logs(config["simulate"])
 SIM_MANEUVERS = sorted({n.rsplit("_", 1)[0] for n in SIM_SETS if n.endswith("_test")})
 # the maneuver sets the EKF filters (rules/estimate_sets.smk): what model sets with input: ekf read
 EKF_SETS = [n for n in SIM_SETS if n.endswith(("_train", "_test"))]
 MODEL_SETS = config["model_sets"]
 STUDY_NAMES = list(STUDY_TABLES)  # rules/studies.smk: one target each, not in `all`
-for _row in _manifest.itertuples():
-    _p = _row.path.rstrip("/")
-    if _p.startswith("results/sim/logs/") and _p.split("/")[-1] not in {
-        s["log"] for s in SIM_LOGS
-    }:
-        raise ValueError(
-            f"{config['manifest']}: flight {_row.flight_id}: {_row.path} is not written by "
-            f"the simulate stage with this config (simulate.datasets: sizes, log_formats)"
-        )
-
 
 SKIPPED = {}  # manifest rows left out (flight id -> reason), for the end-of-run summary
 
 
 def _available(row):
-    # files under results/ are produced by the workflow itself (simulated/demo flights)
     path = _expand_path(row.path)
-    if path.startswith("results/") or Path(path).exists():
+    if log_available(path):
         return True
     SKIPPED[row.flight_id] = f"{path} not found"
     print(

@@ -14,8 +14,11 @@ Checked per row, in file order (the first failure is raised):
   built-in defaults). A vehicle with no entry is an error, never a silent default;
 - ``format`` is blank (detect from the bytes) or a reader name of :mod:`pipeline.io.registry`;
 - ``labels`` is ``embedded``, ``none``, blank, or an existing file. Paths under ``results/`` are
-  written by the workflow and count as existing; ``{realdata}`` expands to ``realdata_dir``. The
-  labels of a row whose log is absent are not checked: that row is skipped with a notice anyway.
+  written by the workflow and count as existing; ``{realdata}`` expands to ``realdata_dir`` and a
+  leading ``~`` to the home folder (:func:`expand_path`). The labels of a row whose log is absent
+  are not checked: that row is skipped with a notice anyway;
+- a ``results/sim/logs/`` path names a log the simulate stage writes with this config (when the
+  caller passes ``simulated_logs``: the workflow does, from ``simulate.run.planned_logs``).
 
 What the JSON schema ``rules/schemas/flights.schema.yaml`` types (``role``, the id pattern) is
 left to the schema validation that follows.
@@ -24,7 +27,7 @@ left to the schema validation that follows.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -39,15 +42,22 @@ COLUMNS: tuple[str, ...] = ("flight_id", "path", "vehicle", "role", "labels", "f
 #: ``labels`` values that are not paths
 LABEL_WORDS = ("embedded", "none", "")
 
+#: where the simulate stage writes its log-file flights (manifest paths below it are checked)
+SIM_LOG_DIR = "results/sim/logs/"
+
 
 def expand_path(path: str, realdata_dir: str | None) -> str:
-    """A manifest path with ``{realdata}`` replaced by the config's ``realdata_dir``."""
-    return path.replace("{realdata}", str(realdata_dir or "").rstrip("/"))
+    """A manifest path with ``{realdata}`` replaced by the config's ``realdata_dir`` and a leading
+    ``~`` (or ``~user``) by that home folder, as a shell would (``~/logs/f.bin``)."""
+    return os.path.expanduser(path.replace("{realdata}", str(realdata_dir or "").rstrip("/")))
 
 
-def _produced_or_exists(path: str, base: Path) -> bool:
-    # files under results/ are produced by the workflow itself (simulated/demo flights)
-    return path.startswith("results/") or (base / path).exists()
+def log_available(path: str, base: str | os.PathLike | None = None) -> bool:
+    """Whether an expanded manifest path can be read: it exists (relative to ``base``, default the
+    working directory), or lies under ``results/``, which the workflow writes itself (the simulated
+    and demo flights)."""
+    # str.startswith, not Path: "results/..." is the workflow's own relative output tree
+    return path.startswith("results/") or (Path(base or ".") / path).exists()
 
 
 def reader_names() -> list[str]:
@@ -58,7 +68,8 @@ def reader_names() -> list[str]:
 
 
 def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
-                   base: str | os.PathLike | None = None) -> list[dict[str, str]]:
+                   base: str | os.PathLike | None = None,
+                   simulated_logs: Collection[str] | None = None) -> list[dict[str, str]]:
     """Read and check a flight manifest; the rows as dicts of the columns, in file order.
 
     Parameters
@@ -71,6 +82,10 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
     base : path-like, optional
         The folder relative paths are resolved against (default: the working directory, as the
         workflow's).
+    simulated_logs : collection of str, optional
+        The log names (``sim-M1-000.bin``, ``sim-M1-000-mcap``) the simulate stage writes under
+        ``results/sim/logs/`` with this config; a row naming another one there is an error. ``None``
+        (the default) leaves such paths unchecked.
 
     Returns
     -------
@@ -86,9 +101,14 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
     src = str(path)
     root = Path(base) if base is not None else Path.cwd()
     try:
-        text = Path(root / path if not Path(path).is_absolute() else path).read_text()
+        # utf-8-sig: a spreadsheet saving "UTF-8 text" puts a byte-order mark before the header
+        text = Path(root / path if not Path(path).is_absolute() else path).read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise ConfigError(f"{src}: cannot read the manifest: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"{src}:{line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x}); save the "
+                          f"manifest as UTF-8") from None
     vehicles = dict((config.get("preprocess") or {}).get("vehicles") or {})
     realdata = config.get("realdata_dir")
     known_vehicles = [GENERIC_VEHICLE, *sorted(v for v in vehicles if v != GENERIC_VEHICLE)]
@@ -129,9 +149,13 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
                                   f"blank = detect from the file's bytes)")
         lab = row["labels"]
         log = expand_path(row["path"], realdata)
-        if lab not in LABEL_WORDS and _produced_or_exists(log, root):
+        if (simulated_logs is not None and log.startswith(SIM_LOG_DIR)
+                and log.rstrip("/")[len(SIM_LOG_DIR):] not in simulated_logs):
+            raise ConfigError(f"{where}: {row['path']} is not written by the simulate stage with "
+                              f"this config (simulate.datasets: sizes, log_formats)")
+        if lab not in LABEL_WORDS and log_available(log, root):
             lab_path = expand_path(lab, realdata)
-            if not _produced_or_exists(lab_path, root) or not (
+            if not log_available(lab_path, root) or not (
                     lab_path.startswith("results/") or (root / lab_path).is_file()):
                 raise ConfigError(f"{where}: labels {lab!r} is neither 'embedded', 'none' nor an "
                                   f"existing file")

@@ -270,6 +270,13 @@ def test_unreadable_files_are_one_line_errors(tmp_path):
     p.write_text("- 1\n")
     with pytest.raises(ConfigError, match="top level must be a mapping"):
         load_config(p)
+    p.write_bytes(b"seed: 3\nnotes: caf\xe9\n")  # latin-1, as an old editor saves it
+    with pytest.raises(ConfigError, match=r"bad\.yaml:2: not UTF-8 text \(byte 0xe9\)"):
+        load_config(p)
+    with pytest.raises(ConfigError, match="cannot read the config: Is a directory"):
+        load_config(tmp_path)
+    p.write_bytes(b"\xef\xbb\xbfseed: 3\n")  # a byte-order mark is not part of the first key
+    assert load_config(p)["seed"] == 3
 
 
 # --- the schema agrees with the code's vocabularies ----------------------------------------------

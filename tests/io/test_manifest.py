@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.config import ConfigError, load_config
-from pipeline.io.manifest import check_manifest, reader_names
+from pipeline.io.manifest import check_manifest, expand_path, log_available, reader_names
 
 ROOT = Path(__file__).resolve().parents[2]
 HEADER = "flight_id\tpath\tvehicle\trole\tlabels\tformat\tnotes\n"
@@ -96,3 +96,50 @@ def test_a_missing_column_or_manifest_is_one_line(tmp_path):
         check_manifest(p, CONFIG)
     with pytest.raises(ConfigError, match=r"nope\.tsv: cannot read the manifest"):
         check_manifest(tmp_path / "nope.tsv", CONFIG)
+
+
+def test_a_leading_tilde_is_the_home_folder_and_realdata_expands_first(monkeypatch):
+    monkeypatch.setenv("HOME", "/home/pilot")
+    assert expand_path("~/logs/f 1.bin", None) == "/home/pilot/logs/f 1.bin"
+    assert expand_path("{realdata}/a.bin", "~/data/") == "/home/pilot/data/a.bin"
+    # only a leading tilde: one inside a name is a character of the name
+    assert expand_path("logs/run~2.bin", None) == "logs/run~2.bin"
+
+
+def test_a_log_under_the_home_folder_is_available_and_its_labels_are_checked(tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))
+    (tmp_path / "my logs").mkdir()
+    (tmp_path / "my logs" / "flight 1.bin").write_bytes(b"x")
+    assert log_available(expand_path("~/my logs/flight 1.bin", None))
+    assert not log_available(expand_path("~/my logs/flight 2.bin", None))
+    # the log exists, so its labels must too: the check follows the tilde as well
+    msg = _error(tmp_path, "home1\t~/my logs/flight 1.bin\thusky\tnone\t~/my logs/gone.parquet\t\t")
+    assert ":3: flight home1: labels '~/my logs/gone.parquet' is neither" in msg
+
+
+def test_a_simulated_log_this_config_does_not_write_names_the_file_line_and_flight(tmp_path):
+    p = _manifest(tmp_path, DEMO, "s1\tresults/sim/logs/sim-M1-000.bin\tsim-quad\ttest\tnone\t\t",
+                  "s3\tresults/sim/logs/sim-M3-000.bin\tsim-quad\ttest\tnone\t\t")
+    planned = {"sim-M1-000.bin", "sim-M1-000-mcap"}
+    with pytest.raises(ConfigError) as exc:
+        check_manifest(p, CONFIG, base=tmp_path, simulated_logs=planned)
+    assert str(exc.value) == (f"{p}:5: flight s3: results/sim/logs/sim-M3-000.bin is not written by the "
+                              f"simulate stage with this config (simulate.datasets: sizes, log_formats)")
+    # without simulated_logs nothing is checked; a directory log (MCAP) may carry a trailing slash
+    assert len(check_manifest(p, CONFIG, base=tmp_path)) == 3
+    p2 = _manifest(tmp_path, "m\tresults/sim/logs/sim-M1-000-mcap/\tsim-quad\ttest\tnone\t\t")
+    assert len(check_manifest(p2, CONFIG, base=tmp_path, simulated_logs=planned)) == 1
+
+
+def test_a_byte_order_mark_and_windows_line_ends_from_a_spreadsheet_are_read_as_plain_text(tmp_path):
+    p = tmp_path / "flights.tsv"
+    p.write_bytes(b"\xef\xbb\xbf" + (HEADER + DEMO + "\n").replace("\n", "\r\n").encode())
+    rows = check_manifest(p, CONFIG, base=tmp_path)
+    assert [(r["flight_id"], r["labels"], r["notes"]) for r in rows] == [("demo-quad", "none", "demo")]
+
+
+def test_a_manifest_that_is_not_utf8_names_its_line(tmp_path):
+    p = tmp_path / "flights.tsv"
+    p.write_bytes((HEADER + DEMO + "\n").encode() + "caf\u00e9\tx.bin\thusky\tnone\tnone\t\t\n".encode("latin-1"))
+    with pytest.raises(ConfigError, match=r"flights\.tsv:3: not UTF-8 text \(byte 0xe9\); save the manifest as UTF-8$"):
+        check_manifest(p, CONFIG, base=tmp_path)

@@ -313,19 +313,46 @@ def validate_section(path: str, sec: Mapping[str, Any] | None) -> dict[str, Any]
     return inst
 
 
+def read_text_file(path: str | os.PathLike, what: str, *, source: str | None = None) -> str:
+    """The text of a config or manifest file, or one :class:`ConfigError` line saying why not.
+
+    UTF-8, with a leading byte-order mark dropped (a spreadsheet or Windows editor saving "UTF-8"
+    writes one; kept, it would become part of the first key or column name).
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    what : str
+        What it is, for the message (``"config"``, ``"manifest"``).
+    source : str, optional
+        How the message names the file (default: ``path`` as given).
+
+    Raises
+    ------
+    ConfigError
+        ``<source>: <what> file not found``, ``<source>: cannot read the <what>: <reason>`` or
+        ``<source>:<line>: not UTF-8 text (byte 0x..); save the <what> as UTF-8``.
+    """
+    src = str(path) if source is None else source
+    try:
+        return Path(path).read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise ConfigError(f"{src}: {what} file not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{src}: cannot read the {what}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        line = exc.object[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"{src}:{line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x}); save the "
+                          f"{what} as UTF-8") from None
+
+
 def load_config(path: str | os.PathLike | None = None) -> dict[str, Any]:
     """Load, validate and default the dataset config (default ``datasets/config.yaml``)."""
     p = Path(path) if path else DEFAULT_CONFIG
+    text = read_text_file(p, "config")
     try:
-        data = yaml.load(p.read_text(encoding="utf-8"), Loader=_Loader)
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: config file not found") from None
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the config: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        line = exc.object[:exc.start].count(b"\n") + 1
-        raise ConfigError(f"{p}:{line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x}); save the "
-                          f"config as UTF-8") from None
+        data = yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: invalid YAML: {' '.join(str(exc).split())}") from None
     return validate_config(data, source=p)

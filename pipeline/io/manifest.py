@@ -31,7 +31,7 @@ from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
 
-from ..config import ConfigError
+from ..config import ConfigError, read_text_file
 
 #: the vehicle name that means "no vehicle-specific settings" (needs no config entry)
 GENERIC_VEHICLE = "generic"
@@ -100,15 +100,7 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
     """
     src = str(path)
     root = Path(base) if base is not None else Path.cwd()
-    try:
-        # utf-8-sig: a spreadsheet saving "UTF-8 text" puts a byte-order mark before the header
-        text = Path(root / path if not Path(path).is_absolute() else path).read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise ConfigError(f"{src}: cannot read the manifest: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        line = exc.object[:exc.start].count(b"\n") + 1
-        raise ConfigError(f"{src}:{line}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x}); save the "
-                          f"manifest as UTF-8") from None
+    text = read_text_file(root / path, "manifest", source=src)  # root / absolute = absolute
     vehicles = dict((config.get("preprocess") or {}).get("vehicles") or {})
     realdata = config.get("realdata_dir")
     known_vehicles = [GENERIC_VEHICLE, *sorted(v for v in vehicles if v != GENERIC_VEHICLE)]

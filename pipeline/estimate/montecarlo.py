@@ -24,8 +24,8 @@ F64 = NDArray[np.float64]
 
 
 def simulate_white_jerk(n_runs: int, n_steps: int, dt: float, q: float, x0: ArrayLike,
-                        P0: ArrayLike | None = None,
-                        rng: np.random.Generator | int | None = None) -> F64:
+                        P0: ArrayLike | None = None, *,
+                        rng: np.random.Generator | int) -> F64:
     """Truth drawn from the filter's own model: ``x_{k+1} = A x_k + w_k``, ``w_k ~ N(0, Q(dt, q))``.
 
     Parameters
@@ -40,7 +40,9 @@ def simulate_white_jerk(n_runs: int, n_steps: int, dt: float, q: float, x0: Arra
     P0 : array_like, shape (9, 9), optional
         Initial spread: ``x_0 ~ N(x0, P0)`` (default :func:`~pipeline.estimate.models.initial_cov`;
         then a filter started at ``x0`` with ``P0`` is consistent from the first step).
-    rng : Generator, int or None
+    rng : Generator or int
+        The draws' generator, or a seed for one (required: every draw comes from the config's
+        master seed, never from the operating system's entropy).
 
     Returns
     -------
@@ -59,7 +61,7 @@ def simulate_white_jerk(n_runs: int, n_steps: int, dt: float, q: float, x0: Arra
     return x
 
 
-def measure(model, truth: ArrayLike, rng: np.random.Generator | int | None = None) -> F64:
+def measure(model, truth: ArrayLike, rng: np.random.Generator | int) -> F64:
     """Measurements of ``truth`` (n_runs, T, n_x) through ``model.measure`` (e.g. the
     :class:`~pipeline.estimate.models.RadarModel`), returned as ``(T, n_runs, n_z)``."""
     rng = np.random.default_rng(rng)

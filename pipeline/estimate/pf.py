@@ -252,6 +252,7 @@ class ParticleFilter:
     dt_ref : float, optional
         The step ``Pi`` is given for; ``None`` uses ``Pi`` as is at every step.
     rng : numpy.random.Generator or int
+        Every draw's generator, or a seed for one (required: no unseeded default).
     reinit : callable, optional
         ``(x, z, rng) -> x`` for the all-zero-weight guard; default ``likelihood.reinit``.
     """
@@ -259,7 +260,7 @@ class ParticleFilter:
     def __init__(self, models: Sequence[ModeModel], Pi: ArrayLike | Callable | None,
                  likelihood: Likelihood, *, n_particles: int = 1000, resample: str = "systematic",
                  threshold: float = 1.0 / 3.0, every_step: bool = False,
-                 dt_ref: float | None = None, rng: np.random.Generator | int | None = None,
+                 dt_ref: float | None = None, rng: np.random.Generator | int,
                  reinit: Callable[[F64, F64, np.random.Generator], F64] | None = None) -> None:
         self.models = list(models)
         if not self.models:

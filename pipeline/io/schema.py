@@ -1096,23 +1096,6 @@ def conform_arrow(stream: str, data) -> pa.Table:
     return conform_arrow_counted(stream, data)[0]
 
 
-def timestamp_anomalies_arrow(table: pa.Table) -> dict[str, int]:
-    """:func:`timestamp_anomalies` of an (unsorted, arrival-order) Arrow stream table."""
-    if table.num_rows < 2 or "t_ns" not in table.column_names:
-        return {"backwards": 0, "duplicate": 0}
-    cols = {n: table.column(n) for n in ("t_ns", "instance", "src") if n in table.column_names}
-    return _anomalies_np(_np_columns_like(cols, table.num_rows))
-
-
-def _np_columns_like(cols: dict, n: int) -> dict[str, tuple]:
-    out = {"t_ns": (arrow_to_np(cols["t_ns"]).astype(np.int64), None),
-           "instance": (arrow_to_np(cols["instance"]) if "instance" in cols else np.zeros(n, np.uint8), None)}
-    src = cols.get("src")
-    out["src"] = _categories(Column("src", "category"), [{"src": src}], [n]) if src is not None else \
-        (np.zeros(n, np.int32), None, [])
-    return out
-
-
 def frame_from_arrow(cols: tuple[Column, ...], table: pa.Table):
     """pandas DataFrame of a table of declared columns, dtypes as :func:`conform` gives them.
 

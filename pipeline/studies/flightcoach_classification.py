@@ -80,7 +80,6 @@ Sizes (``studies.size``): the flights are fixed, so ``small`` and ``thesis`` are
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -96,7 +95,7 @@ from ..models import ManeuverModelSet, ModelsConfig
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
 from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_FILES, FLIGHTCOACH_SKIP, STUDY_TABLES, Progress, Results, StudyResult,
-                   flightcoach_defaults, flightcoach_labelled, flightcoach_paths, input_path, md_table, model_dir,
+                   flightcoach_labelled, flightcoach_paths, input_path, md_table, model_dir,
                    output_path, say, study_outputs, study_settings, write_text)
 
 NAME = "flightcoach_classification"
@@ -150,12 +149,6 @@ SIZES: dict[str, dict[str, Any]] = {
 def outputs_for(results_dir: str = "results") -> dict[str, str]:
     """The study's declared outputs under ``results_dir`` (see :func:`.base.study_outputs`)."""
     return study_outputs(NAME, results_dir=results_dir)
-
-
-def default_inputs(realdata_dir: str | os.PathLike | None = None) -> dict[str, str]:
-    """The four FlightCoach files under ``realdata_dir`` (default: ``$UAVPIPE_REALDATA`` or
-    ``../shared/realdata`` beside the repository)."""
-    return flightcoach_defaults(FLIGHTS, realdata_dir)
 
 
 def load(path: Path):
@@ -335,7 +328,8 @@ def run_flightcoach_classification(inputs: Mapping | None, outputs: Mapping, con
     ----------
     inputs : mapping or None
         ``train``, ``test_p23``, ``test_f23``, ``calib``: the four FlightCoach JSON files
-        (default :func:`default_inputs`), and optionally ``template``.
+        (default: their files under ``$UAVPIPE_REALDATA``, else
+        ``../shared/realdata``, :func:`.base.flightcoach_defaults`), and optionally ``template``.
     outputs : mapping
         :func:`outputs_for`'s keys: ``report``, ``results``, ``page``, one per table of
         :data:`OUTPUT_TABLES`, ``model_params`` and ``model_meta``.

@@ -66,7 +66,6 @@ test runs quickly (its figures are not the study's).
 
 from __future__ import annotations
 
-import os
 import zlib
 from collections.abc import Mapping
 from pathlib import Path
@@ -89,7 +88,7 @@ from ..models.features import decimate
 from ..preprocess.state import preprocess_log
 from ..report.study import build_study_page, layout
 from .base import (FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, FLIGHTCOACH_SKIP, STUDY_TABLES, Progress, Results,
-                   StudyError, StudyResult, flightcoach_defaults, flightcoach_labelled, flightcoach_paths, input_path,
+                   StudyError, StudyResult, flightcoach_labelled, flightcoach_paths, input_path,
                    md_table, model_dir, model_variant, output_path, say, study_outputs, study_settings, write_text)
 
 NAME = "flightcoach_ekf_hmm"
@@ -131,12 +130,6 @@ SIZES: dict[str, dict[str, Any]] = {
 def outputs_for(results_dir: str = "results") -> dict[str, str]:
     """The study's declared outputs under ``results_dir`` (see :func:`.base.study_outputs`)."""
     return study_outputs(NAME, results_dir=results_dir)
-
-
-def default_inputs(realdata_dir: str | os.PathLike | None = None) -> dict[str, str]:
-    """The two FlightCoach files under ``realdata_dir`` (default: ``$UAVPIPE_REALDATA`` or
-    ``../shared/realdata`` beside the repository)."""
-    return flightcoach_defaults(FLIGHTS, realdata_dir)
 
 
 def _flight_paths(inputs: Mapping | None) -> dict[str, Path]:
@@ -394,7 +387,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     Parameters
     ----------
     inputs : mapping or None
-        ``train``, ``test``: the two FlightCoach JSON files (default :func:`default_inputs`), and
+        ``train``, ``test``: the two FlightCoach JSON files (default: their files under ``$UAVPIPE_REALDATA``, else
+        ``../shared/realdata``, :func:`.base.flightcoach_defaults`), and
         optionally ``template``.
     outputs : mapping
         :func:`outputs_for`'s keys: ``report``, ``results``, ``page``, one per table of

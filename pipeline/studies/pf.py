@@ -194,7 +194,7 @@ def cv_kf_error_on_cv_truth(sigma_a: float, sigma_m: float, dt: float = 1.0) -> 
 
 def straight_fraction_bound(cfg: HmpfConfig, speed_mps: float, *, kill_after: int, steps: int = 300,
                             n: int = 100_000, startup: int | None = None,
-                            rng: np.random.Generator | None = None) -> np.ndarray:
+                            rng: np.random.Generator) -> np.ndarray:
     """Mode fractions [S, L, R, W] on a straight track under an **ideal** likelihood, by Monte
     Carlo of the mode and submode chains alone (independent of the filter's kernels).
 
@@ -217,7 +217,6 @@ def straight_fraction_bound(cfg: HmpfConfig, speed_mps: float, *, kill_after: in
         raise ValueError("straight_fraction_bound: kill_after must be >= 1")
     if kill_after * cfg.omega_init_radps[1] * cfg.dt_s >= cfg.theta_max_rad:
         raise ValueError("straight_fraction_bound: curves must die before theta reaches theta_max")
-    rng = rng if rng is not None else np.random.default_rng(0)
     startup = cfg.startup_steps if startup is None else int(startup)
     Pi = np.asarray(cfg.pi_m, dtype=np.float64)
     cum = np.cumsum(Pi, axis=1)

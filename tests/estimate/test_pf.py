@@ -132,9 +132,9 @@ def test_modes_are_drawn_from_the_rows_of_pi():
 
 def test_a_pi_whose_rows_do_not_sum_to_one_is_refused_naming_the_row():
     with pytest.raises(ValueError, match="row 1 sums to"):
-        ParticleFilter([PfConstantVelocity()] * 2, [[1.0, 0.0], [0.5, 0.6]], GaussianPositionLikelihood())
+        ParticleFilter([PfConstantVelocity()] * 2, [[1.0, 0.0], [0.5, 0.6]], GaussianPositionLikelihood(), rng=0)
     with pytest.raises(ValueError, match="2 mode models"):
-        ParticleFilter([PfConstantVelocity()] * 2, np.eye(3), GaussianPositionLikelihood())
+        ParticleFilter([PfConstantVelocity()] * 2, np.eye(3), GaussianPositionLikelihood(), rng=0)
 
 
 def test_pi_is_retimed_to_each_step_by_the_matrix_exponential():
@@ -216,3 +216,15 @@ def test_the_compiled_mode_draw_equals_a_searchsorted_per_from_mode_including_ti
     np.testing.assert_array_equal(out, ref)
     pos = u > 0                                       # a positive u never draws a zero-probability mode
     assert np.all(P[mode[pos], out[pos]] > 0)
+
+
+def test_a_filter_or_a_monte_carlo_draw_without_an_rng_is_refused_rather_than_seeded_from_the_os():
+    # every draw comes from the config's master seed: there is no unseeded default to fall back on
+    from pipeline.estimate.models import RadarModel
+    from pipeline.estimate.montecarlo import measure, simulate_white_jerk
+    with pytest.raises(TypeError, match="rng"):
+        ParticleFilter([PfConstantVelocity()], None, GaussianPositionLikelihood(), n_particles=10)
+    with pytest.raises(TypeError, match="rng"):
+        simulate_white_jerk(2, 3, 0.2, 1.0, np.zeros(9))
+    with pytest.raises(TypeError, match="rng"):
+        measure(RadarModel(), np.zeros((2, 3, 9)))

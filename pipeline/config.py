@@ -43,6 +43,30 @@ SCHEMA_PATH = ROOT / "rules" / "schemas" / "config.schema.yaml"
 _Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
+class _UniqueKeyLoader(_Loader):  # type: ignore[misc, valid-type]
+    """The safe loader, refusing a key repeated in one mapping: YAML keeps the last one, so a
+    second ``preprocess:`` block would silently drop the whole first one."""
+
+
+def _unique_mapping(loader, node, deep=False):
+    first: dict[Any, int] = {}
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue
+        key = loader.construct_object(key_node, deep=True)
+        try:
+            line = first.setdefault(key, key_node.start_mark.line + 1)
+        except TypeError:  # an unhashable key: the schema names it
+            continue
+        if line != key_node.start_mark.line + 1:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r} (first on line {line})", key_node.start_mark)
+    return loader.construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+
+
 class ConfigError(ValueError):
     """A configuration file or value is invalid; the message names the file and key."""
 
@@ -350,12 +374,20 @@ def read_text_file(path: str | os.PathLike, what: str, *, source: str | None = N
 def load_config(path: str | os.PathLike | None = None) -> dict[str, Any]:
     """Load, validate and default the dataset config (default ``datasets/config.yaml``)."""
     p = Path(path) if path else DEFAULT_CONFIG
+    return validate_config(read_config_file(p), source=p)
+
+
+def read_config_file(path: str | os.PathLike) -> Any:
+    """The YAML of a config file as read (not validated), or one :class:`ConfigError` line: the
+    file unreadable, not UTF-8, not YAML, or a key repeated in one mapping (YAML would keep the
+    last silently). The workflow calls it on its ``--configfile`` files too: Snakemake's own
+    reader keeps the last."""
+    p = Path(path)
     text = read_text_file(p, "config")
     try:
-        data = yaml.load(text, Loader=_Loader)
+        return yaml.load(text, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: invalid YAML: {' '.join(str(exc).split())}") from None
-    return validate_config(data, source=p)
 
 
 def command_line_overrides(cli: Mapping[str, Any] | None) -> dict[str, Any]:

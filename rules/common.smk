@@ -6,7 +6,7 @@ import pandas as pd
 from snakemake.utils import update_config, validate
 
 import pipeline
-from pipeline.config import ConfigError, command_line_overrides, validate_config
+from pipeline.config import ConfigError, command_line_overrides, read_config_file, validate_config
 from pipeline.estimate.run import job_config as estimate_job_config
 from pipeline.estimate.pf_run import job_config as pf_job_config
 from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest, expand_path, log_available
@@ -23,6 +23,8 @@ PIPELINE_VERSION = pipeline.__version__
 # their nested scalars typed as in the config file (Snakemake leaves them strings: 'true', '500')
 update_config(config, command_line_overrides(workflow.config_settings.config))
 try:
+    for _cf in workflow.configfiles:  # what Snakemake's reader lets pass: a key given twice
+        read_config_file(_cf)
     _sources = [*map(str, workflow.configfiles), *(["--config"] if workflow.config_settings.config else [])]
     _validated = validate_config(config, source=" + ".join(_sources) or "config")
 except ConfigError as _exc:

@@ -1,13 +1,16 @@
 """``uavpipe`` command line: one module per subcommand, each exposing ``add_parser(subparsers)``.
 
 Subcommands print a one-line reason and exit non-zero on failure; batch commands keep going
-past a bad input and report it at the end.
+past a bad input and report it at the end. What a command did not foresee still ends in one
+line, ``uavpipe <command>: <Type>: <message>`` with exit 1 (:func:`main`);
+``UAVPIPE_DEBUG=1`` shows the traceback instead.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from .. import __version__
@@ -39,6 +42,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("uavpipe: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # the last resort: bad input a command did not foresee, one line
+        if os.environ.get("UAVPIPE_DEBUG"):
+            raise
+        from .common import describe
+
+        print(f"uavpipe {args.command}: {describe(exc)} (UAVPIPE_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

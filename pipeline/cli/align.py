@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
+from .common import table_problem
 
 
 def add_parser(sub) -> None:
@@ -46,10 +47,21 @@ def run(args) -> int:
         print(f"uavpipe align: --state and --segments name different flights ({', '.join(stems)} vs "
               f"{', '.join(sorted(p.stem for p in args.segments))})", file=sys.stderr)
         return 2
-    for p in (*args.state, *args.segments):
-        if not p.is_file():
-            print(f"uavpipe align: {p}: no such file", file=sys.stderr)
+    kinds = [*((p, ("state",), "a state table") for p in args.state),
+             *((p, ("segments",), "a segments table") for p in args.segments)]
+    for p, expected, what in kinds:
+        bad = table_problem(p, expected, what)
+        if bad:
+            print(f"uavpipe align: {p}: {bad}", file=sys.stderr)
             return 2
+    # the outputs' places, before minutes of learning
+    for opt, p in (("-o", args.out), ("--page", args.page.parent if args.page else None)):
+        if p is not None and p.exists() and not p.is_dir():
+            print(f"uavpipe align: {opt} {p}: exists and is not a folder", file=sys.stderr)
+            return 2
+    if args.page is not None and args.page.is_dir():
+        print(f"uavpipe align: --page {args.page}: is a folder (give the page's file name)", file=sys.stderr)
+        return 2
     outputs = {k: args.out / f"{k}.parquet" for k in ALIGN_OUTPUTS}
     res = run_align({"states": [str(p) for p in args.state], "segments": [str(p) for p in args.segments]},
                     outputs, sec, set_name=args.set_name)

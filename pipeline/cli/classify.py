@@ -18,6 +18,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from .common import Claims, describe, table_problem
+
 
 def add_parser(sub) -> None:
     p = sub.add_parser("classify", help="classify maneuvers online with trained HMMs")
@@ -35,7 +37,9 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    from ..io.stage import source_names
     from ..models.base import ModelError
+    from ..models.classifier import ManeuverModelSet
     from ..models.run import run_classify
 
     if not (args.model / "meta.json").is_file():
@@ -45,21 +49,43 @@ def run(args) -> int:
         print(f"uavpipe classify: --segments: {len(args.segments)} given for {len(args.tables)} tables",
               file=sys.stderr)
         return 1
+    if args.reset_at_segments and args.segments is None:
+        print("uavpipe classify: --reset-at-segments needs --segments (the segment starts to reset at)",
+              file=sys.stderr)
+        return 2
+    try:  # once, before any table: a damaged model is the model's fault, not the first table's
+        ManeuverModelSet.load(args.model)
+    except ModelError as exc:
+        print(f"uavpipe classify: {exc}", file=sys.stderr)
+        return 1
     failed = 0
+    claims = Claims()
+    # several tables: DIR/<name>.parquet, the name telling the inputs apart (a/state, b/state)
+    names = [n.replace("/", "-") for n in source_names(args.tables)]
     for k, path in enumerate(args.tables):
-        out = args.out if len(args.tables) == 1 else args.out / f"{path.stem}.parquet"
+        out = args.out if len(args.tables) == 1 else args.out / f"{names[k]}.parquet"
+        seg = args.segments[k] if args.segments else None
+        bad = (table_problem(path, ("state", "*set"), "a state table or simulated set")
+               or (seg is not None and (p := table_problem(seg, ("segments",), "a segments table"))
+                   and f"--segments {seg}: {p}"))
+        clash = claims.clash(out)
+        if bad or clash:
+            print(f"uavpipe classify: {path}: {bad or clash}", file=sys.stderr)
+            failed += 1
+            continue
         inputs = {"params": args.model / "params.npz", "meta": args.model / "meta.json", "state": path,
-                  "segments": args.segments[k] if args.segments else None}
+                  "segments": seg}
         try:
             res = run_classify(inputs, {"classification": out}, {"reset_at_segments": args.reset_at_segments},
                                model_set=args.model.name, mode=args.mode, decision=args.decision)
-        except (ModelError, ValueError, OSError, KeyError) as exc:
-            print(f"uavpipe classify: {path}: {exc}", file=sys.stderr)
+        except Exception as exc:  # one bad table never stops the others
+            print(f"uavpipe classify: {path}: {describe(exc)}", file=sys.stderr)
             failed += 1
             continue
         if res.status != "ok":
             print(f"uavpipe classify: {path}: {res.error}", file=sys.stderr)
             failed += 1
             continue
+        claims.claim(out, path)
         print(f"{path} -> {out} ({res.diagnostics['n_samples']} samples, {res.diagnostics['n_unknown']} unknown)")
     return 1 if failed else 0

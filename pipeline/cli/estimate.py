@@ -14,11 +14,12 @@ noise from the config's master seed and the flight id). The EKF+HMM needs ``--mo
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
+from .common import Claims, describe, json_object_problem, table_problem, vehicle_problem
+from .preprocess import ingest_flight_id
 
 
 def add_parser(sub) -> None:
@@ -55,6 +56,21 @@ def run(args) -> int:
     if args.model is not None and not (args.model / "meta.json").is_file():
         print(f"uavpipe estimate: {args.model}: not a model directory (no meta.json)", file=sys.stderr)
         return 2
+    # every side input the kind it must be, before any flight runs (a missing --q2 was a placeholder
+    # that never named the file; a segments table given as --state a KeyError)
+    checks = [*((f"--state {p}", table_problem(p, ("state",), "a state table")) for p in args.state),
+              *((f"--segments {p}", table_problem(p, ("segments",), "a segments table")) for p in args.segments or ()),
+              *((f"--train-sets {p}", table_problem(p, ("state", "*set"), "a simulated set"))
+                for p in args.train_sets or ()),
+              ("--vehicle", vehicle_problem(args.vehicle, cfg))]
+    if args.model is not None:
+        checks.append((f"--model {args.model}", None if (args.model / "params.npz").is_file() else "no params.npz"))
+    if args.q2 is not None:
+        checks.append((f"--q2 {args.q2}", json_object_problem(args.q2)))
+    for opt, bad in checks:
+        if bad:
+            print(f"uavpipe estimate: {opt}: {bad}", file=sys.stderr)
+            return 2
     q2 = args.q2
     if args.model is not None and q2 is None and args.train_sets:
         q2 = args.out / "q2" / f"{args.model.name}.json"
@@ -66,12 +82,18 @@ def run(args) -> int:
     if args.model is not None:
         config["ekf_hmm"]["model"] = args.model.name
     failed = 0
+    claims = Claims()
     for k, d in enumerate(args.ingest_dirs):
         meta = d / "meta.json"
         try:
-            fid = json.loads(meta.read_text()).get("flight_id") or d.name
-        except (OSError, ValueError) as exc:
-            print(f"uavpipe estimate: {d}: not an ingest folder ({meta}: {exc})", file=sys.stderr)
+            fid = ingest_flight_id(d)
+        except ValueError as exc:
+            print(f"uavpipe estimate: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        clash = claims.clash(args.out / "ekf" / f"{fid}.parquet")
+        if clash:
+            print(f"uavpipe estimate: {d}: flight {fid} {clash}", file=sys.stderr)
             failed += 1
             continue
         inputs = {"meta": meta, "state": args.state[k], "segments": args.segments[k] if args.segments else None,
@@ -79,13 +101,14 @@ def run(args) -> int:
         outputs = {e: args.out / e / f"{fid}.parquet" for e in ESTIMATORS}
         try:
             res = run_estimate(inputs, outputs, config, flight_id=fid, vehicle=args.vehicle, seed=int(cfg["seed"]))
-        except (ValueError, OSError, KeyError) as exc:
-            print(f"uavpipe estimate: {d}: {exc}", file=sys.stderr)
+        except Exception as exc:  # one bad flight never stops the others
+            print(f"uavpipe estimate: {d}: {describe(exc)}", file=sys.stderr)
             failed += 1
             continue
         if res.status == "failed":  # run_estimate has said why, in one line naming the flight
             failed += 1
             continue
+        claims.claim(args.out / "ekf" / f"{fid}.parquet", d)
         dg = res.diagnostics
         print(f"{d} -> {args.out}/{{{','.join(ESTIMATORS)}}}/{fid}.parquet: {dg['n_steps']} steps "
               f"({dg['n_predict_only']} predict-only), radar {dg['radar']}, reference {dg['reference']}"

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..io.manifest import reader_names
 from ..io.registry import flight_id_for
+from .common import Claims
 from .progress import progress_bar
 
 
@@ -58,8 +59,14 @@ def run(args) -> int:
         print("uavpipe ingest: --labels takes one LOG", file=sys.stderr)
         return 2
     failed = []
+    claims = Claims()
     for path in args.logs:
         inputs, outputs, fid = job_paths(path, args.labels, args.out)
+        clash = claims.clash(args.out / fid)
+        if clash:  # two logs with one flight id (same name, other extension or folder)
+            print(f"uavpipe ingest: {path}: flight id {fid} {clash}", file=sys.stderr)
+            failed.append(str(path))
+            continue
         try:
             size = path.stat().st_size if path.is_file() else 0
         except OSError:
@@ -76,6 +83,8 @@ def run(args) -> int:
             print(f"uavpipe ingest: {path}: warning: {w}", file=sys.stderr)
         if res.status == "failed":
             failed.append(str(path))
+        else:
+            claims.claim(args.out / fid, path)
     if failed:
         print(f"uavpipe ingest: {len(failed)} of {len(args.logs)} log(s) failed", file=sys.stderr)
         return 1

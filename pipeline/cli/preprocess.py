@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from ..io.manifest import GENERIC_VEHICLE
+from .common import Claims, describe, vehicle_problem
 
 
 def add_parser(sub) -> None:
@@ -27,6 +27,19 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
+def ingest_flight_id(d: Path) -> str:
+    """The flight id of an ingest folder (its ``meta.json`` ``flight_id``, else the folder name);
+    ``ValueError`` naming the folder when it is not one."""
+    meta = d / "meta.json"
+    try:
+        m = json.loads(meta.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{d}: not an ingest folder ({meta}: {describe(exc)})") from None
+    if not isinstance(m, dict):
+        raise ValueError(f"{d}: not an ingest folder ({meta} holds a JSON {type(m).__name__}, not an object)")
+    return str(m.get("flight_id") or d.name)
+
+
 def vehicle_profile(diag: dict) -> str:
     """``vehicle profile <name>`` (the ``preprocess.vehicles`` entry used), or the built-in one."""
     used = diag.get("vehicle")
@@ -38,39 +51,44 @@ def run(args) -> int:
     from ..preprocess.state import summary_line
 
     try:
-        sec = section(load_config(args.config), "preprocess")
+        cfg = load_config(args.config)
+        sec = section(cfg, "preprocess")
     except ConfigError as exc:
         print(f"uavpipe preprocess: {exc}", file=sys.stderr)
         return 2
-    known = sec.get("vehicles") or {}
-    if args.vehicle and args.vehicle != GENERIC_VEHICLE and args.vehicle not in known:
-        # as the workflow's manifest check: an unknown vehicle is an error, never a silent default
-        print(f"uavpipe preprocess: unknown vehicle {args.vehicle!r}: add it to preprocess.vehicles "
-              f"or give {GENERIC_VEHICLE!r} (known: {', '.join([GENERIC_VEHICLE, *sorted(known)])})",
-              file=sys.stderr)
+    bad = vehicle_problem(args.vehicle, cfg)
+    if bad:
+        print(f"uavpipe preprocess: {bad}", file=sys.stderr)
         return 2
     failed = []
+    claims = Claims()
     for d in args.ingest_dirs:
         meta = d / "meta.json"
         try:
-            fid = json.loads(meta.read_text()).get("flight_id") or d.name
-        except (OSError, ValueError) as exc:
-            print(f"uavpipe preprocess: {d}: not an ingest folder ({meta}: {exc})", file=sys.stderr)
+            fid = ingest_flight_id(d)
+        except ValueError as exc:
+            print(f"uavpipe preprocess: {exc}", file=sys.stderr)
             failed.append(d)
             continue
         out = args.out / fid
+        clash = claims.clash(out)
+        if clash:
+            print(f"uavpipe preprocess: {d}: flight {fid} {clash}", file=sys.stderr)
+            failed.append(d)
+            continue
         outputs = {"state": out / "state.parquet", "segments": out / "segments.parquet",
                    "calibration": out / "calibration.parquet", "info": out / "preprocess.json"}
         try:
             res = run_preprocess({"meta": meta}, outputs, sec, vehicle=args.vehicle)
-        except (ConfigError, ValueError, OSError) as exc:
-            print(f"uavpipe preprocess: {d}: {exc}", file=sys.stderr)
+        except Exception as exc:  # one bad flight never stops the others
+            print(f"uavpipe preprocess: {d}: {describe(exc)}", file=sys.stderr)
             failed.append(d)
             continue
         if res.status == "failed":
             print(f"uavpipe preprocess: {d}: {res.diagnostics.get('error')}", file=sys.stderr)
             failed.append(d)
             continue
+        claims.claim(out, d)
         print(f"{d} -> {out}: {summary_line(res.diagnostics)}, {vehicle_profile(res.diagnostics)}")
     if failed:
         print(f"uavpipe preprocess: {len(failed)} of {len(args.ingest_dirs)} flight(s) failed", file=sys.stderr)

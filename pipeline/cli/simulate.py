@@ -15,13 +15,14 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
+from .common import nonnegative_int
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("simulate", help="simulate the seed-000 maneuver data sets and log files")
     p.add_argument("out_dir", type=Path, metavar="OUT_DIR")
     p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
-    p.add_argument("--seed", type=int, default=None, help="master seed (default: the config's seed)")
+    p.add_argument("--seed", type=nonnegative_int, default=None, help="master seed (default: the config's seed)")
     p.add_argument("--size", default=None, help="datasets size row (small, thesis, or one defined in config)")
     p.add_argument("--no-logs", action="store_true", help="skip the log files")
     p.set_defaults(func=run)
@@ -30,6 +31,9 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from ..simulate.run import planned_logs, planned_sets, run_simulate_logs, run_simulate_sets
 
+    if args.out_dir.exists() and not args.out_dir.is_dir():
+        print(f"uavpipe simulate: {args.out_dir}: exists and is not a folder", file=sys.stderr)
+        return 2
     try:
         cfg = load_config(args.config)
         sim = dict(section(cfg, "simulate"))

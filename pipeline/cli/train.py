@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config
+from .common import nonnegative_int, table_problem
 
 
 def add_parser(sub) -> None:
@@ -30,7 +31,7 @@ def add_parser(sub) -> None:
     p.add_argument("--model-set", default=None, help="use this model_sets entry of the config")
     p.add_argument("--labels", nargs="*", default=None, help="train only these maneuver labels")
     p.add_argument("--exclude", nargs="*", default=None, help="labels to leave out (e.g. take-off, landing)")
-    p.add_argument("--seed", type=int, default=None, help="override the config's master seed")
+    p.add_argument("--seed", type=nonnegative_int, default=None, help="override the config's master seed")
     p.set_defaults(func=run)
 
 
@@ -52,6 +53,16 @@ def run(args) -> int:
             spec["exclude"] = list(args.exclude)
         if args.segments is not None and len(args.segments) != len(args.tables):
             raise ConfigError(f"--segments: {len(args.segments)} given for {len(args.tables)} tables")
+        if args.out.exists() and not args.out.is_dir():
+            raise ConfigError(f"-o {args.out}: exists and is not a folder")
+        # every input the kind it must be, before any training (a swapped pair is named)
+        kinds = ([(p, ("state",), "a state table") for p in args.tables]
+                 + [(p, ("segments",), "a segments table") for p in args.segments] if args.segments
+                 else [(p, ("state", "*set"), "a simulated set or labelled state table") for p in args.tables])
+        for p, expected, what in kinds:
+            bad = table_problem(p, expected, what)
+            if bad:
+                raise ConfigError(f"{p}: {bad}")
         inputs = ({"states": args.tables, "segments": args.segments} if args.segments
                   else {"sets": args.tables})
         seed = args.seed if args.seed is not None else int(cfg.get("seed", 0))

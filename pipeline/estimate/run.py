@@ -278,9 +278,14 @@ def _ekf_hmm_blocker(inputs, config: Mapping) -> tuple[str, Any, F64 | None]:
     if not q2_path or not Path(q2_path).exists():
         return f"no Q2 for model set {model}", None, None
     q2 = json.loads(Path(q2_path).read_text())
+    if not isinstance(q2, dict) or "status" not in q2:
+        return f"{q2_path}: not a Q2 file of run_q2 (no 'status')", None, None
     if q2.get("status") != "ok":
         return f"Q2 of model set {model} failed: {q2.get('error')}", None, None
-    return "", ms, np.asarray(q2["Q2"], dtype=np.float64)
+    Q2 = np.asarray(q2.get("Q2", np.nan), dtype=np.float64)
+    if Q2.shape != (9, 9) or not np.isfinite(Q2).all():
+        return f"{q2_path}: Q2 is not a finite 9 x 9 matrix (shape {Q2.shape})", None, None
+    return "", ms, Q2
 
 
 def _rmse(err: F64) -> dict[str, float]:
@@ -455,17 +460,11 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
 def _training_runs(inputs) -> pd.DataFrame:
     """The model set's training truth: simulated ``sets`` (run ids made unique per file) or the
     labelled segments of the training flights (``states``/``segments``, one run each)."""
+    from ..models.run import flight_runs, read_sets
+
     sets = declared_list(inputs, "sets")
     if sets:
-        frames = []
-        for p in sets:
-            df = pd.read_parquet(p)
-            if "run_id" not in df.columns:
-                df["run_id"] = 0
-            df["run_id"] = [f"{Path(p).stem}:{r}" for r in df["run_id"]]
-            frames.append(df)
-        return pd.concat(frames, ignore_index=True)
-    from ..models.run import flight_runs
+        return read_sets(sets)
 
     return flight_runs(declared_list(inputs, "states"), declared_list(inputs, "segments"))
 

@@ -30,3 +30,33 @@ def declared_list(paths: Any, name: str) -> list[str]:
     if v is None:
         return []
     return [str(v)] if isinstance(v, (str, os.PathLike)) else [str(x) for x in v]
+
+
+def source_names(paths: Any) -> list[str]:
+    """One short name per input file that tells the files apart, for run ids made unique per file.
+
+    The file stems where they differ (the workflow's ``M1_train``, ``fc-p23-036``: names
+    unchanged); else the last folders too, as few as make them differ (``a/state``, ``b/state``
+    for the CLI's ``DIR/<flight>/state.parquet`` layout); the same file given twice gets ``#2``,
+    ``#3``... on its repeats. Runs of different files therefore never share a run id, which
+    would join them into one training sequence.
+
+    >>> source_names(["out/a/state.parquet", "out/b/state.parquet"])
+    ['a/state', 'b/state']
+    >>> source_names(["sets/M1_train.parquet", "x/M1_train.parquet", "sets/M1_train.parquet"])
+    ['sets/M1_train', 'x/M1_train', 'sets/M1_train#2']
+    """
+    from pathlib import PurePath
+
+    parts = [PurePath(p).with_suffix("").parts for p in [str(x) for x in paths]]
+    depth = max((len(p) for p in parts), default=1)
+    for k in range(1, depth + 1):
+        names = ["/".join(p[-k:]) for p in parts]
+        if len(set(names)) == len(names):
+            return names
+    seen: dict[str, int] = {}
+    out = []
+    for n in names:
+        seen[n] = seen.get(n, 0) + 1
+        out.append(n if seen[n] == 1 else f"{n}#{seen[n]}")
+    return out

@@ -42,6 +42,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import zipfile
 import zlib
 from pathlib import Path
 
@@ -501,16 +502,39 @@ class ManeuverModelSet:
 
     @classmethod
     def load(cls, in_dir: str | os.PathLike) -> "ManeuverModelSet":
+        """Read a model set written by :meth:`save` (``params.npz`` + ``meta.json``).
+
+        Raises
+        ------
+        ModelError
+            One line naming the folder: a file missing, unreadable (a truncated or empty
+            ``params.npz``, ``meta.json`` not a JSON object), of another format version, or the
+            two files not fitting together (arrays missing, feature counts differing).
+        """
         d = Path(in_dir)
         try:
-            meta = json.loads((d / "meta.json").read_text())
-            z = np.load(d / "params.npz", allow_pickle=False)
+            meta = json.loads((d / "meta.json").read_text(encoding="utf-8"))
+            if not isinstance(meta, dict):
+                raise ModelError(f"{d}: unreadable model files: meta.json holds a JSON "
+                                 f"{type(meta).__name__}, not an object")
+            if meta.get("format_version") != FORMAT_VERSION:
+                raise ModelError(f"{d}: model format {meta.get('format_version')} != {FORMAT_VERSION}")
+            # our own handle: np.load leaves its file open when a truncated archive fails to open
+            with open(d / "params.npz", "rb") as fh, np.load(fh, allow_pickle=False) as z:
+                return cls._from_files(meta, z)  # reads every array it keeps
         except FileNotFoundError as exc:
             raise ModelError(f"{d}: not a model directory ({exc.filename} missing)") from None
-        except (ValueError, OSError) as exc:
-            raise ModelError(f"{d}: unreadable model files: {exc}") from None
-        if meta.get("format_version") != FORMAT_VERSION:
-            raise ModelError(f"{d}: model format {meta.get('format_version')} != {FORMAT_VERSION}")
+        except ModelError:
+            raise
+        except (OSError, EOFError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+            # np.load raises EOFError on an empty file, BadZipFile on a truncated archive
+            raise ModelError(f"{d}: unreadable model files: {type(exc).__name__}: {exc}") from None
+        except (KeyError, ValueError, TypeError, IndexError, AttributeError) as exc:
+            raise ModelError(f"{d}: params.npz and meta.json do not fit together "
+                             f"({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+
+    @classmethod
+    def _from_files(cls, meta: dict, z) -> "ManeuverModelSet":
         cfg = dict(meta["config"])
         seed = cfg.pop("seed", 0)   # persisted with the model; not a key of the hmm section
         self = cls(config=ModelsConfig.from_section(cfg, seed=seed))
@@ -534,4 +558,8 @@ class ManeuverModelSet:
                     n = np.minimum(n, self.config.window)
                 self.threshold_base_[mode] = thr + self.threshold_slack_ * n
         self.background_ = HMMParams.from_arrays(z, prefix="bg_") if "bg_means" in z.files else None
+        n_feat = len(self.feature_set.names)
+        if np.shape(self.normaliser_.x_min) != (n_feat,):
+            raise ValueError(f"normaliser of {np.size(self.normaliser_.x_min)} features, feature set "
+                             f"{self.config.feature_set!r} has {n_feat}")
         return self

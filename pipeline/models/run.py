@@ -45,7 +45,7 @@ from ..io.atomic import atomic_output
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
-from ..io.stage import declared, declared_list
+from ..io.stage import declared, declared_list, source_names
 from .base import ModelError, ModelsConfig
 from .metrics import THESIS_CLASSIFICATION, per_maneuver_table, thesis_side_by_side
 
@@ -118,14 +118,19 @@ def _say(msg: str) -> None:
     print(f"uavpipe models: {msg}", file=sys.stderr, flush=True)
 
 
-def _read_sets(paths: Sequence[str | os.PathLike]) -> pd.DataFrame:
-    # run ids restart in every set file: make them unique per file
+def read_sets(paths: Sequence[str | os.PathLike]) -> pd.DataFrame:
+    """The training runs of simulated sets (or single labelled tables), concatenated.
+
+    Run ids restart in every set file, so each becomes ``<source>:<run_id>`` with
+    :func:`pipeline.io.stage.source_names` (the file stem where stems differ); a table without
+    ``run_id`` is one run.
+    """
     frames = []
-    for i, p in enumerate(paths):
+    for p, src in zip(paths, source_names(paths)):
         df = pd.read_parquet(p)
         if "run_id" not in df.columns:  # one run per file (a single labelled state table)
             df["run_id"] = 0
-        df["run_id"] = [f"{Path(p).stem}:{r}" for r in df["run_id"]]
+        df["run_id"] = [f"{src}:{r}" for r in df["run_id"]]
         frames.append(df)
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
@@ -145,16 +150,17 @@ def label_state(state: pd.DataFrame, segments: pd.DataFrame) -> pd.DataFrame:
 
 
 def flight_runs(states: Sequence, segments: Sequence) -> pd.DataFrame:
-    """One training run per labelled segment of each flight (``run_id`` = ``<flight>:<segment>``)."""
+    """One training run per labelled segment of each flight (``run_id`` = ``<flight>:<segment>``,
+    ``<flight>`` the state file's :func:`pipeline.io.stage.source_names` name: its stem in the workflow)."""
     frames = []
-    for sp, gp in zip(states, segments):
+    for sp, gp, src in zip(states, segments, source_names(states)):
         st = read_table(sp)
         if not len(st):
             continue
         seg = read_table(gp)
         lab = label_state(st, seg)
         lab = lab[lab["segment_id"] >= 0]
-        lab["run_id"] = [f"{Path(sp).stem}:{s}" for s in lab["segment_id"]]
+        lab["run_id"] = [f"{src}:{s}" for s in lab["segment_id"]]
         frames.append(lab.drop(columns="segment_id"))
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
@@ -201,7 +207,7 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
     sets, states, segments = declared_list(inputs, "sets"), declared_list(inputs, "states"), declared_list(inputs, "segments")
     cfg = hmm_config(config, seed)  # a bad hyperparameter is a config error, not a placeholder
     try:
-        df = _read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments)
+        df = read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments)
         if not len(df) or "label" not in df.columns:
             raise ModelError("no labelled training data (no training flights with segments?)")
         keep = df["label"].notna() & ~df["label"].isin(list(spec.get("exclude") or []))
@@ -337,7 +343,7 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
             for split, paths in (("train", train_sets), ("test", test_sets)):
                 if not paths:
                     continue
-                df = _read_sets(paths)
+                df = read_sets(paths)
                 for decision in ("oneclass", "confidence"):
                     res = ms.classify(df, decision=decision, gmr=False)
                     tab = per_maneuver_table(res, ms.labels_, truth_col="truth")

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from pipeline import config as C
-from pipeline.config import ConfigError, load_config, validate_config, validate_section
+from pipeline.config import ConfigError, load_config, read_config_file, validate_config, validate_section
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -277,6 +277,24 @@ def test_unreadable_files_are_one_line_errors(tmp_path):
         load_config(tmp_path)
     p.write_bytes(b"\xef\xbb\xbfseed: 3\n")  # a byte-order mark is not part of the first key
     assert load_config(p)["seed"] == 3
+
+
+
+def test_a_key_given_twice_in_one_mapping_is_an_error_naming_both_lines(tmp_path):
+    # YAML keeps the last silently: a second `preprocess:` block would drop the whole first one
+    p = tmp_path / "dup.yaml"
+    p.write_text("seed: 1\npreprocess:\n  rate_hz: 5\n  gap_multiple: 3\npreprocess:\n  rate_hz: 10\n")
+    with pytest.raises(ConfigError, match=r"dup\.yaml: invalid YAML: duplicate key 'preprocess' \(first on line 2\)"
+                                          r".* line 5, column 1$"):
+        load_config(p)
+    p.write_text("preprocess:\n  rate_hz: 5\n  rate_hz: 6\n")
+    with pytest.raises(ConfigError, match=r"duplicate key 'rate_hz' \(first on line 2\)"):
+        load_config(p)
+    # the same key in two different mappings, and YAML merge keys, are fine
+    p.write_text("base: &b {rate_hz: 5}\n")
+    assert read_config_file(p) == {"base": {"rate_hz": 5}}
+    p.write_text("a: &x {k: 1}\nb:\n  <<: *x\n  j: 2\nc: {k: 3}\n")
+    assert read_config_file(p) == {"a": {"k": 1}, "b": {"k": 1, "j": 2}, "c": {"k": 3}}
 
 
 # --- the schema agrees with the code's vocabularies ----------------------------------------------

@@ -214,7 +214,10 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
         if spec.get("labels"):
             keep &= df["label"].isin(list(spec["labels"]))
         if not keep.any():
-            raise ModelError(f"no training samples with labels {spec.get('labels')}")
+            present = sorted(map(str, df["label"].dropna().unique()))
+            raise ModelError(f"no training samples left: the data has labels {present or 'none'}, "
+                             f"the model set takes {list(spec.get('labels') or []) or 'all'} "
+                             f"and excludes {list(spec.get('exclude') or []) or 'none'}")
         ms = ManeuverModelSet(config=cfg).fit(df[keep].reset_index(drop=True))
     except ValueError as exc:  # ModelError, numpy LinAlgError, bad tables: a placeholder model
         reason = f"training failed: {type(exc).__name__}: {exc}"

@@ -202,3 +202,11 @@ def test_simulate_and_align_refuse_an_output_folder_that_is_a_file_before_any_wo
     assert _err_lines(capsys) == [f"uavpipe align: -o {f}: exists and is not a folder"]
     assert main(["align", "--state", str(seg), "--segments", str(st), "--set", "p23", "-o", str(tmp_path / "o")]) == 2
     assert _err_lines(capsys) == [f"uavpipe align: {seg}: not a state table (it is a 'segments' table)"]
+
+
+def test_train_says_which_labels_the_data_has_when_the_selection_leaves_none(model_dir, tmp_path, capsys):
+    s = model_dir.parent / "M12_train.parquet"
+    assert main(["train", str(s), "-o", str(tmp_path / "m"), "--exclude", "M1", "M2"]) == 1
+    assert ("no training samples left: the data has labels ['M1', 'M2'], the model set takes all and "
+            "excludes ['M1', 'M2']") in capsys.readouterr().err
+

@@ -170,6 +170,9 @@ class Ros2BagReader(LogReader):
         cfg = rc.RosConfig.from_config(config, path)
         bag = _bag_dir(path)
         meta_path = bag / "metadata.yaml"
+        if not bag.is_dir():  # --format rosbag2 forced on a file
+            raise IngestError(path, "a ROS 2 bag is a folder holding metadata.yaml and its storage "
+                                    "file, not a single file")
         try:
             info = yaml.safe_load(meta_path.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:

@@ -207,3 +207,13 @@ def test_reader_classes_claim_only_their_format(tmp_path):
     assert Ros2BagReader.sniff(d, b"") and not Ros1BagReader.sniff(d, b"")
     (tmp_path / "x.bag").write_bytes(b"#ROSBAG V1.2\n" + b"\0" * 100)
     assert not Ros1BagReader.sniff(tmp_path / "x.bag", (tmp_path / "x.bag").read_bytes())
+
+
+def test_rosbag2_forced_on_a_single_file_says_a_bag_is_a_folder(tmp_path):
+    from pipeline.io.base import IngestError
+    from pipeline.io.registry import read_log
+
+    f = tmp_path / "flight.csv"
+    f.write_text("t,x\n0,1\n")
+    with pytest.raises(IngestError, match="a ROS 2 bag is a folder holding metadata.yaml and its storage file"):
+        read_log(f, fmt="rosbag2")

@@ -6,6 +6,7 @@ module."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -71,9 +72,34 @@ def violations(path: Path, source: str | None = None) -> list[str]:
     return out
 
 
+def pipeline_imports(text: str) -> str:
+    """The ``from pipeline... import`` / ``import pipeline...`` statements of a Snakemake file
+    (parenthesised ones whole), as Python source."""
+    return "\n".join(re.findall(r"^(?:from pipeline[\w.]* import \([^)]*\)|(?:from|import) pipeline[^\n]*)",
+                                text, flags=re.M)) + "\n"
+
+
+def test_the_snakemake_import_reader_sees_one_and_several_line_imports():
+    text = "rule a:\n    input: x\nfrom pipeline.io.schema import (STATE,\n    _cast)\nimport pipeline.io\n"
+    assert violations(ROOT / "rules" / "probe.py", pipeline_imports(text)) == [
+        "rules/probe.py:1: from pipeline.io.schema import _cast"]
+
+
 def test_no_module_imports_or_uses_another_modules_private_names():
     found = [v for p in sorted(PKG.rglob("*.py")) for v in violations(p)]
     assert not found, "private names used across modules:\n" + "\n".join(found)
+
+
+def test_the_rule_adapters_and_benchmarks_use_only_public_pipeline_names():
+    # they sit outside the package and call into it: the same rule holds for them
+    files = [*sorted((ROOT / "rules").rglob("*.py")), *sorted((ROOT / "benchmarks").rglob("*.py"))]
+    assert len(files) > 10
+    found = [v for p in files for v in violations(p)]
+    # the Snakemake files are not Python: their `from pipeline... import` lines, read as Python
+    for smk in sorted([ROOT / "Snakefile", *(ROOT / "rules").glob("*.smk")]):
+        found += [v.replace(str(smk.with_suffix(".py").relative_to(ROOT)), str(smk.relative_to(ROOT)))
+                  for v in violations(smk.with_suffix(".py"), pipeline_imports(smk.read_text()))]
+    assert not found, "private pipeline names used outside the package:\n" + "\n".join(found)
 
 
 @pytest.mark.parametrize("src, bad", [

@@ -30,9 +30,10 @@ def _subpackage(path: Path) -> str:
     return rel.parts[0] if len(rel.parts) > 1 else rel.stem
 
 
-def _imports(path: Path) -> list[tuple[int, str]]:
-    """(line, absolute module name) of every import in one module."""
-    tree = ast.parse(path.read_text(), filename=str(path))
+def _imports(path: Path, source: str | None = None) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every import in one module (its text, or ``source`` as if
+    it were it)."""
+    tree = ast.parse(path.read_text() if source is None else source, filename=str(path))
     rel = path.relative_to(PKG.parent).with_suffix("")
     pkg_parts = list(rel.parts[:-1]) if rel.name != "__init__" else list(rel.parts[:-1])
     out = []
@@ -48,6 +49,9 @@ def _imports(path: Path) -> list[tuple[int, str]]:
                     continue
             else:
                 mod = node.module or ""
+            if mod == "pipeline":  # from pipeline import estimate (a subpackage, or __version__)
+                out += [(node.lineno, f"pipeline.{a.name}") for a in node.names]
+                continue
             out.append((node.lineno, mod))
     return out
 
@@ -59,9 +63,14 @@ SUBPACKAGES = {p.name for p in PKG.iterdir() if p.is_dir() and (p / "__init__.py
 
 @pytest.mark.parametrize("path", MODULES, ids=lambda p: p.relative_to(PKG).as_posix())
 def test_module_imports_only_what_the_graph_allows(path):
+    bad = _bad_imports(path)
+    assert not bad, f"{path.relative_to(PKG)}: " + "; ".join(bad)
+
+
+def _bad_imports(path: Path, source: str | None = None) -> list[str]:
     me = _subpackage(path)
     bad = []
-    for line, mod in _imports(path):
+    for line, mod in _imports(path, source):
         top = mod.split(".")[0]
         if top == "snakemake":
             bad.append(f"line {line}: imports snakemake")
@@ -77,13 +86,21 @@ def test_module_imports_only_what_the_graph_allows(path):
             bad.append(f"line {line}: pipeline/{me}.py imports {mod}")
         elif target not in ALLOWED.get(me, set()):
             bad.append(f"line {line}: {me} imports {mod}")
-    assert not bad, f"{path.relative_to(PKG)}: " + "; ".join(bad)
+    return bad
 
 
 def test_the_graph_test_sees_relative_imports():
     mods = dict((m, line) for line, m in _imports(PKG / "preprocess" / "state.py"))
     assert "pipeline.io.schema" in {m for m in mods} or "pipeline.io" in mods
     assert any(m.startswith("pipeline.frames") for m in mods)
+
+
+def test_the_graph_test_sees_a_subpackage_imported_from_the_package_root():
+    # `from pipeline import studies` names the subpackage only in the imported name
+    src = "from pipeline import studies, __version__\n"
+    probe = PKG / "io" / "probe.py"
+    assert [m for _, m in _imports(probe, src)] == ["pipeline.studies", "pipeline.__version__"]
+    assert _bad_imports(probe, src) == ["line 1: io imports pipeline.studies"]
 
 
 @pytest.mark.parametrize("package,entry", [("io", "run_ingest"), ("simulate", "run_simulate_sets"),

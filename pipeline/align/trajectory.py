@@ -463,27 +463,31 @@ class TrajectoryLearner:
 
     # ---------------------------------------------------------------- API
     def fit(self, demos: Sequence[ArrayLike], tau: Sequence[ArrayLike] | None = None) -> "TrajectoryLearner":
+        """Learn the intended trajectory from ``demos`` by nested EM (seed 004 §3, steps 1–5).
+
+        Parameters
+        ----------
+        demos : sequence of array_like, each (N_k, D)
+            At least 2 finite demos of at least 3 samples, sampled at ``dt``. ``kinematic``:
+            D = 3 (NED position, m), 9 (+ velocity, m/s, and acceleration, m/s²) or 13
+            (+ quaternion ``q_w, q_x, q_y, q_z``), columns as :data:`COLUMNS`; ``yak54``: the 17
+            columns of :data:`~pipeline.estimate.aircraft.YAK54_COLUMNS`.
+        tau : sequence of int arrays, optional
+            Initial hidden index of each demo sample (starting at 0, steps of 1..3; default from
+            ``init_tau``); with ``fix_tau`` kept throughout. T is then at least ``max τ + 1``.
+
+        Returns
+        -------
+        self
+            With the fitted attributes (``mean_``, ``var_``, ``tau_``, ``d_``, ``sigma_z_``, …).
+        """
         # one BLAS thread: every product here is ≤ 65×65, where a threaded BLAS only adds
         # hand-offs (~1 ms a call on a loaded 2-core machine, 100× the work)
         with threadpool_limits(1) if threadpool_limits is not None else contextlib.nullcontext():
             return self._fit(demos, tau)
 
     def _fit(self, demos: Sequence[ArrayLike], tau: Sequence[ArrayLike] | None = None) -> "TrajectoryLearner":
-        """Learn the intended trajectory from ``demos``.
-
-        Parameters
-        ----------
-        demos : sequence of array_like, each (N_k, D)
-            Demos sampled at ``dt``, D = 3 (NED position), 9 (+ velocity, acceleration) or 13
-            (+ quaternion ``q_w, q_x, q_y, q_z``); columns as :data:`COLUMNS`. At least 2, finite.
-        tau : sequence of int arrays, optional
-            Initial τ (default: the linear stretch); with ``fix_tau`` kept throughout. T is
-            then at least ``max τ + 1``.
-
-        Returns
-        -------
-        self
-        """
+        """:meth:`fit`'s work, under one BLAS thread (parameters and result as there)."""
         Y = self._check(demos)
         D = Y[0].shape[1]
         yak = self.dynamics == "yak54"

@@ -162,6 +162,8 @@ class ModelsConfig:
         return cfg
 
     def validate(self) -> None:
+        """Check choices, ranges and cross-field rules; raise :class:`ConfigError` (one line
+        naming the ``hmm.`` key) at the first violation."""
         if self.mode not in _MODES:
             raise ConfigError(f"hmm.mode must be one of {_MODES}, got {self.mode!r}")
         if self.decision not in _DECISIONS:
@@ -211,6 +213,8 @@ class ModelsConfig:
         return max(1, int(round(self.window_s * self.rate_hz)))
 
     def to_dict(self) -> dict:
+        """Every field, ``seed`` included, as a JSON-ready dict (``n_states_range`` a list): the
+        ``config`` of a model's ``meta.json``, read back by :meth:`from_section`."""
         d = asdict(self)
         d["n_states_range"] = list(self.n_states_range)
         return d

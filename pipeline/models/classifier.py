@@ -103,6 +103,7 @@ class ManeuverModelSet:
     # -- features ------------------------------------------------------------------------
     @property
     def feature_set(self):
+        """The :class:`~pipeline.models.features.FeatureSet` named by ``config.feature_set``."""
         return get_feature_set(self.config.feature_set)
 
     def phase_sequences(self, run: pd.DataFrame, *, box_heading_rad: float = 0.0,
@@ -322,6 +323,17 @@ class ManeuverModelSet:
 
     # -- classification ----------------------------------------------------------------------
     def classifier(self, *, mode: str | None = None, decision: str | None = None) -> OnlineClassifier:
+        """An :class:`~pipeline.models.online.OnlineClassifier` over the trained models (seed 000
+        §5): the one-class thresholds of ``mode`` (``windowed``, else ``cumulative``) and the
+        config's window, restart probability, ``confirm_s`` (in samples) and confidence threshold.
+
+        Parameters
+        ----------
+        mode, decision : str, optional
+            Override the config. ``confidence_bg`` appends the background model as a last rival
+            that never gates or labels (runs as ``confidence``); it raises :class:`ModelError`
+            when the set has no background model.
+        """
         cfg = self.config
         mode = mode or cfg.mode
         decision = decision or cfg.decision

@@ -133,6 +133,8 @@ def rotate_triples(x: F64, rot: F64) -> F64:
 
 
 def get_feature_set(name: str) -> FeatureSet:
+    """The :class:`FeatureSet` keyed ``name`` in :data:`FEATURE_SETS` (``ValueError`` listing the
+    known names otherwise)."""
     try:
         return FEATURE_SETS[name]
     except KeyError:
@@ -209,6 +211,9 @@ class MinMaxNormaliser:
 
     @classmethod
     def fit(cls, X: F64) -> "MinMaxNormaliser":
+        """Per-feature extrema of the training observations ``X`` (n_samples, n_features),
+        rows with a non-finite value ignored (seed 000 (3.7)); ``ValueError`` for an empty or
+        non-2-D ``X``."""
         X = np.asarray(X, dtype=np.float64)
         if X.ndim != 2 or not len(X):
             raise ValueError("cannot fit a normaliser on an empty observation set")
@@ -230,10 +235,12 @@ class MinMaxNormaliser:
         return np.asarray(Xn, dtype=np.float64) * self.span[sl] + self.x_min[sl]
 
     def to_dict(self) -> dict:
+        """``{"x_min": [...], "x_max": [...]}`` as JSON lists (the model's ``meta.json``)."""
         return {"x_min": self.x_min.tolist(), "x_max": self.x_max.tolist()}
 
     @classmethod
     def from_dict(cls, d: dict) -> "MinMaxNormaliser":
+        """Inverse of :meth:`to_dict`."""
         return cls(np.asarray(d["x_min"], dtype=np.float64), np.asarray(d["x_max"], dtype=np.float64))
 
 

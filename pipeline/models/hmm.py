@@ -135,6 +135,9 @@ class HMMParams:
 
     @classmethod
     def from_hmmlearn(cls, m) -> "HMMParams":
+        """Copy the arrays of a fitted hmmlearn ``GaussianHMM`` (as ``n_mix`` = 1, covariances as
+        full matrices) or full-covariance ``GMMHMM``; inverse of :meth:`to_hmmlearn`. Sets
+        ``m.n_features`` when missing."""
         if not hasattr(m, "n_features"):
             m.n_features = np.asarray(m.means_).shape[-1]
         if hasattr(m, "weights_"):
@@ -441,15 +444,21 @@ class ManeuverHMM:
 
     # -- persistence (no pickles) ----------------------------------------------------------
     def to_arrays(self, prefix: str = "") -> dict[str, F64]:
+        """:meth:`HMMParams.to_arrays` of the fitted :attr:`params_` (npz persistence)."""
         return self.params_.to_arrays(prefix)
 
     def training_meta(self) -> dict:
+        """JSON-ready training record: ``n_states``, ``n_iter``, ``converged``, ``history``,
+        ``bic`` (string keys) and ``init_runs``; the model set extends it into its label's
+        ``training`` entry of ``meta.json``."""
         return {"n_states": int(self.n_states_), "n_iter": int(self.n_iter_),
                 "converged": bool(self.converged_), "history": self.history_,
                 "bic": {str(k): v for k, v in self.bic_.items()}, "init_runs": self.init_runs_}
 
     @classmethod
     def from_params(cls, params: HMMParams, **hyper) -> "ManeuverHMM":
+        """A fitted model from stored ``params`` (no training; empty history, ``converged_``
+        True); ``hyper`` are :meth:`__init__` keywords."""
         m = cls(**hyper)
         m.params_ = params
         m.n_states_ = params.n_states

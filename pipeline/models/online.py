@@ -68,6 +68,8 @@ class StackedModels:
 
     @classmethod
     def build(cls, models: Sequence[HMMParams]) -> "StackedModels":
+        """Stack ``M`` models padded to the largest state count ``S`` and mixture size ``K``
+        (``ValueError`` when their feature dimensions differ)."""
         M = len(models)
         S = max(p.n_states for p in models)
         K = max(p.n_mix for p in models)

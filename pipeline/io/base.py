@@ -120,9 +120,12 @@ class FlightLog:
         return StreamFrames(self)
 
     def __repr__(self) -> str:
-        rows = {n: (t.num_rows if t is not None else len(self._frames[n])) for n, t in self._tables.items()}
         return (f"FlightLog(flight_id={self.meta.get('flight_id')!r}, "
-                f"streams={ {n: r for n, r in rows.items() if r} })")
+                f"streams={ {n: r for n, r in self.n_rows().items() if r} })")
+
+    def n_rows(self) -> dict[str, int]:
+        """Rows per stream the log holds (streams never set are absent)."""
+        return {n: (t.num_rows if t is not None else len(self._frames[n])) for n, t in self._tables.items()}
 
     def table(self, name: str) -> pa.Table:
         """The conformed Arrow table of stream ``name`` (empty with full schema when absent)."""

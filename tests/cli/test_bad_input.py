@@ -210,3 +210,12 @@ def test_train_says_which_labels_the_data_has_when_the_selection_leaves_none(mod
     assert ("no training samples left: the data has labels ['M1', 'M2'], the model set takes all and "
             "excludes ['M1', 'M2']") in capsys.readouterr().err
 
+
+
+def test_a_log_cut_inside_its_header_fails_as_empty_instead_of_partial(demo_logs, tmp_path, capsys):
+    cut = tmp_path / "cut.bin"
+    cut.write_bytes(demo_logs[0].read_bytes()[:100])
+    assert main(["ingest", str(cut), "-o", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert f"uavpipe ingest: FAILED {cut}: no data: every stream is empty after decoding as dataflash" in err
+    assert json.loads((tmp_path / "o" / "cut" / "meta.json").read_text())["status"] == "failed"

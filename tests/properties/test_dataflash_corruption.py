@@ -105,6 +105,11 @@ def test_truncated_at_random_offsets(tmp_path_factory, kind, frac):
     p.write_bytes(data[:cut])
     out = ingest(p)
     if isinstance(out, IngestError):
+        if "no data: every stream is empty" in out.reason:
+            # cut inside the header: only format-describing records end before it
+            counts = df.decode(data[:cut]).diagnostics["record_counts"]
+            assert set(counts) <= {"FMT", "FMTU", "UNIT", "MULT"}, counts
+            return
         assert cut < 4096  # only when no FMT (or nothing at all) survives
         return
     assert isinstance(out, FlightLog)

@@ -144,8 +144,9 @@ def test_bad_key_or_value_in_every_section_stops_the_dry_run_in_seconds_with_one
 
 @pytest.mark.slow
 def test_an_ekf_hmm_model_that_is_no_model_set_stops_the_dry_run_naming_it(tmp_path):
-    wd = _copy_workflow(tmp_path / "wf", [DEMO], extra_config="\nestimate: {ekf_hmm: {model: simm}}\n")
-    p = _smk(wd, "-n", check=False)
+    # an override (a second `estimate:` block in the file would be a duplicate key, refused as such)
+    wd = _copy_workflow(tmp_path / "wf", [DEMO])
+    p = _smk(wd, "-n", "--config", "estimate={ekf_hmm: {model: simm}}", check=False)
     lines = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("uavpipe: ")]
     assert p.returncode != 0 and len(lines) == 1, p.stdout + p.stderr
     assert "estimate.ekf_hmm.model: no model set 'simm' (model_sets: sim, simekf, f3a)" in lines[0]

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 
@@ -83,10 +84,22 @@ def vehicle_problem(vehicle: str | None, config: dict) -> str | None:
             f"(known: {', '.join([GENERIC_VEHICLE, *sorted(known)])})")
 
 
+def ingest_flight_id(d: Path) -> str:
+    """The flight id of an ingest folder (its ``meta.json`` ``flight_id``, else the folder name);
+    ``ValueError`` naming the folder when it is not one (preprocess and estimate read their
+    flights so)."""
+    meta = d / "meta.json"
+    try:
+        m = json.loads(meta.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{d}: not an ingest folder ({meta}: {describe(exc)})") from None
+    if not isinstance(m, dict):
+        raise ValueError(f"{d}: not an ingest folder ({meta} holds a JSON {type(m).__name__}, not an object)")
+    return str(m.get("flight_id") or d.name)
+
+
 def json_object_problem(path: str | os.PathLike) -> str | None:
     """``None`` if ``path`` holds a JSON object, else why not, in a few words."""
-    import json
-
     try:
         obj = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
@@ -104,10 +117,9 @@ class Claims:
 
     def clash(self, name: str | os.PathLike) -> str | None:
         """``None`` when no input of this run has written ``name`` yet, else the reason to skip."""
-        first = self._by.get(os.path.normpath(str(name)))
-        if first is None:
-            return None
-        return f"would overwrite {os.path.normpath(str(name))}, written from {first} in this run; skipped"
+        key = os.path.normpath(str(name))
+        first = self._by.get(key)
+        return None if first is None else f"would overwrite {key}, written from {first} in this run; skipped"
 
     def claim(self, name: str | os.PathLike, source: str | os.PathLike) -> None:
         """Record that ``source`` wrote ``name``."""

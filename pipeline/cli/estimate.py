@@ -18,8 +18,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import Claims, describe, json_object_problem, table_problem, vehicle_problem
-from .preprocess import ingest_flight_id
+from .common import Claims, describe, ingest_flight_id, json_object_problem, table_problem, vehicle_problem
 
 
 def add_parser(sub) -> None:

@@ -7,12 +7,11 @@ Each ``INGEST_DIR`` is one flight written by ``uavpipe ingest`` (``<stream>.parq
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import Claims, describe, vehicle_problem
+from .common import Claims, describe, ingest_flight_id, vehicle_problem
 
 
 def add_parser(sub) -> None:
@@ -25,19 +24,6 @@ def add_parser(sub) -> None:
                    help="vehicle key in preprocess.vehicles, or 'generic' (the default entry); "
                         "without it: preprocess.flights by flight id, else the default entry")
     p.set_defaults(func=run)
-
-
-def ingest_flight_id(d: Path) -> str:
-    """The flight id of an ingest folder (its ``meta.json`` ``flight_id``, else the folder name);
-    ``ValueError`` naming the folder when it is not one."""
-    meta = d / "meta.json"
-    try:
-        m = json.loads(meta.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{d}: not an ingest folder ({meta}: {describe(exc)})") from None
-    if not isinstance(m, dict):
-        raise ValueError(f"{d}: not an ingest folder ({meta} holds a JSON {type(m).__name__}, not an object)")
-    return str(m.get("flight_id") or d.name)
 
 
 def vehicle_profile(diag: dict) -> str:

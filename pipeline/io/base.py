@@ -86,6 +86,19 @@ class StreamFrames(MutableMapping):
         return name in self._log._tables
 
 
+def losses_text(diag: Mapping[str, Any]) -> str:
+    """What decoding lost, from a log's ``diagnostics``: ``"3 bytes skipped, 1 records dropped
+    (truncated)"``; ``""`` when nothing was lost."""
+    parts = []
+    if diag.get("bytes_skipped"):
+        parts.append(f"{diag['bytes_skipped']} bytes skipped")
+    dropped = diag.get("records_dropped") or {}
+    if isinstance(dropped, dict) and dropped:  # {record type: count}
+        n = sum(v for v in dropped.values() if isinstance(v, (int, float)))
+        parts.append(f"{n} records dropped ({', '.join(sorted(map(str, dropped)))})")
+    return ", ".join(parts)
+
+
 class FlightLog:
     """One flight in the canonical schema (style.md §3.2).
 

@@ -24,7 +24,7 @@ from pathlib import Path
 import hashlib
 import threading
 
-from .base import FlightLog, IngestError, LogReader, Progress, read_file, sha256_of, source_size
+from .base import FlightLog, IngestError, LogReader, losses_text, Progress, read_file, sha256_of, source_size
 
 #: Reader modules, imported on first use (each registers its reader class).
 READER_MODULES: tuple[str, ...] = ("dataflash", "tlog", "rosbag", "mcap_reader", "ulog", "flightcoach",
@@ -176,13 +176,9 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
         attach_sidecar(log, side)  # raises IngestError naming the side-car
     if not any(log.n_rows().values()):
         # a log cut to its headers, or with nothing mapped: 'partial' would hide that it is empty
-        diag = log.meta.get("diagnostics") or {}
-        dropped = diag.get("records_dropped") or {}
-        n_dropped = sum(v for v in dropped.values() if isinstance(v, (int, float))) if isinstance(dropped, dict) else 0
-        lost = [f"{diag['bytes_skipped']} bytes skipped" if diag.get("bytes_skipped") else "",
-                f"{n_dropped} records dropped" if n_dropped else ""]
+        lost = losses_text(log.meta.get("diagnostics") or {})
         raise IngestError(p, f"no data: every stream is empty after decoding as {reader_cls.name}"
-                             + (f" ({', '.join(x for x in lost if x)})" if any(lost) else ""))
+                             + (f"; {lost}" if lost else ""))
     check_gps(log)  # lat = lon = 0 never a position; why the NED origin is null
     m = log.meta
     m["flight_id"] = flight_id or m.get("flight_id") or flight_id_for(p)

@@ -25,6 +25,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from ..io.base import losses_text
+
 #: flight states, in the order the summary counts and lists them
 FLIGHT_STATES = ("ok", "partial", "failed", "not run")
 
@@ -47,14 +49,7 @@ def _read_json(path: Path) -> tuple[dict[str, Any] | None, str]:
 
 
 def _partial_reason(diag: Mapping[str, Any]) -> str:
-    parts = []
-    if diag.get("bytes_skipped"):
-        parts.append(f"{diag['bytes_skipped']} bytes skipped")
-    dropped = diag.get("records_dropped") or {}
-    if isinstance(dropped, dict) and dropped:  # {record type: count}
-        n = sum(v for v in dropped.values() if isinstance(v, (int, float)))
-        parts.append(f"{n} records dropped ({', '.join(sorted(map(str, dropped)))})")
-    return ", ".join(parts) or "partly decoded"
+    return losses_text(diag) or "partly decoded"
 
 
 def flight_status(flight: str, results_dir: str | os.PathLike = "results") -> tuple[str, str]:

@@ -72,7 +72,9 @@ def run(args) -> int:
         print(f"uavpipe train: {exc}", file=sys.stderr)
         return 1
     if res.status != "ok":
-        print(f"uavpipe train: {res.error}", file=sys.stderr)
+        # run_train has already said why (``uavpipe models: …``); name where its placeholder went
+        print(f"uavpipe train: no models trained; placeholder {args.out / 'meta.json'} holds the reason",
+              file=sys.stderr)
         return 1
     for lab, t in res.diagnostics["training"].items():
         print(f"{lab}: {t['n_states']} states, {t['n_sequences']} sequences, {t['n_samples']} samples, "

@@ -207,8 +207,12 @@ def test_simulate_and_align_refuse_an_output_folder_that_is_a_file_before_any_wo
 def test_train_says_which_labels_the_data_has_when_the_selection_leaves_none(model_dir, tmp_path, capsys):
     s = model_dir.parent / "M12_train.parquet"
     assert main(["train", str(s), "-o", str(tmp_path / "m"), "--exclude", "M1", "M2"]) == 1
+    err = _err_lines(capsys)
+    # the reason once (from the training entry point), then where the placeholder is
+    assert sum("no training samples left" in ln for ln in err) == 1, err
     assert ("no training samples left: the data has labels ['M1', 'M2'], the model set takes all and "
-            "excludes ['M1', 'M2']") in capsys.readouterr().err
+            "excludes ['M1', 'M2']") in err[0]
+    assert err[1:] == [f"uavpipe train: no models trained; placeholder {tmp_path / 'm' / 'meta.json'} holds the reason"]
 
 
 

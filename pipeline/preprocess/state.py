@@ -184,15 +184,34 @@ def resolve_config(sec: Mapping[str, Any], *, flight_id: str | None = None,
 
 # --- helpers ---------------------------------------------------------------------------------
 
-def _prepare(df: pd.DataFrame, cfg: PreprocessConfig, name: str, diag: dict) -> pd.DataFrame:
-    """Primary instance, timestamp repair (counted)."""
+def _prepare(df: pd.DataFrame, cfg: PreprocessConfig, name: str, diag: dict | None,
+             key: str | None = None) -> pd.DataFrame:
+    """Primary instance, timestamp repair (counted in ``diag`` under ``key``, default ``name``;
+    not counted when ``diag`` is None)."""
     if df is None or not len(df):
         return schema.empty(name) if name in schema.STREAMS else pd.DataFrame()
     df = primary_instance(df)
     df, d = repair_timestamps(df, clock_jump_s=cfg.clock_jump_s)
-    if any(d.values()):
-        diag["timestamp_repairs"][name] = d
+    if diag is not None and any(d.values()):
+        diag["timestamp_repairs"][key or name] = d
     return df
+
+
+def _control_groups(ctrl: pd.DataFrame, cols: list[str]) -> list[list[str]]:
+    """The pulse-width columns of ``control`` split by the record that carries them (``rc_*``
+    inputs, ``servo_*`` outputs), present columns only.
+
+    Readers put RC inputs and servo outputs on rows of their own (RCIN/RCOU, rc_channels/
+    actuator_outputs), so the stream interleaves rows where one group is missing: resampled
+    together, every grid point between an RC row and a servo row would interpolate towards a
+    missing value, and timestamp repair would drop whichever of two same-stamp rows came second.
+    Each group is therefore repaired and resampled on its own rows.
+    """
+    groups: dict[str, list[str]] = {}
+    for c in cols:
+        if c in ctrl.columns and ctrl[c].notna().any():
+            groups.setdefault(c.split("_", 1)[0], []).append(c)
+    return list(groups.values())
 
 
 def _has(df: pd.DataFrame, cols) -> bool:
@@ -238,9 +257,15 @@ def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84
     org = meta.get("ned_origin") or {}
     if org and org.get("lat_deg") is not None and org.get("lon_deg") is not None:
         lat0, lon0 = float(org["lat_deg"]), float(org["lon_deg"])
-        h0 = org.get("alt_wgs84_m")
-        if h0 is None or alt_kind != "alt_wgs84_m":
+        # the origin's own altitude, in the datum of the GPS altitude used (a DataFlash ORGN or
+        # first fix gives MSL): pos_d is "about meta.ned_origin" (schema), so zero is the origin,
+        # not wherever the first fixes happen to be (a flight starting 20 m above its EKF
+        # origin would otherwise read 20 m low throughout)
+        h0 = org.get(alt_kind)
+        if h0 is None or not np.isfinite(float(h0)):
             h0 = np.nanmedian(alt[:10]) if np.any(np.isfinite(alt[:10])) else 0.0
+            diag["notes"].append(f"ned_origin has no {alt_kind}: GPS down about the median of the "
+                                 "first fixes")
     else:
         lat0, lon0 = float(lat[0]), float(lon[0])
         h0 = float(alt[np.isfinite(alt)][0]) if np.any(np.isfinite(alt)) else 0.0
@@ -325,7 +350,10 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         S["attitude"] = apply_mount_attitude(S["attitude"], cfg.imu_mount)
     # 2. per-stream preparation
     P = {n: _prepare(S[n], cfg, n, diag) for n in
-         ("imu", "gps", "baro", "attitude", "local_position", "rangefinder", "control", "truth")}
+         ("imu", "gps", "baro", "attitude", "local_position", "rangefinder", "truth")}
+    # the control stream as a whole only gives the span; its groups are repaired (and their
+    # repairs counted) one by one in step 7, see _control_groups
+    P["control"] = _prepare(S["control"], cfg, "control", None)
 
     # position source
     pos_src, pos_df, pos_cols, gps_origin = None, None, POS, None
@@ -425,8 +453,11 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     # 7. controls
     ctrl_cols = [c for c in P["control"].columns if c.endswith("_us")]
     if has_ctrl:
-        present = [c for c in ctrl_cols if P["control"][c].notna().any()]
-        r, _ = _resample_stream(P["control"], "control", present, grid, cfg, diag)
+        r = pd.DataFrame(index=pd.RangeIndex(n))
+        for cols in _control_groups(S["control"], ctrl_cols):
+            rows = _prepare(S["control"].dropna(subset=cols, how="all"), cfg, "control", diag,
+                            f"control.{cols[0].split('_', 1)[0]}")
+            r[cols] = _resample_stream(rows, "control", cols, grid, cfg, diag)[0]
         cdf = controls_from_pwm(r, cfg.controls, cfg.physical)
     else:
         cdf = controls_from_pwm(pd.DataFrame(index=pd.RangeIndex(n)), cfg.controls, cfg.physical)

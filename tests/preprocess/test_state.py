@@ -100,6 +100,42 @@ def test_every_stream_empty_or_partial_never_crashes():
     assert len(state) == 1
 
 
+def test_gps_down_is_about_the_origin_altitude_when_the_log_gives_msl_only():
+    # a DataFlash-style origin (ORGN: MSL altitude, no WGS-84) and MSL-only fixes: the flight
+    # starts 20 m above its origin, so pos_d is -20 m, not 0 (the median of the first fixes)
+    t = np.arange(0, 20, 0.2)
+    lat0, lon0, h0 = 46.5, 6.6, 480.0
+    lat, lon, h = ned_to_geodetic(0 * t + 5.0, 0 * t, -20.0 - 0.5 * t, lat0, lon0, h0)
+    gps = pd.DataFrame({"t_ns": ns(t), "lat_deg": lat, "lon_deg": lon, "alt_msl_m": h, "fix_type": 3.0})
+    meta = {"flight_id": "msl", "ned_origin": {"lat_deg": lat0, "lon_deg": lon0, "alt_wgs84_m": None,
+                                               "alt_msl_m": h0}}
+    res = preprocess_log(FlightLog.from_streams(meta, {"gps": gps}))
+    st = res.state
+    tt = st["t_ns"].to_numpy() * 1e-9
+    np.testing.assert_allclose(st["pos_d_m"], -20.0 - 0.5 * tt, atol=1e-3)
+    np.testing.assert_allclose(st["pos_n_m"], 5.0, atol=1e-3)
+
+
+def test_rc_inputs_and_servo_outputs_on_rows_of_their_own_both_survive_resampling():
+    # RCIN and RCOU arrive as separate rows (10 Hz each, RC at 0.00, 0.10, ... and servos at
+    # 0.05, 0.15, ... plus every tenth servo row on an RC stamp): resampled together, each
+    # grid point would interpolate towards the other group's missing value
+    tr = np.arange(0, 20, 0.1)
+    ts = np.sort(np.r_[tr[::10], tr + 0.05])
+    rc = pd.DataFrame({"t_ns": ns(tr), "rc_1_us": 1500 + 400 * np.sin(tr), "rc_3_us": 1500.0})
+    sv = pd.DataFrame({"t_ns": ns(ts), "servo_1_us": 1100 + 10 * ts})
+    ctrl = pd.concat([rc, sv]).sort_values("t_ns", kind="stable").reset_index(drop=True)
+    q = np.tile([1.0, 0, 0, 0], (len(tr), 1))
+    att = pd.DataFrame({"t_ns": ns(tr), **dict(zip(["q_w", "q_x", "q_y", "q_z"], q.T))})
+    res = preprocess_log(FlightLog.from_streams({"flight_id": "rc"}, {"control": ctrl, "attitude": att}))
+    st = res.state
+    t = st["t_ns"].to_numpy() * 1e-9
+    inner = (t > 0.2) & (t < 19.7)
+    assert st["ail"][inner].notna().all() and st["thr"][inner].notna().all()
+    np.testing.assert_allclose(st["ail"][inner], np.sin(t[inner]), atol=0.01)
+    assert "control" not in res.diagnostics["timestamp_repairs"]  # no spurious 'duplicates'
+
+
 def test_timestamp_repairs_counted():
     t = ns(np.arange(0, 10, 0.04))
     t[50] = t[49]  # a duplicate

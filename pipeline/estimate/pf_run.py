@@ -193,14 +193,7 @@ def pf_frame(t_ns: NDArray[np.int64], mean: F64, cov: F64, mode_p: F64, neff: F6
 
 def table_columns(df: pd.DataFrame, table: tuple[schema.Column, ...] = schema.PF) -> tuple[schema.Column, ...]:
     """The columns of ``table`` in ``df`` with the wildcard families (``mode_p_*``, ``cls_p_*``) named."""
-    out = []
-    for c in table:
-        if c.name.endswith("*"):
-            out += [schema.Column(n, c.dtype, c.unit, c.frame, c.doc) for n in df.columns
-                    if str(n).startswith(c.name[:-1])]
-        else:
-            out.append(c)
-    return tuple(out)
+    return schema.layout(table, df.columns)
 
 
 def write_pf(df: pd.DataFrame, path, extra: dict, *, table: tuple[schema.Column, ...] = schema.PF,

@@ -36,7 +36,7 @@ META_KEY = b"uavpipe"
 def _write_arrow(table: pa.Table, path: Path, meta: dict) -> None:
     """Atomic ZSTD write of ``table`` with ``meta`` as the ``uavpipe`` schema metadata."""
     md = dict(table.schema.metadata or {})
-    md[META_KEY] = json.dumps(meta, default=_json_default).encode()
+    md[META_KEY] = json.dumps(json_safe(meta), default=_json_default, allow_nan=False).encode()
     table = table.replace_schema_metadata(md)
     with atomic_output(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
@@ -86,6 +86,24 @@ def read_table(path: str | os.PathLike, cols: tuple[schema.Column, ...] | None =
     return schema.frame_from_arrow(tuple(cols), table)
 
 
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every non-finite float (Python or NumPy, at any depth) as ``None``.
+
+    ``json.dumps`` writes NaN and Infinity as bare tokens that are not JSON: pyarrow, browsers
+    and ``jq`` then refuse the metadata of an otherwise good table (a bearing bank whose
+    heading never converged reports its convergence time as NaN). ``null`` is JSON's "no value".
+    """
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray) and obj.dtype.kind == "f":
+        return [json_safe(v) for v in obj.tolist()]
+    return obj
+
+
 def _json_default(o: Any):
     if isinstance(o, (np.integer,)):
         return int(o)
@@ -103,7 +121,8 @@ def _json_default(o: Any):
 
 def write_json(obj: Any, path: str | os.PathLike) -> None:
     """Atomic, deterministic (sorted keys) JSON write."""
-    write_text_atomic(path, json.dumps(obj, indent=1, sort_keys=True, default=_json_default, allow_nan=False))
+    write_text_atomic(path, json.dumps(json_safe(obj), indent=1, sort_keys=True, default=_json_default,
+                                       allow_nan=False))
 
 
 def write_flightlog(log: FlightLog, out_dir: str | os.PathLike | None = None, *,

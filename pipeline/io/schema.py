@@ -511,6 +511,30 @@ def columns(table: str) -> tuple[Column, ...]:
     return TABLES[table]
 
 
+def layout(table: str | tuple[Column, ...], names) -> tuple[Column, ...]:
+    """The declared columns of ``table`` that ``names`` holds, in canonical order, each wildcard
+    family (``ll_*``, ``mode_p_*``) expanded to its members in the order ``names`` gives them.
+
+    For tables whose optional columns are written only when computed (a classification's
+    ``*_hmm_*`` columns come with GMR only): the file still gets declared types, units and
+    order. Raises :class:`SchemaError` on a name the table does not declare.
+    """
+    cols, names = _cols(table), [str(n) for n in names]
+    prefixes = tuple(c.name[:-1] for c in cols if _is_wildcard(c))
+    known = {c.name for c in cols}
+    unknown = [n for n in names if n not in known and not (prefixes and n.startswith(prefixes))]
+    if unknown:
+        raise SchemaError(f"table {table if isinstance(table, str) else 'given'!r}: "
+                          f"undeclared column(s) {unknown}")
+    have, out = set(names), []
+    for c in cols:
+        if _is_wildcard(c):
+            out += [Column(n, c.dtype, c.unit, c.frame, c.doc) for n in names if n.startswith(c.name[:-1])]
+        elif c.name in have:
+            out.append(c)
+    return tuple(out)
+
+
 def column_names(table: str) -> list[str]:
     """Column names of ``table`` in canonical order."""
     return [c.name for c in columns(table)]

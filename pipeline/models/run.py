@@ -42,6 +42,7 @@ import pandas as pd
 
 from .. import __version__
 from ..io.atomic import atomic_output
+from ..io import schema
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
@@ -302,13 +303,15 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
             res["run_id"] = res["run_id"].astype(str)
             if "truth" in res:
                 res["truth"] = res["truth"].replace({"<NA>": "", "nan": "", "None": ""})
-            write_table(res, out_path, name="classification",
+            cols = schema.layout("classification", res.columns)
+            write_table(res, out_path, cols, name="classification",
                         extra={**extra, "status": "ok", "labels": ms.labels_, "mode": mode or ms.config.mode})
             _say(f"{extra['flight_id']}: {len(res)} samples classified with {model_set}")
             return ModelStageResult(model_set, "ok", "", {"n_samples": len(res),
                                                           "n_unknown": int((res["pred"] == "unknown").sum())})
     _say(f"{extra['flight_id']}: placeholder classification ({reason})")
-    write_table(_empty_classification(), out_path, name="classification",
+    empty = _empty_classification()
+    write_table(empty, out_path, schema.layout("classification", empty.columns), name="classification",
                 extra={**extra, "status": "failed", "error": reason})
     return ModelStageResult(model_set, "failed", reason, {"n_samples": 0})
 
@@ -370,7 +373,8 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
                 rows.append(tab)
     table = pd.concat(rows, ignore_index=True)[list(EVAL_COLUMNS)] if rows else \
         pd.DataFrame({c: pd.Series([], dtype=float if c.endswith("pct") else str) for c in EVAL_COLUMNS})
-    write_table(table, out_path, name="model_evaluation",
+    write_table(table, out_path, schema.MODEL_EVALUATION,
+                name="model_evaluation",
                 extra={"model_set": name, "model": name, "status": status, "error": error,
                        "input": spec.get("input", "truth") if simulated else "flights",
                        "thesis_tables": sorted(t for t in set(tables_of.values()) if t in THESIS_CLASSIFICATION)})

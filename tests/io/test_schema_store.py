@@ -108,3 +108,20 @@ def test_registry_errors_name_the_file(tmp_path):
 def test_flight_id_alphabet():
     assert flight_id_for("/x/2014-10-18 20-04-24.bin") == "2014-10-18-20-04-24"
     assert flight_id_for("a_b.c.tlog") == "a-b-c"
+
+
+def test_metadata_with_nan_or_infinity_is_strict_json_with_nulls(tmp_path):
+    from pipeline.io.parquet import write_json, write_table
+
+    df = pd.DataFrame({"x_m": [1.0, 2.0]})
+    extra = {"score": {"converged_s": float("nan"), "ratio": np.float64("inf"), "ok": 1.5},
+             "series": np.array([1.0, np.nan]), "nested": [float("-inf"), 2]}
+    write_table(df, tmp_path / "t.parquet", name="t", extra=extra)
+    raw = pq.read_schema(tmp_path / "t.parquet").metadata[b"uavpipe"].decode()
+    # strict JSON: no bare NaN/Infinity tokens, which pyarrow, browsers and jq refuse
+    meta = json.loads(raw, parse_constant=lambda c: pytest.fail(f"non-JSON token {c}"))
+    assert meta["score"] == {"converged_s": None, "ratio": None, "ok": 1.5}
+    assert meta["series"] == [1.0, None] and meta["nested"] == [None, 2]
+    write_json(extra, tmp_path / "e.json")
+    again = json.loads((tmp_path / "e.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    assert again["score"]["converged_s"] is None

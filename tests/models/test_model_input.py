@@ -4,6 +4,7 @@ config checks (``input: ekf`` needs simulated data)."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from pipeline.config import ConfigError, validate_config
@@ -79,3 +80,42 @@ def test_an_ekf_input_model_set_is_evaluated_as_tables_3_5_to_3_8(synth, rng, tm
     assert (r.thesis_FA_pct, r.thesis_MAoT_pct) == THESIS_EKF["3.8"]["M1"]
     meta = read_table_meta(out)
     assert meta["input"] == "ekf" and meta["thesis_tables"] == ["3.5", "3.6", "3.7", "3.8"]
+
+
+def test_classification_and_flight_evaluation_files_carry_the_declared_layout_and_units(synth, rng, tmp_path):
+    import pyarrow.parquet as pq
+
+    from pipeline.io import schema
+    from pipeline.io.parquet import write_table
+    from pipeline.models.run import run_classify
+
+    run, bulk = synth
+    sets = []
+    for lab in ("M1", "M2"):
+        p = tmp_path / f"{lab}.parquet"
+        bulk([lab], 3, rng).to_parquet(p)
+        sets.append(p)
+    spec = {"data": "simulated", "vehicles": ["x"], "hmm": {"n_states": 3, "n_iter": 5}}
+    model = {"params": tmp_path / "m" / "params.npz", "meta": tmp_path / "m" / "meta.json"}
+    assert run_train({"sets": sets}, model, spec, model_set="m", seed=3).status == "ok"
+    flight = pd.concat([run("M1", rng), run("M2", rng, t0_ns=26_000_000_000)], ignore_index=True)
+    seg = pd.DataFrame({"segment_id": [0, 1], "t_start_ns": [0, 26_000_000_000],
+                        "t_end_ns": [25_000_000_000, 51_000_000_000], "label": ["M1", "M2"]})
+    write_table(schema.conform("state", flight.drop(columns="label")), tmp_path / "state.parquet",
+                schema.STATE, name="state", extra={"flight_id": "f1"})
+    write_table(schema.conform("segments", seg), tmp_path / "segments.parquet", schema.SEGMENTS, name="segments")
+    out = tmp_path / "f1.parquet"
+    res = run_classify({**model, "state": tmp_path / "state.parquet", "segments": tmp_path / "segments.parquet"},
+                       {"classification": out}, {}, model_set="m")
+    assert res.status == "ok", res.error
+    meta, arrow = read_table_meta(out), pq.read_schema(out)
+    assert meta["columns"]["V_best"] == {"unit": "1", "frame": ""}
+    assert meta["columns"]["t_ns"]["unit"] == "ns" and meta["columns"]["ll_M1"]["unit"] == "1"
+    assert str(arrow.field("pred").type) == "string" and str(arrow.field("t_ns").type) == "int64"
+    assert arrow.names[:6] == list(schema.CLASSIFY_MIN_COLUMNS)
+    ev_out = tmp_path / "evaluation.parquet"
+    run_evaluate({**model, "classified": [out]}, {"evaluation": ev_out}, {**spec, "data": "flights"}, model_set="m")
+    ev, ev_arrow = read_table(ev_out), pq.read_schema(ev_out)
+    assert len(ev) == 2 and ev_arrow.names == [c.name for c in schema.MODEL_EVALUATION]
+    assert str(ev_arrow.field("thesis_FA_pct").type) == "double"  # NaN for flights, never int64
+    assert read_table_meta(ev_out)["columns"]["FA_pct"]["unit"] == "%"

@@ -6,6 +6,8 @@ the bookkeeping do not depend on the EM); one runs the real learner when it is i
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers_align import synthetic_segments, synthetic_state, write_flight
@@ -177,3 +179,14 @@ def test_a_demo_the_tau_steps_cannot_stretch_is_dropped_with_the_reason():
     assert [d.name for d in keep] == ["x", "y"]
     assert [d.name for d, _ in out] == ["z"]
     assert out[0][1].startswith("20 samples against a median of 100: τ steps of 1-3 cannot place it on the T = 153")
+
+
+def test_the_same_set_learned_twice_gives_the_same_bytes(tmp_path):
+    pytest.importorskip("pipeline.align.trajectory", reason="TrajectoryLearner (h15-em) not merged")
+    flights = _inputs(_two_flights(tmp_path))
+    cfg = _config({"s": {"flights": ["f1", "f2"]}}, max_iter=2, sample_hz=2.5)
+    a, b = _outputs(tmp_path / "a"), _outputs(tmp_path / "b")
+    align_run.run_align(flights, a, cfg, set_name="s")
+    align_run.run_align(flights, b, cfg, set_name="s")
+    for k in a:  # metadata included: run times are said, not stored
+        assert Path(a[k]).read_bytes() == Path(b[k]).read_bytes(), k

@@ -73,6 +73,7 @@ def test_the_same_seed_writes_the_same_table(tmp_path):
     run_pf_jm({"state": st}, {"pf_jm": b}, CFG, flight_id="f", seed=1)
     run_pf_jm({"state": st}, {"pf_jm": c}, CFG, flight_id="f", seed=2)
     assert read_table(a).equals(read_table(b)) and not read_table(a).equals(read_table(c))
+    assert a.read_bytes() == b.read_bytes()  # metadata included: no run time in the file
 
 
 def test_no_positions_give_a_placeholder_with_the_reason(tmp_path):

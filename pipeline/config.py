@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import datetime
 import functools
 import os
 import re
@@ -300,7 +301,8 @@ def _where(source: str | os.PathLike | None) -> str:
 
 def validate_config(cfg: Mapping[str, Any] | None, *, source: str | os.PathLike | None = None
                     ) -> dict[str, Any]:
-    """Validate a whole config and return a deep copy with every default filled.
+    """Validate a whole config and return a deep copy with every default filled, in canonical
+    form (:func:`typed`: numbers as the schema types them, declared keys in schema order).
 
     Raises
     ------
@@ -311,7 +313,7 @@ def validate_config(cfg: Mapping[str, Any] | None, *, source: str | os.PathLike 
         raise ConfigError(f"{_where(source)}top level must be a mapping, got {type(cfg).__name__}")
     inst = _plain(cfg or {})
     _validate(inst, _schema(), _where(source))
-    return inst
+    return typed("", inst)
 
 
 def validate_section(path: str, sec: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -430,6 +432,10 @@ def _plain(x: Any) -> Any:
         return {k: _plain(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [_plain(v) for v in x]
+    if isinstance(x, datetime.date):
+        # YAML reads an unquoted 2026-01-02T12:00:00Z as a timestamp (Snakemake's loader and
+        # --config alike); the schema's times are ISO 8601 strings, which this gives back
+        return x.isoformat()
     return x
 
 
@@ -602,8 +608,10 @@ def _frozen(v: Any) -> Any:
 
 def typed(path: str, value: Any) -> Any:
     """``value`` with its numbers shaped by the schema types at ``path`` (``number`` -> float,
-    ``integer`` -> int), recursively: dict-valued dataclass fields see the same types whether
-    the value came from the YAML (``10``) or from the schema default (``10.0``)."""
+    ``integer`` -> int) and its declared keys in schema order, recursively: dict-valued
+    dataclass fields see the same types whether the value came from the YAML (``10``) or from
+    the schema default (``10.0``), and a workflow job's parameters read the same whether a
+    setting was written out, reordered or left to its default (Snakemake compares their repr)."""
     root = _schema()
 
     def walk(node: Mapping[str, Any], v: Any) -> Any:
@@ -613,8 +621,11 @@ def typed(path: str, value: Any) -> Any:
         if isinstance(v, dict):
             props = node.get("properties") or {}
             addl = node.get("additionalProperties")
-            return {k: walk(props[k] if k in props else addl if isinstance(addl, Mapping) else {}, x)
-                    for k, x in v.items()}
+            # declared keys in the schema's order, then the user's own names (model sets,
+            # vehicles...) in the order given: the same settings give the same mapping
+            keys = [k for k in props if k in v] + [k for k in v if k not in props]
+            return {k: walk(props[k] if k in props else addl if isinstance(addl, Mapping) else {}, v[k])
+                    for k in keys}
         if isinstance(v, list):
             items = node.get("items")
             return [walk(items if isinstance(items, Mapping) else {}, x) for x in v]

@@ -360,3 +360,34 @@ def test_command_line_overrides_read_their_nested_scalars_as_the_config_file_doe
     assert ok["studies"]["seed000_classification"]["ekf_input"] is True
     with pytest.raises(ConfigError, match=r"studies\.seed000_classification\.ekf_input: 'maybe'"):
         validate_config(C.command_line_overrides({"studies": {"seed000_classification": {"ekf_input": "maybe"}}}))
+
+
+def test_a_setting_written_out_reordered_or_as_an_integer_validates_to_the_same_repr():
+    # Snakemake reruns a job whose params' repr changed: `q: 3` for 3.0, a default written out
+    # (it used to land after the filled defaults) or two keys swapped must change nothing
+    base = repr(validate_config({}))
+    hmm = C.default_at("hmm")
+    swapped = dict(reversed(list(hmm.items())))
+    variants = [
+        {"preprocess": {"rate_hz": int(C.default_at("preprocess.rate_hz"))}},
+        {"preprocess": {"rate_hz": float(C.default_at("preprocess.rate_hz"))}},
+        {"hmm": {"n_iter": C.default_at("hmm.n_iter")}},
+        {"hmm": swapped},
+        {"estimate": {"ekf": {"q": C.default_at("estimate.ekf.q")}}},
+        {"estimate": {"ekf": {"q": int(C.default_at("estimate.ekf.q"))}}}
+        if float(C.default_at("estimate.ekf.q")).is_integer() else {},
+    ]
+    for v in variants:
+        assert repr(validate_config(v)) == base, v
+    # a real change still shows
+    assert repr(validate_config({"hmm": {"n_iter": C.default_at("hmm.n_iter") + 1}})) != base
+
+
+def test_an_unquoted_iso_time_that_yaml_reads_as_a_timestamp_is_taken_as_its_text():
+    # YAML (and so Snakemake's --configfile reader) turns 2026-01-02T12:00:00Z into a datetime;
+    # before, the schema refused it as "datetime.datetime(2026, 1, 2, 12, 0, tzinfo=...)"
+    cfg = yaml.safe_load("simulate: {start_time_utc: 2026-01-02T12:00:00Z}")
+    out = validate_config(cfg)["simulate"]["start_time_utc"]
+    assert out == "2026-01-02T12:00:00+00:00"
+    from pipeline.simulate.datasets import DatasetSettings
+    assert DatasetSettings.from_config(validate_config(cfg)["simulate"]).start_time_utc_ns == 1767355200 * 10**9

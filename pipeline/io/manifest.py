@@ -20,13 +20,19 @@ Checked per row, in file order (the first failure is raised):
 - a ``results/sim/logs/`` path names a log the simulate stage writes with this config (when the
   caller passes ``simulated_logs``: the workflow does, from ``simulate.run.planned_logs``).
 
-What the JSON schema ``rules/schemas/flights.schema.yaml`` types (``role``, the id pattern) is
-left to the schema validation that follows.
+- ``flight_id`` is letters, digits and ``-`` (:data:`FLIGHT_ID`), ``role`` one of
+  :data:`ROLES`, ``path`` non-empty and free of braces other than ``{realdata}`` (Snakemake
+  would read them as wildcards).
+
+These repeat what the JSON schema ``rules/schemas/flights.schema.yaml`` types, so a mistake is
+one line with the file's line number instead of the schema validator's multi-line dump with a
+0-based row; the schema validation that follows stays as the declaration.
 """
 
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Collection, Mapping
 from pathlib import Path
 from typing import Any
@@ -38,6 +44,12 @@ GENERIC_VEHICLE = "generic"
 
 #: the manifest's columns, in order
 COLUMNS: tuple[str, ...] = ("flight_id", "path", "vehicle", "role", "labels", "format", "notes")
+
+#: what a flight id may be: it becomes a file name and a Snakemake wildcard value
+FLIGHT_ID = re.compile(r"[A-Za-z0-9-]+")
+
+#: ``role`` values (which model sets train on or test with the flight)
+ROLES = ("train", "test", "none")
 
 #: ``labels`` values that are not paths
 LABEL_WORDS = ("embedded", "none", "")
@@ -126,6 +138,16 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
         row = dict(zip(header, cells + [""] * (len(header) - len(cells))))
         fid = row["flight_id"]
         where = f"{src}:{lineno}: flight {fid or '(no id)'}"
+        if not FLIGHT_ID.fullmatch(fid):
+            raise ConfigError(f"{src}:{lineno}: flight_id {fid!r} must be letters, digits and '-' only "
+                              "(it becomes a file name and a workflow wildcard)")
+        if not row["path"].strip():
+            raise ConfigError(f"{where}: empty path")
+        if any(b in expand_path(row[c], realdata or "") for b in "{}" for c in ("path", "labels")):
+            raise ConfigError(f"{where}: braces in a path are read as workflow wildcards; only "
+                              f"{{realdata}} may appear (rename the file or link it)")
+        if row["role"] not in ROLES:
+            raise ConfigError(f"{where}: role {row['role']!r} must be one of {', '.join(ROLES)}")
         if fid in first_line:
             raise ConfigError(f"{where}: duplicate flight_id (first on line {first_line[fid]})")
         first_line[fid] = lineno

@@ -39,11 +39,15 @@ def planned_sets(sim_cfg: dict | None) -> list[str]:
 def planned_logs(sim_cfg: dict | None) -> list[dict]:
     """The log-file flights: ``[{flight_id, log, sidecar, is_dir}]`` with paths relative to the
     logs folder (the ``mcap`` format is a ROS 2 bag *directory*)."""
+    from .sensors import SensorSettings, sensor_steps
     from .writers import LOG_NAMES
 
-    _, ds = _settings(sim_cfg)
+    settings, ds = _settings(sim_cfg)
     if not ds.log_formats or ds.log_flights <= 0:
         return []
+    # the workflow plans the logs at start-up: a sensor rate the writer would refuse stops the
+    # run here, in one line, not in the first simulate job
+    sensor_steps(SensorSettings.from_config(sim_cfg), settings.rate_hz)
     stems = [f"sim-{m}-{k:03d}" for m in ds.maneuvers for k in range(ds.log_flights)]
     stems.append("sim-calibration-000")
     out = []

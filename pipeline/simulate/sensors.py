@@ -243,25 +243,44 @@ def mode_stream(duration_s: float) -> pd.DataFrame:
                          "armed": pd.array([True], dtype="boolean")})
 
 
+def sensor_steps(sensors: SensorSettings, truth_rate_hz: float) -> dict[str, int]:
+    """Decimation step of every sensor from the truth rate, ``{sensor: truth_rate / rate}``.
+
+    Raises
+    ------
+    ConfigError
+        ``simulate.sensors.<s>.rate_hz <r> must divide rate_hz <R>`` for the first sensor whose
+        rate does not divide the truth rate (checked at workflow start-up too, by
+        :func:`pipeline.simulate.run.planned_logs`).
+    """
+    rates = {"radar": sensors.radar.rate_hz,
+             **{k: getattr(sensors, k)["rate_hz"]
+                for k in ("gps", "imu", "baro", "rangefinder", "attitude", "control")}}
+    out = {}
+    for what, rate in rates.items():
+        st = truth_rate_hz / rate if rate > 0 else float("nan")
+        if not rate > 0 or abs(st - round(st)) > 1e-9:
+            fits = [f"{truth_rate_hz / k:g}" for k in range(1, 41) if (truth_rate_hz / k) % 1 == 0]
+            raise ConfigError(f"simulate.sensors.{what}.rate_hz {rate:g} must divide rate_hz "
+                              f"{truth_rate_hz:g} (e.g. {', '.join(fits[:8])})")
+        out[what] = int(round(st))
+    return out
+
+
 def all_streams(truth: Truth, sensors: SensorSettings, params: QuadParams, truth_rate_hz: float,
                 rng: np.random.Generator) -> dict[str, pd.DataFrame]:
     """Every simulated sensor stream of run 0 of ``truth``, in a fixed draw order."""
-    def step(rate: float, what: str) -> int:
-        st = truth_rate_hz / rate
-        if rate <= 0 or abs(st - round(st)) > 1e-9:
-            raise ConfigError(f"simulate.sensors.{what}.rate_hz {rate} must divide rate_hz {truth_rate_hz}")
-        return int(round(st))
-
+    steps = sensor_steps(sensors, truth_rate_hz)
     o, und = sensors.origin, sensors.geoid_undulation_m
     return {
-        "radar": radar_stream(truth, sensors.radar, step(sensors.radar.rate_hz, "radar"), rng),
-        "gps": gps_stream(truth, sensors.gps, o, und, step(sensors.gps["rate_hz"], "gps"), rng),
-        "imu": imu_stream(truth, sensors.imu, params, step(sensors.imu["rate_hz"], "imu"), rng),
-        "baro": baro_stream(truth, sensors.baro, o, und, step(sensors.baro["rate_hz"], "baro"), rng),
+        "radar": radar_stream(truth, sensors.radar, steps["radar"], rng),
+        "gps": gps_stream(truth, sensors.gps, o, und, steps["gps"], rng),
+        "imu": imu_stream(truth, sensors.imu, params, steps["imu"], rng),
+        "baro": baro_stream(truth, sensors.baro, o, und, steps["baro"], rng),
         "rangefinder": rangefinder_stream(truth, sensors.rangefinder,
-                                          step(sensors.rangefinder["rate_hz"], "rangefinder"), rng),
-        "attitude": attitude_stream(truth, sensors.attitude, step(sensors.attitude["rate_hz"], "attitude"), rng),
-        "control": control_stream(truth, sensors.control, params, step(sensors.control["rate_hz"], "control")),
+                                          steps["rangefinder"], rng),
+        "attitude": attitude_stream(truth, sensors.attitude, steps["attitude"], rng),
+        "control": control_stream(truth, sensors.control, params, steps["control"]),
         "mode": mode_stream(float(truth.t_s[-1])),
     }
 

@@ -143,3 +143,25 @@ def test_a_manifest_that_is_not_utf8_names_its_line(tmp_path):
     p.write_bytes((HEADER + DEMO + "\n").encode() + "caf\u00e9\tx.bin\thusky\tnone\tnone\t\t\n".encode("latin-1"))
     with pytest.raises(ConfigError, match=r"flights\.tsv:3: not UTF-8 text \(byte 0xe9\); save the manifest as UTF-8$"):
         check_manifest(p, CONFIG, base=tmp_path)
+
+
+@pytest.mark.parametrize("row, reason", [
+    ("x_1\tresults/sim/demo/x.bin\tsim-quad\ttest\tnone\t\t", "flight_id 'x_1' must be letters, digits and '-'"),
+    ("x1 \tresults/sim/demo/x.bin\tsim-quad\ttest\tnone\t\t", "flight_id 'x1 ' must be letters"),
+    ("\tresults/sim/demo/x.bin\tsim-quad\ttest\tnone\t\t", "flight_id '' must be letters"),
+    ("x1\tresults/sim/demo/x.bin\tsim-quad\tTrain\tnone\t\t", "flight x1: role 'Train' must be one of train, test, none"),
+    ("x1\tresults/sim/demo/x.bin\tsim-quad", "flight x1: role '' must be one of"),
+    ("x1\t\tsim-quad\ttest\tnone\t\t", "flight x1: empty path"),
+    ("x1\tlogs/{date}/x.bin\tsim-quad\ttest\tnone\t\t", "flight x1: braces in a path are read as workflow wildcards"),
+])
+def test_what_the_row_schema_types_is_one_line_with_the_files_line_number(tmp_path, row, reason):
+    # before: Snakemake's validator dumped a dozen lines naming a 0-based row (or, for a brace,
+    # a WildcardError deep in the DAG); now the check names the file's 1-based line
+    msg = _error(tmp_path, DEMO, row)
+    assert ":4: " in msg and reason in msg, msg
+
+
+def test_realdata_is_the_one_brace_a_path_may_hold(tmp_path):
+    rows = check_manifest(_manifest(tmp_path, DEMO, "x1\t{realdata}/a.bin\tsim-quad\ttest\tnone\t\t"),
+                          CONFIG, base=tmp_path)
+    assert rows[1]["path"] == "{realdata}/a.bin"

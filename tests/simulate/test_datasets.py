@@ -128,3 +128,17 @@ def test_cli_simulate(tmp_path):
     assert not (tmp_path / "out" / "logs").exists()
     cfg.write_text(yaml.safe_dump({"seed": 1, "simulate": {"rate_hz": 10}}))
     assert main(["simulate", str(tmp_path / "out2"), "--config", str(cfg)]) == 2
+
+
+def test_a_truth_rate_a_sensor_rate_does_not_divide_stops_the_planning_in_one_line():
+    # the workflow plans the log flights at start-up; before, simulate.rate_hz: 150 passed
+    # start-up and failed inside the first simulate job (the 200 Hz IMU does not divide it)
+    from pipeline.config import ConfigError
+    from pipeline.simulate.run import planned_logs
+
+    assert len(planned_logs({})) > 0
+    with pytest.raises(ConfigError, match=r"^simulate\.sensors\.imu\.rate_hz 200 must divide rate_hz 150 "
+                                          r"\(e\.g\. 150, 75, 50"):
+        planned_logs({"rate_hz": 150})
+    # without log flights nothing is decimated, and the sets alone are planned as before
+    assert planned_logs({"rate_hz": 150, "datasets": {"log_formats": []}}) == []

@@ -65,7 +65,7 @@ def run(args) -> int:
     for k, path in enumerate(args.tables):
         out = args.out if len(args.tables) == 1 else args.out / f"{names[k]}.parquet"
         seg = args.segments[k] if args.segments else None
-        bad = table_problem(path, ("state", "*set"), "a state table or simulated set")
+        bad = table_problem(path, ("state", "simulate_set"), "a state table or simulated set")
         bad_seg = table_problem(seg, ("segments",), "a segments table") if seg is not None else None
         bad = bad or (f"--segments {seg}: {bad_seg}" if bad_seg else None)
         clash = claims.clash(out)

@@ -48,14 +48,10 @@ def nonnegative_int(text: str) -> int:
 
 def table_problem(path: str | os.PathLike, expected: tuple[str, ...], what: str) -> str | None:
     """``None`` if ``path`` is a Parquet table written as one of ``expected`` (its ``uavpipe``
-    metadata ``table``), else why not, in a few words.
-
-    ``expected`` may hold ``"*set"`` for the simulated sets, whose ``table`` is their set name:
-    any table that is not one of :data:`pipeline.io.schema.TABLES` then passes.
+    metadata ``table``, e.g. ``state`` or ``simulate_set``), else why not, in a few words.
     """
     import pyarrow as pa
 
-    from ..io import schema
     from ..io.parquet import read_table_meta
 
     p = Path(path)
@@ -67,7 +63,7 @@ def table_problem(path: str | os.PathLike, expected: tuple[str, ...], what: str)
         table = read_table_meta(p).get("table")
     except (pa.ArrowInvalid, OSError, ValueError) as exc:
         return f"not a readable Parquet table ({describe(exc)})"
-    if table is None or table in expected or ("*set" in expected and table not in schema.TABLES):
+    if table is None or table in expected:
         return None  # a table without uavpipe metadata gets the benefit of the doubt
     return f"not {what} (it is a '{table}' table)"
 

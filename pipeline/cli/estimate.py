@@ -59,7 +59,7 @@ def run(args) -> int:
     # that never named the file; a segments table given as --state a KeyError)
     checks = [*((f"--state {p}", table_problem(p, ("state",), "a state table")) for p in args.state),
               *((f"--segments {p}", table_problem(p, ("segments",), "a segments table")) for p in args.segments or ()),
-              *((f"--train-sets {p}", table_problem(p, ("state", "*set"), "a simulated set"))
+              *((f"--train-sets {p}", table_problem(p, ("state", "simulate_set"), "a simulated set"))
                 for p in args.train_sets or ()),
               ("--vehicle", vehicle_problem(args.vehicle, cfg))]
     if args.model is not None:

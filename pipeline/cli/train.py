@@ -58,7 +58,7 @@ def run(args) -> int:
         # every input the kind it must be, before any training (a swapped pair is named)
         kinds = ([(p, ("state",), "a state table") for p in args.tables]
                  + [(p, ("segments",), "a segments table") for p in args.segments] if args.segments
-                 else [(p, ("state", "*set"), "a simulated set or labelled state table") for p in args.tables])
+                 else [(p, ("state", "simulate_set"), "a simulated set or labelled state table") for p in args.tables])
         for p, expected, what in kinds:
             bad = table_problem(p, expected, what)
             if bad:

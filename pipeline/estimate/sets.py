@@ -273,8 +273,8 @@ def run_ekf_sets(inputs, outputs, config: Mapping | None, *, seed: int) -> EkfSe
         est, diag = ekf_set(truth, radar=st.radar, q=st.q, rng=ekf_rng(seed, name), p0_sigma=st.p0_sigma,
                             where=str(i))
         est = classifier_set(est, st.increments, where=str(i))
-        write_table(est, o, SET_COLUMNS, name=name,
-                    extra={"seed": int(seed), "input": "ekf", "truth": str(i), "q": st.q,
+        write_table(est, o, SET_COLUMNS, name="simulate_set",
+                    extra={"set": name, "seed": int(seed), "input": "ekf", "truth": str(i), "q": st.q,
                            "increments": st.increments,
                            "p0_sigma": list(st.p0_sigma), "radar_site_ned_m": list(st.radar.site_ned_m),
                            "runs": diag["runs"], "n_diverged": diag.get("n_diverged", 0),

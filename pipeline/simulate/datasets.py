@@ -258,5 +258,5 @@ def run_simulate(out_dir: str | os.PathLike, sim_cfg: dict | None, seed: int, *,
 
 
 def _write_set(df: pd.DataFrame, path: Path, name: str, seed: int) -> None:
-    write_table(df, path, SET_COLUMNS, name=name,
-                extra={"seed": int(seed), "runs": int(df["run_id"].nunique()) if len(df) else 0})
+    write_table(df, path, SET_COLUMNS, name="simulate_set",
+                extra={"set": name, "seed": int(seed), "runs": int(df["run_id"].nunique()) if len(df) else 0})

@@ -40,7 +40,8 @@ def model_dir(tmp_path_factory) -> Path:
     s = d / "M12_train.parquet"
     runs = synth_bulk(("M1", "M2"), 3, np.random.default_rng(5))
     runs["run_id"] = pd.factorize(runs["run_id"])[0]
-    write_table(schema.conform("simulate_set", runs), s, schema.columns("simulate_set"), name="M12_train")
+    write_table(schema.conform("simulate_set", runs), s, schema.columns("simulate_set"), name="simulate_set",
+                extra={"set": "M12_train"})
     assert main(["train", str(s), "-o", str(d / "m"), "--seed", "1"]) == 0
     return d / "m"
 

@@ -36,7 +36,8 @@ def written(truth, tmp_path_factory):
     paths = {}
     for name, runs in (("M1_train", [0, 1, 2, 3]), ("M1_test", [4, 5])):
         p = sim / f"{name}.parquet"
-        write_table(truth[truth.run_id.isin(runs)].reset_index(drop=True), p, SET_COLUMNS, name=name)
+        write_table(truth[truth.run_id.isin(runs)].reset_index(drop=True), p, SET_COLUMNS, name="simulate_set",
+                    extra={"set": name})
         paths[name] = p
     out = {n: d / "est" / f"{n}.parquet" for n in paths}
     res = run_ekf_sets({"sets": list(paths.values())}, {"sets": list(out.values())}, {}, seed=SEED)

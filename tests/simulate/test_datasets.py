@@ -43,6 +43,8 @@ def test_sets_written_in_state_schema(generated):
     assert df["run_id"].dtype == np.int64 and str(df["label"].dtype) == "string"
     meta = read_table_meta(base / "a" / "sets" / "M1_train.parquet")
     assert meta["schema_version"] == schema.SCHEMA_VERSION and meta["columns"]["pos_n_m"]["frame"] == "NED"
+    # the table kind is a TABLES name (the CLI checks it); the set's own name beside it
+    assert (meta["table"], meta["set"]) == ("simulate_set", "M1_train") and "simulate_set" in schema.TABLES
     # 5 Hz truth, 3 s low-dynamic transition + 25 s (seed 000 §2.4.1) -> 141 samples per run
     per_run = df.groupby("run_id").size()
     assert set(per_run) == {141}

@@ -3,8 +3,9 @@
 pymavlink's ``ardupilotmega`` v2 encoder; framing: big-endian µs UNIX time + frame.
 ``HEARTBEAT`` 1 Hz, ``SYSTEM_TIME`` 1 Hz, ``ATTITUDE``, ``GPS_RAW_INT``, ``SCALED_IMU`` (mG,
 mrad/s), ``SCALED_PRESSURE`` (hPa, cdegC), ``RC_CHANNELS``, ``SERVO_OUTPUT_RAW``,
-``DISTANCE_SENSOR`` (cm). No radar: MAVLink has no such message. Frames are sorted stably by
-time, so the output is a pure function of the streams (same streams, same bytes).
+``DISTANCE_SENSOR`` (cm), ``GPS_GLOBAL_ORIGIN`` once when the origin is given. No radar:
+MAVLink has no such message. Frames are sorted stably by time, so the output is a pure function
+of the streams (same streams, same bytes).
 
 (:func:`pipeline.io.tlog.write_tlog` is the lower-level writer of hand-built message lists used
 by the reader tests.)
@@ -29,7 +30,9 @@ def _us(t_ns) -> np.ndarray:
 
 
 def write_tlog_streams(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int,
-                       duration_s: float, boot_us: int) -> str | os.PathLike:
+                       duration_s: float, boot_us: int,
+                       origin: tuple[float, float, float] | None = None,
+                       undulation_m: float = 0.0) -> str | os.PathLike:
     """Write canonical streams as a MAVLink telemetry log (see the module docstring).
 
     Parameters
@@ -45,6 +48,12 @@ def write_tlog_streams(path: str | os.PathLike, streams: Mapping[str, pd.DataFra
         ``HEARTBEAT``/``SYSTEM_TIME`` are written at 1 Hz for ``t = 0 .. floor(duration_s)``.
     boot_us : int
         Vehicle boot time at ``t_ns = 0`` (``time_boot_ms`` fields = (boot_us + t) / 1000).
+    origin : (lat_deg, lon_deg, alt_wgs84_m), optional
+        The EKF origin, sent once at t = 0 as ``GPS_GLOBAL_ORIGIN`` (altitude MSL =
+        ``alt_wgs84_m - undulation_m``), as ArduPilot does once its origin is set: the reader
+        then puts NED about it, as it does the DataFlash log's ``ORGN``.
+    undulation_m : float
+        Geoid undulation (WGS-84 minus MSL) at the origin.
 
     Returns
     -------
@@ -69,6 +78,9 @@ def write_tlog_streams(path: str | os.PathLike, streams: Mapping[str, pd.DataFra
                                       mav.MAV_MODE_FLAG_SAFETY_ARMED | mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                                       0, mav.MAV_STATE_ACTIVE))
         add(tu, link.system_time_encode(t0_us + tu, (boot_us + tu) // 1000))
+    if origin is not None:
+        add(0, link.gps_global_origin_encode(int(np.rint(origin[0] * 1e7)), int(np.rint(origin[1] * 1e7)),
+                                             int(np.rint((origin[2] - undulation_m) * 1000)), boot_us))
     a = streams["attitude"]
     r, p, y = quat_to_euler(a[["q_w", "q_x", "q_y", "q_z"]].to_numpy())
     for tu, rr, pp, yy in zip(_us(a["t_ns"]), r, p, y):

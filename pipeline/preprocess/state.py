@@ -262,6 +262,16 @@ def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84
         # not wherever the first fixes happen to be (a flight starting 20 m above its EKF
         # origin would otherwise read 20 m low throughout)
         h0 = org.get(alt_kind)
+        other = "alt_msl_m" if alt_kind == "alt_wgs84_m" else "alt_wgs84_m"
+        if h0 is None and org.get(other) is not None and other in g.columns:
+            # the origin in the other datum (an ORGN gives MSL, the fixes WGS-84 too): shift it
+            # by the fixes' own separation of the two (the geoid undulation where they are)
+            sep = alt - g[other].to_numpy(dtype=np.float64, na_value=np.nan)
+            if np.any(np.isfinite(sep)):
+                off = float(np.nanmedian(sep))
+                h0 = float(org[other]) + off
+                diag["notes"].append(f"NED origin altitude from its {other} + {off:.2f} m (the fixes' "
+                                     f"median {alt_kind} - {other})")
         if h0 is None or not np.isfinite(float(h0)):
             h0 = np.nanmedian(alt[:10]) if np.any(np.isfinite(alt[:10])) else 0.0
             diag["notes"].append(f"ned_origin has no {alt_kind}: GPS down about the median of the "

@@ -69,7 +69,7 @@ def write_flight(out_dir: Path, stem: str, truth, sensors, params, rate_hz: floa
                       undulation_m=sensors.geoid_undulation_m)
         elif fmt == "tlog":
             write_tlog_streams(p, streams, t0_utc_ns=t0_utc_ns, duration_s=float(truth.t_s[-1]),
-                               boot_us=BOOT_US)
+                               boot_us=BOOT_US, origin=o, undulation_m=sensors.geoid_undulation_m)
         elif fmt == "bag":
             write_ros1(p, streams, t0_utc_ns=t0_utc_ns)
         elif fmt == "mcap":

@@ -114,6 +114,12 @@ def test_gps_down_is_about_the_origin_altitude_when_the_log_gives_msl_only():
     tt = st["t_ns"].to_numpy() * 1e-9
     np.testing.assert_allclose(st["pos_d_m"], -20.0 - 0.5 * tt, atol=1e-3)
     np.testing.assert_allclose(st["pos_n_m"], 5.0, atol=1e-3)
+    # fixes in both datums (the simulated DataFlash GPS): the WGS-84 altitudes are used and the
+    # MSL origin is shifted by their separation (29 m of geoid undulation), not dropped
+    gps2 = gps.assign(alt_wgs84_m=h - 29.0)
+    res = preprocess_log(FlightLog.from_streams(meta, {"gps": gps2}))
+    np.testing.assert_allclose(res.state["pos_d_m"], -20.0 - 0.5 * tt, atol=1e-3)
+    assert any("the fixes' median alt_wgs84_m - alt_msl_m" in n for n in res.diagnostics["notes"])
 
 
 def test_rc_inputs_and_servo_outputs_on_rows_of_their_own_both_survive_resampling():

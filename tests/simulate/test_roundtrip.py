@@ -127,6 +127,19 @@ def test_ingest_recovers_streams(written, fmt):
     assert not any("shifted" in w for w in log.meta["diagnostics"]["warnings"])
 
 
+def test_the_bin_and_the_tlog_give_the_same_ned_origin_so_their_states_share_the_truths_frame(written):
+    # the DataFlash log has its ORGN; the tlog now carries GPS_GLOBAL_ORIGIN as ArduPilot sends
+    # it (before, the tlog reader fell back to the first fix and its NED sat ~560 m off truth)
+    (paths, _), _, _ = written
+    se = SensorSettings.from_config(CFG)
+    ob, ot = (read_log(paths[f]).meta["ned_origin"] for f in ("bin", "tlog"))
+    assert ot["source"] == "GPS_GLOBAL_ORIGIN" and ob["source"] == "ORGN"
+    assert ot["lat_deg"] == pytest.approx(se.origin[0], abs=1e-7) == pytest.approx(ob["lat_deg"], abs=1e-7)
+    assert ot["lon_deg"] == pytest.approx(ob["lon_deg"], abs=1e-7)
+    assert ot["alt_msl_m"] == pytest.approx(ob["alt_msl_m"], abs=1e-3)
+    assert ot["alt_msl_m"] == pytest.approx(se.origin[2] - se.geoid_undulation_m, abs=1e-3)
+
+
 def test_gps_dropout_gap(written):
     (paths, sim), _, _ = written
     t = sim["gps"]["t_ns"].to_numpy() * 1e-9

@@ -11,7 +11,7 @@ from pipeline.estimate.run import job_config as estimate_job_config
 from pipeline.estimate.pf_run import job_config as pf_job_config
 from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest, expand_path, log_available
 from pipeline.io.schema import STREAM_NAMES
-from pipeline.models.run import model_set_config
+from pipeline.models.run import check_model_set_labels, model_set_config
 from pipeline.report.summary import run_summary
 from pipeline.simulate.run import planned_logs, planned_sets
 from pipeline.studies.base import STUDY_TABLES
@@ -33,8 +33,11 @@ config.clear()
 config.update(_validated)
 
 # simulated outputs are fixed by the config (static DAG): sets and log-file flights
-SIM_SETS = planned_sets(config["simulate"])
-SIM_LOGS = planned_logs(config["simulate"])
+try:
+    SIM_SETS = planned_sets(config["simulate"])
+    SIM_LOGS = planned_logs(config["simulate"])
+except ConfigError as _exc:
+    sys.exit(f"uavpipe: {_exc}")
 
 # the manifest: one line per bad row (file, line, flight id, reason) before any job is planned
 # (pipeline/io/manifest.py: vehicles, labels, duplicate ids, reader names, simulated logs this
@@ -58,6 +61,10 @@ SIM_MANEUVERS = sorted({n.rsplit("_", 1)[0] for n in SIM_SETS if n.endswith("_te
 # the maneuver sets the EKF filters (rules/estimate_sets.smk): what model sets with input: ekf read
 EKF_SETS = [n for n in SIM_SETS if n.endswith(("_train", "_test"))]
 MODEL_SETS = config["model_sets"]
+try:
+    check_model_set_labels(MODEL_SETS, SIM_MANEUVERS)
+except ConfigError as _exc:
+    sys.exit(f"uavpipe: {_exc}")
 STUDY_NAMES = list(STUDY_TABLES)  # rules/studies.smk: one target each, not in `all`
 
 SKIPPED = {}  # manifest rows left out (flight id -> reason), for the end-of-run summary

@@ -109,6 +109,26 @@ def model_set_config(config: Mapping, model_set: str) -> dict:
     return spec
 
 
+def check_model_set_labels(model_sets: Mapping[str, Mapping], simulated: Sequence[str]) -> None:
+    """Refuse a simulated model set whose ``labels`` names a maneuver the simulate stage does not
+    write (checked by the workflow at start-up, so a typo such as ``M9`` is one line before any
+    job instead of a model set silently trained on the other labels).
+
+    Raises
+    ------
+    ConfigError
+        ``model_sets.<name>.labels: 'M9' is not simulated (simulate.datasets.maneuvers: M1, ...)``.
+    """
+    for name, spec in model_sets.items():
+        if spec.get("data", "simulated") != "simulated":
+            continue
+        bad = [lab for lab in spec.get("labels") or () if lab not in simulated]
+        if bad:
+            raise ConfigError(f"model_sets.{name}.labels: {', '.join(map(repr, bad))} "
+                              f"{'is' if len(bad) == 1 else 'are'} not simulated "
+                              f"(simulate.datasets.maneuvers: {', '.join(simulated) or 'none'})")
+
+
 def hmm_config(config: Mapping, seed: int) -> ModelsConfig:
     """The model set's hyperparameters: ``config["hmm"]`` (the ``hmm`` section merged with the
     set's overrides) and the master seed."""

@@ -166,7 +166,7 @@ def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *,
     for f, info in (diag.get("flights") or {}).items():
         s = f"{info.get('frame')} frame, heading {np.degrees(info.get('heading_rad') or 0.0):.1f}°, {info.get('n_demos')} demos"
         if info.get("fit_rms_m") is not None:
-            s += (f"; rigid fit to the reference: translation {np.round(info.get('translation_m'), 1).tolist()} m, "
+            s += (f"; rigid fit to the reference: translation ({', '.join(f'{v:.1f}' for v in info.get('translation_m') or [])}) m, "
                   f"matched-pair RMS {info['fit_rms_m']:.1f} m")
             if info.get("fit_altitude_rms_m") is not None:
                 # altitude alone, before any fit: a large value says the flight flies another schedule

@@ -94,15 +94,20 @@ def last_params(params: pd.DataFrame | None) -> dict[str, float]:
 def differing_params(per_flight: Mapping[str, Mapping[str, float]]) -> tuple[list[str], list[list[str]]]:
     """The parameters whose last value differs between flights (or that some flights lack), as
     ``(headers, rows)``: name, then one value per flight (``–`` where it is not logged). Values
-    equal to 7 significant digits (the page's precision) count as equal."""
+    are compared as logged, bit for bit (NaN equals NaN), and written so that values which
+    differ always read differently (:func:`pipeline.report.plots.param_texts`: integers as
+    integers, floats to their shortest round-trip text)."""
     flights = list(per_flight)
     headers = ["parameter", *flights]
     names = sorted(set().union(*(set(p) for p in per_flight.values()))) if per_flight else []
     rows = []
     for n in names:
-        vals = [f"{per_flight[f][n]:.7g}" if n in per_flight[f] else "–" for f in flights]
-        if len(set(vals)) > 1:
-            rows.append([n, *vals])
+        vals = [per_flight[f].get(n) if n in per_flight[f] else None for f in flights]
+        keys = {("–",) if v is None else ("nan",) if v != v else ("v", float(v)) for v in vals}
+        if len(keys) > 1:
+            present = [v for v in vals if v is not None]
+            texts = iter(plots.param_texts(present))
+            rows.append([n, *("–" if v is None else next(texts) for v in vals)])
     return headers, rows
 
 

@@ -7,7 +7,6 @@ Plotly is not inlined per page: every report references one local copy of ``plot
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Mapping
@@ -19,7 +18,8 @@ from ..estimate.pf_run import classifier_softmax
 from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
-from .flight_summary import summary_rows
+from .flight_summary import (diagnostics_text, first_instance, flight_numbers, ned_track, numbers_script,
+                             plain_text, summary_rows, velocity_track)
 from .pages import figure_divs, render, write_page
 from . import plots
 
@@ -36,37 +36,6 @@ def write_plotly_js(path: str | os.PathLike) -> None:
     p.write_text(get_plotlyjs())
 
 
-def _first_instance(df: pd.DataFrame) -> pd.DataFrame:
-    return df[df["instance"] == df["instance"].min()] if len(df) else df
-
-
-def _ned_track(log, state: pd.DataFrame | None) -> pd.DataFrame | None:
-    """Local NED track: state, else the autopilot's local_position, else GPS about the NED origin."""
-    cols = ["t_ns", "pos_n_m", "pos_e_m", "pos_d_m"]
-    if state is not None and len(state) and state["pos_n_m"].notna().any():
-        return state[cols]
-    lp = _first_instance(log["local_position"])
-    if len(lp) and lp["pos_n_m"].notna().any():
-        return lp[cols]
-    gps = _first_instance(log["gps"]).dropna(subset=["lat_deg", "lon_deg"])
-    gps = gps[(gps["lat_deg"].abs() > 1e-6) | (gps["lon_deg"].abs() > 1e-6)]
-    if len(gps):
-        from ..frames.geodesy import geodetic_to_ned
-
-        o = log.meta.get("ned_origin") or {}
-        lat0 = o.get("lat_deg") if o.get("lat_deg") is not None else gps["lat_deg"].iloc[0]
-        lon0 = o.get("lon_deg") if o.get("lon_deg") is not None else gps["lon_deg"].iloc[0]
-        # heights in one datum: ellipsoidal when the log has it, else MSL (display only)
-        if gps["alt_wgs84_m"].notna().all():
-            alt, h0 = gps["alt_wgs84_m"].to_numpy(), o.get("alt_wgs84_m")
-        else:
-            alt, h0 = gps["alt_msl_m"].fillna(0.0).to_numpy(), o.get("alt_msl_m")
-        h0 = alt[0] if h0 is None else h0
-        n, e, d = geodetic_to_ned(gps["lat_deg"].to_numpy(), gps["lon_deg"].to_numpy(), alt, lat0, lon0, h0)
-        return pd.DataFrame({"t_ns": gps["t_ns"].to_numpy(), "pos_n_m": n, "pos_e_m": e, "pos_d_m": d})
-    return None
-
-
 #: frame notes of the flight page's titles: body-frame panels come from the preprocessed state
 #: (mount applied); raw streams keep the frame the sensor or the autopilot logged them in
 STATE_FRAME = "state: body FRD, mount-corrected"
@@ -79,7 +48,7 @@ def _body_rates(state: pd.DataFrame | None, imu: pd.DataFrame) -> tuple[pd.DataF
     cols = ["p_radps", "q_radps", "r_radps"]
     if state is not None and len(state) and set(cols) <= set(state.columns) and state["p_radps"].notna().any():
         return state[["t_ns", *cols]], STATE_FRAME
-    g = _first_instance(imu)
+    g = first_instance(imu)
     if not len(g):
         return None, SENSOR_FRAME
     return pd.DataFrame({"t_ns": g["t_ns"].to_numpy(), **{c: g[f"gyr_{a}_radps"].to_numpy()
@@ -96,20 +65,50 @@ def attitude_source(state: pd.DataFrame | None, log) -> tuple[pd.DataFrame | Non
     if state is not None and len(state) and set(cols) <= set(state.columns) and state["roll_rad"].notna().any():
         s = state.dropna(subset=cols)
         return s[["t_ns"]], tuple(s[c].to_numpy(np.float64) for c in cols), STATE_FRAME
-    att = _first_instance(log["attitude"]).dropna(subset=["q_w"])
+    att = first_instance(log["attitude"]).dropna(subset=["q_w"])
     if not len(att):
         return None, None, SENSOR_FRAME
     return att[["t_ns"]], quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy()), \
         "attitude stream as logged, not mount-corrected"
 
 
-def _velocity(state: pd.DataFrame | None, log) -> pd.DataFrame | None:
-    """NED velocity: the state's, else the autopilot's local_position, else GPS."""
-    cols = [f"vel_{a}_mps" for a in "ned"]
-    for df in (state, _first_instance(log["local_position"]), _first_instance(log["gps"])):
-        if df is not None and len(df) and set(cols) <= set(df.columns) and df["vel_n_mps"].notna().any():
-            return df[["t_ns", *cols]]
-    return None
+def _ned_text(v) -> str:
+    """An NED position ``[n, e, d]`` as ``"(n, e, d) m NED"`` (``–`` when not given)."""
+    try:
+        n, e, d = (float(x) for x in v)
+    except (TypeError, ValueError):
+        return "–"
+    return f"({n:g}, {e:g}, {d:g}) m NED"
+
+
+def calibration_table(preprocess: Mapping | None) -> tuple[str, list[str], list[list[str]]]:
+    """The barometric calibration of a flight as a page table ``(title, headers, rows)``: one
+    row per region of the fitted offset (time span, offset, drift, RMS of the fit, points used),
+    from the ``calibration`` diagnostics of the preprocessed state's metadata
+    (:meth:`pipeline.preprocess.calibrate.Calibration.info`). The title names the method, the
+    points used of the candidates and the notes; no rows when nothing was fitted."""
+    c = (preprocess or {}).get("calibration") or {}
+    headers = ["region", "t start [s]", "t end [s]", "offset [m]", "drift [m/s]", "RMS of fit [m]", "points used"]
+    if not c:
+        return "Barometric calibration (no preprocess diagnostics)", headers, []
+
+    def num(v, spec):
+        try:
+            v = float(v)
+        except (TypeError, ValueError):
+            return "–"
+        return f"{v:{spec}}" if np.isfinite(v) else "–"
+
+    rows = [[str(r.get("region", i)), num(r.get("t_start_s"), ".1f"), num(r.get("t_end_s"), ".1f"),
+             num(r.get("offset_m"), "+.3f"), num(r.get("drift_mps"), "+.5f"), num(r.get("rms_m"), ".3f"),
+             str(r.get("n_points", "–"))] for i, r in enumerate(c.get("regions") or [])]
+    how = {"rangefinder": "against the rangefinder", "gps": "against GPS height",
+           "uncalibrated": "not calibrated", "none": "no barometer"}.get(c.get("method"), str(c.get("method")))
+    parts = [how]
+    if c.get("n_candidates"):
+        parts.append(f"{c.get('n_used', 0)} of {c['n_candidates']} candidate points used")
+    parts += [plain_text(n) for n in c.get("notes") or []]
+    return f"Barometric calibration ({'; '.join(parts)})", headers, rows
 
 
 def _error_norms(est: pd.DataFrame, ref_t: np.ndarray, ref: np.ndarray) -> pd.DataFrame:
@@ -162,7 +161,7 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
             facts.append((label, f"placeholder: {m.get('error')}"))
         else:
             facts.append((label, f"{m.get('n_steps')} steps ({m.get('n_predict_only')} predict-only), radar "
-                                 f"{m.get('radar')} (site {m.get('radar_site_ned_m')} from {m.get('radar_site_from')}), "
+                                 f"{m.get('radar')} (site {_ned_text(m.get('radar_site_ned_m'))} from {m.get('radar_site_from')}), "
                                  f"q {m.get('q')}, reference {m.get('reference')}"))
     ok = {e: t for e, t in tables.items() if len(t)}
     ref_name = next((metas[e].get("reference") for e in ok), None)
@@ -385,17 +384,19 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     classified = {m: p for m, p in (classified or {}).items() if p and Path(p).exists()}
     timelines = {}
 
-    ned = _ned_track(log, st)
-    velocity = _velocity(st, log)
+    failed = meta.get("status") == "failed"
+    ned = ned_track(log, st)
+    velocity = velocity_track(st, log)
+    numbers = flight_numbers(log, st, ned=ned, velocity=velocity)
     alt_series = {}
-    baro = _first_instance(log["baro"])
+    baro = first_instance(log["baro"])
     if len(baro):
         alt_series["baro (raw)"] = pd.DataFrame({"t_ns": baro["t_ns"], "alt_m": baro["alt_rel_m"]})
     if ned is not None:
         alt_series["−d (track)"] = pd.DataFrame({"t_ns": ned["t_ns"], "alt_m": -ned["pos_d_m"]})
     if st is not None and "alt_cal_m" in st:
         alt_series["calibrated"] = pd.DataFrame({"t_ns": st["t_ns"], "alt_m": st["alt_cal_m"]})
-    rf = _first_instance(log["rangefinder"])
+    rf = first_instance(log["rangefinder"])
     if len(rf) and rf["dist_m"].notna().any():
         alt_series["rangefinder"] = pd.DataFrame({"t_ns": rf["t_ns"], "alt_m": rf["dist_m"]})
     calib_pts = None
@@ -453,47 +454,95 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             if fig is not None:
                 fig.update_layout(title=f"Maneuver timeline ({m})")
             figs.append((f"Maneuver timeline ({m})", fig))
-    est_figs, est_facts = estimate_panels(estimates or {}, truth=log["truth"], state=st, classified=classified)
+    # a failed ingest's placeholders downstream would only repeat its reason
+    est_figs, est_facts = ([], []) if failed else estimate_panels(estimates or {}, truth=log["truth"], state=st,
+                                                                 classified=classified)
     figs.extend(est_figs)
-    # flight-mode bands behind every time panel (not the 3-D path, the ground track, a spectrum)
+    # flight-mode bands behind every time panel (not the 3-D path, the ground track, a spectrum),
+    # the last band ending where the flight does (an end *time*, not the duration)
+    t_end = numbers["t_end_s"]
     for _, f in figs:
         if plots.is_time_panel(f):
-            plots.mode_bands(f, log["mode"], log.duration_s)
+            plots.mode_bands(f, log["mode"], t_end if np.isfinite(t_end) else None)
     divs = figure_divs(figs)
     # one linked time axis: zooming any time panel zooms them all (the template's script)
     linked = [f"plot-{i}" for i, (_, f) in enumerate(figs) if plots.is_time_panel(f)]
+    pre = (read_table_meta(state).get("preprocess") or {}) if state and Path(state).exists() else {}
     tables = [("Log messages", *plots.messages_table(log["messages"])),
               ("Parameters", *plots.params_table(log["params"]))]
+    if pre and not failed:
+        tables.append(calibration_table(pre))
 
-    def known(v) -> str:  # a failed ingest has no reader or format: say so, never "None"
+    def known(v) -> str:  # never "None"
         return "–" if v in (None, "") else str(v)
 
-    reader = (f"{meta['reader']} v{meta.get('reader_version') or '?'}" if meta.get("reader")
-              else "none took the file" if meta.get("status") == "failed" else "–")
-    facts = [("format", known(meta.get("source_format"))), ("reader", reader),
+    facts = [("format", known(meta.get("source_format"))),
+             ("reader", f"{meta['reader']} v{meta.get('reader_version') or '?'}" if meta.get("reader") else "–"),
              ("detected by", known(meta.get("detected_by"))), ("source", known(meta.get("source_path"))),
              ("sha256", known(meta.get("source_sha256"))), ("status", known(meta.get("status"))),
-             *([("reason", meta.get("error") or "unknown")] if meta.get("status") == "failed" else []),
-             ("duration", f"{log.duration_s:.1f} s"),
+             ("time span", _span_text(log, numbers)),
+             ("distance rule", _distance_rule_text(numbers)),
              ("streams", ", ".join(f"{k} ({v['rows']})" for k, v in log.summary().items()) or "none"),
-             ("diagnostics", json.dumps({k: v for k, v in meta.get("diagnostics", {}).items()
-                                         if k in ("bytes_skipped", "records_dropped", "timestamp_anomalies")}))]
-    pre = (read_table_meta(state).get("preprocess") or {}) if state and Path(state).exists() else {}
-    summary = summary_rows(meta, duration_s=log.duration_s, vehicle=vehicle, messages=log["messages"],
-                           gps=log["gps"], ned=ned, velocity=velocity, rates=rates, euler=euler,
-                           preprocess=pre)
+             ("diagnostics", diagnostics_text(meta.get("diagnostics")))]
+    summary = summary_rows(meta, vehicle=vehicle, messages=log["messages"], gps=log["gps"], rates=rates,
+                           euler=euler, preprocess=pre, numbers=numbers)
     if state and Path(state).exists():
         src = pre.get("sources") or {}
         cinfo = pre.get("calibration") or {}
-        facts.append(("preprocess", f"{pre.get('n_samples', 0)} samples @ {pre.get('rate_hz')} Hz; position "
-                                    f"{src.get('position')}; body rates {src.get('body_rates')}; BPM "
-                                    f"{cinfo.get('method')}" if pre else read_table_meta(state).get("error", "–")))
+        facts.append(("preprocess", f"{pre.get('n_samples', 0)} samples @ {known(pre.get('rate_hz'))} Hz; position "
+                                    f"{known(src.get('position'))}; body rates {known(src.get('body_rates'))}; BPM "
+                                    f"{known(cinfo.get('method'))}" if pre else known(read_table_meta(state).get("error"))))
     for m, p in classified.items():
         cm = read_table_meta(p)
         facts.append(("classifier", f"model set {m}: {cm.get('status')}"
                                     + (f" ({cm.get('error')})" if cm.get("error") else "")))
     facts.extend(est_facts)
-    page = render(template, 
+    facts = [(k, plain_text(v)) for k, v in facts]
+    if failed:
+        # the reason once (the template's line under the title), none of the numbers, reader,
+        # format or diagnostics a failed ingest does not have ("duration 0.0 s", "reader: none")
+        summary = [("vehicle", vehicle)] if vehicle else []
+        facts = [("source", known(meta.get("source_path"))),
+                 *([("sha256", meta["source_sha256"])] if meta.get("source_sha256") else []),
+                 ("status", "failed (the reason is above)")]
+    page = render(template,
         flight_id=meta.get("flight_id"), summary=summary, facts=facts, plots=divs, tables=tables, linked=linked, plotly_js=plotly_js,
-        index_href=index_href, failed=meta.get("status") == "failed", error=meta.get("error"))
-    write_page(page, out_html)
+        index_href=index_href, failed=failed, error=meta.get("error") or "unknown reason" if failed else None)
+    # the numbers ride in the page, for the index (one source: they cannot disagree)
+    write_page(page.replace("</body>", numbers_script(numbers) + "\n</body>", 1), out_html)
+
+
+def _span_text(log, numbers: Mapping) -> str:
+    """The span the duration is taken from, the sensor streams' where it differs by more than
+    0.5 s, and the streams with records from more than 0.5 s before the sensors' first (stale
+    records, not counted): ``"0.1 to 79.6 s (preprocessed state); sensor streams 0.0 to 79.6 s;
+    control, setpoint reach back to -46.2 s (stale records, not counted)"``."""
+    t0, t1 = numbers.get("t_start_s"), numbers.get("t_end_s")
+    if t0 is None or not np.isfinite(t0):
+        return "– (no samples)"
+    out = f"{t0:.1f} to {t1:.1f} s ({numbers.get('duration_from')})"
+    lo, hi = log.span_ns(schema.SENSOR_STREAMS)
+    if lo is None:
+        return out
+    lo_s, hi_s = lo * 1e-9, hi * 1e-9
+    if numbers.get("duration_from") != "sensor streams" and (abs(lo_s - t0) > 0.5 or abs(hi_s - t1) > 0.5):
+        out += f"; sensor streams {lo_s:.1f} to {hi_s:.1f} s"
+    # event streams (a parameter dump at boot) may precede the sensors by design: not named
+    starts = {name: log.span_ns([name])[0] for name in schema.STREAM_NAMES
+              if name != "labels" and name not in schema.EVENT_STREAMS}
+    early = [name for name, t in starts.items() if t is not None and t * 1e-9 < lo_s - 0.5]
+    if early:
+        out += (f"; {', '.join(early)} reach{'es' * (len(early) == 1)} back to "
+                f"{min(starts[n] for n in early) * 1e-9:.1f} s (stale records, not counted)")
+    return out
+
+
+def _distance_rule_text(numbers: Mapping) -> str:
+    """How the distance was measured (:func:`pipeline.report.flight_summary.path_length`)."""
+    h, sig = numbers.get("path_dead_band_m"), numbers.get("path_noise_m")
+    if h is None or not np.isfinite(h):
+        return "– (no track)"
+    from .flight_summary import PATH_BIN_S, PATH_NOISE_K
+
+    return (f"path of {PATH_BIN_S:g} s position averages, a step counted once it leaves a {h:.2f} m dead band "
+            f"({PATH_NOISE_K:g} × the averages' noise σ = {sig:.3f} m)")

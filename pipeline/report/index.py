@@ -11,68 +11,37 @@ import os
 from pathlib import Path
 from typing import Mapping
 
-import numpy as np
 import pandas as pd
 
-from ..frames.geodesy import geodetic_to_ned
-from ..io.parquet import read_table
+from ..io.parquet import read_flightlog
 from ..io import schema
-from .flight_summary import timestamp_anomalies, utc_date
+from .flight_summary import flight_numbers, number_texts, read_page_numbers, timestamp_anomalies, utc_date
 from .pages import write_page
 
 
-def _track_stats(flight_dir: Path) -> tuple[float, float]:
-    """Distance flown (m, horizontal) and max speed (m/s) from local_position, else GPS."""
-    lp_path = flight_dir / "local_position.parquet"
-    gps_path = flight_dir / "gps.parquet"
-    dist, vmax = float("nan"), float("nan")
-    if lp_path.exists():
-        lp = read_table(lp_path, schema.columns("local_position"))
-        lp = lp[lp["instance"] == lp["instance"].min()] if len(lp) else lp
-        if len(lp) > 1 and lp["pos_n_m"].notna().any():
-            p = lp[["pos_n_m", "pos_e_m"]].dropna().to_numpy()
-            dist = float(np.sum(np.hypot(*np.diff(p, axis=0).T)))
-            v = lp[["vel_n_mps", "vel_e_mps", "vel_d_mps"]].to_numpy()
-            if np.isfinite(v).any():
-                vmax = float(np.nanmax(np.linalg.norm(v, axis=1)))
-    if np.isnan(dist) and gps_path.exists():
-        g = read_table(gps_path, schema.columns("gps"))
-        g = g[(g["instance"] == g["instance"].min())] if len(g) else g
-        g = g.dropna(subset=["lat_deg", "lon_deg"])
-        g = g[(g["lat_deg"].abs() > 1e-6) | (g["lon_deg"].abs() > 1e-6)]
-        if len(g) > 1:
-            # horizontal track length in the local NED about the first fix (heights left out)
-            lat, lon = g["lat_deg"].to_numpy(), g["lon_deg"].to_numpy()
-            n, e, _ = geodetic_to_ned(lat, lon, np.zeros(len(g)), lat[0], lon[0], 0.0)
-            dist = float(np.sum(np.hypot(np.diff(n), np.diff(e))))
-        if len(g) and np.isnan(vmax):
-            v = g[["vel_n_mps", "vel_e_mps", "vel_d_mps"]].to_numpy()
-            if np.isfinite(v).any():
-                vmax = float(np.nanmax(np.linalg.norm(np.nan_to_num(v), axis=1)))
-    return dist, vmax
+def flight_summary(flight_id: str, meta_path: str | os.PathLike, page: str | os.PathLike | None = None) -> dict:
+    """One index row for a flight from its ingest directory.
 
-
-def flight_summary(flight_id: str, meta_path: str | os.PathLike) -> dict:
-    """One index row for a flight from its ingest directory."""
+    Duration, distance and speed (``numbers``) are the flight page's own
+    (:func:`~pipeline.report.flight_summary.read_page_numbers` of ``page``, the flight page the
+    row links): both pages show one computation,
+    :func:`pipeline.report.flight_summary.flight_numbers`. Without that page (not built), the
+    same function runs here on the ingest streams."""
     meta_path = Path(meta_path)
     meta = json.loads(meta_path.read_text())
     d = meta_path.parent
     row = {"flight_id": flight_id, "date": utc_date(meta), "vehicle": "",
            "status": meta.get("status", "?"), "format": meta.get("source_format") or "",
            "error": meta.get("error") or "", "duration_s": float("nan"), "distance_m": float("nan"),
-           "max_speed_mps": float("nan"), "maneuvers": 0, "warnings": ""}
+           "max_speed_mps": float("nan"), "maneuvers": 0, "warnings": "", "numbers": {}}
     if row["status"] == "failed":
         return row
-    durs = []
-    for s in schema.SENSOR_STREAMS:  # parameter dumps and messages may precede the first sample
-        p = d / f"{s}.parquet"
-        if p.exists():
-            t = pd.read_parquet(p, columns=["t_ns"])["t_ns"]
-            if len(t):
-                durs.append((t.min(), t.max()))
-    if durs:
-        row["duration_s"] = (max(b for _, b in durs) - min(a for a, _ in durs)) * 1e-9
-    row["distance_m"], row["max_speed_mps"] = _track_stats(d)
+    numbers = read_page_numbers(page) if page is not None else None
+    if numbers is None:
+        numbers = flight_numbers(read_flightlog(d, list(schema.SENSOR_STREAMS)))   # gps, local_position among them
+    row["numbers"] = numbers
+    row["duration_s"], row["distance_m"] = numbers.get("duration_s"), numbers.get("distance_m")
+    row["max_speed_mps"] = numbers.get("max_hspeed_mps")
     lab = d / "labels.parquet"
     if lab.exists():
         row["maneuvers"] = len(pd.read_parquet(lab, columns=["label"]))
@@ -92,12 +61,8 @@ body{font-family:system-ui,sans-serif;margin:2em;color:#222}
 table{border-collapse:collapse;font-size:14px}
 th,td{border-bottom:1px solid #ddd;padding:4px 10px;text-align:left;vertical-align:top}
 th{background:#f4f4f4} td.num{text-align:right;font-variant-numeric:tabular-nums}
-tr.failed td{background:#fdecea} .reason{color:#b00020}
+tr.failed td{background:#fdecea} .reason{color:#b00020} .absent{color:#777}
 """
-
-
-def _fmt(x: float, nd: int = 1) -> str:
-    return "–" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:,.{nd}f}"
 
 
 def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | None) -> str:
@@ -161,7 +126,9 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     bearing : dict, optional
         ``{pair: relative URL}`` of the bearing-only replay pages (``report/bearing/<pair>.html``).
     """
-    rows = [flight_summary(f, m) for f, m in zip(flight_ids, meta_paths)]
+    here = Path(out_html).parent
+    links = links or {}
+    rows = [flight_summary(f, m, here / links[f] if f in links else None) for f, m in zip(flight_ids, meta_paths)]
     compare = dict(compare or {})
     for r in rows:
         r["vehicle"] = (vehicles or {}).get(r["flight_id"], "")
@@ -169,8 +136,7 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
         found = maneuver_summary((segments or {}).get(r["flight_id"]), (classified or {}).get(r["flight_id"]))
         if found and r["status"] != "failed":
             r["maneuvers"] = found
-    table = pd.DataFrame(rows)
-    links = links or {}
+    table = pd.DataFrame([{k: v for k, v in r.items() if k != "numbers"} for r in rows])
     body = []
     for r in rows:
         name = html.escape(r["flight_id"])
@@ -184,10 +150,11 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
             body.append(f'<tr class="failed">{first}<td>failed</td><td colspan="6" class="reason">'
                         f'{html.escape(r["error"])}</td></tr>')
             continue
+        txt = number_texts(r["numbers"])   # the texts of the flight page's summary
         body.append(
             f"<tr>{first}<td>{html.escape(r['status'])}</td><td>{html.escape(r['format'])}</td>"
-            f"<td class=num>{_fmt(r['duration_s'])}</td><td class=num>{_fmt(r['distance_m'], 0)}</td>"
-            f"<td class=num>{_fmt(r['max_speed_mps'])}</td><td>{html.escape(str(r['maneuvers']))}</td>"
+            f"<td class=num>{html.escape(txt['duration'])}</td><td class=num>{html.escape(txt['distance'])}</td>"
+            f"<td class=num>{html.escape(txt['max_hspeed'])}</td><td>{html.escape(str(r['maneuvers']))}</td>"
             f"<td>{html.escape(r['warnings'])}</td></tr>")
     n_failed = sum(r["status"] == "failed" for r in rows)
     model_links = "".join(f'<li><a href="{html.escape(u)}">{html.escape(m)}</a></li>'
@@ -197,13 +164,12 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
                           for s, u in (align or {}).items())
     if align_links:
         models_html += f"<h2>Trajectory learning</h2><ul>{align_links}</ul>"
-    here = Path(out_html).parent
     # studies are built by their own targets, not by the main job, and building one does not
-    # rewrite this page: link each always, and say which target builds those absent now
+    # rewrite this page: link those built when it was written, name the target of the others
     study_links = "".join(
-        f'<li><a href="{html.escape(u)}">{html.escape(s)}</a>' + ("" if (here / u).exists() else
-        f' <span class="absent">(not built when this index was written: <code>snakemake '
-        f'study_{html.escape(s)}</code> builds it)</span>') + "</li>" for s, u in (studies or {}).items())
+        (f'<li><a href="{html.escape(u)}">{html.escape(s)}</a></li>' if (here / u).exists() else
+         f'<li>{html.escape(s)} <span class="absent">(not built: run <code>snakemake study_{html.escape(s)}</code>'
+         f')</span></li>') for s, u in (studies or {}).items())
     if study_links:
         models_html += f"<h2>Studies</h2><ul>{study_links}</ul>"
     if compare:
@@ -220,12 +186,12 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
                             for b, u in (bearing or {}).items())
     if bearing_links:
         models_html += f"<h2>Bearing-only replays</h2><ul>{bearing_links}</ul>"
-    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>uavpipe flights</title>
+    page = f"""<!doctype html><html lang="en"><head><meta charset="utf-8"><title>uavpipe flights</title>
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>
 <p>{len(rows)} flights, {n_failed} failed{f", {len(skipped)} manifest rows skipped" if skipped else ""}.</p>
-<table><thead><tr><th>flight</th><th>date (UTC)</th><th>vehicle</th><th>status</th><th>format</th><th>duration [s]</th><th>distance [m]</th>
-<th>max speed [m/s]</th><th>maneuvers</th><th>ingest warnings</th></tr></thead>
+<table><thead><tr><th>flight</th><th>date (UTC)</th><th>vehicle</th><th>status</th><th>format</th><th>duration</th><th>distance (horizontal path)</th>
+<th>max horizontal speed</th><th>maneuvers</th><th>ingest warnings</th></tr></thead>
 <tbody>{''.join(body)}</tbody></table>{skipped_html}{models_html}</body></html>"""
     write_page(page, out_html)
     return table

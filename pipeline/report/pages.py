@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import jinja2
@@ -53,6 +54,17 @@ def render(template: str | os.PathLike, **context) -> str:
     return env.get_template(Path(template).name).render(**context)
 
 
+#: an ``<html>`` start tag without a ``lang`` attribute
+_HTML_TAG = re.compile(r"<html(?![^>]*\blang=)([^>]*)>", re.I)
+
+
+def with_lang(page: str, lang: str = "en") -> str:
+    """``page`` with ``lang`` on its ``<html>`` element (screen readers pick the voice, the
+    browser the hyphenation and spelling from it); a page that names a language keeps it."""
+    return _HTML_TAG.sub(lambda m: f'<html lang="{lang}"{m.group(1)}>', page, count=1)
+
+
 def write_page(page: str, out_html: str | os.PathLike) -> None:
-    """Write ``page`` to ``out_html`` atomically (:func:`pipeline.io.atomic.write_text_atomic`)."""
-    write_text_atomic(out_html, page)
+    """Write ``page`` to ``out_html`` atomically (:func:`pipeline.io.atomic.write_text_atomic`),
+    its ``<html>`` element marked English (:func:`with_lang`)."""
+    write_text_atomic(out_html, with_lang(page))

@@ -466,6 +466,46 @@ def messages_table(msgs: pd.DataFrame | None) -> tuple[list[str], list[list[str]
     return headers, rows
 
 
+def param_text(v) -> str:
+    """A parameter value as text that never hides a digit: an integer as an integer
+    (``20261120``, not ``2.026112e+07``); a value a float32 holds exactly (the autopilots store
+    parameters as float32) as the shortest text that reads back to that float32 (``0.15``, not
+    ``0.15000000596046448``); any other float as Python's shortest round-trip ``repr``. Two
+    float32 values give two texts, as do two float64 values; :func:`param_texts` keeps a row of
+    mixed ones apart."""
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return "–" if v is None else str(v)
+    if not np.isfinite(x):
+        return "NaN" if np.isnan(x) else ("∞" if x > 0 else "−∞")
+    if x.is_integer() and abs(x) < 2.0 ** 53:
+        return str(int(x))
+    x32 = np.float32(x)
+    if np.isfinite(x32) and float(x32) == x:
+        return np.format_float_positional(x32, unique=True, trim="-") if 1e-5 <= abs(x) < 1e16 \
+            else np.format_float_scientific(x32, unique=True, trim="-")
+    return repr(x)
+
+
+def param_texts(values) -> list[str]:
+    """:func:`param_text` of each value, except that values which differ always read
+    differently (a float32's short text can equal another float64's ``repr``: then every
+    non-integer value of the row is written as its float64 ``repr``)."""
+    out = [param_text(v) for v in values]
+    seen: dict[str, float] = {}
+    for v, t in zip(values, out):
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            continue
+        if t in seen and seen[t] != x and not (np.isnan(x) and np.isnan(seen[t])):
+            return [t if t in ("–", "NaN") or t.lstrip("-").isdigit() else repr(float(v))
+                    for v, t in zip(values, out)]
+        seen[t] = x
+    return out
+
+
 def params_table(params: pd.DataFrame | None) -> tuple[list[str], list[list[str]]]:
     """The parameters as ``(headers, rows)``: name, last value, time of that value [s], and
     how many times it was set (sorted by name)."""
@@ -476,7 +516,7 @@ def params_table(params: pd.DataFrame | None) -> tuple[list[str], list[list[str]
     rows = []
     for name, g in p.groupby(p["name"].astype(str), sort=True):
         last = g.iloc[-1]
-        rows.append([name, f"{float(last['value']):.7g}", f"{int(last['t_ns']) * 1e-9:.3f}", str(len(g))])
+        rows.append([name, param_text(last["value"]), f"{int(last['t_ns']) * 1e-9:.3f}", str(len(g))])
     return headers, rows
 
 
@@ -533,16 +573,26 @@ def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None 
     return fig
 
 
+#: the timeline rows of the segments table (``pipeline.preprocess.segment``): flight-mode runs
+#: (labels ``mode:<name>``) and the labelled maneuvers (labels stream, simulation truth, windows)
+MODE_SEGMENTS_ROW = "segments: flight mode"
+LABEL_SEGMENTS_ROW = "segments: maneuvers"
+
+
 def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = None) -> go.Figure | None:
-    """Maneuver timeline: labelled segments as bars; classifier label and confidence if given."""
+    """Maneuver timeline: the segments as bars, flight-mode runs (``mode:<name>``) on their own
+    row apart from the labelled maneuvers; the classifier's label and confidence if given."""
     fig = go.Figure()
     if segments is not None and len(segments):
         for r in segments.itertuples():
             t0, t1 = r.t_start_ns * 1e-9, r.t_end_ns * 1e-9
-            fig.add_trace(go.Scatter(x=[t0, t1], y=["truth", "truth"], mode="lines",
-                                     line=dict(width=14, color=label_colour(r.label)),
-                                     name=str(r.label), showlegend=False, hovertext=str(r.label)))
-            fig.add_annotation(x=(t0 + t1) / 2, y="truth", text=str(r.label), showarrow=False, yshift=14,
+            lab = str(r.label)
+            is_mode = lab.startswith("mode:")
+            row, text = (MODE_SEGMENTS_ROW, lab[len("mode:"):]) if is_mode else (LABEL_SEGMENTS_ROW, lab)
+            fig.add_trace(go.Scatter(x=[t0, t1], y=[row, row], mode="lines",
+                                     line=dict(width=14, color=label_colour(lab)),
+                                     name=lab, showlegend=False, hovertext=lab))
+            fig.add_annotation(x=(t0 + t1) / 2, y=row, text=text, showarrow=False, yshift=14,
                                font=dict(size=9))
     if classified is not None and len(classified):
         d = decimate(classified)

@@ -469,7 +469,7 @@ def test_every_page_kind_draws_every_panel_or_says_it_has_no_data_within_the_lim
         assert "UTC at t = 0" in r["text"] and "worst warning" in r["text"]
         assert any(p["drawn"] for p in r["panels"])
     if kind == "failed flight":
-        assert "none took the file" in r["text"] and "None" not in r["text"]
+        assert "failed (the reason is above)" in r["text"] and "None" not in r["text"]
     if kind == "model":
         assert "Metrics on this page" in r["text"] and "seed 000 §5" in r["text"] and "the thesis" not in r["text"]
     if kind == "study":

@@ -43,7 +43,8 @@ def test_takeoff_is_the_first_sample_above_the_height_or_the_speed_threshold():
 
 
 def test_only_parameters_that_differ_or_are_missing_somewhere_are_listed():
-    per = {"a": {"P1": 1.0, "P2": 2.0, "P3": 0.1}, "b": {"P1": 1.0, "P2": 3.0}, "c": {"P1": 1.0000000001, "P2": 2.0}}
+    per = {"a": {"P1": 1.0, "P2": 2.0, "P3": 0.1, "P4": 7.0}, "b": {"P1": 1.0, "P2": 3.0, "P4": 7.0},
+           "c": {"P1": 1.0, "P2": 2.0, "P4": 7.0}}
     headers, rows = compare.differing_params(per)
     assert headers == ["parameter", "a", "b", "c"]
     assert rows == [["P2", "2", "3", "2"], ["P3", "0.1", "–", "–"]]
@@ -93,3 +94,26 @@ def test_the_comparison_page_and_the_index_columns(tmp_path):
     assert '<td>2015-05-21</td><td><a href="report/compare/copter.html">copter</a></td>' in t
     assert "Skipped manifest rows" in t and "<td>lost</td><td class=\"reason\">logs/lost.bin not found</td>" in t
     assert "1 manifest rows skipped" in t
+
+
+def test_a_parameter_is_listed_whenever_its_values_differ_and_integers_read_as_integers():
+    per = {"a": {"SEED": 20261120.0, "GAIN": 1.0, "SAME": 0.25}, "b": {"SEED": 20261121.0, "GAIN": 1.0000000001,
+                                                                    "SAME": 0.25}}
+    headers, rows = compare.differing_params(per)
+    # 7 significant digits read both seeds as 2.026112e+07 and both gains as 1: both hidden
+    assert rows == [["GAIN", "1", "1.0000000001"], ["SEED", "20261120", "20261121"]]
+    # a float32 value and the float64 whose repr is the float32's short text stay apart
+    x32 = float(np.float32(0.1))
+    assert compare.differing_params({"a": {"P": 0.1}, "b": {"P": x32}})[1] == [["P", "0.1", repr(x32)]]
+
+
+def test_the_parameters_table_writes_integers_as_integers_and_floats_to_their_shortest_exact_text():
+    from pipeline.report import plots
+
+    p = pd.DataFrame({"t_ns": [0, 0, 0, 0], "name": ["SEED", "ATC_RAT_RLL_P", "TINY", "THIRD"],
+                      "value": [20261120.0, float(np.float32(0.135)), 1.25e-7, 1 / 3]})
+    values = {r[0]: r[1] for r in plots.params_table(p)[1]}
+    assert values == {"SEED": "20261120", "ATC_RAT_RLL_P": "0.135", "TINY": "1.25e-07",
+                      "THIRD": "0.3333333333333333"}
+    for text, v in zip(map(values.get, p["name"]), p["value"]):
+        assert float(text) == v or float(np.float32(text)) == v       # every text reads back exactly

@@ -172,7 +172,7 @@ def test_a_maneuver_label_has_one_colour_for_its_segment_and_its_prediction():
     cls = pd.DataFrame({"t_ns": np.arange(10) * 10**9, "label": ["M1"] * 5 + ["unknown"] * 5,
                         "confidence": np.zeros(10)})
     fig = plots.timeline(seg, cls)
-    seg_colour = {t.name: t.line.color for t in fig.data if t.mode == "lines" and t.y[0] == "truth"}
+    seg_colour = {t.name: t.line.color for t in fig.data if t.mode == "lines" and t.y[0] == plots.LABEL_SEGMENTS_ROW}
     pred_colour = {t.name: t.marker.color for t in fig.data if t.mode == "markers"}
     assert seg_colour["M1"] == pred_colour["classifier: M1"] == plots.label_colour("M1")
     assert pred_colour["classifier: unknown"] == "#999999"
@@ -210,3 +210,13 @@ def test_time_arrays_are_float32_for_display_and_values_keep_every_digit():
     t = df["t_ns"].to_numpy() * 1e-9
     np.testing.assert_allclose(x, t[np.searchsorted(df["acc_x_mps2"].to_numpy(), y)], rtol=1e-7)
     assert y.max() == df["acc_x_mps2"].max()
+
+
+def test_flight_mode_segments_get_their_own_row_apart_from_the_labelled_maneuvers():
+    seg = pd.DataFrame({"t_start_ns": [0, 61 * 10**9, 10 * 10**9], "t_end_ns": [61 * 10**9, 79 * 10**9, 20 * 10**9],
+                        "label": ["mode:MANUAL", "mode:POSCTL", "M1"]})
+    fig = plots.timeline(seg)
+    rows = {t.name: t.y[0] for t in fig.data}
+    assert rows == {"mode:MANUAL": "segments: flight mode", "mode:POSCTL": "segments: flight mode",
+                    "M1": "segments: maneuvers"}
+    assert [a.text for a in fig.layout.annotations] == ["MANUAL", "POSCTL", "M1"]

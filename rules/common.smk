@@ -237,7 +237,7 @@ ESTIMATE_MODEL = config["estimate"]["ekf_hmm"]["model"]
 ESTIMATED = [f for f in FLIGHTS if flights.loc[f, "vehicle"] in config["estimate"]["vehicles"]]
 if ESTIMATED and ESTIMATE_MODEL not in MODEL_SETS:
     sys.exit(
-        f"uavpipe: {' + '.join(map(str, workflow.configfiles)) or 'config'}: estimate.ekf_hmm.model: "
+        f"uavpipe: {' + '.join(_sources) or 'config'}: estimate.ekf_hmm.model: "
         f"no model set {ESTIMATE_MODEL!r} (model_sets: {', '.join(MODEL_SETS) or 'none'})"
     )
 

@@ -37,6 +37,8 @@ def _one_line(p) -> str:
      "uavpipe: datasets/flights.tsv:3: flight x1: braces in a path are read as workflow wildcards"),
     ([DEMO, "x_1\tresults/sim/demo/demo-quad.bin\tgeneric\tTrain\tnone\t\t"], [],
      "uavpipe: datasets/flights.tsv:3: flight_id 'x_1' must be letters, digits and '-' only"),
+    ([DEMO], ["--config", "estimate={ekf_hmm: {model: nosuch}}"],
+     "uavpipe: datasets/config.yaml + --config: estimate.ekf_hmm.model: no model set 'nosuch'"),
 ])
 def test_a_config_or_manifest_mistake_stops_the_dry_run_with_one_line(tmp_path, rows, args, expected):
     wd = copy_workflow(tmp_path / "wf", rows, tiny=False)

@@ -3,6 +3,16 @@ from snakemake.utils import min_version
 
 min_version("9.1")
 
+# the config file read once by our reader first: a YAML mistake (or a key given twice) is one
+# 'uavpipe:' line with the file's line and column, not Snakemake's "not valid JSON or YAML"
+import sys
+from pipeline.config import ConfigError, read_config_file
+
+try:
+    read_config_file("datasets/config.yaml")
+except ConfigError as _exc:
+    sys.exit(f"uavpipe: {_exc}")
+
 
 configfile: "datasets/config.yaml"
 

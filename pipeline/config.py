@@ -389,7 +389,21 @@ def read_config_file(path: str | os.PathLike) -> Any:
     try:
         return yaml.load(text, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: invalid YAML: {' '.join(str(exc).split())}") from None
+        raise ConfigError(f"{p}:{_yaml_where(exc)} invalid YAML: {_yaml_problem(exc)}") from None
+
+
+def _yaml_where(exc: Exception) -> str:
+    """``line:column:`` (1-based) of a YAML error, where it has a mark."""
+    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+    return f"{mark.line + 1}:{mark.column + 1}:" if mark is not None else ""
+
+
+def _yaml_problem(exc: Exception) -> str:
+    """The YAML error in words, without the reader's ``in "<unicode string>", line ...`` marks
+    (the location is given once, in front)."""
+    parts = [getattr(exc, "context", None), getattr(exc, "problem", None)]
+    words = "; ".join(str(x) for x in parts if x) or str(exc)
+    return " ".join(words.split())
 
 
 def command_line_overrides(cli: Mapping[str, Any] | None) -> dict[str, Any]:

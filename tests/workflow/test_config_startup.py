@@ -56,3 +56,11 @@ def test_a_setting_written_as_its_default_or_reordered_reruns_nothing(tmp_path):
     assert same.returncode == 0 and "Nothing to be done" in same.stdout + same.stderr, same.stdout[-3000:]
     changed = _snakemake(wd, "-n", target, "--config", "preprocess={rate_hz: 20}")
     assert changed.returncode == 0 and "preprocess_flight" in changed.stdout + changed.stderr
+
+
+@pytest.mark.slow
+def test_a_yaml_mistake_in_the_config_file_is_one_line_with_its_line_and_column(tmp_path):
+    # before: Snakemake's "Config file is not valid JSON or YAML" with no place
+    wd = copy_workflow(tmp_path / "wf", [DEMO], extra_config="\nbroken: {a: 1\n", tiny=False)
+    line = _one_line(_snakemake(wd, "-n"))
+    assert line.startswith("uavpipe: datasets/config.yaml:") and "invalid YAML: while parsing a flow mapping" in line

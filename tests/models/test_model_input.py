@@ -62,16 +62,22 @@ def test_the_thesis_ekf_tables_hold_the_digest_values():
     assert (t["thesis_FA_pct"].iloc[0], t["thesis_MAoT_pct"].iloc[0]) == (100, 89.00)
 
 
-def test_an_ekf_input_model_set_is_evaluated_as_tables_3_5_to_3_8(synth, rng, tmp_path):
+def _trained(synth, rng, tmp_path, **spec_extra):
+    """A model set 'm' trained on three synthetic M1 and M2 runs: (sets, spec, model paths)."""
     _, bulk = synth
     sets = []
     for lab in ("M1", "M2"):
         p = tmp_path / f"{lab}_train.parquet"
         bulk([lab], 3, rng).to_parquet(p)
         sets.append(p)
-    spec = {"data": "simulated", "input": "ekf", "vehicles": ["x"], "hmm": {"n_states": 3, "n_iter": 5}}
+    spec = {"data": "simulated", **spec_extra, "vehicles": ["x"], "hmm": {"n_states": 3, "n_iter": 5}}
     model = {"params": tmp_path / "m" / "params.npz", "meta": tmp_path / "m" / "meta.json"}
     assert run_train({"sets": sets}, model, spec, model_set="m", seed=3).status == "ok"
+    return sets, spec, model
+
+
+def test_an_ekf_input_model_set_is_evaluated_as_tables_3_5_to_3_8(synth, rng, tmp_path):
+    sets, spec, model = _trained(synth, rng, tmp_path, input="ekf")
     out = tmp_path / "m" / "evaluation.parquet"
     run_evaluate({**model, "train_sets": sets, "test_sets": sets}, {"evaluation": out}, spec, model_set="m")
     ev = read_table(out)
@@ -89,15 +95,8 @@ def test_classification_and_flight_evaluation_files_carry_the_declared_layout_an
     from pipeline.io.parquet import write_table
     from pipeline.models.run import run_classify
 
-    run, bulk = synth
-    sets = []
-    for lab in ("M1", "M2"):
-        p = tmp_path / f"{lab}.parquet"
-        bulk([lab], 3, rng).to_parquet(p)
-        sets.append(p)
-    spec = {"data": "simulated", "vehicles": ["x"], "hmm": {"n_states": 3, "n_iter": 5}}
-    model = {"params": tmp_path / "m" / "params.npz", "meta": tmp_path / "m" / "meta.json"}
-    assert run_train({"sets": sets}, model, spec, model_set="m", seed=3).status == "ok"
+    run = synth[0]
+    _, spec, model = _trained(synth, rng, tmp_path)
     flight = pd.concat([run("M1", rng), run("M2", rng, t0_ns=26_000_000_000)], ignore_index=True)
     seg = pd.DataFrame({"segment_id": [0, 1], "t_start_ns": [0, 26_000_000_000],
                         "t_end_ns": [25_000_000_000, 51_000_000_000], "label": ["M1", "M2"]})

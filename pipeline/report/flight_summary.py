@@ -167,14 +167,19 @@ def plain_text(text: str) -> str:
 def diagnostics_text(diag: Mapping | None) -> str:
     """The ingest diagnostics in words: ``"3 bytes skipped; 1 record dropped (truncated);
     gps: 2 duplicate timestamps"``, ``"nothing lost, no timestamp anomalies"``."""
+    return "; ".join(loss_parts(diag)) or "nothing lost, no timestamp anomalies"
+
+
+def loss_parts(diag: Mapping | None) -> list[str]:
+    """What decoding lost and the timestamp anomalies, one phrase each (the flight page's
+    diagnostics and the index's warnings)."""
     diag = diag or {}
     parts = []
     if diag.get("bytes_skipped"):
         parts.append(f"{diag['bytes_skipped']} byte{'s' * (diag['bytes_skipped'] != 1)} skipped")
     for reason, n in (diag.get("records_dropped") or {}).items():
         parts.append(f"{n} record{'s' * (n != 1)} dropped ({reason})")
-    parts += timestamp_anomalies(diag)
-    return "; ".join(parts) if parts else "nothing lost, no timestamp anomalies"
+    return parts + timestamp_anomalies(diag)
 
 
 def worst_warning(meta: Mapping, preprocess: Mapping | None = None) -> str:

@@ -15,7 +15,7 @@ import pandas as pd
 
 from ..io.parquet import read_flightlog
 from ..io import schema
-from .flight_summary import flight_numbers, number_texts, read_page_numbers, timestamp_anomalies, utc_date
+from .flight_summary import flight_numbers, loss_parts, number_texts, read_page_numbers, utc_date
 from .pages import write_page
 
 
@@ -45,13 +45,7 @@ def flight_summary(flight_id: str, meta_path: str | os.PathLike, page: str | os.
     lab = d / "labels.parquet"
     if lab.exists():
         row["maneuvers"] = len(pd.read_parquet(lab, columns=["label"]))
-    diag = meta.get("diagnostics", {})
-    warn = []
-    if diag.get("bytes_skipped"):
-        warn.append(f"{diag['bytes_skipped']} bytes skipped")
-    for reason, n in (diag.get("records_dropped") or {}).items():
-        warn.append(f"{n} dropped ({reason})")
-    warn += timestamp_anomalies(diag)
+    warn = loss_parts(meta.get("diagnostics"))
     row["warnings"] = "; ".join(warn[:6]) + (" …" if len(warn) > 6 else "")
     return row
 

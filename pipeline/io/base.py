@@ -86,6 +86,14 @@ class StreamFrames(MutableMapping):
         return name in self._log._tables
 
 
+#: Half-width of the window around a log's median time stamp outside which a sample cannot
+#: belong to the flight (ns): 3 days, the window the tlog reader and pymavlink's tlog resync use,
+#: widened to 4 interquartile ranges of the stamps for a log that is itself days long.
+TIME_WINDOW_NS = 3 * 24 * 3600 * 1_000_000_000
+_TIME_WINDOW_IQRS = 4.0
+_TIME_SAMPLE = 1 << 20  # stamps pooled for the quantiles (every k-th of each stream)
+
+
 def losses_text(diag: Mapping[str, Any]) -> str:
     """What decoding lost, from a log's ``diagnostics``: ``"3 bytes skipped, 1 records dropped
     (truncated)"``; ``""`` when nothing was lost."""
@@ -200,6 +208,47 @@ class FlightLog:
 
     def __getitem__(self, name: str):
         return self.streams[name] if name in self._tables else schema.empty(name)
+
+    def drop_absurd_times(self) -> int:
+        """Drop the samples whose ``t_ns`` cannot belong to this flight; return how many.
+
+        The safety net of every reader (:func:`pipeline.io.registry.read_log` calls it): a
+        sample farther than ``max(TIME_WINDOW_NS, 4 IQR)`` from the median ``t_ns`` of all
+        time-stamped streams pooled is dropped and counted in
+        ``meta['diagnostics']['records_dropped']['bad_timestamp']``, with a warning naming the
+        streams. A corrupt stamp that decoded anyway (a flipped high bit: years, or
+        ``-9.2e18``) would otherwise stretch the flight over centuries and make every later
+        stage that grids time allocate terabytes. The window is robust (median, quartiles: a
+        few corrupt stamps cannot move it) and wide (no flight spans days around its median),
+        so it never cuts a real sample; corruption inside the flight's span is each reader's
+        to find, where the file order is known (DataFlash: ``dataflash.streams.time_outliers``;
+        tlog: framing times).
+        """
+        arrays = [(name, t) for name, t, _ in self._time_arrays()]
+        total = sum(len(t) for _, t in arrays)
+        if total < 3:
+            return 0
+        stride = max(1, -(-total // _TIME_SAMPLE))
+        pool = np.concatenate([t[::stride] for _, t in arrays]).astype(np.float64)
+        q1, med, q3 = np.quantile(pool, [0.25, 0.5, 0.75])
+        half = max(float(TIME_WINDOW_NS), _TIME_WINDOW_IQRS * float(q3 - q1))
+        per_stream = {}
+        for name, t in arrays:
+            if not np.any(np.abs(t.astype(np.float64) - med) > half):
+                continue
+            table = self.table(name)  # the conformed rows (a frame-backed stream is conformed here)
+            far = np.abs(schema.arrow_to_np(table.column("t_ns")).astype(np.float64) - med) > half
+            per_stream[name] = int(far.sum())
+            self.set_table(name, table.filter(pa.array(~far)))
+        n = sum(per_stream.values())
+        if n:
+            diag = self.meta.setdefault("diagnostics", schema.new_diagnostics())
+            dropped = diag.setdefault("records_dropped", {})
+            dropped["bad_timestamp"] = dropped.get("bad_timestamp", 0) + n
+            diag.setdefault("warnings", []).append(
+                f"{n} sample(s) with an absurd time stamp dropped (farther than {half * 1e-9 / 86400:.3g} days "
+                f"from the log's median time): " + ", ".join(f"{k} {v}" for k, v in sorted(per_stream.items())))
+        return n
 
     def _time_arrays(self) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
         """(name, t_ns, instance) of every non-empty time-stamped stream, without pandas."""

@@ -168,6 +168,7 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
     finally:
         if hasher is not None:
             hasher.join()
+    log.drop_absurd_times()  # whatever the reader: no sample centuries away from the flight
     from .origin import check_gps
     from .sidecar import attach_sidecar, find_sidecar
 

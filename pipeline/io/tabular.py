@@ -28,8 +28,12 @@ Each mapped value is converted from its source ``unit`` to the canonical column'
 Errors (:class:`~pipeline.io.base.IngestError`, one line naming the file): empty file or no data
 rows, malformed CSV/Parquet, no column map matching the header, a mapped (non-optional) column
 missing from the file, a missing or unknown unit or one of the wrong dimension, no time column.
-Rows without a finite time are dropped and counted (``records_dropped['bad_time']``), non-numeric
-cells of numeric columns become NaN and are counted (``records_dropped['bad_value:<column>']``); columns
+Rows without a finite time (or one beyond the int64 ns range, ±292 years) are dropped and counted
+(``records_dropped['bad_time']``), non-numeric
+cells of numeric columns become NaN and are counted (``records_dropped['bad_value:<column>']``).
+CSV lines holding NUL bytes (a block of the file zeroed or lost on the card: text never has
+them) are dropped before parsing, their bytes counted in ``bytes_skipped`` and the rows they
+held in ``records_dropped['unparseable_row']`` (:func:`drop_nul_lines`); columns
 constant over the file, unmapped columns and absent optional ones are listed in
 ``meta['columnmap']`` and the warnings.
 
@@ -40,7 +44,9 @@ shipped one), CSV by a header line whose fields look like column names, followed
 from __future__ import annotations
 
 import functools
+import io
 import math
+import mmap
 import re
 from dataclasses import dataclass, field
 from importlib import resources
@@ -271,7 +277,7 @@ class TabularReader(LogReader):
 
     name = "tabular"
     source_format = "table"
-    version = "1"
+    version = "2"  # 2: CSV lines with NUL bytes dropped and counted (unparseable_row)
     priority = 80  # structural guess: after every magic-number format
 
     @classmethod
@@ -292,7 +298,7 @@ class TabularReader(LogReader):
     def read(self, path: Path, *, config: dict | None = None,
              progress: Progress | None = None) -> FlightLog:
         config = config or {}
-        df, kind = _read_table(path)
+        df, kind, lost = _read_table(path)
         if progress:
             progress(1, 3)
         header = [str(c) for c in df.columns]
@@ -318,18 +324,79 @@ class TabularReader(LogReader):
                                         f"{', '.join(header[:6])}{', ...' if len(header) > 6 else ''}){hint}; "
                                         "add one under ingest: columnmaps")
         if not len(df):
-            raise IngestError(path, f"{kind} has a header but no data rows")
+            raise IngestError(path, f"{kind} has a header but no data rows"
+                                    + (f" ({lost.text})" if lost is not None else ""))
         try:
             log = _apply(df, cmap, path)
         except ColumnMapError as exc:
             raise IngestError(path, f"column map {cmap.name!r}: {exc}") from None
+        if lost is not None:
+            d = log.meta["diagnostics"]
+            d["bytes_skipped"] = int(d.get("bytes_skipped") or 0) + lost.bytes
+            d["records_dropped"]["unparseable_row"] = d["records_dropped"].get("unparseable_row", 0) + lost.rows
+            d["warnings"].append(lost.text)
         log.meta["source_format"] = f"{kind}:{cmap.name}"
         if progress:
             progress(3, 3)
         return log
 
 
-def _read_table(path: Path) -> tuple[pd.DataFrame, str]:
+@dataclass(frozen=True)
+class LostLines:
+    """What :func:`drop_nul_lines` removed: ``lines`` (text lines), their ``bytes``, the
+    ``rows`` they held (at least ``lines``; see there) and a one-line ``text``."""
+
+    lines: int
+    bytes: int
+    rows: int
+    text: str
+
+
+def drop_nul_lines(data: bytes) -> tuple[bytes, LostLines | None]:
+    """``data`` (a CSV file's bytes) without the lines that hold NUL bytes.
+
+    A NUL never occurs in text, so a line holding one is damaged (a block zeroed or lost on the
+    card): parsed, it would be one row glued from the head of one record and the tail of
+    another, some later, or make the parser fail on a wrong field count. Dropped instead, and
+    counted: the block also swallowed the line breaks of the records it covered, so the rows
+    lost are estimated as the dropped bytes over the median length of an intact line (never
+    fewer than the lines dropped).
+
+    Raises
+    ------
+    ValueError
+        When the header line itself holds NUL bytes.
+    """
+    buf = np.frombuffer(data, dtype=np.uint8)
+    nul = np.flatnonzero(buf == 0)
+    if not len(nul):
+        return data, None
+    nl = np.flatnonzero(buf == 0x0A)
+    starts = np.concatenate([[0], nl + 1])           # line i is data[starts[i]:ends[i]]
+    ends = np.concatenate([nl + 1, [len(buf)]])
+    bad = np.unique(np.searchsorted(nl, nul))         # the line holding each NUL (its '\n' included)
+    if bad[0] == 0:
+        raise ValueError("the header line holds NUL bytes")
+    pieces, prev = [], 0
+    for i in bad.tolist():
+        pieces.append(data[prev:int(starts[i])])
+        prev = int(ends[i])
+    pieces.append(data[prev:])
+    lengths = ends - starts
+    good = np.ones(len(lengths), dtype=bool)
+    good[bad] = False
+    good[0] = False  # the header is no data row
+    good &= lengths > 1  # blank lines and the empty piece after the last '\n'
+    n_bytes = int(lengths[bad].sum())
+    med = float(np.median(lengths[good])) if good.any() else 0.0
+    rows = max(len(bad), int(round(n_bytes / med)) if med > 0 else 0)
+    first = int(nul[0])
+    text = (f"{len(bad)} line(s) with NUL bytes dropped ({n_bytes} bytes from byte {int(starts[bad[0]])}, "
+            f"first NUL at byte {first}): about {rows} row(s) lost")
+    return b"".join(pieces), LostLines(lines=len(bad), bytes=n_bytes, rows=rows, text=text)
+
+
+def _read_table(path: Path) -> tuple[pd.DataFrame, str, LostLines | None]:
     try:
         with open(path, "rb") as fh:
             head = fh.read(65536)
@@ -340,22 +407,32 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, str]:
         import pyarrow.parquet as pq
 
         try:
-            return pq.read_table(path).to_pandas(), "parquet"
+            return pq.read_table(path).to_pandas(), "parquet", None
         except (pa.ArrowException, OSError, ValueError) as exc:
             raise IngestError(path, f"unreadable Parquet: {exc}") from None
     if not head.strip():
         raise IngestError(path, "empty CSV (no header line)")
     hf = _header_fields(head)
     sep = hf[1] if hf else ","
+    src, lost = path, None
     try:
-        df = pd.read_csv(path, sep=sep)
+        with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as m:
+            if m.find(b"\0") >= 0:  # the rare damaged file: parse a cleaned copy
+                cleaned, lost = drop_nul_lines(m[:])
+                src = io.BytesIO(cleaned)
+    except OSError as exc:
+        raise IngestError(path, f"cannot read: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        raise IngestError(path, f"malformed CSV: {exc}") from None
+    try:
+        df = pd.read_csv(src, sep=sep)
     except pd.errors.EmptyDataError:
         raise IngestError(path, "empty CSV (no header line)") from None
     except pd.errors.ParserError as exc:
         raise IngestError(path, f"malformed CSV: {' '.join(str(exc).split())}") from None
     except UnicodeDecodeError as exc:
         raise IngestError(path, f"CSV is not UTF-8 text: {exc.reason} at byte {exc.start}") from None
-    return df, "csv"
+    return df, "csv", lost
 
 
 def _time_ns(df: pd.DataFrame, cmap: ColumnMap) -> np.ndarray:
@@ -405,7 +482,7 @@ def _apply(df: pd.DataFrame, cmap: ColumnMap, path: Path) -> FlightLog:
         targets[src] = (unit, can)
 
     t_src = _time_ns(df, cmap)
-    ok = np.isfinite(t_src)
+    ok = np.isfinite(t_src) & (np.abs(t_src) < 2.0 ** 63 - 1024)  # beyond int64 ns: not a time
     if not ok.any():
         raise ColumnMapError(f"time column {cmap.time_column!r} has no valid value")
     if not ok.all():

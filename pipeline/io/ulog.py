@@ -92,6 +92,7 @@ declares 0.05-25 m, all 361 samples inside; 98 fall in 0.17-6 m).
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import mmap
 import struct
@@ -164,6 +165,9 @@ class ULogReader(LogReader):
             topics.setdefault(d.name, []).append(d)
             diag["record_counts"][f"{d.name}[{d.multi_id}]"] = int(len(d.data["timestamp"]))
         if not topics:
+            if ulog.file_corruption:
+                raise IngestError(path, "corrupt ULog: no data message decoded (pyulog met corrupt bytes "
+                                        "and found no data section after them)")
             raise IngestError(path, "ULog has no data messages (empty or cut before the data section)")
 
         t0_us = int(ulog.start_timestamp)
@@ -267,16 +271,74 @@ class ULogReader(LogReader):
 
 # --- parsing and bookkeeping ------------------------------------------------------------------
 
-def _parse(path: Path):
-    """Run pyulog, wrapping its exceptions and capturing what it prints."""
+class _FullReadSeeks:
+    """The file handle pyulog's definitions loop reads through: a relative seek right after a
+    short read counts from where the read would have ended had it returned every byte asked for.
+
+    Why: pyulog's ``_read_file_definitions`` (1.3.0) steps over a corrupt message header (type 0,
+    size 0 or size > 10000) with ``read(size)`` and then ``seek(-2 - size, 1)``, meaning "one byte
+    past the header". Within ``size`` bytes of the end of the file the read returns fewer bytes,
+    so the seek lands up to 64 KiB *before* the header; the byte-wise rescan from there walks
+    onto the same header again and the loop never ends (a ULog whose ``ADD_LOGGED`` message was
+    hit, so that the definitions scan runs on into the data, hangs for good). Counting the seek
+    from the full read's end restores what pyulog means (one byte on; the end-of-section seek
+    back onto the header start), so every step moves forward and the scan ends at the end of
+    the file. The data loop needs no help: it stops at a short read before any seek.
+    """
+
+    __slots__ = ("_fh", "_full_end")
+
+    def __init__(self, fh):
+        self._fh = fh
+        self._full_end: int | None = None  # where the last read would have ended, if it was short
+
+    def read(self, n: int = -1) -> bytes:
+        start = self._fh.tell()
+        data = self._fh.read(n)
+        self._full_end = start + n if n is not None and len(data) < n else None
+        return data
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        if whence == 1 and self._full_end is not None:
+            offset, whence = self._full_end + offset, 0
+        self._full_end = None
+        return self._fh.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._fh.tell()
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+@functools.lru_cache(maxsize=1)
+def _ulog_class():
+    """pyulog's ``ULog`` whose definitions section is read through :class:`_FullReadSeeks`
+    (the data section keeps the plain file handle: no per-read cost on the bulk of the file)."""
     from pyulog import ULog
+
+    class _GuardedULog(ULog):
+        def _read_file_definitions(self):
+            raw = self._file_handle
+            self._file_handle = _FullReadSeeks(raw)
+            try:
+                return super()._read_file_definitions()
+            finally:
+                self._file_handle = raw
+
+    return _GuardedULog
+
+
+def _parse(path: Path):
+    """Run pyulog (guarded against its end-of-file rescan loop, :class:`_FullReadSeeks`),
+    wrapping its exceptions and capturing what it prints."""
     from pyulog.exceptions import ULogException
 
     buf = io.StringIO()
     try:
         # our own handle: pyulog leaves its file open when it raises
         with open(path, "rb") as fh, contextlib.redirect_stdout(buf):
-            ulog = ULog(fh)
+            ulog = _ulog_class()(fh)
     except ULogException as exc:
         raise IngestError(path, f"not a readable ULog: {exc}") from None
     except (struct.error, ValueError, IndexError, KeyError, OverflowError, UnicodeDecodeError,

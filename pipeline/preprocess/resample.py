@@ -39,6 +39,17 @@ from ..frames.rotations import quat_continuity, quat_slerp
 
 METHODS = ("linear", "nearest", "previous", "slerp", "mean")
 
+#: Most grid points :func:`make_grid` builds: ``state`` holds about 40 float64 columns, so
+#: 2e7 points are ~6 GiB, as much as one flight's job should take (9 days at 25 Hz, 2.3 days
+#: at 100 Hz; real flights are hours). A longer grid means a corrupt time base.
+MAX_GRID_SAMPLES = 20_000_000
+
+
+class TimeBaseError(ValueError):
+    """A flight's time stamps cannot be put on a grid (a span of days: a corrupt time base).
+    ``str(err)`` is one line naming the span and the rate; the stage writes the flight's
+    failure placeholder with it (:func:`pipeline.preprocess.run.run_preprocess`)."""
+
 
 def median_period_ns(t_ns: NDArray[np.int64]) -> float:
     """Median positive step of a sorted time vector (ns); NaN with fewer than two samples."""
@@ -122,12 +133,28 @@ def repair_timestamps(df: pd.DataFrame, *, clock_jump_s: float | None = 3600.0
     return out.reset_index(drop=True), diag
 
 
-def make_grid(t_start_ns: int, t_end_ns: int, rate_hz: float) -> NDArray[np.int64]:
-    """Uniform grid ``t_start + round(k / rate)`` (ns) covering ``[t_start, t_end]``."""
+def make_grid(t_start_ns: int, t_end_ns: int, rate_hz: float, *,
+              max_samples: int = MAX_GRID_SAMPLES) -> NDArray[np.int64]:
+    """Uniform grid ``t_start + round(k / rate)`` (ns) covering ``[t_start, t_end]``.
+
+    Raises
+    ------
+    TimeBaseError
+        The grid would hold more than ``max_samples`` points (:data:`MAX_GRID_SAMPLES`): the
+        span is days long, which no flight is, so its time stamps are corrupt. Without this
+        the allocation fails with a MemoryError (or takes the machine's memory).
+    """
     if rate_hz <= 0 or not np.isfinite(rate_hz):
         raise ValueError(f"rate_hz must be positive, got {rate_hz}")
     if t_end_ns < t_start_ns:
         return np.empty(0, dtype=np.int64)
+    span_s = (float(t_end_ns) - float(t_start_ns)) * 1e-9  # float: int64 spans can overflow
+    n_float = np.floor(span_s * rate_hz + 1e-9) + 1
+    if n_float > max_samples:
+        raise TimeBaseError(
+            f"time span {span_s:.6g} s ({span_s / 86400:.3g} days, t_ns {t_start_ns} to {t_end_ns}) at "
+            f"{rate_hz:g} Hz would need {n_float:.3g} grid samples (limit {max_samples:.3g}): "
+            "corrupt time stamps in the log?")
     n = int(np.floor((t_end_ns - t_start_ns) * rate_hz * 1e-9 + 1e-9)) + 1
     return t_start_ns + np.round(np.arange(n) * (1e9 / rate_hz)).astype(np.int64)
 

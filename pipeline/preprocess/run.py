@@ -11,21 +11,28 @@ preprocess`` both call, with the declared paths:
 A flight whose ingest failed (``meta.json`` ``status: failed``) gets *placeholder* outputs:
 empty ``state``/``segments``/``calibration`` tables with the full schema and ``status: failed``
 plus the ingest's reason in the table metadata and the JSON diagnostics, so every downstream job
-still finds its inputs and reports the failure instead of crashing.
+still finds its inputs and reports the failure instead of crashing. So does a flight whose
+preprocessing raises (a time base spanning days, :class:`~.resample.TimeBaseError`; a numerical
+failure; out of memory): its reason is one line, ``preprocessing failed: ...``, and one bad
+flight never stops the others. A configuration error (:class:`~pipeline.config.ConfigError`)
+still raises: it is no flight's fault, and every flight would fail the same way.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
+from ..config import ConfigError
 from ..io import schema
 from ..io.parquet import read_flightlog, write_json, write_table
 from ..io.stage import declared
 from .calibrate import CALIBRATION
+from .resample import TimeBaseError
 from .state import PreprocessResult, preprocess_log, summary_line, write_outputs
 
 
@@ -64,18 +71,13 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
     fid = meta.get("flight_id")
     paths = {k: declared(outputs, k) for k in ("state", "segments", "calibration", "info")}
     if meta.get("status") == "failed":
-        reason = f"ingest failed: {meta.get('error') or 'unknown reason'}"
-        diag = {"flight_id": fid, "status": "failed", "error": reason}
-        extra = {"flight_id": fid, "status": "failed", "error": reason}
-        write_table(schema.empty("state"), paths["state"], schema.STATE, name="state", extra=extra)
-        write_table(schema.empty("segments"), paths["segments"], schema.SEGMENTS,
-                    name="segments", extra=extra)
-        write_table(schema.empty("calibration"), paths["calibration"], CALIBRATION, name="calibration",
-                    extra=extra)
-        write_json(diag, paths["info"])
-        print(f"uavpipe preprocess: {fid}: placeholder outputs ({reason})", file=sys.stderr)
-        return PreprocessStageResult(flight_id=fid, status="failed", diagnostics=diag)
-    res = preprocess_log(read_flightlog(meta_path.parent), config, vehicle=vehicle or None)
+        return _placeholder(paths, fid, f"ingest failed: {meta.get('error') or 'unknown reason'}")
+    try:
+        res = preprocess_log(read_flightlog(meta_path.parent), config, vehicle=vehicle or None)
+    except ConfigError:
+        raise
+    except Exception as exc:  # one bad flight never stops the others: its placeholder says why
+        return _placeholder(paths, fid, f"preprocessing failed: {_one_line(exc)}")
     diag = {**res.diagnostics, "status": "ok"}
     res = PreprocessResult(state=res.state, segments=res.segments, calibration=res.calibration,
                            diagnostics=diag)
@@ -83,3 +85,29 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
                   calibration_path=paths["calibration"], info_path=paths["info"])
     print(f"uavpipe preprocess: {fid}: {summary_line(diag)}", file=sys.stderr)
     return PreprocessStageResult(flight_id=fid, status="ok", diagnostics=diag)
+
+
+def _one_line(exc: BaseException) -> str:
+    """``exc`` as one line: the message alone for a :class:`TimeBaseError` (it says what and
+    why); ``Type: message (at file:line)`` otherwise, the line where it was raised."""
+    msg = " ".join(str(exc).split()) or "(no message)"
+    if isinstance(exc, TimeBaseError):
+        return msg
+    if isinstance(exc, MemoryError):
+        msg = f"out of memory ({msg})"
+    tb = traceback.extract_tb(exc.__traceback__)
+    where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    return f"{type(exc).__name__}: {msg}{where}"
+
+
+def _placeholder(paths: Mapping, fid: str | None, reason: str) -> PreprocessStageResult:
+    """Write the failed flight's placeholder outputs (empty tables with the full schema,
+    ``status: failed`` and ``reason`` in their metadata and the JSON diagnostics)."""
+    diag = {"flight_id": fid, "status": "failed", "error": reason}
+    extra = {"flight_id": fid, "status": "failed", "error": reason}
+    write_table(schema.empty("state"), paths["state"], schema.STATE, name="state", extra=extra)
+    write_table(schema.empty("segments"), paths["segments"], schema.SEGMENTS, name="segments", extra=extra)
+    write_table(schema.empty("calibration"), paths["calibration"], CALIBRATION, name="calibration", extra=extra)
+    write_json(diag, paths["info"])
+    print(f"uavpipe preprocess: {fid}: placeholder outputs ({reason})", file=sys.stderr)
+    return PreprocessStageResult(flight_id=fid, status="failed", diagnostics=diag)

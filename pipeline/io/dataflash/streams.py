@@ -41,7 +41,11 @@ GPS fix, else POS) -> ``meta['ned_origin']``.
 
 Time. ``t_ns = TimeUS·1000`` (``TimeMS·10⁶`` on old logs; old ``GPS`` uses its boot-time
 field ``T``) minus ``t0``, the first boot time stamp of a record mapped to a canonical stream.
-Untimed records take the time of the preceding timed record in file order. UTC of ``t_ns = 0``
+Untimed records take the time of the preceding timed record in file order. A record whose boot
+time stamp stands out from its neighbours in file order (more than :data:`TIME_OUTLIER_US` from
+the median of the ``2w + 1`` timed records around it, ``w`` = :data:`TIME_OUTLIER_HALF_WINDOW`,
+all message types together) has a corrupt time field and is dropped before ``t0`` is chosen,
+counted in ``records_dropped['bad_timestamp']`` (:func:`time_outliers`). UTC of ``t_ns = 0``
 comes from the first GPS record with a week number:
 
 .. math:: t_{UTC} = 315964800 + 604800\\,\\mathrm{week} + \\mathrm{tow}_{ms}/1000 - n
@@ -54,6 +58,7 @@ pymavlink's ``DFReader.py::_gpsTimeToTime`` subtracts a fixed 18), recorded in
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
@@ -62,16 +67,24 @@ import numpy as np
 from .. import schema
 from ..base import FlightLog
 from ..gpstime import gps_to_utc_ns
-from .decode import DecodeResult
+from .decode import Columns, DecodeResult
 
 SOURCE_FORMAT = "ardupilot_dataflash"
 READER_NAME = "dataflash"
-READER_VERSION = "3"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3)
+READER_VERSION = "4"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: bad_timestamp drops
 
 GPS_EPOCH_UNIX_S = 315964800
 #: pymavlink's fixed GPS − UTC (DFReader._gpsTimeToTime), true since 2017-01-01; the reader
 #: uses :func:`pipeline.io.gpstime.gps_to_utc_ns` (the table by date) instead
 LEAP_SECONDS = 18
+
+#: A boot time stamp farther than this (µs) from the median of its neighbours in file order is
+#: corrupt (:func:`time_outliers`). No logger holds a record back for a minute, and records
+#: interleave within milliseconds; a flipped bit >= 26 of the µs counter moves a stamp by more.
+TIME_OUTLIER_US = 60_000_000
+#: Neighbours on each side in the window of :func:`time_outliers` (up to this many corrupt
+#: stamps in a row are still outvoted).
+TIME_OUTLIER_HALF_WINDOW = 4
 
 
 
@@ -143,6 +156,92 @@ class _Clock:
             return np.zeros(len(off), dtype=np.int64)
         k = np.searchsorted(idx_off, off, side="right") - 1
         return idx_t[np.maximum(k, 0)]
+
+
+def time_outliers(t: np.ndarray, limit: float = TIME_OUTLIER_US,
+                  half_window: int = TIME_OUTLIER_HALF_WINDOW) -> np.ndarray:
+    """Mask of the stamps of ``t`` (in arrival order) that stand out from their neighbours.
+
+    A stamp is an outlier when it lies more than ``limit`` from the median of the
+    ``2 * half_window + 1`` stamps centred on it (the window is moved inward at the ends):
+
+    .. math:: |t_k - \\operatorname{median}(t_{k-w}, \\dots, t_{k+w})| > \\Delta
+
+    Why this rule: the running median of a non-decreasing sequence is the sequence itself, so a
+    real clock is never cut, whatever pauses it has (logging stopped while disarmed, gaps of
+    hours); a reboot that restarts the clock moves the median by at most ``w`` samples. A
+    corrupt stamp (a flipped bit in ``TimeUS``, up to ``w`` of them in a row) departs from
+    both its predecessors and its successors, which outvote it. A window around the median of
+    the whole log would miss corruption inside the log's span and cut a log with long pauses.
+    Only the first and last ``w`` stamps are judged against a one-sided window: a real pause of
+    more than ``limit`` there costs those records. Only stamps next to a step larger than
+    ``limit`` are examined, so a clean log costs one pass over its stamps.
+    """
+    t = np.asarray(t)
+    n = len(t)
+    bad = np.zeros(n, dtype=bool)
+    if n < 3:
+        return bad  # nothing to outvote with
+    tf = t.astype(np.float64)  # int64 differences of corrupt stamps could overflow
+    step = np.abs(np.diff(tf)) > limit
+    if not step.any():
+        return bad
+    near = np.zeros(n, dtype=bool)
+    near[:-1] |= step
+    near[1:] |= step
+    k = np.flatnonzero(near)
+    m = min(2 * half_window + 1, n)
+    lo = np.clip(k - half_window, 0, n - m)
+    med = np.median(tf[lo[:, None] + np.arange(m)], axis=1)
+    bad[k] = np.abs(tf[k] - med) > limit
+    return bad
+
+
+def _drop_time_outliers(res: DecodeResult, diag: dict) -> tuple[DecodeResult, _Clock]:
+    """``res`` without the records whose own time stamp is corrupt (:func:`time_outliers` over
+    all timed records in file order), counted in ``diag['records_dropped']['bad_timestamp']``
+    with a warning naming the message types, and its clock. ``res`` itself is not changed."""
+    clock = _Clock(res)
+    names, offs, times = [], [], []
+    for name in res.formats:
+        t = clock.own_time_us(name)
+        if t is not None and len(t):
+            names.append(name)
+            offs.append(res.offsets[name])
+            times.append(t)
+    if not names:
+        return res, clock
+    o = np.concatenate(offs)
+    order = np.argsort(o, kind="stable")
+    bad_sorted = time_outliers(np.concatenate(times)[order])
+    if not bad_sorted.any():
+        return res, clock
+    bad = np.empty(len(o), dtype=bool)
+    bad[order] = bad_sorted
+    tables, offsets = dict(res.tables), dict(res.offsets)
+    per_type = {}
+    a = 0
+    for name, t in zip(names, times):
+        drop = bad[a:a + len(t)]
+        a += len(t)
+        if not drop.any():
+            continue
+        keep = ~drop
+        per_type[name] = int(drop.sum())
+        src, cols = res.tables[name], Columns()
+        for col in src:
+            cols.set_lazy(col, lambda src=src, col=col, keep=keep: src[col][keep])
+        tables[name] = cols
+        offsets[name] = res.offsets[name][keep]
+    n = sum(per_type.values())
+    dropped = diag["records_dropped"]
+    dropped["bad_timestamp"] = dropped.get("bad_timestamp", 0) + n
+    diag["warnings"].append(
+        f"{n} record(s) with a corrupt time stamp dropped (more than {TIME_OUTLIER_US / 1e6:g} s from "
+        f"the median of their neighbours in file order): "
+        + ", ".join(f"{k} {v}" for k, v in sorted(per_type.items())))
+    res = dataclasses.replace(res, tables=tables, offsets=offsets)
+    return res, _Clock(res)
 
 
 def _mode_names(res: DecodeResult) -> dict[int, str]:
@@ -787,8 +886,9 @@ def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,
 def stream_parts(res: DecodeResult, diag: dict | None = None) -> dict[str, list[Part] | None]:
     """The loose stream parts of a decoded log, ``{stream: [part, ...] or None}``, with the
     clock and ``t0`` :func:`to_flightlog` uses (what it conforms; tests compare it with pandas)."""
-    clock = _Clock(res)
-    return dict(iter_stream_parts(res, clock, _first_time_us(res, clock), diag or schema.new_diagnostics()))
+    diag = diag or schema.new_diagnostics()
+    res, clock = _drop_time_outliers(res, diag)
+    return dict(iter_stream_parts(res, clock, _first_time_us(res, clock), diag))
 
 
 def _first_time_us(res: DecodeResult, clock: _Clock) -> int:
@@ -865,7 +965,7 @@ def to_flightlog(res: DecodeResult) -> FlightLog:
     diag["records_dropped"] = dict(res.diagnostics["records_dropped"])
     diag["record_counts"] = dict(res.diagnostics["record_counts"])
     diag["warnings"] = list(res.diagnostics["warnings"])
-    clock = _Clock(res)
+    res, clock = _drop_time_outliers(res, diag)  # before t0: a corrupt first stamp would shift every t_ns
     t0_us = _first_time_us(res, clock)
 
     params: dict[str, float] = {}

@@ -1,0 +1,218 @@
+"""Corrupt input at ingest: bit-flipped DataFlash time stamps, a ULog whose definitions scan runs
+off the end of the file, a CSV with a block of NUL bytes. Each gives a partial log with its drops
+counted, or one IngestError line naming the file, in seconds (project rule on bad input).
+
+The corruption patterns are fixed (``random.Random`` / ``default_rng`` with constant seeds): what
+is tested is a particular damaged file, not a distribution of them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import random
+import signal
+import struct
+import time
+
+import numpy as np
+import pytest
+
+import helpers_tabular
+from helpers import realdata_file
+from helpers_ulog import ULogWriter
+from pipeline.io import registry
+from pipeline.io.base import IngestError, losses_text
+from pipeline.io.dataflash.streams import TIME_OUTLIER_US, time_outliers
+from pipeline.simulate.demo import write_demo_flight
+
+DEMO_S = 60.0  # the demo flight's length (s); its log starts 2 s after boot
+
+
+class _Hung(BaseException):
+    """Raised by :func:`deadline`; a BaseException so no reader's catch-all turns it into an
+    IngestError."""
+
+
+@contextlib.contextmanager
+def deadline(seconds: float):
+    """Fail the test instead of hanging when the body runs longer than ``seconds``."""
+    def fire(signum, frame):
+        raise _Hung()
+
+    old = signal.signal(signal.SIGALRM, fire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    t = time.perf_counter()
+    try:
+        yield
+    except _Hung:
+        pytest.fail(f"still running after {time.perf_counter() - t:.1f} s (hang)")
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+# --- DataFlash: flipped bits in TimeUS -------------------------------------------------------
+
+def _bit_flipped_demo(path, *, start=20_000, step=997, seed=1):
+    """The demo DataFlash log (~230 kB) with one bit flipped every ``step`` bytes from ``start``."""
+    write_demo_flight(path, seed=0, duration_s=DEMO_S)
+    data = bytearray(path.read_bytes())
+    r = random.Random(seed)
+    for i in range(start, len(data), step):
+        data[i] ^= 1 << r.randrange(8)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def test_a_bit_flipped_dataflash_log_drops_and_counts_its_corrupt_time_stamps(tmp_path):
+    log = registry.read_log(_bit_flipped_demo(tmp_path / "flipped.bin"))
+    diag = log.meta["diagnostics"]
+    assert log.meta["status"] == "partial"
+    assert diag["records_dropped"]["bad_timestamp"] >= 20  # 35 with this pattern
+    assert "bad_timestamp" in losses_text(diag)
+    assert any("corrupt time stamp" in w for w in diag["warnings"])
+    # what is left lies in the flight: no stamp more than a minute outside it (was -9.2e18 ns)
+    lo, hi = log.span_ns()
+    assert -TIME_OUTLIER_US * 1000 <= lo and hi <= (DEMO_S * 1e6 + TIME_OUTLIER_US) * 1000
+    assert log.meta["t0_boot_ns"] == 2_000_000_000  # t0 from an intact first record
+    assert log.n_rows()["imu"] > 0.95 * DEMO_S * 50  # 50 Hz IMU: the bulk is kept
+
+
+def test_a_clean_dataflash_log_loses_no_record_to_the_time_stamp_check(tmp_path):
+    p = tmp_path / "clean.bin"
+    write_demo_flight(p, seed=0, duration_s=DEMO_S)
+    log = registry.read_log(p)
+    assert log.meta["status"] == "ok"
+    assert "bad_timestamp" not in log.meta["diagnostics"]["records_dropped"]
+
+
+def test_the_time_stamp_check_keeps_pauses_and_reboots_and_cuts_isolated_stamps():
+    s = 1_000_000  # µs
+    clean = np.concatenate([np.arange(0, 20 * s, s // 50),           # 20 s at 50 Hz
+                            np.arange(3600 * s, 3610 * s, s // 50),  # an hour's pause in logging
+                            np.arange(0, 5 * s, s // 50)])           # a reboot: the clock restarts
+    assert not time_outliers(clean).any()
+    t = clean.copy()
+    hit = [100, 101, 1500, len(t) - 1]  # two in a row, one inside, the very last
+    t[100] = -(1 << 62)
+    t[101] = 1 << 60
+    t[1500] += 1 << 36  # bit 36 of the µs counter: +19 h
+    t[-1] = 1 << 45
+    bad = time_outliers(t)
+    assert sorted(np.flatnonzero(bad).tolist()) == hit
+    assert not time_outliers(np.array([0, 1 << 62])).any()  # two stamps: nothing to outvote with
+
+
+def test_a_csv_row_stamped_centuries_away_is_dropped_by_the_common_ingest_path(tmp_path):
+    rng = np.random.default_rng(3)
+    df = helpers_tabular.table(rng, 30)
+    df.loc[17, "t_ms"] = 1e12  # 31.7 years after the others: a valid int64 ns stamp
+    df.loc[23, "t_ms"] = 1e15  # 31 700 years: beyond int64 ns, no time at all
+    p = tmp_path / "far.csv"
+    df.to_csv(p, index=False)
+    log = registry.read_log(p, config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
+    d = log.meta["diagnostics"]
+    # the row's samples in the four streams it feeds (gps, attitude, baro, imu) are dropped
+    assert d["records_dropped"] == {"bad_time": 1, "bad_timestamp": 4} and log.meta["status"] == "partial"
+    assert any("absurd time stamp" in w and "gps 1" in w for w in d["warnings"])
+    assert log.span_ns() == (0, 29 * 100_000_000)  # 10 Hz rows: the flight is 2.9 s
+    assert len(log["gps"]) == 28
+
+
+# --- ULog: the definitions scan runs into the end of the file ------------------------------
+
+def _ulog_definitions_never_end(path):
+    """A small ULog (3000 sensor_combined samples, ~150 kB) damaged in two places: its one
+    ADD_LOGGED message has a corrupt type byte, so pyulog's definitions scan never meets the
+    data section and steps over every data message to the end of the file; there the last
+    message header claims 0xFFFF bytes of type 0, more than the file holds."""
+    rng = np.random.default_rng(0)
+    n = 3000
+    w = ULogWriter(start_us=1_000_000)
+    w.add_info("sys_name", "PX4")
+    w.add_param("SYS_AUTOSTART", 4001)
+    fields = [("uint64_t", "timestamp"), ("float[3]", "gyro_rad"), ("uint32_t", "gyro_integral_dt"),
+              ("int32_t", "accelerometer_timestamp_relative"), ("float[3]", "accelerometer_m_s2"),
+              ("uint32_t", "accelerometer_integral_dt")]
+    w.topic("sensor_combined", fields, {
+        "timestamp": 1_000_000 + np.arange(n, dtype=np.uint64) * 4_000,
+        "gyro_rad": rng.normal(0, 0.01, (n, 3)).astype(np.float32),
+        "gyro_integral_dt": np.full(n, 4_000, np.uint32),
+        "accelerometer_timestamp_relative": np.zeros(n, np.int32),
+        "accelerometer_m_s2": rng.normal([0, 0, -9.81], 0.05, (n, 3)).astype(np.float32),
+        "accelerometer_integral_dt": np.full(n, 4_000, np.uint32)})
+    raw = bytearray(w.to_bytes())
+    add = raw.find(b"A" + struct.pack("<BH", 0, 0) + b"sensor_combined") - 2
+    assert add > 0
+    raw[add + 2] = ord("z")
+    pos, last = 16, 16
+    while pos + 3 <= len(raw):  # the last message's header
+        last = pos
+        pos += 3 + (raw[pos] | raw[pos + 1] << 8)
+    raw[last:last + 3] = b"\xff\xff\x00"
+    path.write_bytes(bytes(raw))
+    return path
+
+
+def test_a_ulog_whose_definitions_never_end_fails_in_one_line_within_seconds(tmp_path):
+    p = _ulog_definitions_never_end(tmp_path / "no_data_section.ulg")
+    t = time.perf_counter()
+    with deadline(10.0), pytest.raises(IngestError) as err:
+        registry.read_log(p)
+    assert time.perf_counter() - t < 5.0
+    msg = str(err.value)
+    assert msg.startswith(f"{p}: corrupt ULog") and "\n" not in msg
+
+
+def test_the_motor_failure_ulog_with_310_overwritten_bytes_no_longer_hangs(tmp_path):
+    src = realdata_file("ulg_px4_flight_review_fixtures/motor_failure.ulg")
+    data = bytearray(src.read_bytes())
+    r = random.Random(25)  # of seeds 0-39, the one whose damage hung pyulog for good
+    for _ in range(310):
+        data[16 + int(r.random() * (len(data) - 16))] = r.getrandbits(8)
+    p = tmp_path / "motor_failure_damaged.ulg"
+    p.write_bytes(bytes(data))
+    with deadline(10.0):
+        try:
+            log = registry.read_log(p)
+        except IngestError as exc:
+            assert str(exc).startswith(f"{p}: ") and "\n" not in str(exc)
+        else:
+            assert log.meta["status"] == "partial"
+
+
+# --- CSV: a block of NUL bytes -----------------------------------------------------------------
+
+def test_a_csv_with_a_block_of_nul_bytes_counts_the_rows_it_loses(tmp_path):
+    rng = np.random.default_rng(7)
+    n = 400
+    df = helpers_tabular.table(rng, n)
+    raw = bytearray(df.to_csv(index=False).encode())
+    mid = len(raw) // 2
+    raw[mid:mid + 4096] = bytes(4096)
+    p = tmp_path / "zeroed.csv"
+    p.write_bytes(bytes(raw))
+    log = registry.read_log(p, config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
+    d = log.meta["diagnostics"]
+    got = log["gps"]
+    assert log.meta["status"] == "partial"
+    assert d["records_dropped"]["unparseable_row"] == n - len(got)  # every lost row counted
+    assert 4096 <= d["bytes_skipped"] < 4096 + 2 * 200  # the block and the two cut rows
+    assert "unparseable_row" in losses_text(d)
+    # no row glued from the head of one record and the tail of another
+    t_src = (df["t_ms"].to_numpy() - df["t_ms"].iloc[0]) * 1e6
+    k = np.searchsorted(t_src, got["t_ns"].to_numpy())
+    np.testing.assert_array_equal(t_src[k], got["t_ns"].to_numpy())
+    np.testing.assert_allclose(got["alt_msl_m"].to_numpy(), df["alt_ft"].to_numpy()[k] * 0.3048, rtol=1e-12)
+
+
+def test_a_csv_whose_header_line_holds_nul_bytes_is_one_error_line(tmp_path):
+    rng = np.random.default_rng(7)
+    raw = bytearray(helpers_tabular.table(rng, 20).to_csv(index=False).encode())
+    raw[3:6] = bytes(3)
+    p = tmp_path / "bad_header.csv"
+    p.write_bytes(bytes(raw))
+    with pytest.raises(IngestError, match="bad_header.csv: ") as err:
+        registry.read_log(p, fmt="tabular",
+                          config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
+    assert "\n" not in str(err.value)

@@ -468,7 +468,7 @@ class TlogReader(LogReader):
 
     name = "tlog"
     source_format = "mavlink_tlog"
-    version = "3"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3)
+    version = "4"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: (0, 0, 0) mag is missing
     priority = 15
 
     @classmethod
@@ -676,8 +676,17 @@ def _build(res: _Scan) -> FlightLog:
             **{f"acc_{a}_mps2": tab[f"{a}acc"] * (G0 * 1e-3) for a in "xyz"},
             "temp_degC": np.where(tab["temperature"] != 0, tab["temperature"] * 0.01, np.nan),
         }))
-        streams["mag"].append(dict({
-            **base, **{f"mag_{a}_T": tab[f"{a}mag"] * 1e-7 for a in "xyz"}}))
+        # an IMU message of a board without a compass carries (0, 0, 0) mgauss: no reading
+        # (the Earth's field is 250-650 mG), so missing, never a zero field
+        mag = np.stack([np.asarray(tab[f"{a}mag"], dtype=np.float64) for a in "xyz"])
+        zero = np.all(mag == 0, axis=0)
+        if zero.all():
+            warnings.append(f"{mtype}: magnetometer fields all zero (no compass): no mag stream from it")
+            continue
+        if zero.any():
+            warnings.append(f"{mtype}: {int(zero.sum())} magnetometer sample(s) of (0, 0, 0) read as missing")
+            mag[:, zero] = np.nan
+        streams["mag"].append(dict({**base, **{f"mag_{a}_T": mag[i] * 1e-7 for i, a in enumerate("xyz")}}))
 
     # attitude
     tab = tabs.get("ATTITUDE")

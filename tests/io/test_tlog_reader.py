@@ -552,3 +552,21 @@ def test_progress_reports_bytes(tmp_path):
     TlogReader().read(path, progress=lambda done, total: calls.append((done, total)))
     size = path.stat().st_size
     assert calls[0] == (0, size) and calls[-1] == (size, size)
+
+
+def test_a_magnetometer_reading_of_zero_is_missing_and_an_imu_without_compass_gives_no_mag(tmp_path):
+    # a board without a compass fills SCALED_IMU's mag fields with 0 (the simulated tlog did):
+    # read as a zero field it would be 0 T, which no place on Earth has (25-65 µT)
+    v2, m = _mav()
+    recs = [(T0_US, m.heartbeat_encode(2, 3, 1, 0, 4))]
+    recs += [(T0_US + 1000 * k, m.scaled_imu_encode(100 + k, 0, 0, -1000, 0, 0, 0, 0, 0, 0, 0)) for k in range(1, 4)]
+    recs += [(T0_US + 5000 + 1000 * k, m.scaled_imu2_encode(200 + k, 0, 0, -1000, 0, 0, 0,
+                                                            *((210, -55, 430) if k != 2 else (0, 0, 0)), 0))
+             for k in range(1, 4)]
+    log = TlogReader().read(write_tlog(tmp_path / "nomag.tlog", recs))
+    mag, warn = log["mag"], log.meta["diagnostics"]["warnings"]
+    assert set(mag["src"]) == {"SCALED_IMU2"} and len(log["imu"]) == 6
+    assert mag["mag_x_T"].isna().tolist() == [False, True, False]
+    assert mag["mag_z_T"].iloc[0] == pytest.approx(43e-6)
+    assert any("SCALED_IMU: magnetometer fields all zero" in w for w in warn)
+    assert any("SCALED_IMU2: 1 magnetometer sample(s) of (0, 0, 0) read as missing" in w for w in warn)

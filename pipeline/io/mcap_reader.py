@@ -54,7 +54,7 @@ class McapReader(LogReader):
 
     name = "mcap"
     source_format = "mcap"
-    version = "1"
+    version = "2"  # 2: REP 117 +/-inf ranges read as the limit (valid False)
     priority = 11
 
     @classmethod

@@ -667,6 +667,10 @@ def _conv_range(msgs, t, route, frame, ctx) -> dict[str, Rows]:
     lo, hi = col(msgs, "min_range"), col(msgs, "max_range")
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(r) & (r >= lo) & (r <= hi)
+    # REP 117: +inf "no return within max_range", -inf "closer than min_range". The other
+    # readers give an out-of-range reading a distance at the limit (valid False); so does this
+    # one, so dist_m stays finite for plots and statistics and `valid` keeps the meaning
+    r = np.where(r == np.inf, hi, np.where(r == -np.inf, lo, r))
     return {"rangefinder": {"t_abs": t, "dist_m": r, "valid": valid,
                             "orientation": np.full(len(r), route.orientation)}}
 

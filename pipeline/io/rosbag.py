@@ -101,7 +101,7 @@ class Ros1BagReader(LogReader):
 
     name = "rosbag1"
     source_format = "ros1bag"
-    version = "1"
+    version = "2"  # 2: REP 117 +/-inf ranges read as the limit (valid False)
     priority = 10
 
     @classmethod
@@ -152,7 +152,7 @@ class Ros2BagReader(LogReader):
 
     name = "rosbag2"
     source_format = "ros2bag"
-    version = "1"
+    version = "2"  # 2: REP 117 +/-inf ranges read as the limit (valid False)
     priority = 12
 
     @classmethod
@@ -245,7 +245,7 @@ class Ros2Sqlite3FileReader(LogReader):
 
     name = "rosbag2_db3"
     source_format = "ros2bag"
-    version = "1"
+    version = "2"  # 2: REP 117 +/-inf ranges read as the limit (valid False)
     priority = 14
 
     @classmethod

@@ -97,7 +97,8 @@ def make_messages(rng: np.random.Generator, n: int = N) -> dict[str, tuple[str, 
                 "variance": 0.0}
 
     def rng_(k, t):
-        r = float(rng.uniform(0.05, 8.0)) if k not in (0, 1) else (0.5 if k == 0 else 7.5)
+        # k = 2, 3: REP 117's +inf (nothing within max_range) and -inf (closer than min_range)
+        r = float(rng.uniform(0.05, 8.0)) if k not in (0, 1, 2, 3) else (0.5, 7.5, math.inf, -math.inf)[k]
         return {"header": _hdr(t, "sonar_link"), "radiation_type": 0, "field_of_view": 0.3,
                 "min_range": 0.2, "max_range": 6.0, "range": r, "variance": 0.0}
 
@@ -374,9 +375,11 @@ def check_log(log, msgs) -> None:
     lst = msgs["/sonar"][1]
     r = _rows(log["rangefinder"], "/sonar")
     dist = _arr(lst, lambda d: d["range"])
-    np.testing.assert_allclose(r["dist_m"], dist)
-    np.testing.assert_array_equal(r["valid"].to_numpy(dtype=bool), (dist >= 0.2) & (dist <= 6.0))
-    assert not r["valid"][1] and r["valid"][0]
+    np.testing.assert_array_equal(r["valid"].to_numpy(dtype=bool), np.isfinite(dist) & (dist >= 0.2) & (dist <= 6.0))
+    assert not r["valid"][1] and r["valid"][0] and not r["valid"][2] and not r["valid"][3]
+    # +/-inf read as a reading at the limit, as the other formats give out-of-range readings
+    np.testing.assert_allclose(r["dist_m"], np.where(
+        dist == np.inf, 6.0, np.where(dist == -np.inf, 0.2, dist)))
     assert (r["orientation"] == 25).all()
 
     # odometry: as logged, frames recorded

@@ -62,6 +62,8 @@ rule estimate_bearing:
     input:
         unpack(bearing_inputs),
         plotly="results/report/assets/plotly.min.js",
+        template="reports/templates/bearing.html.j2",
+        linked="reports/templates/_linked_axes.html.j2",
     output:
         **{e: f"results/estimate/{e}/{{pair}}.parquet" for e in BEARING_ESTIMATORS},
         **{

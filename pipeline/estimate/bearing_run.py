@@ -24,7 +24,9 @@ manifest. :func:`synthesise_pair` builds the encounter from their tracks:
 ``bearing_estimate``) with the bank weights beside each in ``<pair>.weights.parquet``
 (``bearing_weights``, every ``weights_every_s``). A pair whose flight is missing (no real logs
 under ``../shared``) writes empty tables with ``status: skipped`` and the reason, and prints one
-notice: the main job goes on.
+notice: the main job goes on. The page ``results/report/bearing/<pair>.html`` is the report
+stage's (:func:`pipeline.report.bearing.run_bearing_report` runs this replay with its page
+writer as ``write_page``): estimate does not import report.
 
 Scores (printed as ``RESULT`` lines and kept in the metadata): the heading convergence time
 (the first time after which the combined course 1-sigma stays below 30°, digest §8) and the
@@ -35,7 +37,7 @@ from __future__ import annotations
 
 import sys
 import zlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,7 +47,6 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from ..io import schema
-from ..io.atomic import write_text_atomic
 from ..io.parquet import read_table, write_table
 from ..io.stage import declared
 from .models import wrap_angle
@@ -298,8 +299,14 @@ def _read_track(path) -> pd.DataFrame | None:
     return read_table(path)
 
 
+#: ``write_page(path, pair, pair_or_None, tracks, reason, info)``: writes the pair's page
+#: (:func:`pipeline.report.bearing.build_bearing_page`); ``info`` holds the pair's settings,
+#: flights, track source and ``status``
+PageWriter = Callable[[Path, str, "BearingPair | None", Mapping[str, "BearingTrack"], "str | None", dict], None]
+
+
 def run_bearing_replay(inputs: Mapping | Any, outputs: Mapping | Any, config: Mapping | None, *, pair: str,
-                       seed: int = 0, **_job) -> BearingReplayResult:
+                       seed: int = 0, write_page: PageWriter | None = None, **_job) -> BearingReplayResult:
     """Replay one pair of ``estimate.bearing_only.replay`` (module docstring).
 
     Parameters
@@ -316,8 +323,15 @@ def run_bearing_replay(inputs: Mapping | Any, outputs: Mapping | Any, config: Ma
         The pair's name (a key of ``config['replay']``).
     seed : int
         Master seed (bearing noise).
+    write_page : callable, optional
+        Writes ``outputs.page`` (:data:`PageWriter`; the report stage passes its own); without
+        it no page is written.
     """
     from ..config import validate_section
+
+    def page(bp: BearingPair | None, tracks: Mapping[str, BearingTrack], reason: str | None, info: dict) -> None:
+        if write_page is not None:
+            write_page(paths["page"], pair, bp, tracks, reason, info)
 
     cfg = validate_section("estimate.bearing_only", dict(config or {}))
     paths = output_paths(outputs, pair)
@@ -332,7 +346,7 @@ def run_bearing_replay(inputs: Mapping | Any, outputs: Mapping | Any, config: Ma
         reason = f"flight(s) {', '.join(missing)} not available (no real logs under realdata_dir?)"
         _say(f"skipping pair {pair}: {reason}")
         _placeholders(paths, {**base, "status": "skipped", "error": reason})
-        _write_page(paths["page"], pair, None, {}, reason)
+        page(None, {}, reason, {**base, "status": "skipped"})
         return BearingReplayResult(status="skipped", reason=reason, diagnostics=base)
     state = _read_track(own_p)
     lp = _read_track(declared(inputs, "ownship_local_position"))
@@ -345,7 +359,7 @@ def run_bearing_replay(inputs: Mapping | Any, outputs: Mapping | Any, config: Ma
     except BearingReplayError as exc:
         _say(f"skipping pair {pair}: {exc}")
         _placeholders(paths, {**base, "status": "failed", "error": str(exc)})
-        _write_page(paths["page"], pair, None, {}, str(exc))
+        page(None, {}, str(exc), {**base, "status": "failed"})
         return BearingReplayResult(status="failed", reason=str(exc), diagnostics=base)
     base["track"] = "local_position" if lp is not None else "state"
     base["synthesis"] = bp.meta
@@ -366,7 +380,7 @@ def run_bearing_replay(inputs: Mapping | Any, outputs: Mapping | Any, config: Ma
     head = scores.get("bank_cppv", {})
     for k in ("heading_converged_s", "range_err_60s_pct"):
         print(f"RESULT bearing_replay_{k} {head.get(k, float('nan')):.2f}", file=sys.stderr, flush=True)
-    _write_page(paths["page"], pair, bp, tracks, None)
+    page(bp, tracks, None, {**base, "status": "ok", "scores": scores})
     return BearingReplayResult(status="ok", scores=scores, diagnostics=base)
 
 
@@ -401,53 +415,3 @@ def run_estimators(t_s: F64, bearing: F64, ownship_vel: F64, sigma_rad: float, c
 
     return bearing_filters.replay_tracks(t_s, bearing, ownship_vel, sigma_rad, cfg, preset=preset,
                                          mpc_preset=mpc_preset)
-
-
-# --------------------------------------------------------------------------------------------
-# page
-
-
-def _write_page(path: Path, pair: str, bp: BearingPair | None, tracks: Mapping[str, BearingTrack],
-                reason: str | None) -> None:
-    """``results/report/bearing/<pair>.html``: range, course and turn rate of each estimator
-    against the truth with 1-sigma, the IMM mode probability and the bearings (plotly, offline
-    script beside the index)."""
-    import plotly.graph_objects as go
-    from plotly.subplots import make_subplots
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    body = [f"<h1>Bearing-only replay: {pair}</h1>"]
-    if bp is None:
-        body.append(f"<p>Skipped: {reason}</p>")
-    else:
-        m = bp.meta
-        body.append(f"<p>{m['n_bearings']} synthetic bearings (σ = {m['sigma_bearing_deg']}°, bias "
-                    f"{m['bias_deg']}°), median step {m['median_dt_s']:.3f} s, intruder offset {m['offset_m']} m.</p>")
-        t = bp.t_s
-        fig = make_subplots(rows=5, cols=1, shared_xaxes=True, vertical_spacing=0.03,
-                            subplot_titles=("range (m)", "course (deg)", "turn rate (deg/s)", "IMM P(CV)",
-                                            "bearing (deg)"))
-        r_true = np.hypot(bp.truth[:, 0], bp.truth[:, 1])
-        fig.add_scatter(x=t, y=r_true, name="truth", line={"color": "black"}, row=1, col=1)
-        fig.add_scatter(x=t, y=np.degrees(bp.truth[:, 3]), name="truth", showlegend=False,
-                        line={"color": "black"}, row=2, col=1)
-        fig.add_scatter(x=t, y=np.degrees(bp.truth[:, 4]), name="truth", showlegend=False,
-                        line={"color": "black"}, row=3, col=1)
-        colours = {"bank_cppv": "#1f77b4", "bank_mpc": "#ff7f0e", "imm": "#2ca02c"}
-        for e, tr in tracks.items():
-            c = colours.get(e)
-            r = np.hypot(tr.mean[:, 0], tr.mean[:, 1])
-            fig.add_scatter(x=t, y=r, name=e, line={"color": c}, row=1, col=1)
-            fig.add_scatter(x=t, y=np.degrees(tr.mean[:, 3]), name=e, showlegend=False, line={"color": c},
-                            row=2, col=1)
-            fig.add_scatter(x=t, y=np.degrees(tr.mean[:, 4]), name=e, showlegend=False, line={"color": c},
-                            row=3, col=1)
-            if tr.mode_p is not None:
-                fig.add_scatter(x=t, y=tr.mode_p[:, 0], name=e, showlegend=False, line={"color": c}, row=4, col=1)
-        fig.add_scatter(x=t, y=np.degrees(bp.bearing), name="bearing", mode="markers",
-                        marker={"size": 2, "color": "grey"}, row=5, col=1)
-        fig.update_layout(height=1200, template="plotly_white")
-        body.append(fig.to_html(full_html=False, include_plotlyjs="../assets/plotly.min.js"))
-    html = ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>bearing " + pair + "</title></head><body>"
-            + "\n".join(body) + "</body></html>")
-    write_text_atomic(path, html)

@@ -72,6 +72,40 @@ def attitude_source(state: pd.DataFrame | None, log) -> tuple[pd.DataFrame | Non
         "attitude stream as logged, not mount-corrected"
 
 
+#: the barometer's start datum: the median of its first second of valid samples
+BARO_DATUM_S = 1.0
+
+
+def baro_relative(baro: pd.DataFrame | None) -> tuple[pd.DataFrame, str] | None:
+    """The barometric altitude of the altitude panel: ``(DataFrame(t_ns, alt_m), legend name)``,
+    the first instance's ``alt_rel_m`` less its start (the median of its first
+    :data:`BARO_DATUM_S` of valid samples), so it shares the panel's axis with the heights about
+    the start (track −d, calibrated, rangefinder). The raw value's datum differs by source: a
+    ULog's is the ISA pressure altitude (1013.25 hPa: hundreds of metres), a DataFlash log's the
+    ground at arming; the name keeps the datum subtracted. ``None`` without a valid sample."""
+    b = first_instance(baro)
+    if b is None or not len(b) or "alt_rel_m" not in b:
+        return None
+    b = b[["t_ns", "alt_rel_m"]].dropna()
+    b = b[np.isfinite(b["alt_rel_m"].to_numpy(np.float64))]
+    if not len(b):
+        return None
+    t = b["t_ns"].to_numpy(np.int64)
+    v = b["alt_rel_m"].to_numpy(np.float64)
+    datum = float(np.median(v[t <= t[0] + int(BARO_DATUM_S * 1e9)]))
+    return (pd.DataFrame({"t_ns": t, "alt_m": v - datum}),
+            f"baro (raw, relative to its start: {datum:+.1f} m subtracted)")
+
+
+def _spectrogram_panel(imu: pd.DataFrame, cols: list[str], name: str, unit: str) -> tuple[str, object]:
+    """``(title, figure or None)`` of one IMU spectrogram at the IMU's own rate; without a
+    figure the title says why (an IMU logged too slowly for a spectrum, too few samples)."""
+    title = f"{name} (raw, sensor frame)"
+    fig = plots.spectrogram(imu, cols, title, unit)
+    why = None if fig is not None else plots.spectrogram_absent(imu, cols)
+    return (f"{name} (raw, sensor frame; {why})" if why else title), fig
+
+
 def _ned_text(v) -> str:
     """An NED position ``[n, e, d]`` as ``"(n, e, d) m NED"`` (``–`` when not given)."""
     try:
@@ -389,9 +423,9 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     velocity = velocity_track(st, log)
     numbers = flight_numbers(log, st, ned=ned, velocity=velocity)
     alt_series = {}
-    baro = first_instance(log["baro"])
-    if len(baro):
-        alt_series["baro (raw)"] = pd.DataFrame({"t_ns": baro["t_ns"], "alt_m": baro["alt_rel_m"]})
+    baro = baro_relative(log["baro"])
+    if baro is not None:
+        alt_series[baro[1]] = baro[0]
     if ned is not None:
         alt_series["−d (track)"] = pd.DataFrame({"t_ns": ned["t_ns"], "alt_m": -ned["pos_d_m"]})
     if st is not None and "alt_cal_m" in st:
@@ -428,14 +462,13 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
             [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),
         ("RC inputs", plots.time_series(log["control"], [f"rc_{i}_us" for i in range(1, schema.N_RC + 1)],
                                         "RC inputs", "pulse width [µs]")),
-        ("Actuator outputs", plots.time_series(log["control"], [f"servo_{i}_us" for i in range(1, schema.N_SERVO + 1)],
-                                               "Actuator outputs (servo/ESC)", "pulse width [µs]")),
+        # each channel on the axis of its unit: PWM µs, PX4's normalised outputs, raw ESC commands
+        ("Actuator outputs", plots.actuator_outputs(
+            log["control"], [f"servo_{i}_us" for i in range(1, schema.N_SERVO + 1)], "Actuator outputs (servo/ESC)")),
         ("GPS quality (fix type, satellites, HDOP/EPH)", plots.gps_quality(log["gps"])),
         ("Vibration", plots.vibration(log["vibration"], imu)),
-        ("Accelerometer spectrogram", plots.spectrogram(imu, [f"acc_{a}_mps2" for a in "xyz"],
-                                                        "Accelerometer spectrogram (raw, sensor frame)", "m/s²")),
-        ("Gyroscope spectrogram", plots.spectrogram(imu, [f"gyr_{a}_radps" for a in "xyz"],
-                                                    "Gyroscope spectrogram (raw, sensor frame)", "rad/s")),
+        *(_spectrogram_panel(imu, [f"acc_{a}_mps2" for a in "xyz"], "Accelerometer spectrogram", "m/s²"),
+          _spectrogram_panel(imu, [f"gyr_{a}_radps" for a in "xyz"], "Gyroscope spectrogram", "rad/s")),
         # raw IMU: the sensor's axes (FRD by convention, before the mount correction of the state)
         ("Accelerometer", plots.time_series(imu, [f"acc_{a}_mps2" for a in "xyz"],
                                             "Accelerometer (raw, sensor frame)", "specific force [m/s²]")),

@@ -371,16 +371,70 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
     return layout(fig, title)
 
 
+#: below this IMU rate a spectrogram shows nothing of the vibration (Nyquist under 10 Hz): a
+#: telemetry log's RAW_IMU at 1-4 Hz, a ULog whose sensor_combined was logged at 10 Hz
+MIN_SPECTROGRAM_RATE_HZ = 20.0
+#: the spectrogram's window length (s) at the IMU's own rate: 128 samples at 200 Hz
+SPECTROGRAM_WINDOW_S = 0.64
+
+
+def imu_rate_hz(imu: pd.DataFrame | None, cols: list[str] | None = None) -> float | None:
+    """The sample rate of the first instance of ``imu`` as logged: 1 / the median step between
+    successive distinct timestamps of the rows with ``cols`` (sensor logs jitter; a repeated
+    timestamp is not a step). ``None`` without two such rows."""
+    i = _first(imu)
+    if i is None:
+        return None
+    if cols:
+        cols = [c for c in cols if c in i]
+        if not cols:
+            return None
+        i = i.dropna(subset=cols)
+    t = np.unique(i["t_ns"].to_numpy(np.int64))
+    if len(t) < 2:
+        return None
+    dt = float(np.median(np.diff(t))) * 1e-9
+    return 1.0 / dt if dt > 0 else None
+
+
+def spectrogram_nperseg(fs_hz: float) -> int:
+    """Samples per window at ``fs_hz``: the power of two nearest :data:`SPECTROGRAM_WINDOW_S`
+    of samples, at least 128 (enough frequency bins at low rates: 6.4 s at 20 Hz) and at most
+    4096 (a 1 kHz IMU gets 512-sample windows, 2 Hz bins; a fixed 128 would give 8 Hz)."""
+    n = 2 ** int(np.round(np.log2(max(fs_hz * SPECTROGRAM_WINDOW_S, 1.0))))
+    return int(min(max(n, 128), 4096))
+
+
+def spectrogram_absent(imu: pd.DataFrame | None, cols: list[str]) -> str | None:
+    """Why :func:`spectrogram` draws nothing for ``cols`` of ``imu`` (for the panel's title), or
+    ``None`` when it draws: no samples, too few for one window, or an IMU logged below
+    :data:`MIN_SPECTROGRAM_RATE_HZ`."""
+    fs = imu_rate_hz(imu, cols)
+    if fs is None:
+        return "no IMU samples"
+    if fs < MIN_SPECTROGRAM_RATE_HZ:
+        return f"IMU logged at {fs:.3g} Hz, below the {MIN_SPECTROGRAM_RATE_HZ:g} Hz a vibration spectrum needs"
+    n = spectrogram_nperseg(fs)
+    i = _first(imu).dropna(subset=[c for c in cols if c in imu])
+    if len(i) < n:
+        return f"{len(i)} IMU samples, fewer than one {n}-sample window"
+    return None
+
+
 def spectrogram(imu: pd.DataFrame | None, cols: list[str], title: str, unit: str, *,
-                nperseg: int = 128, max_columns: int = 200) -> go.Figure | None:
+                nperseg: int | None = None, max_columns: int = 200) -> go.Figure | None:
     """Spectrogram of the vector ``cols`` of the first instance of ``imu`` against flight time.
 
     :func:`scipy.signal.spectrogram` (Hann windows of ``nperseg`` samples, half overlap, mean
-    removed per window) per axis; the vector's PSD is the sum over the axes (the trace of the
-    cross-spectral matrix), shown in dB, ``10 log10(Σ PSD)``. For display, consecutive windows
-    are averaged into at most ``max_columns`` time columns (Welch's estimate per column), so a
-    long log keeps every sample in the estimate but a bounded page. The sample rate is taken
-    from the median time step (sensor logs jitter). ``None`` with fewer than ``nperseg`` samples."""
+    removed per window) per axis at the IMU's own rate; the vector's PSD is the sum over the
+    axes (the trace of the cross-spectral matrix), shown in dB, ``10 log10(Σ PSD)``. For
+    display, consecutive windows are averaged into at most ``max_columns`` time columns
+    (Welch's estimate per column), so a long log keeps every sample in the estimate but a
+    bounded page. The sample rate is the raw IMU rate (:func:`imu_rate_hz`: the median step;
+    sensor logs jitter); ``nperseg`` defaults to :func:`spectrogram_nperseg` of it (about
+    0.64 s, at least 128 samples). ``None`` below :data:`MIN_SPECTROGRAM_RATE_HZ` (a 1 Hz
+    telemetry IMU holds no vibration to show: :func:`spectrogram_absent` says so) and with
+    fewer than ``nperseg`` samples."""
     from scipy.signal import spectrogram as _spectrogram
 
     i = _first(imu)
@@ -388,13 +442,13 @@ def spectrogram(imu: pd.DataFrame | None, cols: list[str], title: str, unit: str
     if not cols:
         return None
     i = i.dropna(subset=cols)
+    fs = imu_rate_hz(i, cols)
+    if fs is None or not np.isfinite(fs) or fs < MIN_SPECTROGRAM_RATE_HZ:
+        return None
+    nperseg = int(nperseg or spectrogram_nperseg(fs))
     if len(i) < nperseg:
         return None
     t_ns = i["t_ns"].to_numpy(np.int64)
-    dt = np.median(np.diff(t_ns)) * 1e-9
-    if not np.isfinite(dt) or dt <= 0:
-        return None
-    fs = 1.0 / dt
     total = None
     for c in cols:
         f, tc, sxx = _spectrogram(i[c].to_numpy(np.float64), fs=fs, window="hann", nperseg=nperseg,
@@ -409,7 +463,8 @@ def spectrogram(imu: pd.DataFrame | None, cols: list[str], title: str, unit: str
                                colorbar=dict(title=f"dB re ({unit})²/Hz")))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title="frequency [Hz]")
-    return layout(fig, f"{title} (Σ over axes, {nperseg}-sample windows, fs = {fs:.0f} Hz)", height=320)
+    return layout(fig, f"{title} (Σ over axes, {nperseg}-sample windows = {nperseg / fs:.2g} s, "
+                       f"fs = {fs:.0f} Hz, {fs / nperseg:.2g} Hz bins)", height=320)
 
 
 def is_time_panel(fig: go.Figure | None) -> bool:
@@ -422,30 +477,131 @@ def is_time_panel(fig: go.Figure | None) -> bool:
     return t == "t [s]"
 
 
+def unit_axes(fig: go.Figure, titles: list[str], colours: list[str | None] | None = None) -> dict:
+    """Give each of ``titles`` (one per unit, left to right) its own y axis: the first on the
+    left (``y``), the second on the right (``y2``), a third further right (``y3``, the plot
+    narrowed to leave it room). A trace goes on axis ``i`` by ``yaxis="y<i+1>"``. ``colours``
+    colour each axis's title and ticks like its trace (one trace per axis). Returns the extra
+    :func:`layout` options (the right margin the axes need)."""
+    colours = list(colours or []) + [None] * len(titles)
+    axes = {}
+    for k, (title, c) in enumerate(zip(titles, colours)):
+        ax = dict(title=dict(text=title, font=dict(color=c) if c else None), tickfont=dict(color=c) if c else None)
+        if k:
+            ax.update(overlaying="y", side="right", showgrid=False, zeroline=False)
+        if k == 2:
+            ax.update(anchor="free", position=1.0)
+        axes["yaxis" if k == 0 else f"yaxis{k + 1}"] = ax
+    if len(titles) > 2:
+        axes["xaxis"] = dict(domain=[0.0, 0.86])
+        axes["yaxis2"]["anchor"] = "x"
+    fig.update_layout(**axes)
+    return {"margin": dict(l=50, r=70 if len(titles) > 1 else 20, t=40, b=40)}
+
+
 def battery(bat: pd.DataFrame | None) -> go.Figure | None:
-    """Battery voltage (left axis), current and remaining capacity in % (right axis)."""
+    """Battery voltage [V] (left axis), current [A] and remaining capacity [%] each on its own
+    right axis: three units, three scales, never two on one axis."""
     b = _first(bat)
     if b is None:
         return None
     fig = go.Figure()
-    if "voltage_V" in b and b["voltage_V"].notna().any():
-        d = decimate(b[["t_ns", "voltage_V"]].dropna(), cols=["voltage_V"])
-        fig.add_trace(go.Scatter(x=_t(d), y=d["voltage_V"], mode="lines", name=label("voltage_V"),
-                                 line=dict(color=colour("voltage_V"))))
-    right = []
-    for c, scale, name in (("current_A", 1.0, label("current_A")), ("remaining_frac", 100.0, "remaining capacity [%]")):
+    titles, colours = [], []
+    for c, scale, name in (("voltage_V", 1.0, label("voltage_V")), ("current_A", 1.0, label("current_A")),
+                           ("remaining_frac", 100.0, "remaining capacity [%]")):
         if c in b and b[c].notna().any():
             d = decimate(b[["t_ns", c]].dropna(), cols=[c])
-            fig.add_trace(go.Scatter(x=_t(d), y=d[c] * scale, mode="lines", name=name, yaxis="y2",
-                                     line=dict(color=colour(c))))
-            right.append(name.split(" [")[0])
+            k = len(titles)
+            fig.add_trace(go.Scatter(x=_t(d), y=d[c] * scale, mode="lines", name=name,
+                                     yaxis="y" if k == 0 else f"y{k + 1}", line=dict(color=colour(c))))
+            titles.append(name)
+            colours.append(colour(c))
     if not fig.data:
         return None
-    if right:
-        fig.update_layout(yaxis2=dict(overlaying="y", side="right", title=" / ".join(right) + " [A, %]"))
+    extra = unit_axes(fig, titles, colours)
     fig.update_xaxes(title="t [s]")
-    fig.layout.yaxis.title = "voltage [V]"
-    return layout(fig, "Battery")
+    return layout(fig, "Battery", **extra)
+
+
+#: how an actuator output column reads (:func:`output_kind`) -> (axis title, unit in a trace
+#: name, words in the panel's title)
+OUTPUT_KINDS = {"pwm": ("pulse width [µs]", "µs", "PWM µs"),
+                "normalised": ("normalised output [−1…1]", "−1…1", "normalised −1…1"),
+                "normalised01": ("normalised output [0…1]", "0…1", "normalised 0…1"),
+                "raw": ("output [raw command units, not µs]", "raw units", "raw command units")}
+#: PWM pulse widths lie in this band (µs; 0 = output off); a channel outside it is not PWM
+PWM_RANGE_US = (400.0, 2600.0)
+
+
+def output_kind(values) -> str | None:
+    """What an actuator output channel holds, from its values: ``pwm`` (every non-zero value
+    within :data:`PWM_RANGE_US`), ``normalised`` (|v| ≤ 1 with a negative value: PX4's
+    [−1, 1] outputs), ``normalised01`` (0 ≤ v ≤ 1), ``raw`` (anything else: ESC/UAVCAN command
+    units, a simulator's 0…1000); ``None`` when the channel never leaves 0 (nothing to tell).
+
+    The schema's ``servo_<i>_us`` holds what the autopilot logged: PWM µs for ArduPilot and
+    PX4's PWM groups, other units for PX4's other outputs (the ULog reader writes them raw)."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    nz = v[v != 0]
+    if not len(nz):
+        return None
+    if np.abs(nz).max() <= 1.0:
+        return "normalised" if nz.min() < 0 else "normalised01"
+    if nz.min() >= PWM_RANGE_US[0] and nz.max() <= PWM_RANGE_US[1]:
+        return "pwm"
+    return "raw"
+
+
+def actuator_outputs(control: pd.DataFrame | None, cols: list[str], title: str = "Actuator outputs (servo/ESC)"
+                     ) -> go.Figure | None:
+    """The actuator outputs ``cols`` (``servo_<i>_us``) of every instance of the ``control``
+    stream that logs them, each channel on the axis of its unit (:func:`output_kind`): PWM in
+    µs, normalised outputs and raw command units on axes of their own (dotted, dashed lines), so
+    a PX4 log's [−1, 1] outputs are never labelled µs. Trace names carry the unit; an instance
+    is named when more than one logs outputs (PX4 logs one per output group)."""
+    if control is None or not len(control):
+        return None
+    cols = [c for c in cols if c in control]
+    insts = sorted(control["instance"].dropna().unique()) if "instance" in control else [None]
+    chans = []                                           # (instance, column, rows, kind)
+    for inst in insts:
+        rows = control if inst is None else control[control["instance"] == inst]
+        for c in cols:
+            if rows[c].notna().sum() >= 1:
+                chans.append((inst, c, rows[["t_ns", c]].dropna(), output_kind(rows[c].to_numpy(np.float64))))
+    if not chans:
+        return None
+    def commonest(ks: list) -> str | None:  # ties: in OUTPUT_KINDS order (never by set order)
+        return max((k for k in OUTPUT_KINDS if k in ks), key=ks.count, default=None)
+
+    kinds = [k for _, _, _, k in chans if k is not None]
+    main = commonest(kinds)
+    order = [k for k in OUTPUT_KINDS if k in kinds] or [None]
+    if main in order:                                    # the commonest unit on the left axis
+        order.remove(main)
+        order.insert(0, main)
+    many = len({i for i, _, _, _ in chans}) > 1
+    mp = max(1000, 3 * MAX_POINTS // len(chans))
+    fig = go.Figure()
+    # an all-zero channel (an unused output) reads like the rest of its output group (instance)
+    group = {inst: commonest([k for i, _, _, k in chans if i == inst and k is not None]) or order[0]
+             for inst, _, _, _ in chans}
+    for inst, c, rows, k in chans:
+        k = k or group[inst]
+        d = decimate(rows, mp, cols=[c])
+        words = label(c).split(" [")[0] + (f" (instance {int(inst)})" if many else "")
+        unit = OUTPUT_KINDS[k][1] if k else "as logged"
+        ax = order.index(k)
+        # a channel keeps its colour on every axis; the line style tells the axes apart
+        fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=f"{words} [{unit}]",
+                                 yaxis="y" if ax == 0 else f"y{ax + 1}",
+                                 line=dict(color=colour(c), dash=(None, "dot", "dash")[min(ax, 2)])))
+    titles = [OUTPUT_KINDS[k][0] if k else "output [as logged]" for k in order]
+    extra = unit_axes(fig, titles)
+    fig.update_xaxes(title="t [s]")
+    kinds_text = ", ".join(OUTPUT_KINDS[k][2] for k in order if k)
+    return layout(fig, f"{title}: {kinds_text}" if kinds_text else title, **extra)
 
 
 #: MAV_SEVERITY / syslog levels

@@ -11,10 +11,13 @@ which never stops the other flights, is still visible on the console at the end 
       report: results/index.html
 
 A flight is ``failed`` when its ingest or preprocess failed (the reason of the first stage that
-did), ``partial`` when the ingest decoded only part of the log (bytes skipped, records dropped),
-``ok`` otherwise, and ``not run`` when the run stopped before its ingest wrote ``meta.json``.
-An unreadable status file is reported as the flight's reason, never raised: the summary is
-printed after an error too.
+did) or its preprocess did not finish (an ingest ``meta.json`` but no ``state/<flight>.json``:
+a crash or a kill, which writes no placeholder), ``partial`` when the ingest decoded only part
+of the log (bytes skipped, records dropped), ``ok`` otherwise, and ``not run`` when the run
+stopped before its ingest wrote ``meta.json``. An unreadable status file is reported as the
+flight's reason, never raised: the summary is printed after an error too. The report line says
+whether ``results/index.html`` is current (:func:`index_state`): ``(not written)``, or ``(stale:
+older than <newest input>)`` when an output it is built from was rewritten after it.
 """
 
 from __future__ import annotations
@@ -68,7 +71,11 @@ def flight_status(flight: str, results_dir: str | os.PathLike = "results") -> tu
     pre, bad = _read_json(res / "state" / f"{flight}.json")
     if bad:
         return "failed", bad
-    if pre is not None and pre.get("status") == "failed":
+    if pre is None:
+        # the ingest finished and the preprocess did not (it crashed, was killed, or the run
+        # stopped before it): the state json is its last output, a failed preprocess writes it too
+        return "failed", f"preprocess did not finish (no {res / 'state' / f'{flight}.json'})"
+    if pre.get("status") == "failed":
         return "failed", f"preprocess: {pre.get('error') or 'unknown reason'}"
     if meta.get("status") == "partial":
         return "partial", _partial_reason(meta.get("diagnostics") or {})
@@ -103,7 +110,7 @@ def run_summary(flights: Iterable[str], model_sets: Iterable[str],
         Manifest rows left out at start-up: flight id -> reason (e.g. ``"/x.bin not found"``).
     """
     res = Path(results_dir)
-    flights = list(flights)
+    flights, model_sets = list(flights), list(model_sets)
     skipped = dict(skipped or {})
     states = {f: flight_status(f, res) for f in flights}
     counts = {s: sum(st == s for st, _ in states.values()) for s in FLIGHT_STATES}
@@ -118,6 +125,64 @@ def run_summary(flights: Iterable[str], model_sets: Iterable[str],
         st, why = model_set_status(m, res)
         sets.append(f"{m} {st}" + (f" ({why})" if why else ""))
     lines.append(f"  model sets: {', '.join(sets) if sets else 'none'}")
-    index = res / "index.html"
-    lines.append(f"  report: {index}" + ("" if index.exists() else " (not written)"))
+    lines.append(f"  report: {index_state(flights, model_sets, res)}")
     return "\n".join(lines)
+
+
+def index_required(flights: Iterable[str], model_sets: Iterable[str], res: Path) -> list[Path]:
+    """The files the index rule reads for every planned flight and model set (``report_index``'s
+    inputs): the ingest ``meta.json``, ``segments`` table and page of each flight, the page of
+    each model set. One missing (a job failed and Snakemake removed its output) leaves the index
+    describing an older run."""
+    paths = []
+    for f in flights:
+        paths += [res / "ingest" / f / "meta.json", res / "segments" / f"{f}.parquet",
+                  res / "report" / "flights" / f"{f}.html"]
+    return paths + [res / "report" / "models" / f"{m}.html" for m in model_sets]
+
+
+def index_inputs(flights: Iterable[str], model_sets: Iterable[str], res: Path) -> list[Path]:
+    """The outputs the index is built from (or summarises), those that exist: per flight its
+    ingest ``meta.json``, preprocess ``state/<f>.json``, ``segments`` table and page; per model
+    set its ``meta.json`` and page; the comparison, trajectory-learning and bearing-replay pages.
+    Study pages are linked by name, not read, and do not count."""
+    flights, model_sets = list(flights), list(model_sets)
+    paths = index_required(flights, model_sets, res)
+    paths += [res / "state" / f"{f}.json" for f in flights] + [res / "models" / m / "meta.json" for m in model_sets]
+    for kind in ("compare", "align", "bearing"):
+        paths += sorted((res / "report" / kind).glob("*.html"))
+    return [p for p in paths if p.is_file()]
+
+
+def index_state(flights: Iterable[str], model_sets: Iterable[str],
+                results_dir: str | os.PathLike = "results") -> str:
+    """Where the report is and whether it is current: ``results/index.html``, ``results/index.html
+    (not written)`` when absent, ``results/index.html (stale: older than <newest input>)`` when a
+    flight's or model set's output (:func:`index_inputs`) is newer than it: the run rebuilt
+    something after the index was last written and stopped before writing it again (a failed
+    job, an interrupted run), so the index shows an older run's results; ``(stale: <input>
+    missing)`` when a file it is built from (:func:`index_required`) is gone. An up-to-date run
+    that had nothing to rebuild leaves the index current, and it is reported as such (the
+    summary sees the files, not when the run started)."""
+    flights, model_sets = list(flights), list(model_sets)
+    res = Path(results_dir)
+    index = res / "index.html"
+    shown = str(index)
+    try:
+        t_index = index.stat().st_mtime_ns
+    except OSError:
+        return f"{shown} (not written)"
+    newer = []
+    for p in index_inputs(flights, model_sets, res):
+        try:
+            t = p.stat().st_mtime_ns
+        except OSError:
+            continue
+        if t > t_index:
+            newer.append((t, p))
+    if newer:
+        return f"{shown} (stale: older than {max(newer)[1]})"
+    missing = next((p for p in index_required(flights, model_sets, res) if not p.is_file()), None)
+    if missing is not None:
+        return f"{shown} (stale: {missing} missing)"
+    return shown

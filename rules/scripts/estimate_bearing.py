@@ -1,6 +1,6 @@
 import sys
 
 sys.stderr = open(snakemake.log[0], "w")
-from pipeline.estimate.bearing_run import run_bearing_replay
+from pipeline.report.bearing import run_bearing_report
 
-run_bearing_replay(snakemake.input, snakemake.output, snakemake.params.config, **snakemake.params.job)
+run_bearing_report(snakemake.input, snakemake.output, snakemake.params.config, **snakemake.params.job)

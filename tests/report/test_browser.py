@@ -221,8 +221,9 @@ def test_a_bearing_replay_page_draws_offline_and_the_index_links_it(report_tree,
     import numpy as np
     import pandas as pd
 
-    from pipeline.estimate.bearing_run import ESTIMATORS, run_bearing_replay
+    from pipeline.estimate.bearing_run import ESTIMATORS
     from pipeline.io.parquet import write_table
+    from pipeline.report.bearing import run_bearing_report
     from pipeline.report.index import build_index
 
     t = np.arange(0, 15.0, 0.1)
@@ -238,11 +239,14 @@ def test_a_bearing_replay_page_draws_offline_and_the_index_links_it(report_tree,
     page = report_tree / "report" / "bearing" / "syn.html"
     out["page"] = page
     cfg = {"replay": {"syn": {"ownship": "own", "intruder": "intr", "duration_s": 10.0, "rate_hz": 5.0}}}
-    assert run_bearing_replay({"ownship_state": tmp_path / "own.parquet", "intruder_state": tmp_path / "intr.parquet"},
+    assert run_bearing_report({"ownship_state": tmp_path / "own.parquet", "intruder_state": tmp_path / "intr.parquet",
+                               "plotly": report_tree / "report" / "assets" / "plotly.min.js"},
                               out, cfg, pair="syn", seed=1).status == "ok"
     r = _open(page, tmp_path / "bearing.png")
     _check_offline(r)
-    assert len(r["plots"]) == 1 and r["plots"][0]["traces"] >= 10 and r["plots"][0]["drawn"] > 0, r["plots"]
+    # range, course, turn rate (3 estimators ±1σ + truth), IMM P(CV), bearings: one panel each
+    assert len(r["plots"]) == 5 and all(p["drawn"] > 0 for p in r["plots"]), r["plots"]
+    assert [p["traces"] for p in r["plots"]][:3] == [10, 10, 10], r["plots"]
     index = report_tree / "index_bearing.html"
     build_index(["demo-quad"], [report_tree / "ingest" / "demo-quad" / "meta.json"], index,
                 bearing={"syn": "report/bearing/syn.html"})

@@ -68,13 +68,15 @@ def test_the_vibration_panel_falls_back_to_the_accelerometer_rms_in_one_second_w
     assert plots.vibration(None, None) is None
 
 
-def test_the_battery_panel_draws_voltage_left_and_current_and_remaining_percent_right():
+def test_the_battery_panel_draws_voltage_left_and_current_and_remaining_percent_each_on_its_own_right_axis():
     n = 30
     bat = _stream("battery", n, 1.0, voltage_V=np.linspace(16.8, 15.0, n), current_A=np.full(n, 12.0),
                   remaining_frac=np.linspace(1.0, 0.7, n))
     fig = plots.battery(bat)
     assert _names(fig) == ["voltage [V]", "current [A]", "remaining capacity [%]"]
-    assert [t.yaxis for t in fig.data] == [None, "y2", "y2"]
+    assert [t.yaxis for t in fig.data] == ["y", "y2", "y3"]
+    assert [fig.layout.yaxis.title.text, fig.layout.yaxis2.title.text, fig.layout.yaxis3.title.text] == \
+        ["voltage [V]", "current [A]", "remaining capacity [%]"]
     np.testing.assert_allclose(fig.data[2].y, np.linspace(100.0, 70.0, n))
     assert plots.battery(bat.iloc[:0]) is None
 

@@ -22,11 +22,19 @@ def _tree(tmp_path: Path) -> Path:
     _meta(res, "late", status="ok", diagnostics={})
     (res / "state").mkdir()
     (res / "state" / "good.json").write_text(json.dumps({"status": "ok"}))
+    (res / "state" / "half.json").write_text(json.dumps({"status": "ok"}))  # no state json: failed
     (res / "state" / "late.json").write_text(json.dumps({"status": "failed", "error": "no IMU rows"}))
     (res / "models" / "sim").mkdir(parents=True)
     (res / "models" / "sim" / "meta.json").write_text(json.dumps({"status": "ok"}))
     (res / "models" / "f3a").mkdir(parents=True)
     (res / "models" / "f3a" / "meta.json").write_text(json.dumps({"status": "failed", "error": "no training flights"}))
+    for f in ("good", "half", "broken", "late"):               # what the index is built from
+        for p in (res / "segments" / f"{f}.parquet", res / "report" / "flights" / f"{f}.html"):
+            p.parent.mkdir(parents=True, exist_ok=True)
+            p.write_text("")
+    for m in ("sim", "f3a"):
+        (res / "report" / "models" / f"{m}.html").parent.mkdir(parents=True, exist_ok=True)
+        (res / "report" / "models" / f"{m}.html").write_text("")
     (res / "index.html").write_text("<html></html>")
     return res
 

@@ -319,7 +319,9 @@ def _ulog_class():
 
     class _GuardedULog(ULog):
         def _read_file_definitions(self):
-            raw = self._file_handle
+            raw = getattr(self, "_file_handle", None)
+            if raw is None:  # a pyulog that keeps its handle elsewhere: run it unguarded
+                return super()._read_file_definitions()
             self._file_handle = _FullReadSeeks(raw)
             try:
                 return super()._read_file_definitions()

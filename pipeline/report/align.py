@@ -151,6 +151,13 @@ def anchor_table(learned: pd.DataFrame, demos: pd.DataFrame, band_deg: Sequence[
     return pd.DataFrame(rows)
 
 
+#: column name -> table header (words, unit in brackets) for the page's tables
+HEADERS = {"peak_pitch_deg": "peak pitch [°]", "time_in_band_s": "longest time in the pitch band [s]",
+           "cross_track_rms_m": "cross-track RMS [m]", "rms_to_learned_m": "RMS to the learned path [m]",
+           "loglik_first": "log-likelihood, first", "loglik_last": "log-likelihood, last",
+           "flight_id": "flight"}
+
+
 def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *, set_name: str,
                        template: str | os.PathLike, plotly_js: str, index_href: str = "../../index.html",
                        band_deg: Sequence[float] = (55.0, 89.0)) -> None:
@@ -186,15 +193,16 @@ def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *,
         at = anchor_table(learned, demos, band_deg)
         tables.append((f"Anchors (digest §10 item 7): peak pitch, longest time within {band_deg[0]:g}–{band_deg[1]:g}°, "
                        "cross-track RMS about the track's own straight line; RMS distance of each demo to the learned path",
-                       at.to_html(index=False, border=0, float_format="%.2f")))
+                       at.rename(columns=HEADERS).to_html(index=False, border=0, float_format="%.2f")))
     summary = iterations.groupby("maneuver", sort=False).agg(
         status=("status", "first"), reason=("reason", "first"), demos=("n_demos", "first"),
         iterations=("iteration", "max"), converged=("converged", "first"),
         loglik_first=("loglik", "first"), loglik_last=("loglik", "last")).reset_index()
-    tables.append(("Maneuvers", summary.to_html(index=False, border=0, float_format="%.1f", na_rep="–")))
+    tables.append(("Maneuvers", summary.rename(columns=HEADERS).to_html(index=False, border=0, float_format="%.1f",
+                                                                         na_rep="–")))
     left = alignment[alignment["status"] != "used"][["maneuver", "demo", "flight_id", "status", "reason"]]
     if len(left):
-        tables.append(("Left out", left.to_html(index=False, border=0)))
+        tables.append(("Left out", left.rename(columns=HEADERS).to_html(index=False, border=0)))
     page = render(template, set_name=set_name, facts=facts, plots=figure_divs(figs), tables=tables,
                   plotly_js=plotly_js, index_href=index_href, failed=meta.get("status") == "failed",
                   error=meta.get("error"))

@@ -209,7 +209,8 @@ def test_align_report_in_headless_chromium(report_tree, tmp_path):
     assert len(r["plots"]) == 7, r["plots"]
     for p in r["plots"]:
         assert p["traces"] > 0 and p["w"] > 0 and p["h"] > 0 and p["drawn"] > 0, p
-    assert "peak_pitch_deg" in r["text"] and "cross_track_rms_m" in r["text"]
+    assert "peak pitch [°]" in r["text"] and "cross-track RMS [m]" in r["text"]  # words, not column names
+    assert "cross_track_rms_m" not in r["text"]
     idx = _open(report_tree / "index.html", tmp_path / "index2.png")
     assert "Trajectory learning" in idx["text"]
 

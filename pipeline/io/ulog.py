@@ -166,8 +166,8 @@ class ULogReader(LogReader):
             diag["record_counts"][f"{d.name}[{d.multi_id}]"] = int(len(d.data["timestamp"]))
         if not topics:
             if ulog.file_corruption:
-                raise IngestError(path, "corrupt ULog: no data message decoded (pyulog met corrupt bytes "
-                                        "and found no data section after them)")
+                raise IngestError(path, "corrupt ULog: no data messages decoded (pyulog met bytes it could "
+                                        "not read: damaged, or cut before the data section)")
             raise IngestError(path, "ULog has no data messages (empty or cut before the data section)")
 
         t0_us = int(ulog.start_timestamp)

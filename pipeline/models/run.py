@@ -109,24 +109,31 @@ def model_set_config(config: Mapping, model_set: str) -> dict:
     return spec
 
 
-def check_model_set_labels(model_sets: Mapping[str, Mapping], simulated: Sequence[str]) -> None:
-    """Refuse a simulated model set whose ``labels`` names a maneuver the simulate stage does not
-    write (checked by the workflow at start-up, so a typo such as ``M9`` is one line before any
-    job instead of a model set silently trained on the other labels).
+def check_model_set_labels(model_sets: Mapping[str, Mapping], simulated: Sequence[str],
+                           known: Sequence[str]) -> None:
+    """Refuse a simulated model set whose ``labels`` names a maneuver the simulator does not
+    have (``known``), or none that this config simulates (``simulated``); checked by the
+    workflow at start-up, so a typo such as ``M9`` is one line before any job instead of a model
+    set silently trained on the other labels. Known labels the datasets size leaves out (the
+    tiny test sizes simulate M1, M2) are dropped, as before.
 
     Raises
     ------
     ConfigError
-        ``model_sets.<name>.labels: 'M9' is not simulated (simulate.datasets.maneuvers: M1, ...)``.
+        ``model_sets.<name>.labels: 'M9' is not a simulated maneuver (known: M1, ...)``.
     """
     for name, spec in model_sets.items():
-        if spec.get("data", "simulated") != "simulated":
+        if spec.get("data", "simulated") != "simulated" or not spec.get("labels"):
             continue
-        bad = [lab for lab in spec.get("labels") or () if lab not in simulated]
+        labels = list(spec["labels"])
+        bad = [lab for lab in labels if lab not in known]
         if bad:
             raise ConfigError(f"model_sets.{name}.labels: {', '.join(map(repr, bad))} "
-                              f"{'is' if len(bad) == 1 else 'are'} not simulated "
-                              f"(simulate.datasets.maneuvers: {', '.join(simulated) or 'none'})")
+                              f"{'is' if len(bad) == 1 else 'are'} not a simulated maneuver "
+                              f"(known: {', '.join(known)})")
+        if not any(lab in simulated for lab in labels):
+            raise ConfigError(f"model_sets.{name}.labels: none of {', '.join(labels)} is simulated with "
+                              f"this config (simulate.datasets.maneuvers: {', '.join(simulated) or 'none'})")
 
 
 def hmm_config(config: Mapping, seed: int) -> ModelsConfig:

@@ -30,7 +30,9 @@ def _one_line(p) -> str:
 @pytest.mark.slow
 @pytest.mark.parametrize("rows, args, expected", [
     ([DEMO], ["--config", "model_sets={sim: {labels: [M1, M9]}}"],
-     "uavpipe: model_sets.sim.labels: 'M9' is not simulated (simulate.datasets.maneuvers: M1, M2"),
+     "uavpipe: model_sets.sim.labels: 'M9' is not a simulated maneuver (known: M1, M2, M3, M4, M5)"),
+    ([DEMO], ["--config", "model_sets={sim: {labels: [M5]}}", "simulate={datasets: {maneuvers: [M1, M2]}}"],
+     "uavpipe: model_sets.sim.labels: none of M5 is simulated with this config"),
     ([DEMO], ["--config", "simulate={rate_hz: 150}"],
      "uavpipe: simulate.sensors.imu.rate_hz 200 must divide rate_hz 150"),
     ([DEMO, "x1\tlogs/{date}/x.bin\tgeneric\ttest\tnone\t\t"], [],

@@ -11,8 +11,8 @@ which never stops the other flights, is still visible on the console at the end 
       report: results/index.html
 
 A flight is ``failed`` when its ingest or preprocess failed (the reason of the first stage that
-did) or its preprocess did not finish (an ingest ``meta.json`` but no ``state/<flight>.json``:
-a crash or a kill, which writes no placeholder), ``partial`` when the ingest decoded only part
+did) or its preprocess did not finish (its job log but no ``state/<flight>.json``: a crash or
+a kill, which writes no placeholder; a flight not yet preprocessed is judged by its ingest), ``partial`` when the ingest decoded only part
 of the log (bytes skipped, records dropped), ``ok`` otherwise, and ``not run`` when the run
 stopped before its ingest wrote ``meta.json``. An unreadable status file is reported as the
 flight's reason, never raised: the summary is printed after an error too. The report line says
@@ -71,11 +71,12 @@ def flight_status(flight: str, results_dir: str | os.PathLike = "results") -> tu
     pre, bad = _read_json(res / "state" / f"{flight}.json")
     if bad:
         return "failed", bad
-    if pre is None:
-        # the ingest finished and the preprocess did not (it crashed, was killed, or the run
-        # stopped before it): the state json is its last output, a failed preprocess writes it too
+    if pre is None and (res / "logs" / "preprocess_flight" / f"{flight}.log").exists():
+        # the preprocess job started (its log is its first file) and wrote no state json, its
+        # last output, which a failed preprocess writes too: it crashed or was killed
         return "failed", f"preprocess did not finish (no {res / 'state' / f'{flight}.json'})"
-    if pre.get("status") == "failed":
+    # (no state json and no preprocess log: not preprocessed yet, e.g. an ingest-only target)
+    if pre is not None and pre.get("status") == "failed":
         return "failed", f"preprocess: {pre.get('error') or 'unknown reason'}"
     if meta.get("status") == "partial":
         return "partial", _partial_reason(meta.get("diagnostics") or {})

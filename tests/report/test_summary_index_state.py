@@ -34,6 +34,12 @@ def test_a_flight_whose_preprocess_crashed_without_its_state_json_counts_as_fail
     res = tmp_path / "results"
     _flight(res, "good")
     _flight(res, "crashed", state=False)
+    # not preprocessed yet (an ingest-only target): judged by its ingest
+    assert flight_status("crashed", res) == ("ok", "")
+    # its preprocess job started (the job log exists) and wrote no state json: it crashed
+    log = res / "logs" / "preprocess_flight" / "crashed.log"
+    log.parent.mkdir(parents=True)
+    log.write_text("Traceback ...\nMemoryError\n")
     assert flight_status("crashed", res) == (
         "failed", f"preprocess did not finish (no {res / 'state' / 'crashed.json'})")
     text = run_summary(["good", "crashed"], [], res)

@@ -237,8 +237,10 @@ def _header_fields(head: bytes) -> tuple[list[str], str, list[str]] | None:
     delimited text table with a header line, else None."""
     try:
         text = head.decode("utf-8")
-    except UnicodeDecodeError as exc:  # a cut multi-byte char at the end of head is fine
-        if exc.start < len(head) - 4:
+    except UnicodeDecodeError as exc:
+        # a cut multi-byte char at the end of head is fine, and so are garbled bytes after the
+        # header and the first data line (the reader drops and counts such lines)
+        if exc.start < len(head) - 4 and head[:exc.start].count(b"\n") < 2:
             return None
         text = head[:exc.start].decode("utf-8")
     text = text.lstrip("\ufeff")
@@ -277,7 +279,7 @@ class TabularReader(LogReader):
 
     name = "tabular"
     source_format = "table"
-    version = "2"  # 2: CSV lines with NUL bytes dropped and counted (unparseable_row)
+    version = "3"  # 2: CSV lines with NUL bytes dropped and counted (unparseable_row); 3: non-UTF-8 lines too
     priority = 80  # structural guess: after every magic-number format
 
     @classmethod
@@ -371,12 +373,49 @@ def drop_nul_lines(data: bytes) -> tuple[bytes, LostLines | None]:
     nul = np.flatnonzero(buf == 0)
     if not len(nul):
         return data, None
+    return _drop_lines(data, nul, "with NUL bytes", f"first NUL at byte {int(nul[0])}",
+                       "the header line holds NUL bytes")
+
+
+def drop_undecodable_lines(data: bytes) -> tuple[bytes, LostLines | None]:
+    """``data`` without the lines that are not UTF-8 text (bytes garbled on the card, a binary
+    block written into the file), counted as :func:`drop_nul_lines` counts its lines.
+
+    Raises
+    ------
+    ValueError
+        When the header line itself is not UTF-8.
+    """
+    bad, start = [], 0
+    while True:
+        try:
+            data[start:].decode("utf-8")
+            break
+        except UnicodeDecodeError as exc:
+            pos = start + exc.start
+            bad.append(pos)
+            nl = data.find(b"\n", pos)
+            if nl < 0:
+                break
+            start = nl + 1
+    if not bad:
+        return data, None
+    return _drop_lines(data, np.asarray(bad), "that are not UTF-8 text", f"first bad byte at {bad[0]}",
+                       "the header line is not UTF-8 text")
+
+
+def _drop_lines(data: bytes, positions: np.ndarray, what: str, where: str,
+                header_error: str) -> tuple[bytes, LostLines]:
+    """``data`` without every line holding one of the byte ``positions``; the rows lost are
+    estimated as the dropped bytes over the median length of an intact line (never fewer than
+    the lines dropped). ValueError(``header_error``) when the header line is one of them."""
+    buf = np.frombuffer(data, dtype=np.uint8)
     nl = np.flatnonzero(buf == 0x0A)
     starts = np.concatenate([[0], nl + 1])           # line i is data[starts[i]:ends[i]]
     ends = np.concatenate([nl + 1, [len(buf)]])
-    bad = np.unique(np.searchsorted(nl, nul))         # the line holding each NUL (its '\n' included)
+    bad = np.unique(np.searchsorted(nl, positions))   # the line holding each position ('\n' included)
     if bad[0] == 0:
-        raise ValueError("the header line holds NUL bytes")
+        raise ValueError(header_error)
     pieces, prev = [], 0
     for i in bad.tolist():
         pieces.append(data[prev:int(starts[i])])
@@ -390,9 +429,8 @@ def drop_nul_lines(data: bytes) -> tuple[bytes, LostLines | None]:
     n_bytes = int(lengths[bad].sum())
     med = float(np.median(lengths[good])) if good.any() else 0.0
     rows = max(len(bad), int(round(n_bytes / med)) if med > 0 else 0)
-    first = int(nul[0])
-    text = (f"{len(bad)} line(s) with NUL bytes dropped ({n_bytes} bytes from byte {int(starts[bad[0]])}, "
-            f"first NUL at byte {first}): about {rows} row(s) lost")
+    text = (f"{len(bad)} line(s) {what} dropped ({n_bytes} bytes from byte {int(starts[bad[0]])}, "
+            f"{where}): about {rows} row(s) lost")
     return b"".join(pieces), LostLines(lines=len(bad), bytes=n_bytes, rows=rows, text=text)
 
 
@@ -425,7 +463,19 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, str, LostLines | None]:
     except ValueError as exc:
         raise IngestError(path, f"malformed CSV: {exc}") from None
     try:
-        df = pd.read_csv(src, sep=sep)
+        try:
+            df = pd.read_csv(src, sep=sep)
+        except UnicodeDecodeError:
+            # garbled lines in a text file: parse a copy without them, counted like NUL lines
+            raw = src.getvalue() if isinstance(src, io.BytesIO) else Path(path).read_bytes()
+            try:
+                cleaned, more = drop_undecodable_lines(raw)
+            except ValueError as exc:
+                raise IngestError(path, f"CSV is not UTF-8 text: {exc}") from None
+            lost = more if lost is None else LostLines(
+                lines=lost.lines + more.lines, bytes=lost.bytes + more.bytes, rows=lost.rows + more.rows,
+                text=f"{lost.text}; {more.text}")
+            df = pd.read_csv(io.BytesIO(cleaned), sep=sep)
     except pd.errors.EmptyDataError:
         raise IngestError(path, "empty CSV (no header line)") from None
     except pd.errors.ParserError as exc:

@@ -216,3 +216,24 @@ def test_a_csv_whose_header_line_holds_nul_bytes_is_one_error_line(tmp_path):
         registry.read_log(p, fmt="tabular",
                           config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
     assert "\n" not in str(err.value)
+
+
+def test_a_csv_with_garbled_non_utf8_lines_keeps_the_others_and_counts_the_lost_rows(tmp_path):
+    # before: the whole file failed ("CSV is not UTF-8 text: invalid start byte at byte 0")
+    rng = np.random.default_rng(8)
+    n = 200
+    df = helpers_tabular.table(rng, n)
+    lines = df.to_csv(index=False).encode().split(b"\n")
+    for k in (50, 51, 120):  # three records garbled on the card: bytes no text encoding has
+        lines[k] = lines[k][:5] + b"\xff\xfe\x80" + lines[k][8:]
+    p = tmp_path / "garbled.csv"
+    p.write_bytes(b"\n".join(lines))
+    log = registry.read_log(p, config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
+    d = log.meta["diagnostics"]
+    assert log.meta["status"] == "partial" and len(log["gps"]) == n - 3
+    assert d["records_dropped"]["unparseable_row"] == 3 and d["bytes_skipped"] > 0
+    assert any("3 line(s) that are not UTF-8 text dropped" in w for w in d["warnings"])
+    # a garbled header is still one error line
+    p.write_bytes(b"\xff" + b"\n".join(lines))
+    with pytest.raises(IngestError, match="garbled.csv: CSV is not UTF-8 text: the header line is not UTF-8"):
+        registry.read_log(p, fmt="tabular", config={"columnmaps": {"m": helpers_tabular.column_map("m")}})

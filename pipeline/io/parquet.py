@@ -50,7 +50,8 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Co
     ----------
     df : DataFrame
         The table. With ``cols`` given its columns must match them (canonical tables);
-        otherwise (free-form result tables) units are taken from ``extra['units']`` if present.
+        otherwise (free-form result tables) units come from the column-name suffixes
+        (:func:`pipeline.io.schema.units_from_names`) and ``extra['units']``, which wins.
     cols : tuple of Column, optional
         Declared columns (``schema.columns(stream)``, ``schema.STATE``...).
     name : str
@@ -65,7 +66,8 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Co
         colmeta = {c.name: {"unit": c.unit, "frame": c.frame} for c in cols}
     else:
         table = pa.Table.from_pandas(df, preserve_index=False)
-        colmeta = (extra or {}).get("units", {})
+        # a free-form result table: units by the naming rule, any given in extra['units'] win
+        colmeta = {**schema.units_from_names(df.columns), **(extra or {}).get("units", {})}
     meta = {"schema_version": schema.SCHEMA_VERSION, "table": name, "columns": colmeta}
     if extra:
         meta.update({k: v for k, v in extra.items() if k != "units"})

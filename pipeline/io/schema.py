@@ -499,6 +499,33 @@ TABLES: dict[str, tuple[Column, ...]] = {
 }
 
 
+#: unit of a column-name suffix (``vel_n_mps`` -> m/s), the naming rule every declared column
+#: follows; :func:`units_from_names` gives free-form result tables (studies) their units by it
+UNIT_SUFFIXES: dict[str, str] = {
+    "m": "m", "s": "s", "ns": "ns", "us": "us", "mps": "m/s", "mps2": "m/s^2", "mps3": "m/s^3",
+    "rad": "rad", "radps": "rad/s", "deg": "deg", "degps": "deg/s", "pct": "%", "Pa": "Pa", "T": "T",
+    "degC": "degC", "Hz": "Hz", "V": "V", "A": "A", "N": "N", "px": "px",
+}
+
+
+_SQUARED_PREFIXES = ("var_", "P_", "sigma_z_", "sigma_y_")
+
+
+def units_from_names(names) -> dict[str, dict[str, str]]:
+    """``{column: {"unit", "frame"}}`` for the columns whose name ends in a unit suffix
+    (:data:`UNIT_SUFFIXES`); frame left empty. Variances and covariances (``var_*``, ``P_*``,
+    the Σ diagonals ``sigma_z_*``/``sigma_y_*``) are left out: their unit is the square of the
+    suffix's."""
+    out = {}
+    for n in map(str, names):
+        if "_" not in n or n.startswith(_SQUARED_PREFIXES):
+            continue
+        unit = UNIT_SUFFIXES.get(n.rsplit("_", 1)[1])
+        if unit is not None:
+            out[n] = {"unit": unit, "frame": ""}
+    return out
+
+
 class SchemaError(ValueError):
     """A DataFrame does not fit its canonical stream (unknown column, uncastable dtype)."""
 

@@ -28,13 +28,23 @@ def test_every_stream_has_full_schema_when_absent():
 
 def test_units_in_column_names_are_declared():
     # every physical column carries its unit suffix and a unit string
-    suffix = {"_m": "m", "_mps": "m/s", "_mps2": "m/s^2", "_radps": "rad/s", "_deg": "deg",
-              "_Pa": "Pa", "_T": "T", "_us": "us", "_degC": "degC", "_ns": "ns", "_mps3": "m/s^3"}
-    for name in schema.STREAM_NAMES:
+    for name in schema.TABLES:  # every declared table: the suffix rule free-form tables rely on
+        inferred = schema.units_from_names(c.name for c in schema.columns(name))
         for c in schema.columns(name):
-            for suf, unit in suffix.items():
-                if c.name.endswith(suf):
-                    assert c.unit == unit, (name, c.name, c.unit)
+            if c.name in inferred:
+                assert c.unit == inferred[c.name]["unit"], (name, c.name, c.unit)
+
+
+def test_a_free_form_result_table_gets_its_units_from_the_column_name_suffixes(tmp_path):
+    from pipeline.io.parquet import write_table
+
+    df = pd.DataFrame({"maneuver": ["M1"], "FA_pct": [90.0], "rmse_vel_mps": [0.3], "t_s": [1.0],
+                       "var_pos_n_m": [0.1], "n_runs": [3], "err_m": [2.0]})
+    write_table(df, tmp_path / "t.parquet", name="study_x", extra={"units": {"err_m": {"unit": "m", "frame": "NED"}}})
+    cols = read_table_meta(tmp_path / "t.parquet")["columns"]
+    assert cols["FA_pct"]["unit"] == "%" and cols["rmse_vel_mps"]["unit"] == "m/s" and cols["t_s"]["unit"] == "s"
+    assert "var_pos_n_m" not in cols and "n_runs" not in cols and "maneuver" not in cols
+    assert cols["err_m"] == {"unit": "m", "frame": "NED"}  # given units win
 
 
 def test_conform_sorts_stably_and_counts_anomalies_in_arrival_order():

@@ -547,9 +547,7 @@ def layout(table: str | tuple[Column, ...], names) -> tuple[Column, ...]:
     order. Raises :class:`SchemaError` on a name the table does not declare.
     """
     cols, names = _cols(table), [str(n) for n in names]
-    prefixes = tuple(c.name[:-1] for c in cols if _is_wildcard(c))
-    known = {c.name for c in cols}
-    unknown = [n for n in names if n not in known and not (prefixes and n.startswith(prefixes))]
+    unknown = _undeclared(cols, names)
     if unknown:
         raise SchemaError(f"table {table if isinstance(table, str) else 'given'!r}: "
                           f"undeclared column(s) {unknown}")
@@ -574,6 +572,14 @@ def _cols(table: str | tuple[Column, ...]) -> tuple[Column, ...]:
 def _is_wildcard(col: Column) -> bool:
     # ``ll_*``: a family of columns named at run time (one per model label)
     return col.name.endswith("*")
+
+
+def _undeclared(cols: tuple[Column, ...], names) -> list:
+    """The ``names`` that are neither a column of ``cols`` nor a member of one of its wildcard
+    families (:func:`conform` and :func:`layout` refuse them)."""
+    known = {c.name for c in cols}
+    prefixes = tuple(c.name[:-1] for c in cols if _is_wildcard(c))
+    return [n for n in names if n not in known and not (prefixes and str(n).startswith(prefixes))]
 
 
 def _empty_series(col: Column, n: int) -> pd.Series:
@@ -638,8 +644,7 @@ def conform(table: str | tuple[Column, ...], df: pd.DataFrame | None) -> pd.Data
         return empty(table)
     cols = _cols(table)
     known = {c.name for c in cols}
-    prefixes = tuple(c.name[:-1] for c in cols if _is_wildcard(c))
-    unknown = [c for c in df.columns if c not in known and not (prefixes and str(c).startswith(prefixes))]
+    unknown = _undeclared(cols, df.columns)
     if unknown:
         kind = "stream" if stream in STREAM_NAMES else "table"
         raise SchemaError(f"{kind} {stream or 'given'!r}: unknown column(s) {unknown}")

@@ -197,9 +197,9 @@ def _prepare(df: pd.DataFrame, cfg: PreprocessConfig, name: str, diag: dict | No
     return df
 
 
-def _control_groups(ctrl: pd.DataFrame, cols: list[str]) -> list[list[str]]:
-    """The pulse-width columns of ``control`` split by the record that carries them (``rc_*``
-    inputs, ``servo_*`` outputs), present columns only.
+def _control_groups(ctrl: pd.DataFrame, cols: list[str]) -> dict[str, list[str]]:
+    """The pulse-width columns of ``control`` split by the record that carries them,
+    ``{"rc": [rc_* inputs], "servo": [servo_* outputs]}``, present columns only.
 
     Readers put RC inputs and servo outputs on rows of their own (RCIN/RCOU, rc_channels/
     actuator_outputs), so the stream interleaves rows where one group is missing: resampled
@@ -211,7 +211,7 @@ def _control_groups(ctrl: pd.DataFrame, cols: list[str]) -> list[list[str]]:
     for c in cols:
         if c in ctrl.columns and ctrl[c].notna().any():
             groups.setdefault(c.split("_", 1)[0], []).append(c)
-    return list(groups.values())
+    return groups
 
 
 def _has(df: pd.DataFrame, cols) -> bool:
@@ -464,9 +464,9 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     ctrl_cols = [c for c in P["control"].columns if c.endswith("_us")]
     if has_ctrl:
         r = pd.DataFrame(index=pd.RangeIndex(n))
-        for cols in _control_groups(S["control"], ctrl_cols):
+        for group, cols in _control_groups(S["control"], ctrl_cols).items():
             rows = _prepare(S["control"].dropna(subset=cols, how="all"), cfg, "control", diag,
-                            f"control.{cols[0].split('_', 1)[0]}")
+                            f"control.{group}")
             r[cols] = _resample_stream(rows, "control", cols, grid, cfg, diag)[0]
         cdf = controls_from_pwm(r, cfg.controls, cfg.physical)
     else:

@@ -28,7 +28,7 @@ from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_table, read_table_meta
 from ..io.stage import declared
-from .pages import figure_divs, render, write_page
+from .pages import figure_divs, relative_href, render, write_page
 from .plots import colour, label, layout
 
 _AXES = (("pos", "position", ("pos_n_m", "pos_e_m", "pos_d_m")),
@@ -214,10 +214,7 @@ def run_align_report(inputs, outputs, config: Mapping | None = None, *, set_name
     ``inputs.template`` and ``inputs.plotly``; ``config``: ``pitch_band_deg``."""
     page = declared(outputs, "page")
 
-    def rel(target) -> str:
-        return Path(os.path.relpath(Path(target).resolve(), Path(page).resolve().parent)).as_posix()
-
     build_align_report({k: declared(inputs, k) for k in ("learned", "alignment", "iterations", "demos")}, page,
                        set_name=set_name, template=declared(inputs, "template"),
-                       plotly_js=rel(declared(inputs, "plotly")), index_href=rel(index),
+                       plotly_js=relative_href(declared(inputs, "plotly"), page), index_href=relative_href(index, page),
                        band_deg=tuple((config or {}).get("pitch_band_deg", (55.0, 89.0))))

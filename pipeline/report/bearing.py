@@ -28,7 +28,7 @@ import plotly.graph_objects as go
 from ..estimate.bearing_run import (CONVERGED_SIGMA_DEG, BearingPair, BearingReplayResult, BearingTrack,
                                     heading_converged_s, range_error_pct_at, run_bearing_replay)
 from ..io.stage import declared
-from .pages import figure_divs, render, write_page
+from .pages import figure_divs, relative_href, render, write_page
 from .plots import layout
 
 #: the page's template when a caller declares none (the rule declares it)
@@ -253,10 +253,6 @@ def build_bearing_page(out_html: str | os.PathLike, pair: str, bp: BearingPair |
     write_page(page, out_html)
 
 
-def _rel(target: str | os.PathLike, page: str | os.PathLike) -> str:
-    return Path(os.path.relpath(Path(target).resolve(), Path(page).resolve().parent)).as_posix()
-
-
 def run_bearing_report(inputs: Mapping | Any, outputs: Mapping | Any, config: Mapping | None, *, pair: str,
                        seed: int = 0, index: str | os.PathLike | None = None, **job) -> BearingReplayResult:
     """The ``estimate_bearing`` rule: the replay of ``pair``
@@ -273,7 +269,7 @@ def run_bearing_report(inputs: Mapping | Any, outputs: Mapping | Any, config: Ma
     def write(path: Path, pair_: str, bp: BearingPair | None, tracks: Mapping[str, BearingTrack],
               reason: str | None, info: dict) -> None:
         build_bearing_page(path, pair_, bp, tracks, reason, info, template=template,
-                           plotly_js=_rel(plotly, path) if plotly else "../assets/plotly.min.js",
-                           index_href=_rel(index, path) if index else "../../index.html")
+                           plotly_js=relative_href(plotly, path) if plotly else "../assets/plotly.min.js",
+                           index_href=relative_href(index, path) if index else "../../index.html")
 
     return run_bearing_replay(inputs, outputs, config, pair=pair, seed=seed, write_page=write, **job)

@@ -102,7 +102,7 @@ def differing_params(per_flight: Mapping[str, Mapping[str, float]]) -> tuple[lis
     names = sorted(set().union(*(set(p) for p in per_flight.values()))) if per_flight else []
     rows = []
     for n in names:
-        vals = [per_flight[f].get(n) if n in per_flight[f] else None for f in flights]
+        vals = [per_flight[f].get(n) for f in flights]
         keys = {("–",) if v is None else ("nan",) if v != v else ("v", float(v)) for v in vals}
         if len(keys) > 1:
             present = [v for v in vals if v is not None]

@@ -18,8 +18,8 @@ from ..estimate.pf_run import classifier_softmax
 from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
-from .flight_summary import (diagnostics_text, first_instance, flight_numbers, ned_track, numbers_script,
-                             plain_text, summary_rows, velocity_track)
+from .flight_summary import (PATH_BIN_S, PATH_NOISE_K, diagnostics_text, first_instance, flight_numbers,
+                             ned_track, numbers_script, plain_text, summary_rows, velocity_track)
 from .pages import figure_divs, render, write_page
 from . import plots
 
@@ -540,7 +540,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
                  ("status", "failed (the reason is above)")]
     page = render(template,
         flight_id=meta.get("flight_id"), summary=summary, facts=facts, plots=divs, tables=tables, linked=linked, plotly_js=plotly_js,
-        index_href=index_href, failed=failed, error=meta.get("error") or "unknown reason" if failed else None)
+        index_href=index_href, failed=failed, error=(meta.get("error") or "unknown reason") if failed else None)
     # the numbers ride in the page, for the index (one source: they cannot disagree)
     write_page(page.replace("</body>", numbers_script(numbers) + "\n</body>", 1), out_html)
 
@@ -575,7 +575,5 @@ def _distance_rule_text(numbers: Mapping) -> str:
     h, sig = numbers.get("path_dead_band_m"), numbers.get("path_noise_m")
     if h is None or not np.isfinite(h):
         return "– (no track)"
-    from .flight_summary import PATH_BIN_S, PATH_NOISE_K
-
     return (f"path of {PATH_BIN_S:g} s position averages, a step counted once it leaves a {h:.2f} m dead band "
             f"({PATH_NOISE_K:g} × the averages' noise σ = {sig:.3f} m)")

@@ -34,16 +34,17 @@ counted, and a turn tighter than the 1 s bins is cut short (chord error ``(vΔt/
 from __future__ import annotations
 
 import datetime as _dt
-import re
-from typing import Mapping, Sequence
-
 import json
 import math
+import re
+from pathlib import Path
+from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
 from ..io import schema
+from ..io.parquet import json_safe
 
 #: MAV_AUTOPILOT enum values that name an autopilot (MAVLink common.xml)
 MAV_AUTOPILOT = {0: "generic", 3: "ArduPilot", 4: "OpenPilot", 8: "none (not a flight controller)",
@@ -390,16 +391,13 @@ _NUMBERS_RE = re.compile(r'<script type="application/json" id="' + NUMBERS_ID + 
 def numbers_script(numbers: Mapping) -> str:
     """The flight page's numbers as a JSON ``<script>`` the index reads back (NaN as null;
     ``</`` escaped so the JSON cannot end the script)."""
-    clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in numbers.items()}
     return (f'<script type="application/json" id="{NUMBERS_ID}">'
-            + json.dumps(clean, sort_keys=True).replace("</", "<\\/") + "</script>")
+            + json.dumps(json_safe(dict(numbers)), sort_keys=True).replace("</", "<\\/") + "</script>")
 
 
 def read_page_numbers(page) -> dict | None:
     """The numbers a flight page carries (:func:`numbers_script`); None when the page is absent
     or has none (a page written before they were)."""
-    from pathlib import Path
-
     p = Path(page)
     if not p.is_file():
         return None

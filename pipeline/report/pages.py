@@ -58,6 +58,11 @@ def render(template: str | os.PathLike, **context) -> str:
 _HTML_TAG = re.compile(r"<html(?![^>]*\blang=)([^>]*)>", re.I)
 
 
+def relative_href(target: str | os.PathLike, page: str | os.PathLike) -> str:
+    """``target`` relative to the folder of ``page`` (POSIX separators, for an href)."""
+    return Path(os.path.relpath(Path(target).resolve(), Path(page).resolve().parent)).as_posix()
+
+
 def with_lang(page: str, lang: str = "en") -> str:
     """``page`` with ``lang`` on its ``<html>`` element (screen readers pick the voice, the
     browser the hyphenation and spelling from it); a page that names a language keeps it."""

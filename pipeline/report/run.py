@@ -7,7 +7,6 @@ between pages are made relative to the page written, so the tree opens from ``fi
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Mapping
 
@@ -16,15 +15,11 @@ from .compare import build_compare_page
 from .flight import build_flight_report, write_plotly_js
 from .index import build_index
 from .model import build_model_report
+from .pages import relative_href
 
 
 
 
-
-
-def _rel(target: str | os.PathLike, page: str | os.PathLike) -> str:
-    """``target`` relative to the folder of ``page`` (POSIX separators, for an href)."""
-    return Path(os.path.relpath(Path(target).resolve(), Path(page).resolve().parent)).as_posix()
 
 
 def _model_set_of(classification: str) -> str:
@@ -49,7 +44,7 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
     """
     page = declared(outputs, "page")
     build_flight_report(Path(declared(inputs, "meta")).parent, page, template=declared(inputs, "template"),
-                        plotly_js=_rel(declared(inputs, "plotly"), page), index_href=_rel(index, page),
+                        plotly_js=relative_href(declared(inputs, "plotly"), page), index_href=relative_href(index, page),
                         state=declared(inputs, "state"), segments=declared(inputs, "segments"),
                         calibration=declared(inputs, "calibration"),
                         classified={_model_set_of(p): p for p in declared_list(inputs, "classified")},
@@ -69,17 +64,17 @@ def run_compare_report(inputs, outputs, config: Mapping | None = None, *, vehicl
     flights_dir = Path(page).parent.parent / "flights"
     build_compare_page(vehicle, flights, page, metas=declared_list(inputs, "metas"),
                        states=declared_list(inputs, "states"), params=declared_list(inputs, "params"),
-                       template=declared(inputs, "template"), plotly_js=_rel(declared(inputs, "plotly"), page),
-                       index_href=_rel(index, page),
-                       flight_links={f: _rel(flights_dir / f"{f}.html", page) for f in flights})
+                       template=declared(inputs, "template"), plotly_js=relative_href(declared(inputs, "plotly"), page),
+                       index_href=relative_href(index, page),
+                       flight_links={f: relative_href(flights_dir / f"{f}.html", page) for f in flights})
 
 
 def run_model_report(inputs, outputs, config: Mapping | None = None, *, index: str) -> None:
     """One model set's page ``outputs.page`` from ``inputs.params``/``meta``/``evaluation``."""
     page = declared(outputs, "page")
     build_model_report(Path(declared(inputs, "params")).parent, declared(inputs, "evaluation"), page,
-                       template=declared(inputs, "template"), plotly_js=_rel(declared(inputs, "plotly"), page),
-                       index_href=_rel(index, page))
+                       template=declared(inputs, "template"), plotly_js=relative_href(declared(inputs, "plotly"), page),
+                       index_href=relative_href(index, page))
 
 
 def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[str],
@@ -102,11 +97,11 @@ def run_index(inputs, outputs, config: Mapping | None = None, *, flights: list[s
     for p in declared_list(inputs, "classified"):
         classified.setdefault(Path(p).stem, {})[_model_set_of(p)] = p
     build_index(flights, declared_list(inputs, "metas"), out,
-                links={f: _rel(p, out) for f, p in zip(flights, declared_list(inputs, "pages"))},
+                links={f: relative_href(p, out) for f, p in zip(flights, declared_list(inputs, "pages"))},
                 segments=dict(zip(flights, declared_list(inputs, "segments"))), classified=classified,
-                models={m: _rel(p, out) for m, p in zip(model_sets, declared_list(inputs, "models"))},
+                models={m: relative_href(p, out) for m, p in zip(model_sets, declared_list(inputs, "models"))},
                 studies={s: f"report/studies/{s}.html" for s in studies}, vehicles=vehicles,
-                compare={Path(p).stem: _rel(p, out) for p in declared_list(inputs, "compare")},
+                compare={Path(p).stem: relative_href(p, out) for p in declared_list(inputs, "compare")},
                 skipped=skipped,
-                align={s: _rel(p, out) for s, p in zip(align_sets, declared_list(inputs, "align"))},
-                bearing={b: _rel(p, out) for b, p in zip(bearing_pairs, declared_list(inputs, "bearing"))})
+                align={s: relative_href(p, out) for s, p in zip(align_sets, declared_list(inputs, "align"))},
+                bearing={b: relative_href(p, out) for b, p in zip(bearing_pairs, declared_list(inputs, "bearing"))})

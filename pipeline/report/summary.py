@@ -12,11 +12,11 @@ which never stops the other flights, is still visible on the console at the end 
 
 A flight is ``failed`` when its ingest or preprocess failed (the reason of the first stage that
 did) or its preprocess did not finish (its job log but no ``state/<flight>.json``: a crash or
-a kill, which writes no placeholder; a flight not yet preprocessed is judged by its ingest), ``partial`` when the ingest decoded only part
-of the log (bytes skipped, records dropped), ``ok`` otherwise, and ``not run`` when the run
-stopped before its ingest wrote ``meta.json``. An unreadable status file is reported as the
-flight's reason, never raised: the summary is printed after an error too. The report line says
-whether ``results/index.html`` is current (:func:`index_state`): ``(not written)``, or ``(stale:
+a kill, which writes no placeholder; a flight not yet preprocessed is judged by its ingest),
+``partial`` when the ingest decoded only part of the log (bytes skipped, records dropped), ``ok``
+otherwise, and ``not run`` when the run stopped before its ingest wrote ``meta.json``. An
+unreadable status file is reported as the flight's reason, never raised: the summary is printed
+after an error too. The report line says whether ``results/index.html`` is current (:func:`index_state`): ``(not written)``, or ``(stale:
 older than <newest input>)`` when an output it is built from was rewritten after it.
 """
 

@@ -151,7 +151,7 @@ def simulate_set(kind: str, name: str, n_runs: int, settings: SimSettings, ds: D
                  on_truth=None) -> pd.DataFrame:
     """Integrate one set in chunks of ``batch_runs`` and return its table; ``on_truth(truth)`` sees
     each full-rate chunk (e.g. :meth:`SummaryAccumulator.add`) before it is dropped."""
-    step = settings.decimation(ds.truth_rate_hz, "datasets.truth")
+    step = settings.decimation(ds.truth_rate_hz, "simulate.datasets.truth_rate_hz")
     parts = []
     for k, lo, hi in _chunks(n_runs, ds.batch_runs):
         tr = run_named(kind, settings, hi - lo, set_rng(seed, set_name, k), name, t_switch)

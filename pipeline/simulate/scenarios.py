@@ -96,12 +96,25 @@ class SimSettings:
     def dt(self) -> float:
         return 1.0 / self.rate_hz
 
-    def decimation(self, rate_hz: float, what: str) -> int:
-        """Integer step from the truth rate to ``rate_hz`` (ConfigError when it does not divide)."""
-        step = self.rate_hz / rate_hz
-        if rate_hz <= 0 or abs(step - round(step)) > 1e-9:
-            raise ConfigError(f"simulate: {what} rate {rate_hz} Hz must divide rate_hz {self.rate_hz}")
-        return int(round(step))
+    def decimation(self, rate_hz: float, key: str) -> int:
+        """Integer step from the truth rate to ``rate_hz`` (:func:`decimation`; ``key`` names
+        the setting in the error)."""
+        return decimation(self.rate_hz, rate_hz, key)
+
+
+def decimation(truth_rate_hz: float, rate_hz: float, key: str) -> int:
+    """Integer step ``truth_rate_hz / rate_hz`` from the truth rate to a slower one.
+
+    Raises
+    ------
+    ConfigError
+        ``<key> <rate> must divide rate_hz <truth rate> (e.g. ...)`` when it does not divide.
+    """
+    step = truth_rate_hz / rate_hz if rate_hz > 0 else float("nan")
+    if not rate_hz > 0 or abs(step - round(step)) > 1e-9:
+        fits = [f"{truth_rate_hz / k:g}" for k in range(1, 41) if (truth_rate_hz / k) % 1 == 0]
+        raise ConfigError(f"{key} {rate_hz:g} must divide rate_hz {truth_rate_hz:g} (e.g. {', '.join(fits[:8])})")
+    return int(round(step))
 
 
 def maneuvers() -> dict[str, mv.KnotCommand]:

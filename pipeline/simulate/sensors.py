@@ -45,6 +45,7 @@ from ..estimate.models import RadarModel
 from ..frames.geodesy import ned_to_geodetic
 from ..frames.rotations import quat_multiply, quat_normalize, quat_rotate_inverse
 from .quadcopter import QuadParams, Truth, motor_thrusts
+from .scenarios import decimation
 
 
 _sim = functools.partial(cfield, "simulate")
@@ -256,15 +257,8 @@ def sensor_steps(sensors: SensorSettings, truth_rate_hz: float) -> dict[str, int
     rates = {"radar": sensors.radar.rate_hz,
              **{k: getattr(sensors, k)["rate_hz"]
                 for k in ("gps", "imu", "baro", "rangefinder", "attitude", "control")}}
-    out = {}
-    for what, rate in rates.items():
-        st = truth_rate_hz / rate if rate > 0 else float("nan")
-        if not rate > 0 or abs(st - round(st)) > 1e-9:
-            fits = [f"{truth_rate_hz / k:g}" for k in range(1, 41) if (truth_rate_hz / k) % 1 == 0]
-            raise ConfigError(f"simulate.sensors.{what}.rate_hz {rate:g} must divide rate_hz "
-                              f"{truth_rate_hz:g} (e.g. {', '.join(fits[:8])})")
-        out[what] = int(round(st))
-    return out
+    return {what: decimation(truth_rate_hz, rate, f"simulate.sensors.{what}.rate_hz")
+            for what, rate in rates.items()}
 
 
 def all_streams(truth: Truth, sensors: SensorSettings, params: QuadParams, truth_rate_hz: float,

@@ -49,9 +49,10 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Co
     Parameters
     ----------
     df : DataFrame
-        The table. With ``cols`` given its columns must match them (canonical tables);
-        otherwise (free-form result tables) units come from the column-name suffixes
-        (:func:`pipeline.io.schema.units_from_names`) and ``extra['units']``, which wins.
+        The table. With ``cols`` given its columns must match them; without, ``name`` must be a
+        table of :data:`pipeline.io.schema.TABLES` (the studies' result tables) and the columns
+        ``df`` holds are cast to that declaration, in its order
+        (:func:`pipeline.io.schema.layout`).
     cols : tuple of Column, optional
         Declared columns (``schema.columns(stream)``, ``schema.STATE``...).
     name : str
@@ -65,12 +66,21 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Co
         table = pa.Table.from_pandas(df[[c.name for c in cols]], schema=arrow_schema, preserve_index=False)
         colmeta = {c.name: {"unit": c.unit, "frame": c.frame} for c in cols}
     else:
-        table = pa.Table.from_pandas(df, preserve_index=False)
-        # a free-form result table: units by the naming rule, any given in extra['units'] win
-        colmeta = {**schema.units_from_names(df.columns), **(extra or {}).get("units", {})}
+        # no free-form tables: a result table is declared in io/schema.py under its name, so
+        # its file has the declared types, units and order whichever columns this run computed
+        if name not in schema.TABLES:
+            raise schema.SchemaError(f"{path.name}: table {name!r} is not declared in pipeline/io/schema.py")
+        if len(df.columns) == 0:
+            df = schema.empty(name)  # a part that did not run: its declared columns, no rows
+        try:
+            cols = schema.layout(name, df.columns)
+            df = pd.DataFrame({c.name: schema.cast(c, df[c.name].reset_index(drop=True)) for c in cols})
+        except schema.SchemaError as exc:
+            raise schema.SchemaError(f"{path.name}: {exc}") from None
+        return write_table(df, path, cols, name=name, extra=extra)
     meta = {"schema_version": schema.SCHEMA_VERSION, "table": name, "columns": colmeta}
     if extra:
-        meta.update({k: v for k, v in extra.items() if k != "units"})
+        meta.update(extra)
     _write_arrow(table, path, meta)
 
 

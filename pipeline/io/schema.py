@@ -29,7 +29,9 @@ import pyarrow as pa
 #: and the ``gps`` columns ``hdop``/``vdop`` are new; every 1.0.0 column is unchanged.
 #: 1.2.0: bearing stream (issue 16)
 #: 1.3.0 (minor): the ``estimator_status`` stream (issue 13 item 2); every 1.2.0 column is unchanged.
-SCHEMA_VERSION = "1.3.0"
+#: 1.4.0 (minor): the studies' result tables are declared (:data:`STUDY_RESULTS`); no stream
+#: or stage table changed.
+SCHEMA_VERSION = "1.4.0"
 
 #: Number of RC input / servo output channels carried by the ``control`` stream.
 N_RC = 18
@@ -1269,3 +1271,519 @@ ALIGN_DEMOS: tuple[Column, ...] = (
 )
 TABLES.update({"align_learned": ALIGN_LEARNED, "align_alignment": ALIGN_ALIGNMENT,
                "align_iterations": ALIGN_ITERATIONS, "align_demos": ALIGN_DEMOS})
+
+
+# --- the studies' result tables (results/studies/<study>/<table>.parquet) -----------------------
+# Declared like every other table: pipeline.io.parquet.write_table looks a study table up here by
+# the name it writes under (``<study>_<table>``) and casts it to these types, units and order,
+# refusing a column not declared. A part that did not run writes the declared columns, no rows.
+# Units: a column whose physical unit depends on another column of its row (``component``,
+# ``quantity``) has unit "" and says so in its doc.
+_STUDY_STATE = (*((f"pos_{a}_m", "m") for a in _NED), *((f"vel_{a}_mps", "m/s") for a in _NED),
+          *((f"acc_{a}_mps2", "m/s^2") for a in _NED))
+_STUDY_KNOWN = ("M1", "M2", "M3", "M4")
+
+# shared by seed000_tables_3_10_3_12 and seed000_tables_3_13_3_15 (switch_stats)
+_STUDY_SWITCH = (
+    Column("table", "string", "", "", "thesis table of the cell (3.10/3.11/3.12 truth; 3.13/3.14/3.15 EKF)"),
+    _f("switch_s", "s", "", "time of the maneuver switch"),
+    Column("scenario", "string", "", "", "change scenario A-D"),
+    Column("first", "string", "", "", "maneuver before the switch"),
+    Column("final", "string", "", "", "maneuver after the switch"),
+    Column("mode", "string", "", "", "classifier mode: cumulative, windowed or reset"),
+    Column("n_runs", "int64", "1", "", "runs in the cell"),
+    _f("FA_initial_pct", "%", "", "runs whose label just before the switch is the first maneuver"),
+    _f("FA_final_pct", "%", "", "runs whose final label is the final maneuver"),
+    _f("MAoT_initial_pct", "%", "", "mean accuracy over time before the switch"),
+    _f("MAoT_final_pct", "%", "", "mean accuracy over time from the end of the 2 s blend"),
+    _f("detection_delay_s", "s", "", "median time from the switch until the final maneuver holds 1 s (NaN: never)"),
+    _f("detected_pct", "%", "", "runs where the final maneuver was detected"),
+    _f("change_point_s", "s", "", "median detected change point (NaN: none)"),
+    _f("thesis_FA_initial_pct", "%", "", "thesis FA of the first maneuver (NaN: no thesis value)"),
+    _f("thesis_FA_final_pct", "%", "", "thesis FA of the final maneuver (NaN: no thesis value)"),
+    _f("thesis_MAoT_initial_pct", "%", "", "thesis MAoT of the first maneuver (NaN: no thesis value)"),
+    _f("thesis_MAoT_final_pct", "%", "", "thesis MAoT of the final maneuver (NaN: no thesis value)"),
+)
+
+# shared by flightcoach_p23_segments and flightcoach_f23_segments (per_segment)
+_FC_SEGMENTS = (
+    Column("segment_id", "int64", "", "", "labelled segment of the flight"),
+    Column("label", "string", "", "", "true maneuver label of the segment"),
+    Column("known", "bool", "", "", "the label has a trained model"),
+    _f("t_start_s", "s", "", "segment start on the flight's clock"),
+    _f("duration_s", "s", "", "segment duration"),
+    Column("pred_end", "string", "", "", "decided label at segment end (or unknown)"),
+    Column("best_end", "string", "", "", "most likely model at segment end"),
+    _f("V_end", "1", "", "confidence V of the best model at segment end"),
+    Column("oneclass_ok_end", "bool", "", "", "best model passes its one-class threshold at segment end"),
+    Column("correct_end", "bool", "", "", "label at segment end is right (unknown for unknown maneuvers)"),
+    _f("MAoT_pct", "%", "", "share of the segment's samples labelled right"),
+    _f("accepted_pct", "%", "", "share of the segment's samples not labelled unknown"),
+)
+
+# shared by flightcoach_ekf_hmm_maneuvers and flightcoach_ekf_hmm_train_maneuvers (per_maneuver)
+_FC_EKF_MANEUVERS = (
+    Column("segment_id", "int64", "", "", "labelled segment of the flight"),
+    Column("label", "string", "", "", "true maneuver label"),
+    _f("t_start_s", "s", "", "segment start on the flight's clock"),
+    _f("duration_s", "s", "", "segment duration"),
+    Column("n_steps", "int64", "1", "", "5 Hz radar steps in the segment"),
+    _f("hmm_share_pct", "%", "", "share of steps predicted with HMM inputs"),
+    Column("pred_end", "string", "", "", "classifier label at segment end"),
+    _f("label_pct", "%", "", "share of steps the classifier labels with the true label"),
+    _f("ekf_pos_rmse", "m", "", "EKF position RMSE against the reference (norm over NED axes)"),
+    _f("ekf_hmm_pos_rmse", "m", "", "EKF+HMM output position RMSE (norm over NED axes)"),
+    _f("ekf_vel_rmse", "m/s", "", "EKF velocity RMSE (norm over NED axes)"),
+    _f("ekf_hmm_vel_rmse", "m/s", "", "EKF+HMM output velocity RMSE (norm over NED axes)"),
+    _f("ekf_acc_rmse", "m/s^2", "", "EKF acceleration RMSE (norm over NED axes)"),
+    _f("ekf_hmm_acc_rmse", "m/s^2", "", "EKF+HMM output acceleration RMSE (norm over NED axes)"),
+    _f("gmr_acc_rmse", "m/s^2", "", "GMR acceleration input RMSE on the steps that used it (NaN: none)"),
+    _f("acc_ratio", "1", "", "ekf_hmm_acc_rmse / ekf_acc_rmse"),
+    Column("better", "bool", "", "", "acc_ratio < 0.95 and HMM inputs on >= 20 % of steps"),
+)
+
+_STUDY_TABLES_A: dict[str, tuple[Column, ...]] = {
+    # pipeline/studies/seed000_classification.py (per_maneuver_table + thesis_side_by_side)
+    "seed000_classification_tables_3_1_3_4": (
+        Column("table", "string", "", "", "thesis table of the row (3.1 ... 3.4; ours 3.4+1c, 3.4+bg)"),
+        Column("classifier", "string", "", "", "decision: oneclass, confidence, both, confidence_bg"),
+        Column("split", "string", "", "", "train or test runs"),
+        Column("maneuver", "string", "", "", "true maneuver M1-M5"),
+        Column("n_runs", "int64", "1", "", "runs of the maneuver"),
+        _f("FA_pct", "%", "", "final accuracy: runs whose final label is right"),
+        _f("MAoT_pct", "%", "", "mean accuracy over time"),
+        _f("thesis_FA_pct", "%", "", "thesis FA (NaN: no thesis value)"),
+        _f("thesis_MAoT_pct", "%", "", "thesis MAoT (NaN: no thesis value)"),
+    ),
+    # pipeline/studies/seed000_classification.py (models.metrics.confusion; columns KNOWN + unknown)
+    "seed000_classification_confusion": (
+        Column("truth", "string", "", "", "true maneuver (row of the confusion matrix)"),
+        *(Column(m, "int64", "1", "", f"runs whose final label is {m}") for m in _STUDY_KNOWN),
+        Column("unknown", "int64", "1", "", "runs whose final label is unknown (or any label outside M1-M4)"),
+        Column("table", "string", "", "", "thesis table of the classification (3.1 ... 3.4+bg)"),
+    ),
+    # pipeline/studies/seed000_classification.py (switch_stats; truth input)
+    "seed000_classification_switch_tables": _STUDY_SWITCH,
+    # pipeline/studies/seed000_classification.py (reset-mode switch moved by +-1 s)
+    "seed000_classification_switch_shift": (
+        Column("scenario", "string", "", "", "change scenario A-D"),
+        _f("base_switch_s", "s", "", "thesis switch time (3, 8, 13 s)"),
+        _f("switch_s", "s", "", "switch time used (base - 1, base, base + 1)"),
+        _f("change_point_s", "s", "", "median reset-mode change point (NaN: none)"),
+        _f("detection_delay_s", "s", "", "median detection delay (NaN: never)"),
+    ),
+    # pipeline/studies/seed000_classification.py (gmr_errors)
+    "seed000_classification_gmr_error": (
+        Column("maneuver", "string", "", "", "maneuver M1-M4"),
+        Column("quantity", "string", "", "",
+               "acc_fd, acc, jerk, acc_<variant>, jerk_<variant> (variants _pos, _interval, _posfd, _posvel)"),
+        Column("axis", "string", "", "", "NED axis n, e or d"),
+        _f("t_s", "s", "", "time in the run"),
+        _f("mean_err", "", "NED", "mean error over test runs; unit of `quantity`: m/s^2 (acc*) or m/s^3 (jerk*)"),
+        _f("err_var", "", "NED",
+           "error variance over test runs; square of the unit of `quantity`: (m/s^2)^2 or (m/s^3)^2"),
+    ),
+    # pipeline/studies/seed000_classification.py (gmr_errors)
+    "seed000_classification_gmr_rmse": (
+        Column("maneuver", "string", "", "", "maneuver M1-M4"),
+        Column("quantity", "string", "", "", "acc_fd, acc, jerk, acc_<variant>, jerk_<variant>"),
+        _f("rmse", "", "", "RMSE over the common samples; unit of `quantity`: m/s^2 (acc*) or m/s^3 (jerk*)"),
+        Column("n", "int64", "1", "", "samples (all axes) the RMSE is over"),
+    ),
+    # pipeline/studies/seed000_classification.py (ekf_tables; only with ekf_input, else empty)
+    "seed000_classification_ekf_tables": (
+        Column("table", "string", "", "", "thesis table of the row (3.5 ... 3.8; ours 3.8+bg)"),
+        Column("classifier", "string", "", "", "decision: oneclass, confidence, confidence_bg"),
+        Column("split", "string", "", "", "train or test runs"),
+        Column("trained_on", "string", "", "", "models trained on truth or ekf estimates"),
+        Column("increments", "string", "", "", "what the classifier sees: prior or posterior increments"),
+        Column("maneuver", "string", "", "", "true maneuver M1-M5"),
+        Column("n_runs", "int64", "1", "", "runs of the maneuver"),
+        _f("FA_pct", "%", "", "final accuracy on EKF input"),
+        _f("MAoT_pct", "%", "", "mean accuracy over time on EKF input"),
+        _f("thesis_FA_pct", "%", "", "thesis FA (NaN: no thesis value)"),
+        _f("thesis_MAoT_pct", "%", "", "thesis MAoT (NaN: no thesis value)"),
+        _f("MAoT_after_5s_pct", "%", "", "MAoT without each run's first 5 s (ours, STARTUP_S)"),
+    ),
+    # pipeline/studies/seed000_classification.py (ekf_switch_tables; only with ekf_input and switch)
+    "seed000_classification_ekf_switch_tables": (
+        *_STUDY_SWITCH,
+        Column("trained_on", "string", "", "", "models trained on truth or ekf estimates"),
+    ),
+
+    # pipeline/studies/seed000_ekf.py (tune_q_on_training)
+    "seed000_ekf_q_tuning": (
+        _f("q", "m^2/s^5", "", "white-jerk density of the grid"),
+        _f("score", "1", "", "normalised RMSE pooled over M1-M4 (minimum chosen)"),
+        Column("chosen", "bool", "", "", "the frozen q"),
+        *(_f(f"rmse_{n}", u, "NED", "pooled RMSE of the state component") for n, u in _STUDY_STATE),
+        _f("rmse_pos", "m", "", "pooled 3-D position RMSE"),
+        _f("rmse_vel", "m/s", "", "pooled 3-D velocity RMSE"),
+        _f("rmse_acc", "m/s^2", "", "pooled 3-D acceleration RMSE"),
+        *(_f(f"score_{m}", "1", "", f"normalised RMSE on {m}'s tuning runs") for m in _STUDY_KNOWN),
+    ),
+    # pipeline/studies/seed000_ekf.py (mc_maneuver)
+    "seed000_ekf_mc_time": (
+        Column("maneuver", "string", "", "", "Monte Carlo maneuver (mc_<M>)"),
+        Column("filter", "string", "", "", "ekf or rts"),
+        _f("t_s", "s", "", "time since the first step"),
+        Column("component", "string", "", "", "state component pos_n_m ... acc_d_mps2 (its unit in the name)"),
+        _f("mean_err", "", "NED", "mean error over runs; unit of `component`: m, m/s or m/s^2"),
+        _f("err_var", "", "NED", "error variance over runs; square of the unit of `component`"),
+        _f("filter_var", "", "NED", "mean filter variance (diag P); square of the unit of `component`"),
+        _f("nees_avg", "1", "", "run-averaged NEES at this step"),
+    ),
+    # pipeline/studies/seed000_ekf.py (mc_maneuver summary)
+    "seed000_ekf_mc_rmse": (
+        Column("maneuver", "string", "", "", "Monte Carlo maneuver"),
+        Column("n_runs", "int64", "1", "", "Monte Carlo runs"),
+        Column("n_steps", "int64", "1", "", "steps per run"),
+        _f("nees_band_lo", "1", "", "lower bound of the 95 % band of chi2(9N)/N"),
+        _f("nees_band_hi", "1", "", "upper bound of the 95 % band of chi2(9N)/N"),
+        *(c for f in ("ekf", "rts") for c in (
+            _f(f"{f}_rmse_pos", "m", "", f"{f.upper()} 3-D position RMSE over runs and time"),
+            _f(f"{f}_rmse_vel", "m/s", "", f"{f.upper()} 3-D velocity RMSE over runs and time"),
+            _f(f"{f}_rmse_acc", "m/s^2", "", f"{f.upper()} 3-D acceleration RMSE over runs and time"),
+            _f(f"{f}_nees_mean", "1", "", f"time mean of the run-averaged {f.upper()} NEES"),
+            _f(f"{f}_nees_in_band_pct", "%", "", f"steps whose run-averaged {f.upper()} NEES is in the band"),
+            _f(f"{f}_var_ratio_median", "1", "",
+               f"median MC error variance / {f.upper()} filter variance (NaN with one run)"),
+        )),
+    ),
+    # pipeline/studies/seed000_ekf.py (tune_ekf_hmm; empty when skip: hmm)
+    "seed000_ekf_q2_tuning": (
+        Column("gmr_input", "string", "", "", "GMR conditioning block: pos, pos_fd, pos_vel"),
+        _f("gate_mps2", "m/s^2", "", "GMR outlier gate (per step)"),
+        Column("q2_input", "string", "", "", "what the GMR sees when Q2 is estimated: truth or ekf"),
+        _f("q2_scale", "1", "", "scale of the estimated Q2"),
+        _f("score", "1", "", "mean over components of pooled EKF+HMM RMSE / EKF RMSE"),
+        _f("hmm_rmse_pos", "m", "", "EKF+HMM output 3-D position RMSE, pooled"),
+        _f("ekf_rmse_pos", "m", "", "EKF 3-D position RMSE, pooled"),
+        _f("hmm_rmse_vel_n", "m/s", "NED", "EKF+HMM output north velocity RMSE, pooled"),
+        _f("ekf_rmse_vel_n", "m/s", "NED", "EKF north velocity RMSE, pooled"),
+        _f("hmm_rmse_vel_e", "m/s", "NED", "EKF+HMM output east velocity RMSE, pooled"),
+        _f("ekf_rmse_vel_e", "m/s", "NED", "EKF east velocity RMSE, pooled"),
+        _f("hmm_rmse_vel_d", "m/s", "NED", "EKF+HMM output down velocity RMSE, pooled"),
+        _f("ekf_rmse_vel_d", "m/s", "NED", "EKF down velocity RMSE, pooled"),
+        _f("hmm_rmse_acc", "m/s^2", "", "EKF+HMM output 3-D acceleration RMSE, pooled"),
+        _f("ekf_rmse_acc", "m/s^2", "", "EKF 3-D acceleration RMSE, pooled"),
+        Column("chosen", "bool", "", "", "the frozen candidate (lowest score)"),
+    ),
+    # pipeline/studies/seed000_ekf.py (hmm_maneuver + input_quality; empty when skip: hmm)
+    "seed000_ekf_scenarios": (
+        Column("maneuver", "string", "", "", "maneuver M1-M4"),
+        Column("scenario", "string", "", "", "S1 (best test run) or S2 (worst)"),
+        Column("run_id", "int64", "", "", "test run chosen for the scenario"),
+        _f("summed_abs_error", "", "",
+           "summed |EKF+HMM error| over steps and the 9 state components (mixed m, m/s, m/s^2)"),
+        Column("n_realisations", "int64", "1", "", "radar noise realisations"),
+        _f("MAoT_pct", "%", "", "classifier mean accuracy over time"),
+        _f("thesis_MAoT_pct", "%", "", "thesis Chapter-4 MAoT"),
+        _f("hmm_mode_pct", "%", "", "share of steps in HMM mode"),
+        _f("hmm_output_pct", "%", "", "share of steps whose output is the EKF+HMM estimate"),
+        _f("gated_pct", "%", "", "share of GMR inputs dropped by the gate"),
+        _f("gmr_input_acc_rmse", "m/s^2", "", "3-D RMSE of the GMR acceleration input on HMM steps (NaN: none)"),
+        _f("ekf_acc_rmse_on_hmm_steps", "m/s^2", "", "EKF 3-D acceleration RMSE on the same steps (NaN: none)"),
+        _f("ekf_hmm_acc_rmse_on_hmm_steps", "m/s^2", "",
+           "EKF+HMM output 3-D acceleration RMSE on the same steps (NaN: none)"),
+    ),
+    # pipeline/studies/seed000_ekf.py (group_rmse; empty when skip: hmm)
+    "seed000_ekf_hmm_rmse": (
+        Column("maneuver", "string", "", "", "maneuver M1-M4"),
+        Column("scenario", "string", "", "", "S1 or S2"),
+        Column("filter", "string", "", "", "ekf or ekf_hmm"),
+        _f("pos", "m", "", "3-D position RMSE over realisations and time"),
+        _f("vel_n", "m/s", "NED", "north velocity RMSE"),
+        _f("vel_e", "m/s", "NED", "east velocity RMSE"),
+        _f("vel_d", "m/s", "NED", "down velocity RMSE"),
+        _f("acc", "m/s^2", "", "3-D acceleration RMSE"),
+    ),
+    # pipeline/studies/seed000_ekf.py (hmm_maneuver; empty when skip: hmm)
+    "seed000_ekf_hmm_time": (
+        Column("maneuver", "string", "", "", "maneuver M1-M4"),
+        Column("scenario", "string", "", "", "S1 or S2"),
+        Column("filter", "string", "", "", "ekf or ekf_hmm"),
+        _f("t_s", "s", "", "time since the first step"),
+        Column("component", "string", "", "", "state component pos_n_m ... acc_d_mps2 (its unit in the name)"),
+        _f("mean_err", "", "NED", "mean error over realisations; unit of `component`: m, m/s or m/s^2"),
+        _f("err_var", "", "NED", "error variance over realisations; square of the unit of `component`"),
+        _f("filter_var", "", "NED", "mean filter variance (diag P); square of the unit of `component`"),
+        _f("mode_pct", "%", "", "share of realisations in HMM mode at this step"),
+    ),
+
+    # pipeline/studies/flightcoach_classification.py (per_segment; P23 #350, reset per segment)
+    "flightcoach_classification_p23_segments": _FC_SEGMENTS,
+    # pipeline/studies/flightcoach_classification.py (timeline; whole flight, windowed)
+    "flightcoach_classification_p23_timeline": (
+        _f("t_start_s", "s", "", "start of a run of one predicted label"),
+        _f("t_end_s", "s", "", "last sample of the run"),
+        Column("pred", "string", "", "", "predicted label"),
+        Column("truth", "string", "", "", "true label at the run start"),
+    ),
+    # pipeline/studies/flightcoach_classification.py (sweep_row)
+    "flightcoach_classification_oneclass_slack_sweep": (
+        _f("slack_nats_per_sample", "1", "", "one-class slack (nats per sample)"),
+        Column("auto", "bool", "", "", "the slack is the model set's auto slack"),
+        _f("p21_known_accepted_pct", "%", "", "P21 known segments not labelled unknown at the end"),
+        _f("p21_unknown_rejected_pct", "%", "", "P21 unknown segments labelled unknown at the end"),
+        _f("p21_balanced_pct", "%", "", "mean of the two P21 shares (calibration score)"),
+        _f("p21_balanced_over_time_pct", "%", "", "balanced P21 accuracy over all samples"),
+        Column("p23_correct_at_end", "int64", "1", "", "P23 #350 segments right at segment end"),
+        Column("p23_n", "int64", "1", "", "P23 #350 segments scored"),
+        _f("f23_new_unknown_pct", "%", "", "F23 #35 new maneuvers labelled unknown at the end"),
+        Column("f23_new_n", "int64", "1", "", "F23 #35 new maneuvers scored"),
+    ),
+    # pipeline/studies/flightcoach_classification.py (per_segment; F23 #35, decision both)
+    "flightcoach_classification_f23_segments": _FC_SEGMENTS,
+
+    # pipeline/studies/flightcoach_ekf_hmm.py (per_maneuver; test flight)
+    "flightcoach_ekf_hmm_maneuvers": _FC_EKF_MANEUVERS,
+    # pipeline/studies/flightcoach_ekf_hmm.py (per_maneuver; training flight, in-sample)
+    "flightcoach_ekf_hmm_train_maneuvers": _FC_EKF_MANEUVERS,
+    # pipeline/studies/flightcoach_ekf_hmm.py (q and Q2-scale grids)
+    "flightcoach_ekf_hmm_tuning": (
+        Column("parameter", "string", "", "", "q or q2_scale"),
+        Column("gmr_input", "string", "", "", "GMR conditioning block ('' for q rows)"),
+        _f("value", "", "", "grid value; unit of `parameter`: q m^2/s^5, q2_scale 1"),
+        _f("score", "1", "", "q: normalised RMSE; q2_scale: mean EKF+HMM/EKF acceleration-RMSE ratio"),
+        Column("chosen", "bool", "", "", "the frozen value"),
+    ),
+    # pipeline/studies/flightcoach_ekf_hmm.py (_timeline; test flight per 5 Hz step)
+    "flightcoach_ekf_hmm_timeline": (
+        _f("t_s", "s", "", "time since the first radar step"),
+        Column("label", "string", "", "", "true maneuver label ('' outside segments)"),
+        Column("pred", "string", "", "", "classifier label"),
+        Column("mode", "bool", "", "", "step predicted with HMM inputs"),
+        *(c for a in _NED for c in (
+            _f(f"ref_acc_{a}_mps2", "m/s^2", "NED", "reference acceleration"),
+            _f(f"ekf_acc_{a}_mps2", "m/s^2", "NED", "EKF acceleration"),
+            _f(f"ekf_hmm_acc_{a}_mps2", "m/s^2", "NED", "EKF+HMM output acceleration"),
+            _f(f"gmr_acc_{a}_mps2", "m/s^2", "NED", "GMR acceleration input"),
+        )),
+    ),
+}
+
+_STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
+    # ---------------------------------------------------------------------------------------------
+    # pipeline/studies/bearing_only.py (run_bearing_only -> write_table(name=f"bearing_only_{key}"),
+    # key in OUTPUT_TABLES = curves, runs, trends, crlb, study3)
+    # ---------------------------------------------------------------------------------------------
+    # curves_table(): per configuration and kept step (every curve_every_s), means over the runs
+    "bearing_only_curves": (
+        Column("config", "string", "", "", "configuration name (bank preset, sweep_*, imm_td*_d*, crlb_*, study3_*)"),
+        Column("part", "string", "", "", "study part: table_4_2, cppv_vs_mpc, sweeps, imm_grid, crlb, study3"),
+        Column("kind", "string", "", "", "scenario kind of the encounter set (orbit, ct_cv, ct_cv_ct, cv_ct, cv_ct_cv)"),
+        _f("t_s", "s", "", "time since the encounter start"),
+        _f("thesis_r", "1", "", "thesis 'RMSE' of range: mean over runs of |r_hat - r| / |r| (digest §8)"),
+        _f("thesis_v", "1", "", "thesis 'RMSE' of speed: mean over runs of |v_hat - v| / |v|"),
+        _f("thesis_w", "1", "", "thesis 'RMSE' of turn rate: mean over runs of |w_hat - w| / |w| (NaN on straight truth)"),
+        _f("heading_deg", "deg", "", "mean over runs of the heading error |wrap(theta_hat - theta)|"),
+        _f("rmse_r_m", "m", "", "true range RMSE over runs"),
+        _f("nees", "1", "", "mean 5-state CPPV NEES over runs (NaN without covariance)"),
+        _f("mu_cv", "1", "", "IMM: mean CV-mode probability over runs (NaN for a bank)"),
+        Column("n_runs", "int64", "1", "", "runs of the configuration"),
+    ),
+    # runs_table(): one row per configuration and run
+    "bearing_only_runs": (
+        Column("config", "string", "", "", "configuration name"),
+        Column("part", "string", "", "", "study part"),
+        Column("run", "int64", "", "", "run index in the shared scenario set"),
+        _f("range_score", "1", "", "mean relative range error over score_window_s"),
+        _f("heading_score_rad", "rad", "", "mean heading error over score_window_s"),
+        _f("range_score_all", "1", "", "mean relative range error over imm_window_s"),
+        _f("final_range_err", "1", "", "relative range error |r_hat - r| / r at the last step"),
+        Column("diverged", "bool", "", "", "D8 divergence flag (final range error or NEES run too long)"),
+    ),
+    # trends() / _trend() / sign_test(): one row per component sign test of a trend
+    "bearing_only_trends": (
+        Column("trend", "string", "", "", "trend id (nr25, cppv_range, mpc_heading, delta_1e2_worse, delta_over_td, faster_ownship)"),
+        Column("claim", "string", "", "", "the trend's claim in words"),
+        Column("comparison", "string", "", "", "the component test 'a < b[, note]'"),
+        _f("p", "1", "", "one-sided paired sign-test p-value of the component (NaN without runs)"),
+        Column("n", "int64", "1", "", "runs where the pair differs (ties and NaN pairs dropped)"),
+        Column("n_better", "int64", "1", "", "runs where the claimed winner is better"),
+        _f("median_effect", "", "", "median paired difference b - a (> 0: a better); unit of the score: "
+           "1 (relative range error or its spread) except trend mpc_heading: rad"),
+        _f("frac_better", "1", "", "share of differing runs where the claimed winner is better"),
+        _f("p_trend", "1", "", "the trend's p: the largest component p (NaN if any is undecided)"),
+        Column("holds", "bool", "", "", "p_trend < alpha"),
+        Column("note", "string", "", "", "free note ('' if none)"),
+    ),
+    # crlb_check(): one row per quantity and step of the fixed orbit
+    "bearing_only_crlb": (
+        Column("quantity", "string", "", "", "r, v, omega or theta"),
+        _f("t_s", "s", "", "time since the encounter start"),
+        _f("sample_std", "", "", "sample std of the estimate error over realisations; unit per quantity: "
+           "r m, v m/s, omega rad/s, theta rad"),
+        _f("sqrt_crlb", "", "", "sqrt of the CRLB (digest §7); unit per quantity as sample_std"),
+        _f("ratio", "1", "", "sample_std / sqrt_crlb"),
+        _f("floor_std", "", "", "error std of the ideal filter carrying the bank's Q (q_floor); unit per quantity as sample_std"),
+        _f("floor_ratio", "1", "", "floor_std / sqrt_crlb"),
+    ),
+    # run_bearing_only(), study3 part: single IMM runs, one row per scenario and step
+    "bearing_only_study3": (
+        Column("scenario", "string", "", "", "ct_cv_ct, ct_cv_ct_redraw, cv_ct or cv_ct_cv"),
+        _f("t_s", "s", "", "time since the encounter start"),
+        _f("r_true_m", "m", "", "true range ownship-intruder"),
+        _f("r_est_m", "m", "", "estimated range"),
+        _f("theta_true_deg", "deg", "", "true intruder course (from N toward E)"),
+        _f("theta_est_deg", "deg", "", "estimated intruder course"),
+        _f("omega_true_dps", "deg/s", "", "true intruder turn rate (> 0 right turn)"),
+        _f("omega_est_dps", "deg/s", "", "estimated intruder turn rate"),
+        _f("mu_cv", "1", "", "IMM probability of the CV mode"),
+        Column("mode_true", "int64", "", "", "true motion mode: 1 CT, 0 CV"),
+    ),
+
+    # ---------------------------------------------------------------------------------------------
+    # pipeline/studies/pf.py (run_pf): seed-003 weave classifier (hmpf)
+    # ---------------------------------------------------------------------------------------------
+    # summarise(): one row per scenario and seed
+    "pf_hmpf_runs": (
+        Column("scenario", "string", "", "", "scenario (straight_gps, weave_radar, range_<d>, quadrant_<i>, ...)"),
+        Column("sensor", "string", "", "", "gps or radar"),
+        Column("seed", "int64", "", "", "noise realisation index"),
+        _f("delta_max_m", "m", "", "filter's maximal straight length delta_max"),
+        _f("theta_max_rad", "rad", "", "filter's maximal turn angle theta_max"),
+        Column("method", "string", "", "", "submode switching rule: ifelse or min"),
+        _f("straight_frac", "1", "", "mean S-mode fraction over steps after start-up"),
+        _f("weave_frac_in_weave", "1", "", "mean W-mode fraction during the weave (NaN: no weave)"),
+        _f("weave_frac_off_weave", "1", "", "mean W-mode fraction off the weave after start-up (NaN: none)"),
+        Column("ever_flagged", "bool", "", "", "the detector flagged the weave at some step"),
+        Column("first_flag_step", "int64", "1", "", "first flagged step (-1: never)"),
+        Column("flagged_before_weave", "bool", "", "", "flagged before the weave began (false alarm)"),
+        Column("third_turn_end_step", "int64", "1", "", "step at the end of the 3rd turn (-1: no weave)"),
+        _f("flag_delay_steps", "1", "", "first flag in the weave minus the 3rd turn's end, steps of T = 1 s (NaN: none)"),
+        _f("pos_rmse_m", "m", "", "per-axis position RMS error after start-up"),
+        _f("vel_rmse_mps", "m/s", "", "per-axis velocity RMS error after start-up"),
+        Column("n_reinit", "int64", "1", "", "all-zero-weight re-initialisations"),
+    ),
+    # timeline(): one row per scenario and step, over seeds
+    "pf_hmpf_timeline": (
+        Column("scenario", "string", "", "", "scenario"),
+        Column("step", "int64", "1", "", "step k (T = 1 s)"),
+        _f("truth_n_m", "m", "NED", "true north position"),
+        _f("truth_e_m", "m", "NED", "true east position"),
+        Column("in_weave", "bool", "", "", "the step lies in the weave"),
+        *(_f(f"mode_p_{m}", "1", "", f"mean over seeds of the fraction of particles in mode {m} (straight/left/right/weave)")
+          for m in ("S", "L", "R", "W")),
+        _f("af", "1", "", "detector weave fraction AF(k), mean over seeds"),
+        _f("af_seed0", "1", "", "AF(k) of seed 0"),
+        _f("flagged_share", "1", "", "share of seeds flagged at the step"),
+        Column("flag_seed0", "bool", "", "", "seed 0 flagged at the step"),
+        _f("rmse_n", "m", "NED", "RMS north position error over seeds"),
+        _f("rmse_e", "m", "NED", "RMS east position error over seeds"),
+        _f("rmse_vn", "m/s", "NED", "RMS north velocity error over seeds"),
+        _f("rmse_ve", "m/s", "NED", "RMS east velocity error over seeds"),
+    ),
+
+    # ---------------------------------------------------------------------------------------------
+    # pipeline/studies/pf_geolocation.py (geolocation_study, written by pf.py as f"pf_{t}",
+    # t in GEO_TABLES = geo_summary, geo_series, geo_config, geo_timing); rows from
+    # pipeline/simulate/geolocation.py summarise() / per_step_frame()
+    # ---------------------------------------------------------------------------------------------
+    # one row per scenario / sweep point: key, duration, then summarise() without step_us
+    "pf_geo_summary": (
+        Column("case", "string", "", "", "base, maneuvering, mobile, particles_<N>, observers_<O>"),
+        Column("scenario", "string", "", "", "base, maneuvering or mobile (digest 001 §6.1-6.3)"),
+        Column("n_observers", "int64", "1", "", "observer UAVs"),
+        Column("n_particles", "int64", "1", "", "particles N"),
+        _f("duration_s", "s", "", "simulated duration of each run"),
+        _f("eps_m", "m", "", "mean 3-D error pooled over time (after 1 s) and runs"),
+        _f("eta_pct", "%", "", "mean percent error 100 eps_k / mean observer distance"),
+        _f("median_eps_m", "m", "", "median 3-D error pooled over time and runs"),
+        _f("mean_dist_m", "m", "", "mean observer-target distance"),
+        Column("n_runs", "int64", "1", "", "runs"),
+        Column("n_reinit", "int64", "1", "", "filter re-initialisations summed over runs"),
+        _f("median_run_eta_pct", "%", "", "median over runs of each run's mean eta%"),
+        Column("n_lost", "int64", "1", "", "runs ending with no observer detecting the target"),
+        _f("eta_pct_not_lost", "%", "", "pooled eta% over the runs not lost (NaN: all lost)"),
+        _f("eps_m_not_lost", "m", "", "pooled 3-D error over the runs not lost (NaN: all lost)"),
+    ),
+    # per_step_frame(): per case and time index, means over runs
+    "pf_geo_series": (
+        _f("t_s", "s", "", "time since the run start"),
+        _f("eps_m", "m", "", "3-D error eps_k, mean over runs"),
+        _f("eta_pct", "%", "", "percent error eta_k, mean over runs"),
+        _f("mean_dist_m", "m", "", "mean observer-target distance, mean over runs"),
+        _f("neff", "1", "", "effective sample size, mean over runs"),
+        Column("mode_p_*", "float64", "1", "", "fraction of particles per driving mode (stop, accel, decel, coast, "
+               "turn; coast only for the CV-only base filter), mean over runs"),
+        Column("case", "string", "", "", "case (as in pf_geo_summary)"),
+    ),
+    # the chosen config values (GeolocationConfig.meta() + size, seed, runs), JSON-encoded
+    "pf_geo_config": (
+        Column("key", "string", "", "", "setting name"),
+        Column("value", "string", "", "", "setting value as JSON text (number, list, dict or string)"),
+    ),
+    # one row per scenario / sweep point: this machine's filter step time
+    "pf_geo_timing": (
+        Column("case", "string", "", "", "case (as in pf_geo_summary)"),
+        Column("scenario", "string", "", "", "base, maneuvering or mobile"),
+        Column("n_observers", "int64", "1", "", "observer UAVs"),
+        Column("n_particles", "int64", "1", "", "particles N"),
+        _f("step_us", "us", "", "mean wall time of one filter step (perf_counter_ns, first step excluded)"),
+    ),
+
+    # ---------------------------------------------------------------------------------------------
+    # pipeline/studies/trajectory_learning.py (run_trajectory_learning, f"trajectory_learning_{k}");
+    # sim_* from pipeline/studies/trajectory_sim.py simulated_study()
+    # ---------------------------------------------------------------------------------------------
+    # one row per reference, seed and candidate method
+    "trajectory_learning_sim_cases": (
+        Column("reference", "string", "", "", "simulated reference (REFERENCES, YAK54_REFERENCES)"),
+        Column("seed", "int64", "", "", "seed index i of the case"),
+        Column("method", "string", "", "", "candidate: learned, best_demo, mean_demo, dba, dba_smoothed, "
+               "best_smoothed_demo, mean_smoothed_demo (Yak54: + learned_no_bias, learned_kinematic)"),
+        _f("rmse_m", "m", "", "position RMSE against the intended trajectory"),
+        Column("n_iter", "int64", "1", "", "EM iterations of the case's main learner"),
+        Column("converged", "bool", "", "", "the main learner converged"),
+    ),
+    # per reference and method over seeds
+    "trajectory_learning_sim_summary": (
+        Column("reference", "string", "", "", "simulated reference"),
+        Column("method", "string", "", "", "candidate method"),
+        _f("rmse_mean_m", "m", "", "mean over seeds of rmse_m"),
+        _f("rmse_std_m", "m", "", "std over seeds of rmse_m (NaN with one seed)"),
+        _f("rmse_min_m", "m", "", "min over seeds of rmse_m"),
+        _f("rmse_max_m", "m", "", "max over seeds of rmse_m"),
+        Column("n_seeds", "int64", "1", "", "seeds"),
+        Column("learned_best", "bool", "", "", "the learned mean RMSE beats every baseline on the reference"),
+    ),
+    # loo_maneuver() / real_part(): one row per set, maneuver, frame and left-out demo
+    # (a skipped maneuver or failed fit is one row with the rms columns NaN)
+    "trajectory_learning_real_loo": (
+        Column("set", "string", "", "", "align.sets demo set (p23, p21)"),
+        Column("maneuver", "string", "", "", "maneuver label (label#k per occurrence with repeats: split)"),
+        Column("frame", "string", "", "", "box (demos as they are) or centred (mean position subtracted)"),
+        Column("left_out", "string", "", "", "left-out demo <flight>:<label>#<k> ('' for a skipped maneuver)"),
+        Column("n_others", "int64", "1", "", "demos left to learn from (usable demos - 1 when skipped)"),
+        Column("single_other", "bool", "", "", "only one other demo (learner given it twice)"),
+        Column("status", "string", "", "", "ok, 'fit failed: ...' or 'skipped: ...'"),
+        _f("rms_learned_m", "m", "", "RMS distance along the DTW path, learned trajectory to the left-out demo"),
+        _f("rms_best_other_m", "m", "", "the same for the closest other demo"),
+        _f("rms_worst_other_m", "m", "", "the same for the farthest other demo"),
+        _f("rms_dba_m", "m", "", "the same for the others' DBA average"),
+        Column("closest_other", "string", "", "", "name of the closest other demo (NA unless status ok)"),
+        _f("rms_between_others_m", "m", "", "mean RMS distance between the training demos (NaN with one)"),
+        Column("n_iter", "Int64", "1", "", "EM iterations of the fit (NA unless status ok)"),
+    ),
+    # real_part(): per frame, set and maneuver, means over its ok folds
+    "trajectory_learning_real_summary": (
+        Column("frame", "string", "", "", "box or centred"),
+        Column("set", "string", "", "", "demo set"),
+        Column("maneuver", "string", "", "", "maneuver label"),
+        Column("folds", "int64", "1", "", "ok folds"),
+        Column("demos", "int64", "1", "", "demos of the maneuver"),
+        Column("single_other", "bool", "", "", "folds had only one other demo"),
+        _f("rms_learned_m", "m", "", "mean over folds of rms_learned_m"),
+        _f("rms_best_other_m", "m", "", "mean over folds of rms_best_other_m"),
+        _f("rms_worst_other_m", "m", "", "mean over folds of rms_worst_other_m"),
+        _f("rms_dba_m", "m", "", "mean over folds of rms_dba_m"),
+        Column("better", "bool", "", "", "rms_learned_m < rms_best_other_m"),
+        Column("better_than_dba", "bool", "", "", "rms_learned_m < rms_dba_m"),
+    ),
+}
+
+#: the studies' result tables by the name their file is written under
+STUDY_RESULTS: dict[str, tuple[Column, ...]] = {**_STUDY_TABLES_A, **_STUDY_TABLES_B}
+TABLES.update(STUDY_RESULTS)

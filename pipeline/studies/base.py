@@ -48,7 +48,7 @@ STUDY_TABLES: dict[str, tuple[str, ...]] = {
     "flightcoach_classification": ("p23_segments", "p23_timeline", "f23_segments", "oneclass_slack_sweep"),
     "flightcoach_ekf_hmm": ("maneuvers", "train_maneuvers", "tuning", "timeline"),
     "seed000_ekf": ("q_tuning", "mc_time", "mc_rmse", "q2_tuning", "scenarios", "hmm_rmse", "hmm_time"),
-    "pf": ("hmpf_runs", "hmpf_timeline", "geo_summary", "geo_series", "geo_config"),
+    "pf": ("hmpf_runs", "hmpf_timeline", "geo_summary", "geo_series", "geo_config", "geo_timing"),
     "trajectory_learning": ("sim_cases", "sim_summary", "real_loo", "real_summary"),
     "bearing_only": ("curves", "runs", "trends", "crlb", "study3"),
 }

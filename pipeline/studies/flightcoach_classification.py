@@ -378,7 +378,7 @@ def run_flightcoach_classification(inputs: Mapping | None, outputs: Mapping, con
     starts = seg["t_start_ns"].to_numpy()
     res = ms.classify(flight, mode="cumulative", decision="confidence", reset_t_ns=starts, gmr=False)
     p23 = per_segment(res, seg, known)
-    write_table(p23, paths["p23_segments"], name="flightcoach_p23_segments")
+    write_table(p23, paths["p23_segments"], name="flightcoach_classification_p23_segments")
     with pd.option_context("display.width", 200):
         say(p23[["label", "duration_s", "pred_end", "V_end", "correct_end", "MAoT_pct"]]
             .to_string(index=False, float_format=lambda x: f"{x:.1f}"))
@@ -386,7 +386,7 @@ def run_flightcoach_classification(inputs: Mapping | None, outputs: Mapping, con
     # the same models over the whole flight, no resets
     res_w = ms.classify(flight, mode="windowed", decision="confidence", gmr=False)
     tl = timeline(res_w)
-    write_table(tl, paths["p23_timeline"], name="flightcoach_p23_timeline_windowed")
+    write_table(tl, paths["p23_timeline"], name="flightcoach_classification_p23_timeline")
     whole = per_segment(res_w, seg, known)
     say(f"whole flight, windowed, no resets: {len(tl)} label runs; per-segment MAoT "
         f"mean {whole['MAoT_pct'].mean():.1f} %, correct at segment end {int(whole['correct_end'].sum())}/{len(whole)}")
@@ -495,8 +495,8 @@ def run_flightcoach_classification(inputs: Mapping | None, outputs: Mapping, con
                                      reset_t_ns=starts3, gmr=False), seg3, known)
     p23_bg = per_segment(ms.classify(flight, mode="cumulative", decision="confidence_bg",
                                      reset_t_ns=starts, gmr=False), seg, known)
-    write_table(sw, paths["oneclass_slack_sweep"], name="flightcoach_slack_sweep")
-    write_table(f23, paths["f23_segments"], name="flightcoach_f23_segments",
+    write_table(sw, paths["oneclass_slack_sweep"], name="flightcoach_classification_oneclass_slack_sweep")
+    write_table(f23, paths["f23_segments"], name="flightcoach_classification_f23_segments",
                 extra={"threshold_slack": d_slack, "threshold_fraction": d_frac})
     with pd.option_context("display.width", 200):
         say(f23[["label", "known", "pred_end", "best_end", "V_end", "oneclass_ok_end", "correct_end"]]

@@ -46,7 +46,7 @@ from .pf_geolocation import geolocation_panels, geolocation_study
 NAME = "pf"
 OUTPUT_TABLES = STUDY_TABLES[NAME]
 #: the seed-001 tables (written by :func:`.pf_geolocation.geolocation_study`)
-GEO_TABLES = ("geo_summary", "geo_series", "geo_config")
+GEO_TABLES = ("geo_summary", "geo_series", "geo_config", "geo_timing")
 
 #: settings of every size (``studies.pf``)
 DEFAULTS: dict[str, Any] = {

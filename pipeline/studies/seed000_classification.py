@@ -824,8 +824,8 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
     paths = {k: output_path(outputs, k) for k in ("report", "results", "page", *OUTPUT_TABLES,
                                                    "model_params", "model_meta")}
     if not st["ekf_input"]:  # declared outputs are always written: empty, marked skipped
-        for k, n in (("ekf_tables", "seed000_tables_3_5_3_8"), ("ekf_switch_tables", "seed000_tables_3_13_3_15")):
-            write_table(pd.DataFrame(), paths[k], name=n, extra={"skipped": True})
+        for k in ("ekf_tables", "ekf_switch_tables"):
+            write_table(pd.DataFrame(), paths[k], name=f"{NAME}_{k}", extra={"skipped": True})
     progress = Progress()
 
     progress(f"simulating {run.runs} runs of each of {', '.join(ALL)}" if sets is None else f"reading {sets}")
@@ -863,10 +863,10 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
         c = confusion(fin["truth"].tolist(), fin["pred"].tolist(), list(KNOWN)).reset_index()
         confs.append(c.assign(table=table))
     tables = pd.concat(tabs, ignore_index=True)
-    write_table(tables, paths["tables_3_1_3_4"], name="seed000_tables_3_1_3_4",
+    write_table(tables, paths["tables_3_1_3_4"], name="seed000_classification_tables_3_1_3_4",
                 extra={"runs_per_maneuver": run.runs, "seed": run.seed, "size": size})
     conf = pd.concat(confs, ignore_index=True)
-    write_table(conf, paths["confusion"], name="seed000_confusion")
+    write_table(conf, paths["confusion"], name="seed000_classification_confusion")
     with pd.option_context("display.width", 200, "display.max_columns", 20):
         say(tables.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
         say(conf.to_string(index=False))
@@ -899,7 +899,7 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
                     progress(f"switch scenario {key} at {ts:g} s, {mode}")
                     cells.append(switch_cell(ms, key, ts, run, mode))
         sw = pd.DataFrame(cells)
-        write_table(sw, paths["switch_tables"], name="seed000_tables_3_10_3_12",
+        write_table(sw, paths["switch_tables"], name="seed000_classification_switch_tables",
                     extra={"switch_runs": run.switch_runs, "seed": run.seed, "size": size})
         with pd.option_context("display.width", 250, "display.max_columns", 30):
             say(sw.drop(columns=["first", "final", "table"]).to_string(index=False, float_format=lambda x: f"{x:.1f}"))
@@ -913,22 +913,22 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
                                    "change_point_s": c["change_point_s"],
                                    "detection_delay_s": c["detection_delay_s"]})
         sh = pd.DataFrame(shifts)
-        write_table(sh, paths["switch_shift"], name="seed000_switch_shift")
+        write_table(sh, paths["switch_shift"], name="seed000_classification_switch_shift")
         say(sh.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
     else:  # declared outputs are always written: empty, marked skipped
-        for k, n in (("switch_tables", "seed000_tables_3_10_3_12"), ("switch_shift", "seed000_switch_shift")):
-            write_table(pd.DataFrame(), paths[k], name=n, extra={"skipped": True})
+        for k in ("switch_tables", "switch_shift"):
+            write_table(pd.DataFrame(), paths[k], name=f"{NAME}_{k}", extra={"skipped": True})
 
     gerr = grmse = None
     if "gmr" not in skip:
         progress("GMR errors on the test runs")
         gerr, grmse = gmr_errors(ms, test)
-        write_table(gerr, paths["gmr_error"], name="seed000_gmr_error")
-        write_table(grmse, paths["gmr_rmse"], name="seed000_gmr_rmse")
+        write_table(gerr, paths["gmr_error"], name="seed000_classification_gmr_error")
+        write_table(grmse, paths["gmr_rmse"], name="seed000_classification_gmr_rmse")
         say(grmse.pivot(index="maneuver", columns="quantity", values="rmse").to_string(float_format=lambda x: f"{x:.3f}"))
     else:
-        for k, n in (("gmr_error", "seed000_gmr_error"), ("gmr_rmse", "seed000_gmr_rmse")):
-            write_table(pd.DataFrame(), paths[k], name=n, extra={"skipped": True})
+        for k in ("gmr_error", "gmr_rmse"):
+            write_table(pd.DataFrame(), paths[k], name=f"{NAME}_{k}", extra={"skipped": True})
 
     write_report(paths["report"], run, size, cfg, ms, tables, conf, per_sample, m5_diag, sw=sw, sh=sh, grmse=grmse)
     # the M2/M4 ambiguity the thesis reports (§3.4.2), on the Table 3.4 classification
@@ -968,19 +968,19 @@ def run_seed000_classification(inputs: Mapping | None, outputs: Mapping, config:
             tabs.append(ekf_tables({"truth": ms, "ekf": ekf_trained[reading]}, v_train, v_test, increments=reading))
         et = pd.concat(tabs, ignore_index=True)
         models = {"truth": ms, "ekf": ekf_trained[inc]}
-        write_table(et, paths["ekf_tables"], name="seed000_tables_3_5_3_8",
+        write_table(et, paths["ekf_tables"], name="seed000_classification_ekf_tables",
                     extra={"runs_per_maneuver": run.runs, "seed": run.seed, "size": size, "q": es.q,
                            "p0_sigma": list(es.p0_sigma)})
         with pd.option_context("display.width", 200, "display.max_columns", 20):
             say(et.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
         if "switch" not in skip:
             esw = ekf_switch_tables(models, run, es, progress, increments=inc)
-            write_table(esw, paths["ekf_switch_tables"], name="seed000_tables_3_13_3_15",
+            write_table(esw, paths["ekf_switch_tables"], name="seed000_classification_ekf_switch_tables",
                         extra={"switch_runs": run.switch_runs, "seed": run.seed, "size": size, "q": es.q})
             with pd.option_context("display.width", 250, "display.max_columns", 30):
                 say(esw.drop(columns=["first", "final", "table"]).to_string(index=False, float_format=lambda x: f"{x:.1f}"))
         else:
-            write_table(pd.DataFrame(), paths["ekf_switch_tables"], name="seed000_tables_3_13_3_15",
+            write_table(pd.DataFrame(), paths["ekf_switch_tables"], name="seed000_classification_ekf_switch_tables",
                         extra={"skipped": True})
         with open(paths["report"], "a") as fh:
             fh.write("\n".join(ekf_report(et, esw, es, rmse, inc)) + "\n")

@@ -75,8 +75,8 @@ def cfg():
 
 def test_a_synthetic_pair_writes_three_estimates_with_weights_and_a_page(tmp_path, cfg, capsys):
     own, intr = _pair(duration=20.0, jitter=0.01)
-    write_table(own, tmp_path / "own.parquet")
-    write_table(intr, tmp_path / "intr.parquet")
+    write_table(own, tmp_path / "own.parquet", name="state")
+    write_table(intr, tmp_path / "intr.parquet", name="state")
     outputs = {e: tmp_path / e / "syn.parquet" for e in ESTIMATORS}
     outputs.update({f"{e}_weights": tmp_path / e / "syn.weights.parquet" for e in ESTIMATORS})
     outputs["page"] = tmp_path / "report" / "bearing" / "syn.html"

@@ -44,7 +44,7 @@ def test_the_umask_is_read_as_the_process_has_it(umask):
 @pytest.mark.parametrize("mask, mode", [(0o022, 0o644), (0o027, 0o640), (0o002, 0o664)])
 def test_outputs_get_the_mode_an_ordinary_write_would_give(tmp_path, umask, mask, mode):
     umask(mask)
-    write_table(pd.DataFrame({"t_ns": np.arange(3, dtype="int64")}), tmp_path / "a.parquet")
+    write_table(pd.DataFrame({"t_ns": np.arange(3, dtype="int64")}), tmp_path / "a.parquet", name="state")
     write_json({"k": 1}, tmp_path / "a.json")
     write_text_atomic(tmp_path / "a.html", "<p>é</p>")
     with atomic_output(tmp_path / "params.npz", suffix=".npz") as tmp:

@@ -35,16 +35,38 @@ def test_units_in_column_names_are_declared():
                 assert c.unit == inferred[c.name]["unit"], (name, c.name, c.unit)
 
 
-def test_a_free_form_result_table_gets_its_units_from_the_column_name_suffixes(tmp_path):
+def test_a_study_table_is_written_in_its_declared_types_units_and_order(tmp_path):
     from pipeline.io.parquet import write_table
 
-    df = pd.DataFrame({"maneuver": ["M1"], "FA_pct": [90.0], "rmse_vel_mps": [0.3], "t_s": [1.0],
-                       "var_pos_n_m": [0.1], "n_runs": [3], "err_m": [2.0]})
-    write_table(df, tmp_path / "t.parquet", name="study_x", extra={"units": {"err_m": {"unit": "m", "frame": "NED"}}})
-    cols = read_table_meta(tmp_path / "t.parquet")["columns"]
-    assert cols["FA_pct"]["unit"] == "%" and cols["rmse_vel_mps"]["unit"] == "m/s" and cols["t_s"]["unit"] == "s"
-    assert "var_pos_n_m" not in cols and "n_runs" not in cols and "maneuver" not in cols
-    assert cols["err_m"] == {"unit": "m", "frame": "NED"}  # given units win
+    # seed000_gmr_rmse declares maneuver, quantity, rmse, n: given out of order, n as float
+    df = pd.DataFrame({"n": [3.0], "rmse": [0.25], "quantity": ["acc"], "maneuver": ["M1"]})
+    write_table(df, tmp_path / "t.parquet", name="seed000_classification_gmr_rmse")
+    sch = pq.read_schema(tmp_path / "t.parquet")
+    assert sch.names == [c.name for c in schema.columns("seed000_classification_gmr_rmse")]
+    assert str(sch.field("n").type) == "int64" and str(sch.field("maneuver").type) == "string"
+    meta = read_table_meta(tmp_path / "t.parquet")
+    assert meta["table"] == "seed000_classification_gmr_rmse" and meta["columns"]["rmse"]["unit"] == schema.columns(
+        "seed000_classification_gmr_rmse")[2].unit
+
+
+def test_an_undeclared_study_table_or_column_is_refused_naming_the_file(tmp_path):
+    from pipeline.io.parquet import write_table
+
+    with pytest.raises(schema.SchemaError, match=r"t\.parquet: table 'study_x' is not declared"):
+        write_table(pd.DataFrame({"err_m": [1.0]}), tmp_path / "t.parquet", name="study_x")
+    with pytest.raises(schema.SchemaError, match=r"t\.parquet: .*undeclared column\(s\) \['extra_m'\]"):
+        write_table(pd.DataFrame({"maneuver": ["M1"], "extra_m": [1.0]}), tmp_path / "t.parquet",
+                    name="seed000_classification_gmr_rmse")
+    assert not (tmp_path / "t.parquet").exists()
+
+
+def test_a_part_that_did_not_run_writes_its_declared_columns_with_no_rows(tmp_path):
+    from pipeline.io.parquet import read_table, write_table
+
+    write_table(pd.DataFrame(), tmp_path / "t.parquet", name="seed000_classification_gmr_rmse", extra={"skipped": True})
+    df = read_table(tmp_path / "t.parquet")
+    assert list(df.columns) == [c.name for c in schema.columns("seed000_classification_gmr_rmse")] and len(df) == 0
+    assert read_table_meta(tmp_path / "t.parquet")["skipped"] is True
 
 
 def test_conform_sorts_stably_and_counts_anomalies_in_arrival_order():
@@ -123,10 +145,10 @@ def test_flight_id_alphabet():
 def test_metadata_with_nan_or_infinity_is_strict_json_with_nulls(tmp_path):
     from pipeline.io.parquet import write_json, write_table
 
-    df = pd.DataFrame({"x_m": [1.0, 2.0]})
+    df = pd.DataFrame({"maneuver": ["M1", "M2"], "rmse": [1.0, 2.0]})
     extra = {"score": {"converged_s": float("nan"), "ratio": np.float64("inf"), "ok": 1.5},
              "series": np.array([1.0, np.nan]), "nested": [float("-inf"), 2]}
-    write_table(df, tmp_path / "t.parquet", name="t", extra=extra)
+    write_table(df, tmp_path / "t.parquet", name="seed000_classification_gmr_rmse", extra=extra)
     raw = pq.read_schema(tmp_path / "t.parquet").metadata[b"uavpipe"].decode()
     # strict JSON: no bare NaN/Infinity tokens, which pyarrow, browsers and jq refuse
     meta = json.loads(raw, parse_constant=lambda c: pytest.fail(f"non-JSON token {c}"))

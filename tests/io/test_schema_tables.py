@@ -16,7 +16,7 @@ DERIVED = ("state", "segments", "calibration", "simulate_set", "simulate_summary
 
 
 def test_the_registry_holds_every_stream_and_every_derived_table():
-    assert set(schema.TABLES) == {*schema.STREAM_NAMES, *DERIVED}
+    assert set(schema.TABLES) == {*schema.STREAM_NAMES, *DERIVED, *schema.STUDY_RESULTS}
     for s in schema.STREAMS:
         assert schema.columns(s)[:4] == schema.COMMON
     assert schema.columns("state") is schema.STATE and schema.columns("labels") is schema.LABELS

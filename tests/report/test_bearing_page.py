@@ -33,8 +33,8 @@ def replay(tmp_path_factory):
     th = 2.6 + 0.1 * t                                          # course 149° -> 241°: through 180°
     own = _track(t, 30.0 * t, 0 * t, np.full_like(t, 30.0), 0 * t)
     intr = _track(t, 400 * np.sin(th), -400 * np.cos(th), 40 * np.cos(th), 40 * np.sin(th))
-    write_table(own, tmp / "own.parquet")
-    write_table(intr, tmp / "intr.parquet")
+    write_table(own, tmp / "own.parquet", name="state")
+    write_table(intr, tmp / "intr.parquet", name="state")
     res = tmp / "results"
     out = {e: res / "estimate" / e / "syn.parquet" for e in ESTIMATORS}
     out.update({f"{e}_weights": res / "estimate" / e / "syn.weights.parquet" for e in ESTIMATORS})

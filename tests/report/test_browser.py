@@ -233,8 +233,8 @@ def test_a_bearing_replay_page_draws_offline_and_the_index_links_it(report_tree,
     th = 0.1 * t
     intr = pd.DataFrame({"t_ns": (t * 1e9).astype(np.int64), "pos_n_m": -400 * np.sin(th),
                          "pos_e_m": 400 * np.cos(th) - 400, "vel_n_mps": 40 * np.cos(th), "vel_e_mps": 40 * np.sin(th)})
-    write_table(own, tmp_path / "own.parquet")
-    write_table(intr, tmp_path / "intr.parquet")
+    write_table(own, tmp_path / "own.parquet", name="state")
+    write_table(intr, tmp_path / "intr.parquet", name="state")
     out = {e: tmp_path / e / "syn.parquet" for e in ESTIMATORS}
     out.update({f"{e}_weights": tmp_path / e / "syn.weights.parquet" for e in ESTIMATORS})
     page = report_tree / "report" / "bearing" / "syn.html"

@@ -26,3 +26,12 @@ def test_schema_defaults_equal_the_study_defaults(mod):
     for size, over in mod.SIZES.items():
         got = {k: v.get("default") for k, v in sizes[size].get("properties", {}).items()}
         assert got == over, size
+
+
+def test_every_study_table_is_declared_in_the_schema_under_study_and_table_name():
+    from pipeline.io import schema
+    from pipeline.studies import STUDY_TABLES
+
+    names = {f"{study}_{t}" for study, tables in STUDY_TABLES.items() for t in tables}
+    assert names == set(schema.STUDY_RESULTS)  # none missing, none left over
+    assert all(name in schema.TABLES for name in names)

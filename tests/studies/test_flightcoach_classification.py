@@ -55,8 +55,8 @@ def test_the_tiny_study_writes_results_report_and_page(tiny):
 @pytest.mark.realdata
 @pytest.mark.slow
 @pytest.mark.parametrize("table", STUDY_TABLES[NAME])
-def test_each_table_equals_the_old_script_at_tiny_size(tiny, golden, table):
-    pd.testing.assert_frame_equal(tiny.table(table), pd.read_parquet(golden / f"{NAME}_tiny" / f"{table}.parquet"))
+def test_each_table_equals_the_old_script_at_tiny_size(tiny, golden, same_as_golden, table):
+    same_as_golden(tiny.table(table), pd.read_parquet(golden / f"{NAME}_tiny" / f"{table}.parquet"))
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,8 @@ def tiny(ran, tmp_path_factory):
 
 def test_the_study_is_registered_with_its_tables():
     assert STUDIES[NAME] == "pipeline.studies.pf:run_pf"
-    assert STUDY_TABLES[NAME] == ("hmpf_runs", "hmpf_timeline", "geo_summary", "geo_series", "geo_config")
+    assert STUDY_TABLES[NAME] == ("hmpf_runs", "hmpf_timeline", "geo_summary", "geo_series", "geo_config",
+                                 "geo_timing")
 
 
 @pytest.mark.slow

@@ -7,13 +7,14 @@ import json
 import numpy as np
 import pytest
 
+from pipeline.io.parquet import write_table
 from pipeline.studies.pf_geolocation import geolocation_panels, geolocation_study
 
 
 @pytest.mark.slow
 def test_the_tiny_geolocation_study_returns_its_tables_rows_and_panels():
     tables, rows = geolocation_study({}, seed=3, size="tiny")
-    assert set(tables) == {"geo_summary", "geo_series", "geo_config"}
+    assert set(tables) == {"geo_summary", "geo_series", "geo_config", "geo_timing"}
     summ = tables["geo_summary"]
     assert summ["case"].tolist() == ["base", "maneuvering", "mobile", "particles_10", "particles_80",
                                      "observers_1", "observers_2"]
@@ -30,14 +31,18 @@ def test_the_tiny_geolocation_study_returns_its_tables_rows_and_panels():
     assert len(panels) == 5 and all(isinstance(f, dict) and "data" in f for _, f in panels)
 
 
-def test_the_geolocation_study_is_seeded_and_rejects_an_unknown_size():
+def test_the_geolocation_study_is_seeded_and_rejects_an_unknown_size(tmp_path):
     short = {"geo_sizes": {"tiny": {"particles": [], "observers": [], "base_s": 1.5, "maneuvering_s": 1.5,
                                      "mobile_s": 1.5}}}
     a, ra = geolocation_study(short, seed=5, size="tiny")
     b, rb = geolocation_study(short, seed=5, size="tiny")
-    timing = ["step_us"]
-    assert a["geo_summary"].drop(columns=timing).equals(b["geo_summary"].drop(columns=timing))
-    assert a["geo_series"].equals(b["geo_series"])
+    for t in ("geo_summary", "geo_series", "geo_config"):  # the step times live in geo_timing alone
+        assert a[t].equals(b[t]), t
+        # same seed, same bytes: the files as study_pf writes them
+        write_table(a[t], tmp_path / "a.parquet", name=f"pf_{t}", extra={"seed": 5})
+        write_table(b[t], tmp_path / "b.parquet", name=f"pf_{t}", extra={"seed": 5})
+        assert (tmp_path / "a.parquet").read_bytes() == (tmp_path / "b.parquet").read_bytes(), t
+    assert "step_us" not in a["geo_summary"] and a["geo_timing"]["case"].tolist() == a["geo_summary"]["case"].tolist()
     assert [r for r in ra if "step_us" not in r[0]] == [r for r in rb if "step_us" not in r[0]]
     with pytest.raises(ValueError, match="unknown size 'huge'"):
         geolocation_study({}, seed=5, size="huge")

@@ -28,7 +28,7 @@ import plotly.graph_objects as go
 from ..estimate.bearing_run import (CONVERGED_SIGMA_DEG, BearingPair, BearingReplayResult, BearingTrack,
                                     heading_converged_s, range_error_pct_at, run_bearing_replay)
 from ..io.stage import declared
-from .pages import figure_divs, relative_href, render, write_page
+from .pages import figure_divs, number_text, relative_href, render, vector_text, write_page
 from .plots import layout
 
 #: the page's template when a caller declares none (the rule declares it)
@@ -38,29 +38,6 @@ TIME_TITLE = "t since the first bearing [s]"
 #: one colour per estimator (and its band)
 COLOURS = {"bank_cppv": "#1f77b4", "bank_mpc": "#ff7f0e", "imm": "#2ca02c"}
 TRUTH_COLOUR = "black"
-
-
-def number_text(x: Any, decimals: int = 1) -> str:
-    """A number for reading: ``3000.0`` -> ``3000``, ``0.20`` -> ``0.2``, at most ``decimals``
-    decimals, never a ``-0``; ``–`` when not a finite number."""
-    try:
-        v = round(float(x), decimals)
-    except (TypeError, ValueError):
-        return "–"
-    if not np.isfinite(v):
-        return "–"
-    if v == int(v):
-        return str(int(v))
-    return f"{v:.{decimals}f}".rstrip("0").rstrip(".")
-
-
-def vector_text(v: Any, unit: str, decimals: int = 1) -> str:
-    """``[3000.0, 0.0]`` -> ``(3000, 0) m``."""
-    try:
-        parts = [number_text(x, decimals) for x in v]
-    except TypeError:
-        return "–"
-    return f"({', '.join(parts)}) {unit}".rstrip()
 
 
 def estimator_label(name: str, track: BearingTrack | None = None) -> str:

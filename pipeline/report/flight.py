@@ -20,7 +20,7 @@ from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
 from .flight_summary import (PATH_BIN_S, PATH_NOISE_K, diagnostics_text, first_instance, flight_numbers,
                              ned_track, numbers_script, plain_text, summary_rows, velocity_track)
-from .pages import figure_divs, render, write_page
+from .pages import figure_divs, render, vector_text, write_page
 from . import plots
 
 #: the 9 CA state columns (pos, vel, acc NED) of the state table and the truth stream
@@ -106,15 +106,6 @@ def _spectrogram_panel(imu: pd.DataFrame, cols: list[str], name: str, unit: str)
     return (f"{name} (raw, sensor frame; {why})" if why else title), fig
 
 
-def _ned_text(v) -> str:
-    """An NED position ``[n, e, d]`` as ``"(n, e, d) m NED"`` (``–`` when not given)."""
-    try:
-        n, e, d = (float(x) for x in v)
-    except (TypeError, ValueError):
-        return "–"
-    return f"({n:g}, {e:g}, {d:g}) m NED"
-
-
 def calibration_table(preprocess: Mapping | None) -> tuple[str, list[str], list[list[str]]]:
     """The barometric calibration of a flight as a page table ``(title, headers, rows)``: one
     row per region of the fitted offset (time span, offset, drift, RMS of the fit, points used),
@@ -195,7 +186,7 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
             facts.append((label, f"placeholder: {m.get('error')}"))
         else:
             facts.append((label, f"{m.get('n_steps')} steps ({m.get('n_predict_only')} predict-only), radar "
-                                 f"{m.get('radar')} (site {_ned_text(m.get('radar_site_ned_m'))} from {m.get('radar_site_from')}), "
+                                 f"{m.get('radar')} (site {vector_text(m.get('radar_site_ned_m'), 'm NED')} from {m.get('radar_site_from')}), "
                                  f"q {m.get('q')}, reference {m.get('reference')}"))
     ok = {e: t for e, t in tables.items() if len(t)}
     ref_name = next((metas[e].get("reference") for e in ok), None)

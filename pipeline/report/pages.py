@@ -5,9 +5,11 @@ scheduler would take as done)."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from pathlib import Path
+from typing import Any
 
 import jinja2
 
@@ -73,3 +75,26 @@ def write_page(page: str, out_html: str | os.PathLike) -> None:
     """Write ``page`` to ``out_html`` atomically (:func:`pipeline.io.atomic.write_text_atomic`),
     its ``<html>`` element marked English (:func:`with_lang`)."""
     write_text_atomic(out_html, with_lang(page))
+
+
+def number_text(x: Any, decimals: int = 1) -> str:
+    """A number for reading: ``3000.0`` -> ``3000``, ``0.20`` -> ``0.2``, at most ``decimals``
+    decimals, never a ``-0``; ``–`` when not a finite number."""
+    try:
+        v = round(float(x), decimals)
+    except (TypeError, ValueError):
+        return "–"
+    if not math.isfinite(v):
+        return "–"
+    if v == int(v):
+        return str(int(v))
+    return f"{v:.{decimals}f}".rstrip("0").rstrip(".")
+
+
+def vector_text(v: Any, unit: str, decimals: int = 1) -> str:
+    """``[3000.0, 0.0]`` -> ``(3000, 0) m``."""
+    try:
+        parts = [number_text(x, decimals) for x in v]
+    except TypeError:
+        return "–"
+    return f"({', '.join(parts)}) {unit}".rstrip()

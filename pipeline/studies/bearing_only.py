@@ -595,8 +595,8 @@ def run_bearing_only(inputs: Mapping | None, outputs: Mapping, config: Mapping |
             m, tr = r["mean"][0], enc.rel[0]
             s3.append(pd.DataFrame({"scenario": label, "t_s": enc.t_s, "r_true_m": np.hypot(tr[:, 0], tr[:, 1]),
                                     "r_est_m": np.hypot(m[:, 0], m[:, 1]), "theta_true_deg": np.degrees(tr[:, 3]),
-                                    "theta_est_deg": np.degrees(m[:, 3]), "omega_true_dps": np.degrees(tr[:, 4]),
-                                    "omega_est_dps": np.degrees(m[:, 4]), "mu_cv": r["mu_cv"][0],
+                                    "theta_est_deg": np.degrees(m[:, 3]), "omega_true_degps": np.degrees(tr[:, 4]),
+                                    "omega_est_degps": np.degrees(m[:, 4]), "mu_cv": r["mu_cv"][0],
                                     "mode_true": enc.mode[0].astype(np.int64)}))
     study3 = pd.concat(s3, ignore_index=True) if s3 else pd.DataFrame()
 
@@ -821,9 +821,9 @@ def figures(curves: pd.DataFrame, crlb: pd.DataFrame, study3: pd.DataFrame, run:
         for i, (s, g) in enumerate(study3.groupby("scenario", sort=False)):
             fig.add_scatter(x=g["t_s"], y=g["r_true_m"], line={"color": "black"}, showlegend=False, row=i + 1, col=1)
             fig.add_scatter(x=g["t_s"], y=g["r_est_m"], line={"color": "#1f77b4"}, showlegend=False, row=i + 1, col=1)
-            fig.add_scatter(x=g["t_s"], y=g["omega_true_dps"], line={"color": "black"}, showlegend=False, row=i + 1,
+            fig.add_scatter(x=g["t_s"], y=g["omega_true_degps"], line={"color": "black"}, showlegend=False, row=i + 1,
                             col=2)
-            fig.add_scatter(x=g["t_s"], y=g["omega_est_dps"], line={"color": "#1f77b4"}, showlegend=False, row=i + 1,
+            fig.add_scatter(x=g["t_s"], y=g["omega_est_degps"], line={"color": "#1f77b4"}, showlegend=False, row=i + 1,
                             col=2)
             fig.add_scatter(x=g["t_s"], y=g["mu_cv"], line={"color": "#2ca02c"}, showlegend=False, row=i + 1, col=3)
             fig.add_scatter(x=g["t_s"], y=1 - g["mode_true"], line={"color": "black", "dash": "dot"}, showlegend=False,

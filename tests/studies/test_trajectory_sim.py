@@ -51,6 +51,19 @@ def test_at_tiny_size_the_learned_trajectory_beats_every_baseline_on_all_three_r
     assert len(lines) == 5 and all(line.startswith("trajectory sim: ") for line in lines)
 
 
+@pytest.mark.slow
+def test_the_simulated_tables_are_written_in_their_declared_schema(tiny, tmp_path):
+    # the study writes these under trajectory_learning_<table> (io/schema.py STUDY_RESULTS); the
+    # study's own tiny test skips the simulated part, so its declarations are checked here
+    from pipeline.io.parquet import read_table_meta, write_table
+
+    tables = tiny[0]
+    for k in ("sim_cases", "sim_summary"):
+        write_table(tables[k], tmp_path / f"{k}.parquet", name=f"trajectory_learning_{k}")
+        assert read_table_meta(tmp_path / f"{k}.parquet")["columns"]["rmse_mean_m" if k == "sim_summary"
+                                                                      else "rmse_m"]["unit"] == "m"
+
+
 def test_one_seed_gives_every_method_and_reference_and_the_same_seed_the_same_numbers():
     s = {**SIM_DEFAULTS, **SIM_SIZES["tiny"], "n_seeds": 1, "max_iter": 3, "references": ["loop"],
          "yak54_references": []}

@@ -105,6 +105,8 @@ RATE_HZ = 5.0
 
 #: Parquet tables the study writes (``<name>.parquet``)
 OUTPUT_TABLES = STUDY_TABLES[NAME]
+#: the unit suffix of each RMSE group's columns (``ekf_vel_rmse_mps``)
+UNIT = {"pos": "m", "vel": "mps", "acc": "mps2"}
 
 #: settings of every size (``studies.flightcoach_ekf_hmm``)
 DEFAULTS: dict[str, Any] = {
@@ -193,10 +195,10 @@ def per_maneuver(track: EkfHmmTrack, t_ns: np.ndarray, x: np.ndarray, seg: pd.Da
                "n_steps": int(m.sum()), "hmm_share_pct": 100.0 * share, "pred_end": str(pred[-1]),
                "label_pct": 100.0 * float(np.mean(pred == s["label"]))}
         for g, sl in (("pos", slice(0, 3)), ("vel", slice(3, 6)), ("acc", slice(6, 9))):
-            row[f"ekf_{g}_rmse"] = rmse_norm(e1[m, sl])
-            row[f"ekf_hmm_{g}_rmse"] = rmse_norm(e2[m, sl])
-        row["gmr_acc_rmse"] = rmse_norm(eg[used]) if used.any() else float("nan")
-        row["acc_ratio"] = row["ekf_hmm_acc_rmse"] / row["ekf_acc_rmse"]
+            row[f"ekf_{g}_rmse_{UNIT[g]}"] = rmse_norm(e1[m, sl])
+            row[f"ekf_hmm_{g}_rmse_{UNIT[g]}"] = rmse_norm(e2[m, sl])
+        row["gmr_acc_rmse_mps2"] = rmse_norm(eg[used]) if used.any() else float("nan")
+        row["acc_ratio"] = row["ekf_hmm_acc_rmse_mps2"] / row["ekf_acc_rmse_mps2"]
         row["better"] = bool(row["acc_ratio"] < BETTER_RATIO and share >= MIN_HMM_SHARE)
         rows.append(row)
     return pd.DataFrame(rows)
@@ -327,8 +329,9 @@ def _timeline(track: EkfHmmTrack, t_ns: np.ndarray, x: np.ndarray, seg: pd.DataF
 def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, q, scale, man, man_tr,
                  tuning, n_better, diag: Mapping[str, float] | None = None) -> None:
     """``report.md``: settings, tuning, the per-maneuver tables."""
-    cols = ["label", "duration_s", "hmm_share_pct", "label_pct", "ekf_acc_rmse", "ekf_hmm_acc_rmse", "acc_ratio",
-            "gmr_acc_rmse", "better", "ekf_vel_rmse", "ekf_hmm_vel_rmse", "ekf_pos_rmse", "ekf_hmm_pos_rmse"]
+    cols = ["label", "duration_s", "hmm_share_pct", "label_pct", "ekf_acc_rmse_mps2", "ekf_hmm_acc_rmse_mps2",
+            "acc_ratio", "gmr_acc_rmse_mps2", "better", "ekf_vel_rmse_mps", "ekf_hmm_vel_rmse_mps", "ekf_pos_rmse_m",
+            "ekf_hmm_pos_rmse_m"]
     site = ", ".join(f"{float(v):g}" for v in st["radar_site_ned_m"])
     L = [f"# FlightCoach F3A EKF vs EKF+HMM study (size {size}, seed {seed})", "",
          f"{len(ms.labels_)} maneuver HMMs (features `{st['features']}`, {st['n_states']} states, covariance floor "
@@ -343,7 +346,7 @@ def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, q
          f"A maneuver is better when its EKF+HMM acceleration RMSE < {BETTER_RATIO} × the EKF's with HMM inputs "
          f"on ≥ {100 * MIN_HMM_SHARE:.0f} % of its steps: **{n_better}/{len(man)}** (target ≥ {TARGET_BETTER}). "
          f"RMSE against the preprocessed reference state, norm over the NED axes (m, m/s, m/s²); "
-         f"`gmr_acc_rmse`: the HMM acceleration input itself on the steps that used it.", "",
+         f"`gmr_acc_rmse_mps2`: the HMM acceleration input itself on the steps that used it.", "",
          md_table(man[cols], "{:.2f}"), "",
          f"## Training flight `{TRAIN}` (in-sample: the models classify the flight they were trained on)", "",
          md_table(man_tr[cols], "{:.2f}"), "",
@@ -367,8 +370,8 @@ def figures(man: pd.DataFrame, tl: pd.DataFrame) -> list:
     """The page's plots: per-maneuver acceleration RMSE of both filters, and the N acceleration."""
     x = [f"{r.label} ({r.segment_id})" for r in man.itertuples()]
     fig = go.Figure()
-    fig.add_trace(go.Bar(x=x, y=man["ekf_acc_rmse"], name="EKF"))
-    fig.add_trace(go.Bar(x=x, y=man["ekf_hmm_acc_rmse"], name="EKF+HMM",
+    fig.add_trace(go.Bar(x=x, y=man["ekf_acc_rmse_mps2"], name="EKF"))
+    fig.add_trace(go.Bar(x=x, y=man["ekf_hmm_acc_rmse_mps2"], name="EKF+HMM",
                          text=[f"{s:.0f} % HMM" for s in man["hmm_share_pct"]]))
     fig.update_layout(barmode="group", yaxis_title="acceleration RMSE (m/s²)")
     f1 = layout(fig, "Test flight: acceleration RMSE per maneuver")
@@ -490,8 +493,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
     write_table(tuning, paths["tuning"], name="flightcoach_ekf_hmm_tuning")
     write_table(tl, paths["timeline"], name="flightcoach_ekf_hmm_timeline")
     with pd.option_context("display.width", 220):
-        say(man[["label", "hmm_share_pct", "pred_end", "ekf_acc_rmse", "ekf_hmm_acc_rmse", "acc_ratio",
-                 "gmr_acc_rmse", "better"]].to_string(index=False, float_format=lambda v: f"{v:.2f}"))
+        say(man[["label", "hmm_share_pct", "pred_end", "ekf_acc_rmse_mps2", "ekf_hmm_acc_rmse_mps2", "acc_ratio",
+                 "gmr_acc_rmse_mps2", "better"]].to_string(index=False, float_format=lambda v: f"{v:.2f}"))
 
     inside = np.zeros(len(t_te), dtype=bool)
     for _, s in seg_te.iterrows():
@@ -528,7 +531,8 @@ def run_flightcoach_ekf_hmm(inputs: Mapping | None, outputs: Mapping, config: Ma
           "Diagnostic: RMSE (m/s²) of the models' GMR acceleration on the test maneuvers when they classify the "
           "reference state itself instead of the EKF posteriors.")
     for g, what in (("vel", "velocity"), ("pos", "position")):
-        r.add(f"flightcoach_ekf_hmm_{g}_lower_maneuvers", int((man[f"ekf_hmm_{g}_rmse"] < man[f"ekf_{g}_rmse"]).sum()),
+        lower = int((man[f"ekf_hmm_{g}_rmse_{UNIT[g]}"] < man[f"ekf_{g}_rmse_{UNIT[g]}"]).sum())
+        r.add(f"flightcoach_ekf_hmm_{g}_lower_maneuvers", lower,
               f"Test maneuvers whose EKF+HMM {what} RMSE is below the EKF's (reported, no target).")
     r.add("flightcoach_ekf_hmm_hmm_share_pct", f"{100.0 * float(trk.mode[0, inside].mean()):.1f}",
           "% of test-maneuver steps predicted with HMM inputs (on at least one axis).")

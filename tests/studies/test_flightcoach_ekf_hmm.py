@@ -60,11 +60,11 @@ def test_the_maneuver_table_follows_the_acceptance_rule(tiny):
     man = tiny.table("maneuvers")
     assert len(man) == 17 and not set(man["label"]) & {"tkOf", "tkoff", "lnd"}
     # better = below 0.95 × the EKF's acceleration RMSE with HMM inputs on >= 20 % of the steps
-    rule = (man["ekf_hmm_acc_rmse"] < 0.95 * man["ekf_acc_rmse"]) & (man["hmm_share_pct"] >= 20.0)
+    rule = (man["ekf_hmm_acc_rmse_mps2"] < 0.95 * man["ekf_acc_rmse_mps2"]) & (man["hmm_share_pct"] >= 20.0)
     assert (man["better"] == rule).all()
     assert int(man["better"].sum()) == int(tiny.figures["flightcoach_ekf_hmm_acc_better_maneuvers"])
-    np.testing.assert_allclose(man["acc_ratio"], man["ekf_hmm_acc_rmse"] / man["ekf_acc_rmse"])
-    assert (man[["ekf_acc_rmse", "ekf_hmm_acc_rmse", "ekf_pos_rmse", "ekf_vel_rmse"]] > 0).all().all()
+    np.testing.assert_allclose(man["acc_ratio"], man["ekf_hmm_acc_rmse_mps2"] / man["ekf_acc_rmse_mps2"])
+    assert (man[["ekf_acc_rmse_mps2", "ekf_hmm_acc_rmse_mps2", "ekf_pos_rmse_m", "ekf_vel_rmse_mps"]] > 0).all().all()
     tuning = tiny.table("tuning")
     assert tuning.groupby("parameter")["chosen"].sum().to_dict() == {"q": 1, "q2_scale": 1}
     # the GMR input is tuned jointly with the Q₂ scale: the chosen pair has the lowest training score

@@ -502,7 +502,7 @@ TABLES: dict[str, tuple[Column, ...]] = {
 
 
 #: unit of a column-name suffix (``vel_n_mps`` -> m/s), the naming rule every declared column
-#: follows; :func:`units_from_names` gives free-form result tables (studies) their units by it
+#: follows (:func:`units_from_names`; a test holds every declared table to it)
 UNIT_SUFFIXES: dict[str, str] = {
     "m": "m", "s": "s", "ns": "ns", "us": "us", "mps": "m/s", "mps2": "m/s^2", "mps3": "m/s^3",
     "rad": "rad", "radps": "rad/s", "deg": "deg", "degps": "deg/s", "pct": "%", "Pa": "Pa", "T": "T",

@@ -28,7 +28,7 @@ def test_every_stream_has_full_schema_when_absent():
 
 def test_units_in_column_names_are_declared():
     # every physical column carries its unit suffix and a unit string
-    for name in schema.TABLES:  # every declared table: the suffix rule free-form tables rely on
+    for name in schema.TABLES:  # every declared table, the studies' included
         inferred = schema.units_from_names(c.name for c in schema.columns(name))
         for c in schema.columns(name):
             if c.name in inferred:

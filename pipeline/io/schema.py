@@ -1670,10 +1670,10 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
         _f("af_seed0", "1", "", "AF(k) of seed 0"),
         _f("flagged_share", "1", "", "share of seeds flagged at the step"),
         Column("flag_seed0", "bool", "", "", "seed 0 flagged at the step"),
-        _f("rmse_n", "m", "NED", "RMS north position error over seeds"),
-        _f("rmse_e", "m", "NED", "RMS east position error over seeds"),
-        _f("rmse_vn", "m/s", "NED", "RMS north velocity error over seeds"),
-        _f("rmse_ve", "m/s", "NED", "RMS east velocity error over seeds"),
+        _f("rmse_pos_n_m", "m", "NED", "RMS north position error over seeds"),
+        _f("rmse_pos_e_m", "m", "NED", "RMS east position error over seeds"),
+        _f("rmse_vel_n_mps", "m/s", "NED", "RMS north velocity error over seeds"),
+        _f("rmse_vel_e_mps", "m/s", "NED", "RMS east velocity error over seeds"),
     ),
 
     # ---------------------------------------------------------------------------------------------
@@ -1696,8 +1696,8 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
         Column("n_reinit", "int64", "1", "", "filter re-initialisations summed over runs"),
         _f("median_run_eta_pct", "%", "", "median over runs of each run's mean eta%"),
         Column("n_lost", "int64", "1", "", "runs ending with no observer detecting the target"),
-        _f("eta_pct_not_lost", "%", "", "pooled eta% over the runs not lost (NaN: all lost)"),
-        _f("eps_m_not_lost", "m", "", "pooled 3-D error over the runs not lost (NaN: all lost)"),
+        _f("not_lost_eta_pct", "%", "", "pooled eta% over the runs not lost (NaN: all lost)"),
+        _f("not_lost_eps_m", "m", "", "pooled 3-D error over the runs not lost (NaN: all lost)"),
     ),
     # per_step_frame(): per case and time index, means over runs
     "pf_geo_series": (

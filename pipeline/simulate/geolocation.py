@@ -530,8 +530,8 @@ def summarise(runs: list[RunResult], *, skip_s: float = 1.0) -> dict[str, float]
             "n_reinit": int(sum(r.n_reinit for r in runs)),
             "median_run_eta_pct": float(100 * np.nanmedian(run_eta)) if np.isfinite(run_eta).any() else float("nan"),
             "n_lost": int(lost.sum()),
-            "eta_pct_not_lost": float(100 * np.nanmean(held)) if np.isfinite(held).any() else float("nan"),
-            "eps_m_not_lost": float(np.nanmean(held_err)) if np.isfinite(held_err).any() else float("nan")}
+            "not_lost_eta_pct": float(100 * np.nanmean(held)) if np.isfinite(held).any() else float("nan"),
+            "not_lost_eps_m": float(np.nanmean(held_err)) if np.isfinite(held_err).any() else float("nan")}
 
 
 def per_step_frame(runs: list[RunResult], **labels: Any) -> pd.DataFrame:

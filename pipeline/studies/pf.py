@@ -150,7 +150,7 @@ def timeline(name: str, tr: ShipTrack, out) -> pd.DataFrame:
     d["af_seed0"] = out.af[0]
     d["flagged_share"] = out.weave_detected.mean(axis=0)
     d["flag_seed0"] = out.weave_detected[0]
-    for i, c in enumerate(("n", "e", "vn", "ve")):
+    for i, c in enumerate(("pos_n_m", "pos_e_m", "vel_n_mps", "vel_e_mps")):
         d[f"rmse_{c}"] = np.sqrt(np.mean(err[..., i] ** 2, axis=0))
     return pd.DataFrame(d)
 
@@ -340,7 +340,7 @@ def figures(tl: pd.DataFrame, runs: pd.DataFrame) -> list:
     figs.append(("modes", layout(fig, "Weave (GPS): stacked S/L/R/W fractions")))
     r = tl[tl["scenario"] == "weave_radar"]
     fig = go.Figure()
-    for c, lab in (("n", "N (m)"), ("e", "E (m)"), ("vn", "v_N (m/s)"), ("ve", "v_E (m/s)")):
+    for c, lab in (("pos_n_m", "N (m)"), ("pos_e_m", "E (m)"), ("vel_n_mps", "v_N (m/s)"), ("vel_e_mps", "v_E (m/s)")):
         fig.add_trace(go.Scatter(x=r["step"], y=r[f"rmse_{c}"], mode="lines", name=lab))
     fig.update_layout(xaxis_title="step k", yaxis_title="RMS error over seeds")
     figs.append(("errors", layout(fig, "Weave (radar, near the site): RMS errors in N, E, v_N, v_E")))

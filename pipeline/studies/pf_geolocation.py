@@ -122,7 +122,7 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
         rows.append((f"geo_lost_runs_{name}", f"{s['n_lost']}/{s['n_runs']}",
                      f"{name}: runs that end with no observer detecting the target (the cameras, aimed at the "
                      "estimate, lost it; the error then grows unchecked)"))
-        rows.append((f"geo_eta_pct_{name}_not_lost", round(s["eta_pct_not_lost"], 2),
+        rows.append((f"geo_eta_pct_{name}_not_lost", round(s["not_lost_eta_pct"], 2),
                      f"eta% of the {name} setup over the runs not lost (diagnosis; the target is geo_eta_pct_{name})"))
         rows.append((f"geo_eta_pct_{name}_run_median", round(s["median_run_eta_pct"], 2),
                      f"median over runs of each run's mean eta%, {name} (diagnosis)"))
@@ -137,7 +137,7 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
         for k, st in sw.items():
             rows.append((f"geo_lost_runs_{kind}_{k}", f"{st['n_lost']}/{st['n_runs']}",
                          f"{kind} sweep at {k}: runs that end with no observer detecting the target"))
-            rows.append((f"geo_eps_m_{kind}_{k}_not_lost", round(st["eps_m_not_lost"], 2),
+            rows.append((f"geo_eps_m_{kind}_{k}_not_lost", round(st["not_lost_eps_m"], 2),
                          f"{kind} sweep at {k}: mean 3-D error (m) over the runs not lost (diagnosis)"))
     if 1 in eps_o and 2 in eps_o:
         rows.append(("geo_obs_1_to_2_met", int(eps_o[2] <= eps_o[1] / 2), "eps(2) <= eps(1)/2"))

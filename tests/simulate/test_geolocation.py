@@ -142,11 +142,11 @@ def test_a_run_that_ends_undetected_counts_as_lost_and_leaves_the_not_lost_eta()
     s = summarise([a, lost])
     keep = a.t_s >= 1.0
     assert s["n_lost"] == 1 and summarise([a, b])["n_lost"] == 0
-    assert s["eta_pct_not_lost"] == pytest.approx(100 * np.nanmean(a.eta[keep]))
-    assert s["eps_m_not_lost"] == pytest.approx(np.nanmean(a.err_m[keep]))
+    assert s["not_lost_eta_pct"] == pytest.approx(100 * np.nanmean(a.eta[keep]))
+    assert s["not_lost_eps_m"] == pytest.approx(np.nanmean(a.err_m[keep]))
     eta_a, eta_l = np.nanmean(a.eta[keep]), np.nanmean(lost.eta[keep])
     assert s["median_run_eta_pct"] == pytest.approx(100 * (eta_a + eta_l) / 2)
-    assert s["eta_pct"] > s["eta_pct_not_lost"]
+    assert s["eta_pct"] > s["not_lost_eta_pct"]
 
 
 def test_with_small_bearing_noise_and_enough_particles_the_base_setup_tracks_to_a_metre():

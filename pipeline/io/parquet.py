@@ -74,7 +74,7 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Co
             df = schema.empty(name)  # a part that did not run: its declared columns, no rows
         try:
             cols = schema.layout(name, df.columns)
-            df = pd.DataFrame({c.name: schema.cast(c, df[c.name].reset_index(drop=True)) for c in cols})
+            df = schema.conform(cols, df)
         except schema.SchemaError as exc:
             raise schema.SchemaError(f"{path.name}: {exc}") from None
         return write_table(df, path, cols, name=name, extra=extra)

@@ -1563,6 +1563,21 @@ _STUDY_TABLES_A: dict[str, tuple[Column, ...]] = {
     ),
 }
 
+# the key of a seed-001 case, shared by its summary and its step times (pf_geolocation's ``key``)
+_GEO_CASE = (
+    Column("case", "string", "", "", "base, maneuvering, mobile, particles_<N>, observers_<O>"),
+    Column("scenario", "string", "", "", "base, maneuvering or mobile (digest 001 §6.1-6.3)"),
+    Column("n_observers", "int64", "1", "", "observer UAVs"),
+    Column("n_particles", "int64", "1", "", "particles N"),
+)
+# a leave-one-out fold's distances to the left-out demo (real_loo; real_summary: their means)
+_TL_RMS = (
+    _f("rms_learned_m", "m", "", "RMS distance along the DTW path, learned trajectory to the left-out demo"),
+    _f("rms_best_other_m", "m", "", "the same for the closest other demo"),
+    _f("rms_worst_other_m", "m", "", "the same for the farthest other demo"),
+    _f("rms_dba_m", "m", "", "the same for the others' DBA average"),
+)
+
 _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
     # ---------------------------------------------------------------------------------------------
     # pipeline/studies/bearing_only.py (run_bearing_only -> write_table(name=f"bearing_only_{key}"),
@@ -1683,10 +1698,7 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
     # ---------------------------------------------------------------------------------------------
     # one row per scenario / sweep point: key, duration, then summarise() without step_us
     "pf_geo_summary": (
-        Column("case", "string", "", "", "base, maneuvering, mobile, particles_<N>, observers_<O>"),
-        Column("scenario", "string", "", "", "base, maneuvering or mobile (digest 001 §6.1-6.3)"),
-        Column("n_observers", "int64", "1", "", "observer UAVs"),
-        Column("n_particles", "int64", "1", "", "particles N"),
+        *_GEO_CASE,
         _f("duration_s", "s", "", "simulated duration of each run"),
         _f("eps_m", "m", "", "mean 3-D error pooled over time (after 1 s) and runs"),
         _f("eta_pct", "%", "", "mean percent error 100 eps_k / mean observer distance"),
@@ -1717,10 +1729,7 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
     ),
     # one row per scenario / sweep point: this machine's filter step time
     "pf_geo_timing": (
-        Column("case", "string", "", "", "case (as in pf_geo_summary)"),
-        Column("scenario", "string", "", "", "base, maneuvering or mobile"),
-        Column("n_observers", "int64", "1", "", "observer UAVs"),
-        Column("n_particles", "int64", "1", "", "particles N"),
+        *_GEO_CASE,
         _f("step_us", "us", "", "mean wall time of one filter step (perf_counter_ns, first step excluded)"),
     ),
 
@@ -1759,10 +1768,7 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
         Column("n_others", "int64", "1", "", "demos left to learn from (usable demos - 1 when skipped)"),
         Column("single_other", "bool", "", "", "only one other demo (learner given it twice)"),
         Column("status", "string", "", "", "ok, 'fit failed: ...' or 'skipped: ...'"),
-        _f("rms_learned_m", "m", "", "RMS distance along the DTW path, learned trajectory to the left-out demo"),
-        _f("rms_best_other_m", "m", "", "the same for the closest other demo"),
-        _f("rms_worst_other_m", "m", "", "the same for the farthest other demo"),
-        _f("rms_dba_m", "m", "", "the same for the others' DBA average"),
+        *_TL_RMS,
         Column("closest_other", "string", "", "", "name of the closest other demo (NA unless status ok)"),
         _f("rms_between_others_m", "m", "", "mean RMS distance between the training demos (NaN with one)"),
         Column("n_iter", "Int64", "1", "", "EM iterations of the fit (NA unless status ok)"),
@@ -1775,10 +1781,7 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
         Column("folds", "int64", "1", "", "ok folds"),
         Column("demos", "int64", "1", "", "demos of the maneuver"),
         Column("single_other", "bool", "", "", "folds had only one other demo"),
-        _f("rms_learned_m", "m", "", "mean over folds of rms_learned_m"),
-        _f("rms_best_other_m", "m", "", "mean over folds of rms_best_other_m"),
-        _f("rms_worst_other_m", "m", "", "mean over folds of rms_worst_other_m"),
-        _f("rms_dba_m", "m", "", "mean over folds of rms_dba_m"),
+        *(_f(c.name, c.unit, "", f"mean over folds of {c.name}") for c in _TL_RMS),
         Column("better", "bool", "", "", "rms_learned_m < rms_best_other_m"),
         Column("better_than_dba", "bool", "", "", "rms_learned_m < rms_dba_m"),
     ),

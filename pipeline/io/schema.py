@@ -31,7 +31,10 @@ import pyarrow as pa
 #: 1.3.0 (minor): the ``estimator_status`` stream (issue 13 item 2); every 1.2.0 column is unchanged.
 #: 1.4.0 (minor): the studies' result tables are declared (:data:`STUDY_RESULTS`); no stream
 #: or stage table changed.
-SCHEMA_VERSION = "1.4.0"
+#: 1.5.0: study tables only: the ``seed000_ekf`` RMSE columns carry their unit in the name
+#: (``rmse_pos`` -> ``rmse_pos_m``, ``hmm_rmse`` ``acc`` -> ``acc_mps2``, ...); no stream or stage
+#: table changed.
+SCHEMA_VERSION = "1.5.0"
 
 #: Number of RC input / servo output channels carried by the ``control`` stream.
 N_RC = 18
@@ -1417,9 +1420,9 @@ _STUDY_TABLES_A: dict[str, tuple[Column, ...]] = {
         _f("score", "1", "", "normalised RMSE pooled over M1-M4 (minimum chosen)"),
         Column("chosen", "bool", "", "", "the frozen q"),
         *(_f(f"rmse_{n}", u, "NED", "pooled RMSE of the state component") for n, u in _STUDY_STATE),
-        _f("rmse_pos", "m", "", "pooled 3-D position RMSE"),
-        _f("rmse_vel", "m/s", "", "pooled 3-D velocity RMSE"),
-        _f("rmse_acc", "m/s^2", "", "pooled 3-D acceleration RMSE"),
+        _f("rmse_pos_m", "m", "", "pooled 3-D position RMSE"),
+        _f("rmse_vel_mps", "m/s", "", "pooled 3-D velocity RMSE"),
+        _f("rmse_acc_mps2", "m/s^2", "", "pooled 3-D acceleration RMSE"),
         *(_f(f"score_{m}", "1", "", f"normalised RMSE on {m}'s tuning runs") for m in _STUDY_KNOWN),
     ),
     # pipeline/studies/seed000_ekf.py (mc_maneuver)
@@ -1441,9 +1444,9 @@ _STUDY_TABLES_A: dict[str, tuple[Column, ...]] = {
         _f("nees_band_lo", "1", "", "lower bound of the 95 % band of chi2(9N)/N"),
         _f("nees_band_hi", "1", "", "upper bound of the 95 % band of chi2(9N)/N"),
         *(c for f in ("ekf", "rts") for c in (
-            _f(f"{f}_rmse_pos", "m", "", f"{f.upper()} 3-D position RMSE over runs and time"),
-            _f(f"{f}_rmse_vel", "m/s", "", f"{f.upper()} 3-D velocity RMSE over runs and time"),
-            _f(f"{f}_rmse_acc", "m/s^2", "", f"{f.upper()} 3-D acceleration RMSE over runs and time"),
+            _f(f"{f}_rmse_pos_m", "m", "", f"{f.upper()} 3-D position RMSE over runs and time"),
+            _f(f"{f}_rmse_vel_mps", "m/s", "", f"{f.upper()} 3-D velocity RMSE over runs and time"),
+            _f(f"{f}_rmse_acc_mps2", "m/s^2", "", f"{f.upper()} 3-D acceleration RMSE over runs and time"),
             _f(f"{f}_nees_mean", "1", "", f"time mean of the run-averaged {f.upper()} NEES"),
             _f(f"{f}_nees_in_band_pct", "%", "", f"steps whose run-averaged {f.upper()} NEES is in the band"),
             _f(f"{f}_var_ratio_median", "1", "",
@@ -1457,16 +1460,16 @@ _STUDY_TABLES_A: dict[str, tuple[Column, ...]] = {
         Column("q2_input", "string", "", "", "what the GMR sees when Q2 is estimated: truth or ekf"),
         _f("q2_scale", "1", "", "scale of the estimated Q2"),
         _f("score", "1", "", "mean over components of pooled EKF+HMM RMSE / EKF RMSE"),
-        _f("hmm_rmse_pos", "m", "", "EKF+HMM output 3-D position RMSE, pooled"),
-        _f("ekf_rmse_pos", "m", "", "EKF 3-D position RMSE, pooled"),
-        _f("hmm_rmse_vel_n", "m/s", "NED", "EKF+HMM output north velocity RMSE, pooled"),
-        _f("ekf_rmse_vel_n", "m/s", "NED", "EKF north velocity RMSE, pooled"),
-        _f("hmm_rmse_vel_e", "m/s", "NED", "EKF+HMM output east velocity RMSE, pooled"),
-        _f("ekf_rmse_vel_e", "m/s", "NED", "EKF east velocity RMSE, pooled"),
-        _f("hmm_rmse_vel_d", "m/s", "NED", "EKF+HMM output down velocity RMSE, pooled"),
-        _f("ekf_rmse_vel_d", "m/s", "NED", "EKF down velocity RMSE, pooled"),
-        _f("hmm_rmse_acc", "m/s^2", "", "EKF+HMM output 3-D acceleration RMSE, pooled"),
-        _f("ekf_rmse_acc", "m/s^2", "", "EKF 3-D acceleration RMSE, pooled"),
+        _f("hmm_rmse_pos_m", "m", "", "EKF+HMM output 3-D position RMSE, pooled"),
+        _f("ekf_rmse_pos_m", "m", "", "EKF 3-D position RMSE, pooled"),
+        _f("hmm_rmse_vel_n_mps", "m/s", "NED", "EKF+HMM output north velocity RMSE, pooled"),
+        _f("ekf_rmse_vel_n_mps", "m/s", "NED", "EKF north velocity RMSE, pooled"),
+        _f("hmm_rmse_vel_e_mps", "m/s", "NED", "EKF+HMM output east velocity RMSE, pooled"),
+        _f("ekf_rmse_vel_e_mps", "m/s", "NED", "EKF east velocity RMSE, pooled"),
+        _f("hmm_rmse_vel_d_mps", "m/s", "NED", "EKF+HMM output down velocity RMSE, pooled"),
+        _f("ekf_rmse_vel_d_mps", "m/s", "NED", "EKF down velocity RMSE, pooled"),
+        _f("hmm_rmse_acc_mps2", "m/s^2", "", "EKF+HMM output 3-D acceleration RMSE, pooled"),
+        _f("ekf_rmse_acc_mps2", "m/s^2", "", "EKF 3-D acceleration RMSE, pooled"),
         Column("chosen", "bool", "", "", "the frozen candidate (lowest score)"),
     ),
     # pipeline/studies/seed000_ekf.py (hmm_maneuver + input_quality; empty when skip: hmm)
@@ -1482,9 +1485,9 @@ _STUDY_TABLES_A: dict[str, tuple[Column, ...]] = {
         _f("hmm_mode_pct", "%", "", "share of steps in HMM mode"),
         _f("hmm_output_pct", "%", "", "share of steps whose output is the EKF+HMM estimate"),
         _f("gated_pct", "%", "", "share of GMR inputs dropped by the gate"),
-        _f("gmr_input_acc_rmse", "m/s^2", "", "3-D RMSE of the GMR acceleration input on HMM steps (NaN: none)"),
-        _f("ekf_acc_rmse_on_hmm_steps", "m/s^2", "", "EKF 3-D acceleration RMSE on the same steps (NaN: none)"),
-        _f("ekf_hmm_acc_rmse_on_hmm_steps", "m/s^2", "",
+        _f("gmr_input_acc_rmse_mps2", "m/s^2", "", "3-D RMSE of the GMR acceleration input on HMM steps (NaN: none)"),
+        _f("ekf_acc_rmse_on_hmm_steps_mps2", "m/s^2", "", "EKF 3-D acceleration RMSE on the same steps (NaN: none)"),
+        _f("ekf_hmm_acc_rmse_on_hmm_steps_mps2", "m/s^2", "",
            "EKF+HMM output 3-D acceleration RMSE on the same steps (NaN: none)"),
     ),
     # pipeline/studies/seed000_ekf.py (group_rmse; empty when skip: hmm)
@@ -1492,11 +1495,11 @@ _STUDY_TABLES_A: dict[str, tuple[Column, ...]] = {
         Column("maneuver", "string", "", "", "maneuver M1-M4"),
         Column("scenario", "string", "", "", "S1 or S2"),
         Column("filter", "string", "", "", "ekf or ekf_hmm"),
-        _f("pos", "m", "", "3-D position RMSE over realisations and time"),
-        _f("vel_n", "m/s", "NED", "north velocity RMSE"),
-        _f("vel_e", "m/s", "NED", "east velocity RMSE"),
-        _f("vel_d", "m/s", "NED", "down velocity RMSE"),
-        _f("acc", "m/s^2", "", "3-D acceleration RMSE"),
+        _f("pos_m", "m", "", "3-D position RMSE over realisations and time"),
+        _f("vel_n_mps", "m/s", "NED", "north velocity RMSE"),
+        _f("vel_e_mps", "m/s", "NED", "east velocity RMSE"),
+        _f("vel_d_mps", "m/s", "NED", "down velocity RMSE"),
+        _f("acc_mps2", "m/s^2", "", "3-D acceleration RMSE"),
     ),
     # pipeline/studies/seed000_ekf.py (hmm_maneuver; empty when skip: hmm)
     "seed000_ekf_hmm_time": (

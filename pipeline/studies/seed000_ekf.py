@@ -120,6 +120,15 @@ HMM_GROUPS: dict[str, tuple[int, ...]] = {"pos": (0, 1, 2), "vel_n": (3,), "vel_
                                           "acc": (6, 7, 8)}
 #: the Monte Carlo's groups
 MC_GROUPS: dict[str, tuple[int, ...]] = {"pos": (0, 1, 2), "vel": (3, 4, 5), "acc": (6, 7, 8)}
+#: each group's SI unit suffix: its RMSE columns are named ``..._<group>_<unit>`` (the schema's
+#: unit-in-the-name rule); RESULT names keep the bare group and add the unit themselves
+GROUP_UNITS: dict[str, str] = {"pos": "m", "vel": "mps", "vel_n": "mps", "vel_e": "mps", "vel_d": "mps",
+                               "acc": "mps2"}
+
+
+def group_col(grp: str) -> str:
+    """The column-name stem of a group's RMSE with its unit: ``pos`` -> ``pos_m``."""
+    return f"{grp}_{GROUP_UNITS[grp]}"
 
 
 def outputs_for(results_dir: str = "results") -> dict[str, str]:
@@ -224,7 +233,7 @@ def tune_q_on_training(train: dict, radar: RadarModel, st: dict, seed: int):
         rec = {"q": g, "score": float(score[i]), "chosen": g == q}
         rec.update({f"rmse_{c}": float(pooled[i, j]) for j, c in enumerate(STATE_COLUMNS)})
         for grp, idx in MC_GROUPS.items():
-            rec[f"rmse_{grp}"] = float(np.sqrt(np.sum(pooled[i, list(idx)] ** 2)))
+            rec[f"rmse_{group_col(grp)}"] = float(np.sqrt(np.sum(pooled[i, list(idx)] ** 2)))
         for man, t in per:
             rec[f"score_{man}"] = float(normalised_rmse(t.rmse)[i])
         recs.append(rec)
@@ -275,7 +284,7 @@ def mc_maneuver(man: str, df: pd.DataFrame, ekf: ExtendedKalmanFilter, radar: Ra
             "nees_avg": np.repeat(navg, 9)}))
         g = rmse_groups(e)
         for grp in MC_GROUPS:
-            summ[f"{f}_rmse_{grp}"] = g[grp]
+            summ[f"{f}_rmse_{group_col(grp)}"] = g[grp]
         summ[f"{f}_nees_mean"] = float(navg.mean())
         summ[f"{f}_nees_in_band_pct"] = 100.0 * fraction_in_band(navg, 9, R)
         # P against the Monte Carlo error variance (the thesis' Q: "P exceeds the MC error variance")
@@ -368,8 +377,8 @@ def tune_ekf_hmm(ekf, ms, train, radar, st, seed, progress):
                 rec = {"gmr_input": gi, "gate_mps2": float(gate), "q2_input": src, "q2_scale": sc,
                        "score": float(normalised_rmse(pooled[None], ekf_pooled)[0])}
                 for grp, idx in HMM_GROUPS.items():
-                    rec[f"hmm_rmse_{grp}"] = float(np.sqrt(np.sum(pooled[list(idx)] ** 2)))
-                    rec[f"ekf_rmse_{grp}"] = float(np.sqrt(np.sum(ekf_pooled[list(idx)] ** 2)))
+                    rec[f"hmm_rmse_{group_col(grp)}"] = float(np.sqrt(np.sum(pooled[list(idx)] ** 2)))
+                    rec[f"ekf_rmse_{group_col(grp)}"] = float(np.sqrt(np.sum(ekf_pooled[list(idx)] ** 2)))
                 recs.append(rec)
                 cands.append((msv, bases[src] * sc))
             progress(f"  gmr_input {gi}, gate {gate:g}: best score "
@@ -404,14 +413,14 @@ def input_quality(tr, t_ns, truth, e_ekf, e_hmm) -> dict[str, float]:
     u = tr.acc_hmm[:, :-1] + dt[None, :, None] * tr.jerk_hmm[:, :-1]     # input into step k
     on = tr.hmm_axes[:, 1:].all(axis=-1)
     if not on.any():
-        return {"gmr_input_acc_rmse": float("nan"), "ekf_acc_rmse_on_hmm_steps": float("nan"),
-                "ekf_hmm_acc_rmse_on_hmm_steps": float("nan")}
+        return {"gmr_input_acc_rmse_mps2": float("nan"), "ekf_acc_rmse_on_hmm_steps_mps2": float("nan"),
+                "ekf_hmm_acc_rmse_on_hmm_steps_mps2": float("nan")}
 
     def r3(e):
         return float(np.sqrt(np.mean(np.sum(e[on] ** 2, axis=-1))))
 
-    return {"gmr_input_acc_rmse": r3(u - truth[:, 1:, 6:]), "ekf_acc_rmse_on_hmm_steps": r3(e_ekf[:, 1:, 6:]),
-            "ekf_hmm_acc_rmse_on_hmm_steps": r3(e_hmm[:, 1:, 6:])}
+    return {"gmr_input_acc_rmse_mps2": r3(u - truth[:, 1:, 6:]), "ekf_acc_rmse_on_hmm_steps_mps2": r3(e_ekf[:, 1:, 6:]),
+            "ekf_hmm_acc_rmse_on_hmm_steps_mps2": r3(e_hmm[:, 1:, 6:])}
 
 
 #: lags (steps) scanned for the GMR's time alignment: estimate at t_k against the truth at t_{k+L}
@@ -519,7 +528,8 @@ def hmm_maneuver(man, test_df, ekf, ms, Q2, radar, st, seed):
                      "gated_pct": 100.0 * float(np.mean(tr.gated)),
                      **input_quality(tr, t_ns, tr_n, e_ekf, e_hmm)})
         for f, e, P in (("ekf", e_ekf, tr.ekf.cov), ("ekf_hmm", e_hmm, tr.output.cov)):
-            rm.append({"maneuver": man, "scenario": sc, "filter": f, **group_rmse(e)})
+            rm.append({"maneuver": man, "scenario": sc, "filter": f,
+                       **{group_col(g): v for g, v in group_rmse(e).items()}})
             T = e.shape[1]
             times.append(pd.DataFrame({
                 "maneuver": man, "scenario": sc, "filter": f, "t_s": np.repeat(t_s, 9),
@@ -538,7 +548,7 @@ def change_table(hrm: pd.DataFrame) -> pd.DataFrame:
         e = g[g["filter"] == "ekf"].iloc[0]
         h = g[g["filter"] == "ekf_hmm"].iloc[0]
         rows.append({"maneuver": man, "scenario": sc,
-                     **{grp: 100.0 * (h[grp] / e[grp] - 1.0) for grp in HMM_GROUPS}})
+                     **{grp: 100.0 * (h[group_col(grp)] / e[group_col(grp)] - 1.0) for grp in HMM_GROUPS}})
     return pd.DataFrame(rows)
 
 
@@ -566,15 +576,15 @@ def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=Non
          "## q (white-jerk density), tuned on training runs and frozen", "",
          f"Grid-searched on {st['tune_runs']} training runs of each of {', '.join(KNOWN)} (truth initialisation), "
          f"score = mean over the 9 components of the pooled RMSE / its grid median. **q = {q:g} m²/s⁵.**", "",
-         md_table(qt[["q", "score", "rmse_pos", "rmse_vel", "rmse_acc"]], "{:.3f}"), "",
+         md_table(qt[["q", "score", *(f"rmse_{group_col(g)}" for g in MC_GROUPS)]], "{:.3f}"), "",
          "## EKF/RTS Monte Carlo (mc sets, Ch. 2 initialisation)", "",
          "RMSE per group over runs and time; NEES = run-averaged NEES, its time mean and the share of steps "
          "inside the 95 % band of χ²(9N)/N. The truth is the quadcopter simulator, not the filter's white-jerk "
          "model, so the NEES is a diagnostic (the thesis' Q is deliberately high: P above the MC error "
          "variance, NEES below 9); `var_ratio` = median over time and components of MC error variance / "
          "filter variance.", "",
-         md_table(mcs[["maneuver", "n_runs", "ekf_rmse_pos", "ekf_rmse_vel", "ekf_rmse_acc", "rts_rmse_pos",
-                       "rts_rmse_vel", "rts_rmse_acc", "ekf_nees_mean", "ekf_nees_in_band_pct",
+         md_table(mcs[["maneuver", "n_runs", *(f"{f}_rmse_{group_col(g)}" for f in ("ekf", "rts") for g in MC_GROUPS),
+                       "ekf_nees_mean", "ekf_nees_in_band_pct",
                        "rts_nees_mean", "ekf_var_ratio_median"]], "{:.3f}"), ""]
     if hrm is not None:
         L += ["## EKF+HMM (Ch. 4)", "",
@@ -588,7 +598,7 @@ def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=Non
               f"{q2_scale:g}.** Best of each GMR input / Q₂ source:", "",
               md_table(q2t.loc[q2t.groupby(["gmr_input", "gate_mps2", "q2_input"])["score"].idxmin(),
                                ["gmr_input", "gate_mps2", "q2_input", "q2_scale", "score",
-                                *[f"hmm_rmse_{g}" for g in HMM_GROUPS], "ekf_rmse_acc"]], "{:.3f}"), "",
+                                *[f"hmm_rmse_{group_col(g)}" for g in HMM_GROUPS], "ekf_rmse_acc_mps2"]], "{:.3f}"), "",
               f"S1 (best) / S2 (worst): the test run with the lowest / highest summed absolute EKF+HMM error, "
               f"each re-run {st['noise_runs']}× with new radar noise from its true state. MAoT beside the "
               f"thesis' Chapter-4 table (digest §11); `hmm_mode_pct` = steps predicted with HMM inputs, "
@@ -611,8 +621,8 @@ def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=Non
               "the baseline EKF's posteriors (A_H keeps none of the state's own acceleration), so it can beat the "
               "EKF only where that input is better than the EKF's acceleration. 3-D acceleration RMSE (m/s²) on "
               "the steps predicted with HMM inputs on every axis:", "",
-              md_table(scen[["maneuver", "scenario", "gmr_input_acc_rmse", "ekf_acc_rmse_on_hmm_steps",
-                             "ekf_hmm_acc_rmse_on_hmm_steps"]], "{:.3f}"), ""]
+              md_table(scen[["maneuver", "scenario", "gmr_input_acc_rmse_mps2", "ekf_acc_rmse_on_hmm_steps_mps2",
+                             "ekf_hmm_acc_rmse_on_hmm_steps_mps2"]], "{:.3f}"), ""]
     if gdec is not None:
         L += ["Why the GMR input is worse on EKF posteriors (`gmr_decomposition`, the selection realisation of "
               "every test run, chosen GMR input, no gate): 3-D acceleration RMSE (m/s²) of the GMR with the "
@@ -650,7 +660,7 @@ def figures(qt, mc_time, hmm_time=None, hrm=None) -> list:
     if hrm is not None:
         fig = go.Figure()
         for (sc, f), g in hrm.groupby(["scenario", "filter"], sort=False):
-            fig.add_trace(go.Bar(x=g["maneuver"], y=g["acc"], name=f"{sc} {f}"))
+            fig.add_trace(go.Bar(x=g["maneuver"], y=g["acc_mps2"], name=f"{sc} {f}"))
         fig.update_layout(barmode="group", yaxis_title="acceleration RMSE (m/s²)")
         figs.append(("EKF vs EKF+HMM", layout(fig, "Acceleration RMSE, EKF vs EKF+HMM, S1/S2")))
         for man, g in hmm_time[hmm_time["scenario"] == "S1"].groupby("maneuver", sort=False):
@@ -780,8 +790,8 @@ def run_seed000_ekf(inputs: Mapping | None, outputs: Mapping, config: Mapping | 
             "The white-jerk density q (m²/s⁵) grid-searched on training runs by normalised RMSE, then frozen.")
     for r in mc_sum.itertuples():
         for f in ("ekf", "rts"):
-            for grp, unit in (("pos", "m"), ("vel", "mps"), ("acc", "mps2")):
-                res.add(f"seed000_ekf_mc_{r.maneuver}_{f}_rmse_{grp}_{unit}", f"{getattr(r, f'{f}_rmse_{grp}'):.4f}",
+            for grp, unit in ((g, GROUP_UNITS[g]) for g in MC_GROUPS):
+                res.add(f"seed000_ekf_mc_{r.maneuver}_{f}_rmse_{grp}_{unit}", f"{getattr(r, f'{f}_rmse_{grp}_{unit}'):.4f}",
                         f"Monte Carlo {r.maneuver}: {f.upper()} 3-D {grp} RMSE over runs and time ({unit}).")
         res.add(f"seed000_ekf_mc_{r.maneuver}_ekf_nees_mean", f"{r.ekf_nees_mean:.2f}",
                 f"Monte Carlo {r.maneuver}: time mean of the run-averaged EKF NEES (9 if consistent).")

@@ -57,7 +57,7 @@ def test_the_monte_carlo_tables_hold_every_maneuver_filter_and_component(tiny):
     assert set(mt["filter"]) == {"ekf", "rts"} and mt["component"].nunique() == 9
     assert np.all(mt["err_var"] >= 0) and np.all(mt["filter_var"] > 0)
     # the smoother lowers every group's RMSE on every maneuver
-    for g in ("pos", "vel", "acc"):
+    for g in ("pos_m", "vel_mps", "acc_mps2"):
         assert np.all(ms[f"rts_rmse_{g}"] < ms[f"ekf_rmse_{g}"]), g
     lo, hi = ms[["nees_band_lo", "nees_band_hi"]].iloc[0]
     assert lo < 9 < hi
@@ -71,7 +71,7 @@ def test_s1_and_s2_are_the_best_and_worst_test_runs_and_both_filters_are_scored(
     assert np.all(piv["S1"] <= piv["S2"])
     assert list(sc["thesis_MAoT_pct"][:2]) == [94.79, 70.27]
     assert len(hr) == 16 and set(hr["filter"]) == {"ekf", "ekf_hmm"}
-    assert {"pos", "vel_n", "vel_e", "vel_d", "acc"} <= set(hr.columns)
+    assert {"pos_m", "vel_n_mps", "vel_e_mps", "vel_d_mps", "acc_mps2"} <= set(hr.columns)
     for m in ("M1", "M2", "M3", "M4"):
         for s in ("S1", "S2"):
             assert f"seed000_ekf_hmm_{m}_{s}_acc_rmse_change_pct" in tiny.figures

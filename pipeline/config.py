@@ -373,17 +373,28 @@ def read_text_file(path: str | os.PathLike, what: str, *, source: str | None = N
                           f"{what} as UTF-8") from None
 
 
+def default_config_path() -> Path:
+    """The config a command reads without ``--config``: ``datasets/config.yaml`` of the current
+    folder when there is one (where Snakemake, started there, reads it too), else this checkout's
+    :data:`DEFAULT_CONFIG`. Without the first, a user working in a project folder of their own
+    would silently get the repository's dataset settings."""
+    local = Path("datasets") / "config.yaml"
+    return local if local.is_file() else DEFAULT_CONFIG
+
+
 def load_config(path: str | os.PathLike | None = None) -> dict[str, Any]:
-    """Load, validate and default the dataset config (default ``datasets/config.yaml``)."""
-    p = Path(path) if path else DEFAULT_CONFIG
+    """Load, validate and default the dataset config (default :func:`default_config_path`)."""
+    p = Path(path) if path else default_config_path()
     return validate_config(read_config_file(p), source=p)
 
 
 def read_config_file(path: str | os.PathLike) -> Any:
     """The YAML of a config file as read (not validated), or one :class:`ConfigError` line: the
     file unreadable, not UTF-8, not YAML, or a key repeated in one mapping (YAML would keep the
-    last silently). The workflow calls it on its ``--configfile`` files too: Snakemake's own
-    reader keeps the last."""
+    last silently). The workflow calls it on ``datasets/config.yaml`` before Snakemake reads it
+    and on every ``--configfile`` for what Snakemake's own reader lets pass (a repeated key: it
+    keeps the last). A YAML syntax error in a ``--configfile`` stops Snakemake itself, before the
+    workflow runs, with its own message; ``uavpipe config --config FILE`` names its line."""
     p = Path(path)
     text = read_text_file(p, "config")
     try:
@@ -433,11 +444,15 @@ def command_line_overrides(cli: Mapping[str, Any] | None) -> dict[str, Any]:
 
 
 def section(cfg: Mapping[str, Any] | None, name: str) -> dict[str, Any]:
-    """One section (``ingest``, ``simulate``, ``preprocess``, ``hmm``, ...), validated and
-    defaulted (all defaults when absent)."""
+    """One section (``ingest``, ``simulate``, ``preprocess``, ``hmm``, ...; a dotted name such
+    as ``simulate.sensors`` is a section inside one), validated and defaulted (all defaults when
+    absent)."""
     if cfg is not None and not isinstance(cfg, Mapping):
         raise ConfigError(f"config: top level must be a mapping, got {type(cfg).__name__}")
-    return validate_section(name, (cfg or {}).get(name))
+    node: Any = cfg or {}
+    for part in name.split("."):  # the user's value at the dotted path, not the bare default
+        node = node.get(part) if isinstance(node, Mapping) else None
+    return validate_section(name, node)
 
 
 def _plain(x: Any) -> Any:

@@ -107,12 +107,16 @@ def _filter(z: F64, dt: float, F1: F64, Q: F64, keep: str):
     ekf = ExtendedKalmanFilter(LinearTransition(F1, Q), LinearMeasurement(H, np.eye(1)))
     # a diffuse prior scaled to the data: position at the first valid sample, velocity and
     # acceleration of unknown sign with 10× the track's typical step (its first n innovations
-    # are not counted in the likelihood)
+    # are not counted in the likelihood). The step's size is its RMS, not its spread: a steady
+    # track has steps of near-zero spread, which would pin the velocity prior at N(0, ~0) and
+    # lock the filter onto zero velocity (a straight line came back 42 samples off)
     valid = np.isfinite(z)
     first = np.argmax(valid, axis=0)
     x0 = np.zeros((R_, n))
     x0[:, 0] = z[first, np.arange(R_)]
-    step = np.nanstd(np.diff(z, axis=0), axis=0) if T > 2 else np.zeros(R_)
+    d = np.diff(z, axis=0)
+    ok = np.isfinite(d)
+    step = np.sqrt(np.where(ok, d * d, 0.0).sum(axis=0) / np.maximum(ok.sum(axis=0), 1))
     step = np.where(np.isfinite(step) & (step > 0), step, 1.0) * 10.0
     P0 = np.zeros((R_, n, n))
     P0[:, 0, 0] = (np.nanmax(np.abs(z - x0[:, 0]), axis=0) + step) ** 2

@@ -137,6 +137,21 @@ def test_given_noise_levels_reproduce_the_frameworks_ca_ekf_and_rts_smoother(rng
     np.testing.assert_allclose(ours[10:-10], ref[10:-10], atol=1e-3 * np.abs(ref).max())
 
 
+def test_a_straight_line_comes_back_to_round_off_and_a_trend_does_not_change_the_result(rng):
+    # the prior's velocity scale is the size of the steps, not their spread (a steady track's
+    # steps hardly vary: its velocity prior was N(0, ~1e-20) and the line came back 42 off)
+    line = np.arange(100.0)
+    for model in ("ca", "cv"):
+        np.testing.assert_allclose(smooth(line, 0.1, model=model)[:, 0], line, atol=1e-6)
+    t = np.arange(200) * 0.1
+    truth = 0.5 * np.sin(0.3 * t)
+    y = truth + 0.01 * rng.standard_normal(200)
+    flat = smooth(y, 0.1)[:, 0]
+    moving = smooth(y + 10 * t, 0.1)[:, 0] - 10 * t
+    err = [np.sqrt(np.mean((a - truth) ** 2)) for a in (flat, moving)]
+    assert err[1] == pytest.approx(err[0], rel=0.25)
+
+
 def test_nan_rows_are_smoothed_through(rng):
     truth, z, _ = _track(rng)
     z[100:120] = np.nan

@@ -248,9 +248,29 @@ def _fast_gaussian_hmm_class():
     return FastGaussianHMM
 
 
+def check_observations(X, n_features: int | None = None) -> F64:
+    """``X`` as a (T ≥ 1, d) float array of finite observations, or one :class:`ModelError`.
+
+    Why: a NaN row makes every later δ/α NaN and ``argmax`` then answers state 0 at every step,
+    a path that looks like a result; an empty sequence has no likelihood at all."""
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim != 2 or len(X) == 0:
+        raise ModelError(f"observations must be a non-empty (n_samples, n_features) array, got shape {X.shape}")
+    if n_features is not None and X.shape[1] != n_features:
+        raise ModelError(f"observations have {X.shape[1]} features, the model {n_features}")
+    bad = ~np.isfinite(X).all(axis=1)
+    if bad.any():
+        raise ModelError(f"observation row {int(np.flatnonzero(bad)[0])} is not finite "
+                         f"({int(bad.sum())} of {len(X)} rows)")
+    return X
+
+
 def _split(X: F64, lengths) -> list[F64]:
     if lengths is None:
         return [X]
+    lengths = np.asarray(lengths)
+    if lengths.ndim != 1 or len(lengths) == 0 or (lengths <= 0).any():
+        raise ModelError(f"lengths must be positive sequence lengths, got {lengths.tolist()}")
     ends = np.cumsum(lengths)
     if ends[-1] != len(X):
         raise ModelError(f"lengths sum to {ends[-1]} but X has {len(X)} rows")
@@ -334,12 +354,15 @@ class ManeuverHMM:
         best = None
         self.bic_ = {}
         for s in cands:
-            fitted = None
+            fitted = ll = None
             for r in range(max(1, int(self.hmm_restarts))):
                 f = self._fit_one(X, lengths, s, r)
-                if fitted is None or (f[1] and fitted[1] and f[1][-1] > fitted[1][-1]):
-                    fitted = f
-            ll = fitted[1][-1] if fitted[1] else self._score(fitted[0], X, lengths)
+                # restarts and the BIC compare the log-likelihood of the parameters returned:
+                # hmmlearn's last history entry is that of the parameters before its last
+                # M-step (off by 50 nats when n_iter stops it early)
+                f_ll = self._score(f[0], X, lengths)
+                if fitted is None or f_ll > ll:
+                    fitted, ll = f, f_ll
             bic = -2.0 * ll + fitted[0].n_parameters() * np.log(len(X))
             self.bic_[s] = float(bic)
             if best is None or bic < best[0]:
@@ -434,11 +457,12 @@ class ManeuverHMM:
     # -- inference -----------------------------------------------------------------------
     def score(self, X: F64, lengths=None) -> float:
         """Total log-likelihood ``Σ log P(O^(r) | λ)`` by the log-space forward pass."""
-        return self._score(self.params_, np.asarray(X, dtype=np.float64), lengths)
+        return self._score(self.params_, check_observations(X, self.params_.n_features), lengths)
 
     def score_prefixes(self, X: F64) -> F64:
         """``LL(t) = log P(O_{1:t} | λ)`` for every t of one sequence, shape (T,)."""
         p = self.params_
+        X = check_observations(X, p.n_features)
         la, _ = forward_log(safe_log(p.startprob), safe_log(p.transmat), p.log_emission(X))
         return logsumexp(la, axis=1)
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .hmm import HMMParams, safe_log
+from .hmm import HMMParams, check_observations, safe_log
 
 F64 = NDArray[np.float64]
 
@@ -50,13 +50,16 @@ def viterbi_log(log_startprob: F64, log_transmat: F64, log_b: F64) -> tuple[floa
 
 
 def viterbi(params: HMMParams, X: F64) -> tuple[float, NDArray[np.int64]]:
-    """Viterbi path of one observation sequence ``X`` (n_samples, n_features)."""
+    """Viterbi path of one observation sequence ``X`` (n_samples, n_features); a non-finite or
+    empty ``X`` is one :class:`~pipeline.models.base.ModelError`."""
+    X = check_observations(X, params.n_features)
     return viterbi_log(safe_log(params.startprob), safe_log(params.transmat), params.log_emission(X))
 
 
 def online_viterbi_states(params: HMMParams, X: F64) -> NDArray[np.int64]:
-    """``argmax_j δ_t(j)`` at every t (the online current state, no backtracking)."""
-    lb = params.log_emission(X)
+    """``argmax_j δ_t(j)`` at every t (the online current state, no backtracking); a non-finite
+    or empty ``X`` is one :class:`~pipeline.models.base.ModelError`."""
+    lb = params.log_emission(check_observations(X, params.n_features))
     lt = safe_log(params.transmat)
     delta = safe_log(params.startprob) + lb[0]
     out = np.empty(len(lb), dtype=np.int64)

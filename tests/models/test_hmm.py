@@ -131,6 +131,20 @@ def test_auto_states_by_bic(rng):
     assert min(f.bic_, key=f.bic_.get) == 3 and set(f.bic_) == {2, 3, 4}
 
 
+def test_the_bic_and_the_restart_choice_use_the_likelihood_of_the_returned_parameters(rng):
+    # stopped early by n_iter, hmmlearn's last history entry belongs to the parameters before
+    # its last M-step (-431.7 against -378.8 here): the BIC must be that of params_
+    r = np.random.default_rng(0)
+    X = np.concatenate([r.standard_normal((60, 2)) + [3, 0], r.standard_normal((60, 2)) - [3, 0]])
+    m = ManeuverHMM(n_states=2, n_iter=3, tol=1e-9, seed=4).fit(X, lengths=[60, 60])
+    bic = -2.0 * m.score(X, [60, 60]) + m.params_.n_parameters() * np.log(len(X))
+    assert m.bic_[2] == pytest.approx(bic, rel=1e-12)
+    best = ManeuverHMM(n_states=2, n_iter=3, tol=1e-9, seed=4, hmm_restarts=3).fit(X, lengths=[60, 60])
+    each = [ManeuverHMM(n_states=2, n_iter=3, tol=1e-9, seed=4)._fit_one(X, np.array([60, 60]), 2, r)[0]
+            for r in range(3)]
+    assert best.score(X, [60, 60]) == pytest.approx(max(ManeuverHMM._score(p, X, [60, 60]) for p in each))
+
+
 def test_gmm_emissions_train(rng):
     _, X, lengths = _train_data(rng, n=5)
     f = ManeuverHMM(n_states=3, n_mix=2, seed=0, n_iter=8).fit(X, lengths)
@@ -146,3 +160,25 @@ def test_bad_training_input():
         ManeuverHMM(n_states=2).fit(np.array([[0.0], [np.nan], [1.0]]))
     with pytest.raises(ModelError, match="lengths"):
         ManeuverHMM(n_states=2).fit(np.zeros((10, 1)), [3, 3])
+
+
+def test_a_nan_or_empty_observation_sequence_is_refused_naming_the_row_instead_of_a_path_of_zeros(rng):
+    # a NaN row made δ NaN and argmax answered state 0 at every later step, log-prob NaN
+    from pipeline.models.base import ModelError
+    from pipeline.models.viterbi import online_viterbi_states, viterbi
+
+    _, X, lengths = _train_data(rng, n=4)
+    m = ManeuverHMM(n_states=3, seed=0, n_iter=5).fit(X, lengths)
+    bad = X[:40].copy()
+    bad[3, 1] = np.nan
+    for call in (lambda x: viterbi(m.params_, x), lambda x: online_viterbi_states(m.params_, x), m.score,
+                 m.score_prefixes):
+        with pytest.raises(ModelError, match=r"observation row 3 is not finite \(1 of 40 rows\)"):
+            call(bad)
+        with pytest.raises(ModelError, match="non-empty"):
+            call(X[:0])
+    with pytest.raises(ModelError, match="features, the model"):
+        m.score(X[:40, :1])
+    for ls in ([40, 0, len(X) - 40], [len(X) + 5, -5]):
+        with pytest.raises(ModelError, match="lengths must be positive"):
+            m.score(X, ls)

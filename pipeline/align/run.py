@@ -101,17 +101,43 @@ class DemoSet:
     notices: list[str]
 
 
+#: file stems that name a table's kind, not its flight (``uavpipe preprocess -o DIR`` writes
+#: ``DIR/<flight>/{state,segments}.parquet``)
+GENERIC_STEMS: tuple[str, ...] = ("state", "segments")
+
+
+def table_flight_id(path: str | Path) -> str:
+    """The flight id of a ``state`` or ``segments`` table.
+
+    Its ``uavpipe`` metadata ``flight_id`` when it has one (preprocess writes it); else the
+    folder name when the file stem is the generic ``state``/``segments`` of the CLI layout
+    ``DIR/<flight>/state.parquet``; else the file stem (the workflow's
+    ``results/state/<flight>.parquet``, whose metadata says the same flight). A file that cannot
+    be read falls back on its name: reading it later says why it is bad.
+    """
+    p = Path(path)
+    try:
+        fid = read_table_meta(p).get("flight_id")
+    except (OSError, ValueError):  # pyarrow's ArrowInvalid is a ValueError
+        fid = None
+    if fid:
+        return str(fid)
+    return p.parent.name if p.stem in GENERIC_STEMS and p.parent.name else p.stem
+
+
 def _paths_by_flight(inputs) -> dict[str, tuple[str, str]]:
     states = declared_list(inputs, "states")
-    segs = {Path(p).stem: p for p in declared_list(inputs, "segments")}
-    return {Path(p).stem: (p, segs.get(Path(p).stem)) for p in states}
+    segs = {table_flight_id(p): p for p in declared_list(inputs, "segments")}
+    flights = [table_flight_id(p) for p in states]
+    return {f: (p, segs.get(f)) for f, p in zip(flights, states)}
 
 
 def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     """Read and cut the demos of ``align.sets[set_name]`` from the declared inputs.
 
-    ``inputs``: ``states`` and ``segments`` (lists of ``results/{state,segments}/<flight>.parquet``;
-    the flight id is the file stem). Flights of the set without inputs are skipped with a notice.
+    ``inputs``: ``states`` and ``segments`` (lists of ``results/{state,segments}/<flight>.parquet``
+    or the CLI's ``DIR/<flight>/{state,segments}.parquet``; the flight id is
+    :func:`table_flight_id`'s). Flights of the set without inputs are skipped with a notice.
     """
     spec = (config.get("sets") or {}).get(set_name)
     if spec is None:
@@ -312,7 +338,7 @@ def run_align(inputs, outputs, config: Mapping[str, Any], *, set_name: str) -> A
     ----------
     inputs : mapping or namedlist
         ``states``, ``segments``: the set's available flights' ``results/state/<flight>.parquet``
-        and ``results/segments/<flight>.parquet`` (flight id = file stem).
+        and ``results/segments/<flight>.parquet`` (flight id: :func:`table_flight_id`).
     outputs : mapping or namedlist
         ``learned``, ``alignment``, ``iterations``, ``demos`` (Parquet paths).
     config : mapping

@@ -1,8 +1,10 @@
 """``uavpipe align --state STATE... --segments SEGMENTS... --set NAME -o DIR``: trajectory learning.
 
 The same entry point as the workflow's ``align_set`` rule (:func:`pipeline.align.run.run_align`):
-each ``STATE``/``SEGMENTS`` pair is one preprocessed flight (``uavpipe preprocess`` output,
-flight id = file stem); ``--set`` names an ``align.sets`` entry of the config (its flights
+each ``STATE``/``SEGMENTS`` pair is one preprocessed flight (``uavpipe preprocess`` output
+``DIR/<flight>/{state,segments}.parquet`` or the workflow's ``results/{state,segments}/<flight>.parquet``;
+flight id: the tables' metadata, see :func:`pipeline.align.run.table_flight_id`); ``--set``
+names an ``align.sets`` entry of the config (its flights
 without a file here are skipped with a notice). Writes ``DIR/{learned,alignment,iterations,demos}.parquet``
 and, with ``--page``, the set's HTML page.
 """
@@ -13,13 +15,13 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import table_problem
+from .common import folder_problem, table_problem
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("align", help="learn one intended trajectory per maneuver from repeated demos")
     p.add_argument("--state", nargs="+", type=Path, required=True, metavar="STATE",
-                   help="preprocessed state tables (results/state/<flight>.parquet)")
+                   help="preprocessed state tables (DIR/<flight>/state.parquet or results/state/<flight>.parquet)")
     p.add_argument("--segments", nargs="+", type=Path, required=True, metavar="SEGMENTS",
                    help="segments tables, one per STATE (same flight ids)")
     p.add_argument("--set", dest="set_name", required=True, metavar="NAME", help="align.sets entry")
@@ -31,7 +33,7 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from ..align.run import ALIGN_OUTPUTS, run_align
+    from ..align.run import ALIGN_OUTPUTS, run_align, table_flight_id
 
     try:
         sec = section(load_config(args.config), "align")
@@ -42,11 +44,6 @@ def run(args) -> int:
         print(f"uavpipe align: --set {args.set_name}: not an align.sets entry "
               f"({', '.join(sec['sets']) or 'none'})", file=sys.stderr)
         return 2
-    stems = sorted(p.stem for p in args.state)
-    if stems != sorted(p.stem for p in args.segments):
-        print(f"uavpipe align: --state and --segments name different flights ({', '.join(stems)} vs "
-              f"{', '.join(sorted(p.stem for p in args.segments))})", file=sys.stderr)
-        return 2
     kinds = [*((p, ("state",), "a state table") for p in args.state),
              *((p, ("segments",), "a segments table") for p in args.segments)]
     for p, expected, what in kinds:
@@ -54,10 +51,26 @@ def run(args) -> int:
         if bad:
             print(f"uavpipe align: {p}: {bad}", file=sys.stderr)
             return 2
+    # the flights by their tables' flight ids, not the file stems (every `uavpipe preprocess`
+    # output is called state.parquet); the two lists need not be in the same order
+    flights = {opt: [table_flight_id(p) for p in paths] for opt, paths in (("--state", args.state),
+                                                                          ("--segments", args.segments))}
+    for opt, paths in (("--state", args.state), ("--segments", args.segments)):
+        seen: dict[str, Path] = {}
+        for f, p in zip(flights[opt], paths):
+            if f in seen:
+                print(f"uavpipe align: {opt}: {seen[f]} and {p} are both flight {f}", file=sys.stderr)
+                return 2
+            seen[f] = p
+    if sorted(flights["--state"]) != sorted(flights["--segments"]):
+        print(f"uavpipe align: --state and --segments name different flights ({', '.join(sorted(flights['--state']))} "
+              f"vs {', '.join(sorted(flights['--segments']))})", file=sys.stderr)
+        return 2
     # the outputs' places, before minutes of learning
     for opt, p in (("-o", args.out), ("--page", args.page.parent if args.page else None)):
-        if p is not None and p.exists() and not p.is_dir():
-            print(f"uavpipe align: {opt} {p}: exists and is not a folder", file=sys.stderr)
+        bad = folder_problem(opt, p) if p is not None else None
+        if bad:
+            print(f"uavpipe align: {bad}", file=sys.stderr)
             return 2
     if args.page is not None and args.page.is_dir():
         print(f"uavpipe align: --page {args.page}: is a folder (give the page's file name)", file=sys.stderr)

@@ -6,6 +6,10 @@ carry their segment's label in ``truth`` and, with ``--reset-at-segments``, the 
 restart at every segment start (the workflow's default for its model sets); without it a table
 that carries ``run_id``/``label`` (a simulated set) is classified run by run.
 
+``-o OUT`` is the output file of one table, or the folder ``OUT/<name>.parquet`` of several
+(``<name>`` tells the inputs apart, see :func:`pipeline.io.stage.source_names`); one table
+with ``OUT`` an existing folder goes into it the same way.
+
 Output columns: ``run_id``, ``t_ns``, ``truth`` (when the input has labels), ``pred`` (maneuver
 or ``unknown``), ``best`` (``background`` when that rival wins under ``--decision
 confidence_bg``), ``V_best`` (confidence), ``oneclass_ok``, ``ll_<label>`` (and
@@ -18,7 +22,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .common import Claims, describe, table_problem
+from .common import Claims, describe, folder_problem, pairing_problem, table_problem
 
 
 def add_parser(sub) -> None:
@@ -26,13 +30,16 @@ def add_parser(sub) -> None:
     p.add_argument("model", type=Path, metavar="MODEL_DIR")
     p.add_argument("tables", nargs="+", type=Path, metavar="STATE.parquet")
     p.add_argument("-o", "--out", type=Path, required=True, metavar="OUT",
-                   help="output file (one input) or directory (several inputs)")
+                   help="output file (one input) or directory (several inputs, or an existing "
+                        "folder: OUT/<name>.parquet)")
     p.add_argument("--segments", nargs="+", type=Path, default=None, metavar="SEGMENTS",
                    help="segments tables (one per STATE table): labels in 'truth'")
     p.add_argument("--reset-at-segments", action="store_true",
                    help="restart the forward passes at each segment's t_start_ns (needs --segments)")
-    p.add_argument("--mode", choices=("cumulative", "windowed", "reset"), default=None)
-    p.add_argument("--decision", choices=("confidence", "oneclass", "both", "confidence_bg"), default=None)
+    p.add_argument("--mode", choices=("cumulative", "windowed", "reset"), default=None,
+                   help="classification mode (default: the model set's own, its hmm.mode when trained)")
+    p.add_argument("--decision", choices=("confidence", "oneclass", "both", "confidence_bg"), default=None,
+                   help="decision rule (default: the model set's own, its hmm.decision when trained)")
     p.set_defaults(func=run)
 
 
@@ -48,7 +55,7 @@ def run(args) -> int:
     if args.segments is not None and len(args.segments) != len(args.tables):
         print(f"uavpipe classify: --segments: {len(args.segments)} given for {len(args.tables)} tables",
               file=sys.stderr)
-        return 1
+        return 2
     if args.reset_at_segments and args.segments is None:
         print("uavpipe classify: --reset-at-segments needs --segments (the segment starts to reset at)",
               file=sys.stderr)
@@ -58,12 +65,20 @@ def run(args) -> int:
     except ModelError as exc:
         print(f"uavpipe classify: {exc}", file=sys.stderr)
         return 1
+    # several tables (or one, into an existing folder): DIR/<name>.parquet, the name telling the
+    # inputs apart (a/state, b/state); said once, not as a "File exists" per table
+    into_folder = len(args.tables) > 1 or args.out.is_dir()
+    bad = folder_problem("-o", args.out) if into_folder else None
+    # tables and segments pair by position: another flight's labels would become 'truth'
+    bad = bad or pairing_problem([("", args.tables), ("--segments", args.segments)])
+    if bad:
+        print(f"uavpipe classify: {bad}", file=sys.stderr)
+        return 2
     failed = 0
     claims = Claims()
-    # several tables: DIR/<name>.parquet, the name telling the inputs apart (a/state, b/state)
     names = [n.replace("/", "-") for n in source_names(args.tables)]
     for k, path in enumerate(args.tables):
-        out = args.out if len(args.tables) == 1 else args.out / f"{names[k]}.parquet"
+        out = args.out / f"{names[k]}.parquet" if into_folder else args.out
         seg = args.segments[k] if args.segments else None
         bad = table_problem(path, ("state", "simulate_set"), "a state table or simulated set")
         bad_seg = table_problem(seg, ("segments",), "a segments table") if seg is not None else None

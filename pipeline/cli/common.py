@@ -5,6 +5,11 @@
 * :func:`nonnegative_int`: the argparse type of ``--seed``.
 * :func:`table_problem`: whether a Parquet file is the kind of table an option expects
   (a ``segments`` file given as ``--state`` is named as such, not a ``KeyError: 't_ns'``).
+* :func:`pairing_problem`: whether inputs paired by position (``INGEST_DIR``/``--state``/
+  ``--segments``) say they hold one flight (a shell glob may order two lists differently).
+* :func:`folder_problem`: an output folder that exists as something else, refused up front.
+* :func:`q2_problem`, :func:`model_problem`: an ``estimate --q2`` file and ``--model`` folder
+  checked once, before any flight, as the EKF+HMM will read them.
 * :class:`Claims`: outputs claimed in one run, so a second input that would overwrite the
   first one's files is refused by name instead of silently replacing them.
 """
@@ -65,7 +70,23 @@ def table_problem(path: str | os.PathLike, expected: tuple[str, ...], what: str)
         return f"not a readable Parquet table ({describe(exc)})"
     if table is None or table in expected:
         return None  # a table without uavpipe metadata gets the benefit of the doubt
+    if "simulate_set" in expected and _older_set(p, table):
+        return (f"a simulated set written by an older uavpipe (its metadata names the table '{table}', "
+                f"not 'simulate_set'): rerun `snakemake -R simulate_sets` to rebuild the sets")
     return f"not {what} (it is a '{table}' table)"
+
+
+def _older_set(path: Path, table: str) -> bool:
+    """Whether ``table`` is the metadata kind of a set written before sets recorded
+    ``simulate_set``: the set's own name (its file stem) or, failing that, no table kind of
+    :data:`pipeline.io.schema.TABLES` but the sets' ``runs`` count. Such sets stay in
+    ``results/`` after an upgrade because the workflow sees nothing to rebuild."""
+    from ..io import schema
+    from ..io.parquet import read_table_meta
+
+    if table in schema.TABLES:
+        return False
+    return table == path.stem or "runs" in read_table_meta(path)
 
 
 def vehicle_problem(vehicle: str | None, config: dict) -> str | None:
@@ -92,6 +113,109 @@ def ingest_flight_id(d: Path) -> str:
     if not isinstance(m, dict):
         raise ValueError(f"{d}: not an ingest folder ({meta} holds a JSON {type(m).__name__}, not an object)")
     return str(m.get("flight_id") or d.name)
+
+
+def carried_flight_id(path: str | os.PathLike) -> str | None:
+    """The flight id an input says it holds: an ingest folder's ``meta.json`` ``flight_id`` or a
+    table's ``uavpipe`` metadata ``flight_id``; ``None`` when it says none or cannot be read (the
+    other checks name an unreadable input; a simulated set has no flight)."""
+    import pyarrow as pa
+
+    from ..io.parquet import read_table_meta
+
+    p = Path(path)
+    try:
+        if p.is_dir():
+            meta = json.loads((p / "meta.json").read_text(encoding="utf-8"))
+        else:
+            meta = read_table_meta(p)
+    except (pa.ArrowInvalid, OSError, ValueError):
+        return None
+    fid = meta.get("flight_id") if isinstance(meta, dict) else None
+    return str(fid) if fid else None
+
+
+def pairing_problem(columns: list[tuple[str, list]]) -> str | None:
+    """``None`` if the inputs paired by position name one flight each, else the first mismatch.
+
+    ``columns``: ``(option, paths)`` per input list (``""`` for the positional one), every list
+    as long as the first (``None`` lists are left out). Only inputs that carry a flight id
+    (:func:`carried_flight_id`) are compared: a table without one gets the benefit of the doubt.
+    The reason names both files and both flights, e.g. ``ing/b (flight b) and --state
+    pp/a/state.parquet (flight a) are paired by position but hold different flights``.
+    """
+    cols = [(opt, list(paths)) for opt, paths in columns if paths is not None]
+    for k in range(len(cols[0][1]) if cols else 0):
+        seen: tuple[str, str] | None = None
+        for opt, paths in cols:
+            fid = carried_flight_id(paths[k])
+            if fid is None:
+                continue
+            name = f"{opt} {paths[k]}" if opt else str(paths[k])
+            if seen is None:
+                seen = (name, fid)
+            elif fid != seen[1]:
+                return (f"{seen[0]} (flight {seen[1]}) and {name} (flight {fid}) are paired by position "
+                        f"but hold different flights")
+    return None
+
+
+def folder_problem(opt: str, path: str | os.PathLike) -> str | None:
+    """``'<opt> <path>: exists and is not a folder'`` when an output folder is already a file
+    (``opt`` ``""`` for a positional argument), else ``None``. Said once, before any work: an
+    output written under it fails with ``Not a directory`` for every input."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        return f"{opt + ' ' if opt else ''}{p}: exists and is not a folder"
+    return None
+
+
+def q2_problem(path: str | os.PathLike) -> str | None:
+    """``None`` if ``path`` is a usable ``run_q2`` output, else why not, in a few words: the
+    EKF+HMM's own reading (:func:`pipeline.estimate.run.read_q2`), made before any flight."""
+    from ..estimate.run import read_q2
+
+    bad = json_object_problem(path)
+    return bad or read_q2(path)[0] or None
+
+
+def model_problem(path: str | os.PathLike) -> str | None:
+    """``None`` if ``path`` is a model set the EKF+HMM can load, else why not, naming the file.
+
+    Loaded once (:meth:`pipeline.models.classifier.ManeuverModelSet.load`), as ``classify``
+    does, so a damaged folder is said once and not once per flight; ``meta.json`` is read
+    first so that its problems name it (the loader's ``JSONDecodeError`` does not).
+    """
+    from ..models.base import ModelError
+    from ..models.classifier import ManeuverModelSet
+    from ..models.features import GMR_FEATURE_SETS
+
+    d = Path(path)
+    if not d.is_dir():
+        return "no such folder" if not d.exists() else "not a folder"
+    meta = d / "meta.json"
+    if not meta.is_file():
+        return "not a model directory (no meta.json)"
+    bad = json_object_problem(meta)
+    if bad:
+        return f"{meta}: {bad}"
+    m = json.loads(meta.read_text(encoding="utf-8"))
+    if m.get("status") == "failed":
+        return f"{meta}: the model set failed to train ({m.get('error') or 'no reason given'})"
+    if not (d / "params.npz").is_file():
+        return f"no params.npz (beside {meta.name})"
+    try:
+        ms = ManeuverModelSet.load(d)
+    except ModelError as exc:
+        msg = describe(exc)
+        msg = msg[len(f"{d}: "):] if msg.startswith(f"{d}: ") else msg
+        # meta.json has been read above: what the loader cannot read is params.npz
+        unreadable = "unreadable model files: "
+        return f"{d / 'params.npz'}: {msg[len(unreadable):]}" if msg.startswith(unreadable) else msg
+    fs = ms.config.feature_set
+    if fs not in GMR_FEATURE_SETS:  # it would end as an ekf_hmm placeholder for every flight
+        return f"has no GMR (feature set {fs}; the EKF+HMM needs one of {', '.join(GMR_FEATURE_SETS)})"
+    return None
 
 
 def json_object_problem(path: str | os.PathLike) -> str | None:

@@ -10,6 +10,9 @@ noise from the config's master seed and the flight id). The EKF+HMM needs ``--mo
 (a trained model set with GMR) and its Q₂: ``--q2 FILE`` (the workflow's
 ``results/estimate/q2/<model_set>.json``) or ``--train-sets SET...`` (computed into
 ``DIR/q2/<model_set>.json`` first); without a model its table is a placeholder with the reason.
+``--model`` and its Q₂ go together: one without the other is a usage error, as are a ``--q2``
+file that is no usable Q₂ and a model folder that does not load (each said once, before any
+flight). Inputs paired by position must hold the same flight when they say which one.
 """
 
 from __future__ import annotations
@@ -18,7 +21,8 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import Claims, describe, ingest_flight_id, json_object_problem, table_problem, vehicle_problem
+from .common import (Claims, describe, folder_problem, ingest_flight_id, model_problem, pairing_problem,
+                     q2_problem, table_problem, vehicle_problem)
 
 
 def add_parser(sub) -> None:
@@ -30,10 +34,12 @@ def add_parser(sub) -> None:
                    help="output root: DIR/<estimator>/<flight_id>.parquet")
     p.add_argument("--segments", nargs="+", type=Path, default=None, metavar="SEGMENTS",
                    help="segments tables (one per flight): classifier resets with estimate.ekf_hmm.reset_at_segments")
-    p.add_argument("--model", type=Path, default=None, metavar="MODEL_DIR", help="model set of the EKF+HMM")
-    p.add_argument("--q2", type=Path, default=None, metavar="Q2.json", help="the model set's Q2 (estimate_q2 output)")
+    p.add_argument("--model", type=Path, default=None, metavar="MODEL_DIR",
+                   help="model set of the EKF+HMM (with --q2 or --train-sets)")
+    p.add_argument("--q2", type=Path, default=None, metavar="Q2.json",
+                   help="the model set's Q2 (estimate_q2 output; needs --model)")
     p.add_argument("--train-sets", nargs="+", type=Path, default=None, metavar="SET",
-                   help="the model set's training sets: compute Q2 from them")
+                   help="the model set's simulated training sets: compute Q2 from them (needs --model)")
     p.add_argument("--vehicle", default=None, help="manifest vehicle (its estimate.synthetic_radar entry, if any)")
     p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
     p.set_defaults(func=run)
@@ -52,23 +58,35 @@ def run(args) -> int:
         if vals is not None and len(vals) != len(args.ingest_dirs):
             print(f"uavpipe estimate: {opt}: {len(vals)} given for {len(args.ingest_dirs)} flights", file=sys.stderr)
             return 2
-    if args.model is not None and not (args.model / "meta.json").is_file():
-        print(f"uavpipe estimate: {args.model}: not a model directory (no meta.json)", file=sys.stderr)
+    # the EKF+HMM's inputs go together: a lone --q2 or --model was silently a placeholder
+    usage = None
+    if args.model is None and (args.q2 is not None or args.train_sets):
+        usage = f"{'--q2' if args.q2 is not None else '--train-sets'} needs --model (the model set whose Q2 it is)"
+    elif args.model is not None and args.q2 is None and not args.train_sets:
+        usage = "--model needs --q2 Q2.json or --train-sets SET... (the model set's Q2)"
+    elif args.q2 is not None and args.train_sets:
+        usage = "--q2 and --train-sets: give one (a Q2 file, or the sets to compute it from)"
+    if usage:
+        print(f"uavpipe estimate: {usage}", file=sys.stderr)
         return 2
     # every side input the kind it must be, before any flight runs (a missing --q2 was a placeholder
     # that never named the file; a segments table given as --state a KeyError)
-    checks = [*((f"--state {p}", table_problem(p, ("state",), "a state table")) for p in args.state),
+    checks = [("", folder_problem("-o", args.out)),
+              *((f"--state {p}", table_problem(p, ("state",), "a state table")) for p in args.state),
               *((f"--segments {p}", table_problem(p, ("segments",), "a segments table")) for p in args.segments or ()),
-              *((f"--train-sets {p}", table_problem(p, ("state", "simulate_set"), "a simulated set"))
+              *((f"--train-sets {p}", table_problem(p, ("simulate_set",), "a simulated set"))
                 for p in args.train_sets or ()),
               ("--vehicle", vehicle_problem(args.vehicle, cfg))]
-    if args.model is not None:
-        checks.append((f"--model {args.model}", None if (args.model / "params.npz").is_file() else "no params.npz"))
+    if args.model is not None:  # loaded once here, not once per flight
+        checks.append((f"--model {args.model}", model_problem(args.model)))
     if args.q2 is not None:
-        checks.append((f"--q2 {args.q2}", json_object_problem(args.q2)))
+        checks.append((f"--q2 {args.q2}", q2_problem(args.q2)))
+    # inputs pair by position: a flight given another flight's state is refused, not estimated
+    checks.append(("", pairing_problem([("", args.ingest_dirs), ("--state", args.state),
+                                        ("--segments", args.segments)])))
     for opt, bad in checks:
         if bad:
-            print(f"uavpipe estimate: {opt}: {bad}", file=sys.stderr)
+            print(f"uavpipe estimate: {f'{opt}: ' if opt else ''}{bad}", file=sys.stderr)
             return 2
     q2 = args.q2
     if args.model is not None and q2 is None and args.train_sets:

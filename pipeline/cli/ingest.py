@@ -5,7 +5,7 @@ ingest rule calls, so the CLI writes the same files: a log that cannot be decode
 failure placeholders (empty streams, ``meta.json`` with ``status: failed`` and the reason) and
 one line on stderr, and the command goes on with the next log (exit 1 if any failed).
 ``--config FILE`` passes the file's ``ingest`` section, as the workflow does with its config;
-without it the readers use their defaults.
+without it that of the default dataset config (``datasets/config.yaml``), as the workflow.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..io.manifest import reader_names
 from ..io.registry import flight_id_for
-from .common import Claims
+from .common import Claims, folder_problem
 from .progress import progress_bar
 
 
@@ -57,6 +57,10 @@ def run(args) -> int:
         return 2
     if args.labels is not None and len(args.logs) > 1:
         print("uavpipe ingest: --labels takes one LOG", file=sys.stderr)
+        return 2
+    bad = folder_problem("-o", args.out)
+    if bad:  # once, not a "Not a directory" per LOG
+        print(f"uavpipe ingest: {bad}", file=sys.stderr)
         return 2
     failed = []
     claims = Claims()

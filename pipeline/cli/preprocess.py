@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import Claims, describe, ingest_flight_id, vehicle_problem
+from .common import Claims, describe, folder_problem, ingest_flight_id, vehicle_problem
 
 
 def add_parser(sub) -> None:
@@ -42,7 +42,8 @@ def run(args) -> int:
     except ConfigError as exc:
         print(f"uavpipe preprocess: {exc}", file=sys.stderr)
         return 2
-    bad = vehicle_problem(args.vehicle, cfg)
+    # once, before any flight (an output folder that is a file: "Not a directory" per flight)
+    bad = vehicle_problem(args.vehicle, cfg) or folder_problem("-o", args.out)
     if bad:
         print(f"uavpipe preprocess: {bad}", file=sys.stderr)
         return 2

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import nonnegative_int
+from .common import folder_problem, nonnegative_int
 
 
 def add_parser(sub) -> None:
@@ -31,8 +31,9 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from ..simulate.run import planned_logs, planned_sets, run_simulate_logs, run_simulate_sets
 
-    if args.out_dir.exists() and not args.out_dir.is_dir():
-        print(f"uavpipe simulate: {args.out_dir}: exists and is not a folder", file=sys.stderr)
+    bad = folder_problem("", args.out_dir)
+    if bad:
+        print(f"uavpipe simulate: {bad}", file=sys.stderr)
         return 2
     try:
         cfg = load_config(args.config)

@@ -10,6 +10,10 @@ The same entry point as the workflow's ``train_model`` rule (:func:`pipeline.mod
 Hyperparameters come from the config's ``hmm`` section, or with ``--model-set NAME`` from that
 entry of ``model_sets`` (its ``hmm`` overrides, ``labels`` and ``exclude``) exactly as the
 workflow trains it. Writes ``MODEL_DIR/params.npz`` and ``MODEL_DIR/meta.json``.
+
+A config error or an input refused before training (a count mismatch, a table of the wrong
+kind, a state and segments pair of two flights, ``-o`` a file) exits 2, as in every command;
+a failed training exits 1.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config
-from .common import nonnegative_int, table_problem
+from .common import folder_problem, nonnegative_int, pairing_problem, table_problem
 
 
 def add_parser(sub) -> None:
@@ -39,7 +43,7 @@ def run(args) -> int:
     from ..models.base import ModelError
     from ..models.run import model_set_config, run_train
 
-    try:
+    try:  # usage: exit 2, as the other commands' config and input errors
         cfg = load_config(args.config)
         if args.model_set:
             spec = model_set_config(cfg, args.model_set)
@@ -53,8 +57,9 @@ def run(args) -> int:
             spec["exclude"] = list(args.exclude)
         if args.segments is not None and len(args.segments) != len(args.tables):
             raise ConfigError(f"--segments: {len(args.segments)} given for {len(args.tables)} tables")
-        if args.out.exists() and not args.out.is_dir():
-            raise ConfigError(f"-o {args.out}: exists and is not a folder")
+        bad = folder_problem("-o", args.out)
+        if bad:
+            raise ConfigError(bad)
         # every input the kind it must be, before any training (a swapped pair is named)
         kinds = ([(p, ("state",), "a state table") for p in args.tables]
                  + [(p, ("segments",), "a segments table") for p in args.segments] if args.segments
@@ -63,6 +68,13 @@ def run(args) -> int:
             bad = table_problem(p, expected, what)
             if bad:
                 raise ConfigError(f"{p}: {bad}")
+        bad = pairing_problem([("", args.tables), ("--segments", args.segments)]) if args.segments else None
+        if bad:
+            raise ConfigError(bad)
+    except ConfigError as exc:
+        print(f"uavpipe train: {exc}", file=sys.stderr)
+        return 2
+    try:
         inputs = ({"states": args.tables, "segments": args.segments} if args.segments
                   else {"sets": args.tables})
         seed = args.seed if args.seed is not None else int(cfg.get("seed", 0))

@@ -277,15 +277,35 @@ def _ekf_hmm_blocker(inputs, config: Mapping) -> tuple[str, Any, F64 | None]:
                 f"{', '.join(GMR_FEATURE_SETS)})"), None, None
     if not q2_path or not Path(q2_path).exists():
         return f"no Q2 for model set {model}", None, None
-    q2 = json.loads(Path(q2_path).read_text())
-    if not isinstance(q2, dict) or "status" not in q2:
-        return f"{q2_path}: not a Q2 file of run_q2 (no 'status')", None, None
-    if q2.get("status") != "ok":
-        return f"Q2 of model set {model} failed: {q2.get('error')}", None, None
-    Q2 = np.asarray(q2.get("Q2", np.nan), dtype=np.float64)
-    if Q2.shape != (9, 9) or not np.isfinite(Q2).all():
-        return f"{q2_path}: Q2 is not a finite 9 x 9 matrix (shape {Q2.shape})", None, None
+    problem, Q2 = read_q2(q2_path)
+    if problem:
+        return f"{q2_path}: {problem}", None, None
     return "", ms, Q2
+
+
+def read_q2(path: str | Path) -> tuple[str, F64 | None]:
+    """``("", Q2)`` from a :func:`run_q2` output, or ``(why not, None)`` in a few words.
+
+    Usable: a JSON object with ``status`` ``ok`` and ``Q2`` a finite 9 × 9 numeric matrix
+    (state order pos/vel/acc NED). A Q₂ that :func:`run_q2` recorded as failed gives its
+    recorded reason. The ``uavpipe estimate --q2`` check calls this before any flight."""
+    try:
+        q2 = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return f"not a readable JSON file ({type(exc).__name__}: {exc})", None
+    if not isinstance(q2, dict) or "status" not in q2:
+        return "not a Q2 file of run_q2 (no 'status')", None
+    if q2["status"] != "ok":
+        return f"records a failed Q2 (status {q2['status']!r}: {q2.get('error') or 'no reason given'})", None
+    if "Q2" not in q2:
+        return "not a Q2 file of run_q2 (no 'Q2')", None
+    try:
+        Q2 = np.asarray(q2["Q2"], dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        return f"Q2 is not a numeric matrix ({type(exc).__name__}: {exc})", None
+    if Q2.shape != (9, 9) or not np.isfinite(Q2).all():
+        return f"Q2 is not a finite 9 x 9 matrix (shape {Q2.shape})", None
+    return "", Q2
 
 
 def _rmse(err: F64) -> dict[str, float]:

@@ -33,19 +33,6 @@ def demo_logs(tmp_path_factory) -> tuple[Path, Path]:
     return d / "a" / "x.bin", d / "b" / "x.bin"
 
 
-@pytest.fixture(scope="module")
-def model_dir(tmp_path_factory) -> Path:
-    """A small trained model set (two maneuvers, three runs each) and the set it was trained on."""
-    d = tmp_path_factory.mktemp("model")
-    s = d / "M12_train.parquet"
-    runs = synth_bulk(("M1", "M2"), 3, np.random.default_rng(5))
-    runs["run_id"] = pd.factorize(runs["run_id"])[0]
-    write_table(schema.conform("simulate_set", runs), s, schema.columns("simulate_set"), name="simulate_set",
-                extra={"set": "M12_train"})
-    assert main(["train", str(s), "-o", str(d / "m"), "--seed", "1"]) == 0
-    return d / "m"
-
-
 def test_an_error_no_command_foresaw_is_one_line_and_uavpipe_debug_shows_the_traceback(monkeypatch, capsys):
     import pipeline.cli.config as cmd
 
@@ -140,7 +127,7 @@ def test_train_names_a_swapped_state_and_segments_pair_and_a_negative_seed(model
     write_table(schema.conform("segments", pd.DataFrame({"segment_id": [0], "t_start_ns": [0],
                                                           "t_end_ns": [10**10], "label": ["M1"]})),
                 seg, schema.SEGMENTS, name="segments")
-    assert main(["train", str(seg), "--segments", str(st), "-o", str(tmp_path / "m")]) == 1
+    assert main(["train", str(seg), "--segments", str(st), "-o", str(tmp_path / "m")]) == 2  # usage, as elsewhere
     assert _err_lines(capsys) == [f"uavpipe train: {seg}: not a state table (it is a 'segments' table)"]
     with pytest.raises(SystemExit) as exc:
         main(["train", str(st), "-o", str(tmp_path / "m"), "--seed", "-3"])
@@ -179,10 +166,11 @@ def test_estimate_checks_its_side_inputs_before_any_flight(tmp_path, model_dir, 
         err = _err_lines(capsys)
         assert len(err) == 1 and err[0].startswith(f"uavpipe estimate: {msg}"), err
     assert not (tmp_path / "o").exists()
-    # a JSON object that is no Q2 file: the EKF+HMM placeholder names the file (was "failed: None")
+    # a JSON object that is no Q2 file: refused up front, naming the file (was exit 0 with a placeholder)
     q2.write_text('{"a": 1}')
-    assert main([*base, "--state", str(inputs["state"]), "--model", str(model_dir), "--q2", str(q2)]) == 0
-    assert f"ekf_hmm placeholder: {q2}: not a Q2 file of run_q2 (no 'status')" in capsys.readouterr().out
+    assert main([*base, "--state", str(inputs["state"]), "--model", str(model_dir), "--q2", str(q2)]) == 2
+    assert _err_lines(capsys) == [f"uavpipe estimate: --q2 {q2}: not a Q2 file of run_q2 (no 'status')"]
+    assert not (tmp_path / "o").exists()
 
 
 def test_simulate_and_align_refuse_an_output_folder_that_is_a_file_before_any_work(tmp_path, capsys):

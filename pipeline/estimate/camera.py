@@ -40,7 +40,7 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
 
-from ..frames.rotations import quat_to_dcm
+from ..frames.rotations import quat_continuity, quat_to_dcm
 from .models import wrap_angle
 
 F64 = NDArray[np.float64]
@@ -574,7 +574,11 @@ def observers_from_streams(camera_det, local_position, attitude, *, offset_body=
         lt = np.asarray(lp["t_ns"]).astype(np.float64)
         at_t = np.asarray(at["t_ns"]).astype(np.float64)
         pos = np.stack([np.interp(t, lt, np.asarray(lp[f"pos_{a}_m"], dtype=np.float64)) for a in "ned"], axis=1)
-        q = np.stack([np.interp(t, at_t, np.asarray(at[f"q_{c}"], dtype=np.float64)) for c in "wxyz"], axis=1)
+        # q and -q are one attitude and logs often keep q_w >= 0, so the stored sign flips where the
+        # yaw crosses 180 deg: made continuous first, or the component-wise interpolation between
+        # two such samples collapses towards another rotation (yaw 170/190 deg gave 0 deg)
+        q_at = quat_continuity(np.stack([np.asarray(at[f"q_{c}"], dtype=np.float64) for c in "wxyz"], axis=1))
+        q = np.stack([np.interp(t, at_t, q_at[:, j]) for j in range(4)], axis=1)
         out[sel] = camera_to_world(pos, quat_to_rot(q), np.asarray(det["gimbal_yaw_rad"])[sel],
                                    np.asarray(det["gimbal_pitch_rad"])[sel], offset_body)
     return out

@@ -304,3 +304,20 @@ def test_fixes_from_several_detections_are_least_squares_ray_intersections_in_fr
     dist_hand = np.hypot(*(hand - pos[:2]).T)
     for q in (0.25, 0.5, 0.75):
         assert np.isclose(np.quantile(dist, q), np.quantile(dist_hand, q), rtol=0.08)
+
+
+def test_an_observers_attitude_is_interpolated_through_a_stored_quaternion_sign_flip():
+    # yaw 170 deg and 190 deg, the second stored with q_w >= 0 (as -q): half way the camera looks
+    # south (yaw 180 deg); interpolated component by component it looked north (0 deg)
+    def q_yaw(deg):
+        return np.array([np.cos(np.radians(deg) / 2), 0.0, 0.0, np.sin(np.radians(deg) / 2)])
+
+    qa, qb = q_yaw(170.0), -q_yaw(190.0)
+    assert qb[0] > 0
+    lp = pd.DataFrame({"t_ns": [0, 100], "instance": [0, 0], "pos_n_m": [0.0, 0.0], "pos_e_m": [0.0, 0.0],
+                       "pos_d_m": [-40.0, -40.0]})
+    att = pd.DataFrame({"t_ns": [0, 100], "instance": [0, 0], **{f"q_{c}": [qa[j], qb[j]] for j, c in enumerate("wxyz")}})
+    det = pd.DataFrame({"t_ns": [50], "instance": [0], "gimbal_yaw_rad": [0.0], "gimbal_pitch_rad": [0.0]})
+    T = observers_from_streams(det, lp, att)
+    ref = camera_to_world([0, 0, -40.0], quat_to_rot(q_yaw(180.0)), 0.0, 0.0)
+    np.testing.assert_allclose(T[0], ref, atol=1e-12)

@@ -900,11 +900,21 @@ def check_inputs(t_s: ArrayLike, z_rad: ArrayLike, ownship: ArrayLike | None,
 
 
 def first_bearing(z: F64, who: str = "run_bank") -> F64:
-    """Each run's first finite bearing (R,); a run without one is an error."""
+    """Each run's bearing at the first step (R,), the one the prior is built from at ``t_s[0]``.
+
+    A run whose first bearing is missing is an error naming the runs and how many steps they
+    lack: a later bearing stamped at ``t_s[0]`` would start the bank from the wrong line of
+    sight (the ownship moves meanwhile) and then be used a second time at its own step."""
+    z = np.asarray(z, dtype=np.float64)
     ok = np.isfinite(z)
     if not ok.any(axis=1).all():
         raise ValueError(f"{who}: run(s) {np.flatnonzero(~ok.any(axis=1)).tolist()} have no finite bearing")
-    return z[np.arange(len(z)), ok.argmax(axis=1)]
+    late = np.flatnonzero(~ok[:, 0])
+    if len(late):
+        lead = ok[late].argmax(axis=1)
+        raise ValueError(f"{who}: run(s) {late[:10].tolist()} start with {lead[:10].tolist()} missing bearing(s); "
+                         f"the prior is built from the bearing at t_s[0]: start the runs at their first bearing")
+    return z[:, 0]
 
 
 def run_bank(settings: "BankSettings | str | Mapping[str, Any]", t_s: ArrayLike, z_rad: ArrayLike,

@@ -185,6 +185,18 @@ def test_bad_input_is_one_clear_error():
         run_bank("cppv_10_1_6", np.zeros(5), np.zeros(5))
 
 
+def test_a_run_whose_first_bearing_is_missing_is_refused_not_started_from_a_later_one():
+    # the prior used to take the first finite bearing, stamped at t_s[0]: 10 s late here, on a
+    # line of sight 11 degrees off, and that bearing was then used again at its own step
+    t, X, z, own = orbit(T=300)
+    late = z.copy()
+    late[0, :200] = np.nan
+    with pytest.raises(ValueError, match=r"run\(s\) \[0\] start with \[200\] missing bearing\(s\)"):
+        run_bank("cppv_10_1_6", t, late[0], SIG, own)
+    tr = run_bank("cppv_10_1_6", t[200:] - t[200], late[0, 200:], SIG, own[200:])
+    assert np.isfinite(tr.mean).all()
+
+
 @pytest.mark.parametrize("preset", ["cppv_10_1_6", BankSettings(coords="mpc", n_r=5, n_omega=3, n_theta=2)])
 def test_the_compiled_algebra_equals_the_extended_kalman_filter_path(preset):
     t, X, z, own = orbit(T=120)

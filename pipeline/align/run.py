@@ -137,7 +137,8 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
 
     ``inputs``: ``states`` and ``segments`` (lists of ``results/{state,segments}/<flight>.parquet``
     or the CLI's ``DIR/<flight>/{state,segments}.parquet``; the flight id is
-    :func:`table_flight_id`'s). Flights of the set without inputs are skipped with a notice.
+    :func:`table_flight_id`'s). Flights of the set without inputs are skipped with a notice, and
+    inputs of flights the set does not list are ignored with one.
     """
     spec = (config.get("sets") or {}).get(set_name)
     if spec is None:
@@ -152,6 +153,10 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     dropped: list[Dropped] = []
     loaded: dict[str, tuple[pd.DataFrame, pd.DataFrame, float | None]] = {}
     origins: dict[str, list[float] | None] = {}
+    for f in sorted(set(paths) - set(flights)):  # given, but the set does not list it: said, not silent
+        msg = f"set {set_name}: input flight {f} is not a flight of the set ({', '.join(flights)}): ignored"
+        notices.append(msg)
+        _say(msg)
     for f in flights:
         if f not in paths or paths[f][1] is None:
             msg = f"set {set_name}: flight {f} missing (no state/segments input): skipped"

@@ -145,6 +145,15 @@ def test_a_missing_flight_is_skipped_with_a_notice(tmp_path, stand_in, capsys):
     assert set(read_table(out["learned"])["maneuver"]) == {"a", "b"}
 
 
+def test_an_input_flight_the_set_does_not_list_is_ignored_with_a_notice(tmp_path, stand_in, capsys):
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(_two_flights(tmp_path)), out, _config({"s": {"flights": ["f1"]}}),
+                              set_name="s")
+    msg = "set s: input flight f2 is not a flight of the set (f1): ignored"
+    assert msg in capsys.readouterr().err and res.diagnostics["notices"][0] == msg
+    assert set(read_table(out["demos"], schema.ALIGN_DEMOS)["flight_id"]) <= {"f1"}
+
+
 def test_a_set_with_nothing_to_learn_writes_empty_tables_with_the_reason(tmp_path, stand_in):
     out = _outputs(tmp_path)
     paths = _two_flights(tmp_path)[:1]

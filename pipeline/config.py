@@ -420,7 +420,7 @@ def _yaml_problem(exc: Exception) -> str:
 def command_line_overrides(cli: Mapping[str, Any] | None) -> dict[str, Any]:
     """Snakemake ``--config key=VALUE`` overrides with their scalars typed as the config file's.
 
-    Snakemake reads a nested ``VALUE`` (``studies='{pf: {particles: 500}}'``) with YAML's
+    Snakemake reads a nested ``VALUE`` (``studies='{pf: {n_particles: 500}}'``) with YAML's
     BaseLoader, which keeps every scalar a string, so ``true`` or ``500`` would fail the schema
     as ``'true'``/``'500'``. Each string scalar is read again with the loader of
     :func:`load_config`, so an override means what the same text means in

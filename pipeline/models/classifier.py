@@ -529,8 +529,12 @@ class ManeuverModelSet:
             if not isinstance(meta, dict):
                 raise ModelError(f"{d}: unreadable model files: meta.json holds a JSON "
                                  f"{type(meta).__name__}, not an object")
-            if meta.get("format_version") != FORMAT_VERSION:
-                raise ModelError(f"{d}: model format {meta.get('format_version')} != {FORMAT_VERSION}")
+            if "format_version" not in meta:
+                raise ModelError(f"{d}: meta.json has no format_version: not the meta.json of a trained "
+                                 f"model set (uavpipe train writes format {FORMAT_VERSION})")
+            if meta["format_version"] != FORMAT_VERSION:
+                raise ModelError(f"{d}: model format {meta['format_version']} (this uavpipe reads format "
+                                 f"{FORMAT_VERSION}): retrain the model set")
             # our own handle: np.load leaves its file open when a truncated archive fails to open
             with open(d / "params.npz", "rb") as fh, np.load(fh, allow_pickle=False) as z:
                 return cls._from_files(meta, z)  # reads every array it keeps

@@ -102,6 +102,20 @@ def test_save_load_roundtrip_identical(synth, rng, tmp_path):
     pd.testing.assert_frame_equal(a, b)
 
 
+def test_a_meta_json_of_no_or_another_format_version_is_named_in_words(synth, rng, tmp_path):
+    from pipeline.models.base import ModelError
+
+    ms, _ = _train(synth, rng, labels=("M1", "M2"), n_runs=3)
+    ms.save(tmp_path / "m")
+    meta = json.loads((tmp_path / "m" / "meta.json").read_text())
+    for fv, match in ((None, "meta.json has no format_version: not the meta.json of a trained model set"),
+                      (0, "model format 0 \\(this uavpipe reads format 1\\): retrain the model set")):
+        m = {k: v for k, v in meta.items() if k != "format_version"} if fv is None else {**meta, "format_version": fv}
+        (tmp_path / "m" / "meta.json").write_text(json.dumps(m))
+        with pytest.raises(ModelError, match=match):
+            ManeuverModelSet.load(tmp_path / "m")
+
+
 def test_training_deterministic(synth, rng, tmp_path):
     _, bulk = synth
     data = bulk(("M1", "M2"), 3, rng)

@@ -19,6 +19,49 @@ from .models import ca_transition, white_jerk_q
 F64 = NDArray[np.float64]
 
 
+def check_times(t_ns: ArrayLike, who: str, t0_ns: int | None = None) -> NDArray[np.int64]:
+    """Step times (ns) as an int64 array (T,), checked with one clear error.
+
+    Equal stamps are allowed (several updates at one instant); a step back in time is not:
+    predicting over a negative ``dt`` gives a negative definite process noise in an EKF, and a
+    particle filter would skip it, both silently.
+
+    Parameters
+    ----------
+    t_ns : array_like, shape (T,)
+        Integers, or floats holding whole nanoseconds (a fractional value is refused rather
+        than truncated).
+    who : str
+        The caller, for the message.
+    t0_ns : int, optional
+        The prior's time, which must not be after ``t_ns[0]``.
+
+    Raises
+    ------
+    ValueError
+        ``t_ns`` not 1-D, a non-finite or fractional float, a decreasing step (naming its
+        first row), or ``t0_ns > t_ns[0]``.
+    """
+    a = np.asarray(t_ns)
+    if a.ndim != 1:
+        raise ValueError(f"{who}: t_ns must be 1-D, got shape {a.shape}")
+    if a.dtype.kind == "f":
+        bad = ~np.isfinite(a) | (a != np.round(a))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(f"{who}: t_ns must hold whole nanoseconds; row {k} is {a[k]!r} "
+                             "(round or scale it explicitly)")
+    t = np.asarray(a, dtype=np.int64)
+    back = np.diff(t) < 0
+    if back.any():
+        k = int(np.argmax(back)) + 1
+        raise ValueError(f"{who}: t_ns must be non-decreasing; row {k} ({int(t[k])}) is before row {k - 1} "
+                         f"({int(t[k - 1])})")
+    if t0_ns is not None and len(t) and int(t0_ns) > int(t[0]):
+        raise ValueError(f"{who}: the prior time {int(t0_ns)} ns is after the first step t_ns[0] = {int(t[0])} ns")
+    return t
+
+
 @dataclass(frozen=True)
 class GaussianState:
     """A Gaussian state estimate at one time.

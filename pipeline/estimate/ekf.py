@@ -21,9 +21,10 @@ and the normalised innovation squared ``NIS = yᵀ S⁻¹ y``.
 
 Every array may carry a leading run axis: means ``(n_runs, 9)``, covariances
 ``(n_runs, 9, 9)``; :func:`run_filter` loops over time only. An update takes 0..M stacked
-measurements per step (``(..., M, n_z)``, M = 0: predict only); a measurement row that is NaN
-is missing for that run (its H row, residual and gain column are zero, exactly as if it were
-left out), so radar gaps and ragged measurement counts stay vectorised.
+measurements per step (``(..., M, n_z)``, M = 0: predict only); a measurement row with a
+non-finite entry (NaN, or ±inf as the bearing bank and IMM treat it) is missing for that run
+(its H row, residual and gain column are zero, exactly as if it were left out; it counts as 0
+in ``dof``), so radar gaps and ragged measurement counts stay vectorised.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg.lapack import dpotrf as _dpotrf
 from scipy.linalg.lapack import dpotri as _dpotri
 
-from .base import GaussianState, MeasurementModel, TransitionModel
+from .base import GaussianState, MeasurementModel, TransitionModel, check_times
 
 F64 = NDArray[np.float64]
 
@@ -241,7 +242,8 @@ class ExtendedKalmanFilter:
             Predicted state, batch shape ``b`` (``()`` for one run).
         z : array_like, shape ``b + (n_z,)`` or ``b + (M, n_z)``
             One measurement per run, or M stacked ones (independent, each with noise ``R``);
-            M = 0 returns ``pred``. NaN rows are missing measurements for that run.
+            M = 0 returns ``pred``. Rows with a NaN or ±inf are missing measurements for that
+            run (an inf would otherwise poison the state for the rest of a run).
             ``h(x⁻)`` and ``H`` come from the measurement model's ``h_and_jacobian`` where it
             has one (one pass, e.g. :meth:`~pipeline.estimate.models.RadarModel.h_and_jacobian`),
             else from its ``h`` and ``jacobian``.
@@ -259,11 +261,11 @@ class ExtendedKalmanFilter:
             raise ValueError(f"update: measurement shape {z.shape} does not fit the state batch {b} "
                              f"with {n_z} components (expected {b + (n_z,)} or {b + ('M', n_z)})")
         M = z.shape[-2]
-        if M * n_z > _PLANES_MAX_N and int(np.prod(b)) == 1 and np.isnan(z).any():
+        if M * n_z > _PLANES_MAX_N and int(np.prod(b)) == 1 and not np.isfinite(z).all():
             # one run with many stacked rows, some missing (the trajectory learner's 0..M demo
             # samples per hidden step): leaving the missing rows out is exactly the zero-gain
             # treatment below, on a smaller innovation covariance
-            keep = ~np.isnan(z.reshape(M, n_z)).any(axis=-1)
+            keep = np.isfinite(z.reshape(M, n_z)).all(axis=-1)
             z = z[..., keep, :]
             M = int(keep.sum())
         if M == 0:
@@ -278,8 +280,8 @@ class ExtendedKalmanFilter:
         hx = hx[..., None, :]
         Hj = np.asarray(Hj)[..., None, :, :]  # (..., 1, n_z, n_x)
         # one flat test for the common case (everything measured); per row only when needed
-        full = not np.isnan(z).any()
-        valid = None if full and M == 1 else ~np.isnan(z).any(axis=-1)  # (..., M)
+        full = bool(np.isfinite(z).all())
+        valid = None if full and M == 1 else np.isfinite(z).all(axis=-1)  # (..., M)
         # optional hook: a model with angular components wraps its innovation
         # (BearingMeasurement.residual); the default is the plain difference
         res = getattr(self.measurement, "residual", None)
@@ -390,17 +392,27 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     ekf : ExtendedKalmanFilter
     prior : GaussianState
         Initial estimate, batch ``(R,)`` (one row per run) or unbatched (one run, R = 1), at
-        ``prior.t_ns``; when that equals ``t_ns[0]`` the first step is an update only.
+        ``prior.t_ns`` ≤ ``t_ns[0]``; when that equals ``t_ns[0]`` the first step is an update
+        only. Its mean and covariance must be finite.
     t_ns : array_like of int, shape (T,)
-        Step times (ns), shared by every run.
+        Step times (ns), shared by every run: non-decreasing (equal stamps update again at the
+        same instant, without a predict); floats must hold whole nanoseconds
+        (:func:`~pipeline.estimate.base.check_times`).
     z : array_like, shape (T, R, n_z) or (T, R, M, n_z)
-        Measurements per step and run (NaN rows: missing; M = 0: predict only).
+        Measurements per step and run (rows with a NaN or ±inf: missing, ``dof`` 0 for that
+        run; M = 0: predict only).
     store : {"all", "filtered", "mean"}
         What to keep: everything the RTS smoother needs, posterior mean and covariance, or the
         posterior mean only (the covariance arrays of a large Monte Carlo are big).
     bu : array_like, shape (T, n_x) or (T, R, n_x), optional
         Deterministic input added to the prediction into step k (``x⁻_k = F x⁺_{k−1} + bu[k]``;
         ``bu[0]`` is used only when step 0 is predicted): the trajectory learner's bias ``β``.
+
+    Raises
+    ------
+    ValueError
+        Bad ``store``, ``bu`` or measurement shapes; a decreasing or fractional ``t_ns`` or a
+        prior after ``t_ns[0]`` (naming the first bad row); a non-finite prior.
 
     Returns
     -------
@@ -420,9 +432,13 @@ def run_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns: ArrayLike,
     """
     if store not in ("all", "filtered", "mean"):
         raise ValueError(f"run_filter: store must be 'all', 'filtered' or 'mean', not {store!r}")
-    t_ns = np.asarray(t_ns, dtype=np.int64)
+    t_ns = check_times(t_ns, "run_filter", prior.t_ns)
     if prior.mean.ndim == 1:
         prior = GaussianState(prior.mean[None], prior.cov[None], prior.t_ns)
+    bad = ~(np.isfinite(prior.mean).all(axis=-1) & np.isfinite(prior.cov).all(axis=(-1, -2)))
+    if bad.any():
+        raise ValueError(f"run_filter: the prior mean or covariance is not finite (run {int(np.argmax(bad))}, "
+                         f"{int(bad.sum())} run(s))")
     z = np.asarray(z, dtype=np.float64)
     R_, n_x, T = prior.mean.shape[0], prior.n_x, len(t_ns)
     if z.shape[0] != T or z.shape[1] != R_:

@@ -212,7 +212,12 @@ class ImmTrack:
 
 
 def mix_components(modes: Sequence[ImmMode], comps: Sequence[Components], mij: F64) -> list[Components]:
-    """Mixed inputs of every component of every mode (module docstring)."""
+    """Mixed inputs of every component of every mode (module docstring).
+
+    A mode ``j`` with no predicted probability in a run (``c̄_j = 0``, so ``μ(·|j)`` is all
+    zero there; e.g. a one-hot ``mu0`` with an identity transmat) keeps its own unmixed
+    components in that run: its μ_j stays 0, so its input has no weight in the output.
+    """
     K = len(modes)
     moments = [combine(c.mean, c.cov, c.logw, angle_index(m.names)) for m, c in zip(modes, comps)]
     out = []
@@ -230,11 +235,37 @@ def mix_components(modes: Sequence[ImmMode], comps: Sequence[Components], mij: F
         with np.errstate(divide="ignore"):
             lw = np.log(np.broadcast_to(mij[:, None, :, j], (R_, C, K)))
         m0, P0 = combine(src_m, src_P, lw, angle_index(mj.names))
+        # c̄_j = 0: mixing with all-zero weights would zero every mean and covariance (and the
+        # NaN loglik would then poison μ); keep the mode's own components instead.
+        dead = ~(mij[:, :, j].sum(axis=1) > 0)  # (R,)
+        if dead.any():
+            m0 = np.where(dead[:, None, None], cj.mean, m0)
+            P0 = np.where(dead[:, None, None, None], cj.cov, P0)
         if cj.diverged.any():  # a frozen component stays frozen
             m0 = np.where(cj.diverged[..., None], cj.mean, m0)
             P0 = np.where(cj.diverged[..., None, None], cj.cov, P0)
         out.append(Components(m0, P0, cj.logw, cj.diverged))
     return out
+
+
+def _check_mu0(mu0: ArrayLike, R: int, K: int) -> F64:
+    """Initial mode probabilities ``mu0`` (K,) or (R, K) as a normalised (R, K) array.
+
+    Raises
+    ------
+    ValueError
+        A wrong shape, a non-finite or negative entry, or a run whose entries sum to 0.
+    """
+    m = np.asarray(mu0, dtype=np.float64)
+    if m.shape not in ((K,), (R, K)):
+        raise ValueError(f"run_imm: mu0 must have shape ({K},) or ({R}, {K}), got {m.shape}")
+    if not np.isfinite(m).all() or (m < 0).any():
+        raise ValueError(f"run_imm: mu0 must be finite and >= 0, got {m.tolist()}")
+    m = np.array(np.broadcast_to(m, (R, K)))
+    tot = m.sum(axis=1, keepdims=True)
+    if not (tot > 0).all():
+        raise ValueError(f"run_imm: mu0 must have a positive sum (run {int(np.argmin(tot[:, 0]))} sums to 0)")
+    return m / tot
 
 
 def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float], t_s: ArrayLike,
@@ -256,7 +287,8 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
     mix_every : int, optional
         Steps between mixes (default: from ``T_d`` and the median step, else 1).
     mu0 : array_like (K,) or (R, K), optional
-        Initial mode probabilities (default uniform).
+        Initial mode probabilities (default uniform): finite, ≥ 0, with a positive sum per run;
+        normalised to sum 1. A mode may start at 0 (:func:`mix_components`).
     output_names : sequence of str
         The combined output's state.
     store_cov, store_weights : bool
@@ -292,8 +324,7 @@ def run_imm(modes: Sequence[ImmMode], transition: ArrayLike | tuple[float, float
     for m in modes:
         if m.prior.mean.shape[0] != R_:
             raise ValueError(f"run_imm: mode {m.name!r} has {m.prior.mean.shape[0]} runs, the bearings {R_}")
-    mu = np.full((R_, K), 1.0 / K) if mu0 is None else np.broadcast_to(np.asarray(mu0, dtype=np.float64), (R_, K)).copy()
-    mu = mu / mu.sum(axis=1, keepdims=True)
+    mu = np.full((R_, K), 1.0 / K) if mu0 is None else _check_mu0(mu0, R_, K)
     out_names = tuple(output_names)
     donor = next((i for i, m in enumerate(modes) if set(out_names) <= set(m.names)), None)
     if donor is None:

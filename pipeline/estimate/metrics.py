@@ -55,10 +55,48 @@ def rmse_groups(err: ArrayLike) -> dict[str, float]:
 
 
 def nees(err: ArrayLike, cov: ArrayLike) -> F64:
-    """Normalised estimation error squared ``eᵀ P⁻¹ e``; ``err`` (..., n_x), ``cov`` (..., n_x, n_x)."""
+    """Normalised estimation error squared ``eᵀ P⁻¹ e``; ``err`` (..., n_x), ``cov`` (..., n_x, n_x).
+
+    NaN where ``cov`` is not positive definite (non-finite, indefinite or singular): no
+    consistency statistic exists there, and the callers treat a NaN NEES as undefined
+    (:func:`divergence_flag` counts it as above the threshold).
+    """
     e = np.asarray(err, dtype=np.float64)
-    sol = np.linalg.solve(np.asarray(cov, dtype=np.float64), e[..., None])[..., 0]
+    P = np.asarray(cov, dtype=np.float64)
+    try:
+        # the common case: every covariance positive definite (Cholesky fails on anything else)
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        return _nees_where_pd(e, P)
+    sol = np.linalg.solve(P, e[..., None])[..., 0]
     return np.einsum("...i,...i->...", e, sol)
+
+
+def _nees_where_pd(e: F64, P: F64) -> F64:
+    """:func:`nees` where some ``P`` is not positive definite: NaN there (solve would give a
+    number for an indefinite ``P`` and raise for a singular one)."""
+    n = P.shape[-1]
+    shape = np.broadcast_shapes(e.shape[:-1], P.shape[:-2])
+    e = np.broadcast_to(e, shape + (n,))
+    P = np.broadcast_to(P, shape + (n, n))
+    ok = np.isfinite(P).all(axis=(-1, -2))
+    Pf = np.where(ok[..., None, None], P, np.eye(n))
+    ok &= np.linalg.eigvalsh(Pf)[..., 0] > 0
+    out = np.full(shape, np.nan)
+    Pk, ek = P[ok], e[ok]
+    try:
+        np.linalg.cholesky(Pk)
+    except np.linalg.LinAlgError:  # positive eigenvalues by round-off only: sort them one by one
+        keep = np.ones(len(Pk), dtype=bool)
+        for i in range(len(Pk)):
+            try:
+                np.linalg.cholesky(Pk[i])
+            except np.linalg.LinAlgError:
+                keep[i] = False
+        ok[ok] = keep
+        Pk, ek = Pk[keep], ek[keep]
+    out[ok] = np.einsum("...i,...i->...", ek, np.linalg.solve(Pk, ek[..., None])[..., 0])
+    return out
 
 
 def nis(innovation: ArrayLike, S: ArrayLike) -> F64:
@@ -75,24 +113,53 @@ def chi2_band(dof: int, n_runs: int = 1, alpha: float = 0.05) -> tuple[float, fl
     return float(lo / n_runs), float(hi / n_runs)
 
 
-def fraction_in_band(avg: ArrayLike, dof: int, n_runs: int, alpha: float = 0.05) -> float:
-    """Fraction of steps whose run-averaged NEES/NIS ``avg`` (T,) lies inside :func:`chi2_band`."""
-    lo, hi = chi2_band(dof, n_runs, alpha)
-    a = np.asarray(avg, dtype=np.float64)
-    return float(np.mean((a >= lo) & (a <= hi)))
+def fraction_in_band(avg: ArrayLike, dof: int, n_runs: int | ArrayLike, alpha: float = 0.05) -> float:
+    """Fraction of steps whose run-averaged NEES/NIS ``avg`` (T,) lies inside :func:`chi2_band`.
+
+    ``n_runs`` is the number of runs averaged: one int, or one per step (T,) (e.g.
+    :attr:`~pipeline.estimate.montecarlo.MonteCarloResult.nis_count`, when some runs were not
+    measured); steps with 0 runs are left out. NaN when no step is left (no warning). A NaN
+    ``avg`` at a step with runs counts as outside the band.
+    """
+    a = np.asarray(avg, dtype=np.float64).reshape(-1)
+    n = np.broadcast_to(np.asarray(n_runs), a.shape)
+    use = n > 0
+    if not use.any():
+        return float("nan")
+    a, n = a[use], n[use].astype(np.int64)
+    inside = np.zeros(a.shape, dtype=bool)
+    for m in np.unique(n):  # one band per distinct run count
+        lo, hi = chi2_band(dof, int(m), alpha)
+        sel = n == m
+        inside[sel] = (a[sel] >= lo) & (a[sel] <= hi)
+    return float(np.mean(inside))
 
 
 def summed_abs_error(err: ArrayLike) -> F64:
-    """Per run, the summed absolute error over time and components (seed 000 §9); ``(n_runs,)``."""
+    """Per run, the summed absolute error over time and components (seed 000 §9); ``(n_runs,)``.
+    Non-finite entries are left out (a run with none sums to 0)."""
     e = np.asarray(err, dtype=np.float64)
     return np.nansum(np.abs(e), axis=tuple(range(1, e.ndim)))
 
 
 def best_worst(err: ArrayLike) -> tuple[int, int]:
     """Indices of the best (Scenario 1: lowest summed absolute error) and the worst (Scenario 2:
-    highest) run of ``err`` (n_runs, T, n_x) (seed 000 §9)."""
-    s = summed_abs_error(err)
-    return int(np.argmin(s)), int(np.argmax(s))
+    highest) run of ``err`` (n_runs, T, n_x) (seed 000 §9).
+
+    Runs without a single finite error (diverged, or no reference) are left out of both: their
+    NaN-skipping sum is 0, which would make them the best.
+
+    Raises
+    ------
+    ValueError
+        No run has a finite error.
+    """
+    e = np.asarray(err, dtype=np.float64)
+    s = summed_abs_error(e)
+    has = np.isfinite(e).reshape(len(e), -1).any(axis=1) if e.ndim else np.zeros(0, dtype=bool)
+    if not has.any():
+        raise ValueError(f"best_worst: none of the {len(has)} runs has a finite error")
+    return int(np.argmin(np.where(has, s, np.inf))), int(np.argmax(np.where(has, s, -np.inf)))
 
 
 # --------------------------------------------------------------------------------------------
@@ -166,10 +233,22 @@ def divergence_flag(range_rel_err: ArrayLike, nees_values: ArrayLike, t_s: Array
     """The D8 divergence flag per run (R,): the final |relative range error| exceeds
     ``final_rel`` (50 %), or the NEES stays above ``nees_threshold`` (χ²₅(0.999) = 20.5) for
     more than ``nees_seconds`` (10 s) in one unbroken stretch (the longest consecutive run of
-    steps above it, timed by ``t_s``). A non-finite final error counts as diverged."""
+    steps above it, timed by ``t_s``). A non-finite final error counts as diverged.
+
+    Raises
+    ------
+    ValueError
+        No step (T = 0), or ``range_rel_err`` (R, T), ``nees_values`` (R, T) and ``t_s`` (T,)
+        that do not match.
+    """
     rel = np.atleast_2d(np.asarray(range_rel_err, dtype=np.float64))
     q = np.atleast_2d(np.asarray(nees_values, dtype=np.float64))
     t = np.asarray(t_s, dtype=np.float64)
+    if rel.ndim != 2 or rel.shape != q.shape or t.shape != rel.shape[1:]:
+        raise ValueError(f"divergence_flag: range_rel_err {rel.shape}, nees_values {q.shape} (R, T) and "
+                         f"t_s {t.shape} (T,) do not match")
+    if rel.shape[1] == 0:
+        raise ValueError("divergence_flag: no step (T = 0): there is no final error to judge")
     final = rel[:, -1]
     flag = ~(np.abs(final) <= final_rel)
     above = ~(q <= nees_threshold)  # NaN NEES (a frozen/undefined covariance) counts as above

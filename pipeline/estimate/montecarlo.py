@@ -47,8 +47,20 @@ def simulate_white_jerk(n_runs: int, n_steps: int, dt: float, q: float, x0: Arra
     Returns
     -------
     ndarray, shape (n_runs, n_steps, 9)
+
+    Raises
+    ------
+    TypeError
+        ``rng`` is None.
+    ValueError
+        ``n_runs`` or ``n_steps`` below 1, or ``dt`` or ``q`` not finite and positive.
     """
-    rng = np.random.default_rng(rng)
+    rng = _required_rng(rng, "simulate_white_jerk")
+    if int(n_runs) < 1 or int(n_steps) < 1:
+        raise ValueError(f"simulate_white_jerk: n_runs and n_steps must be >= 1, got {n_runs}, {n_steps}")
+    # q = 0 or dt <= 0 would reach cholesky as a bare LinAlgError
+    if not (np.isfinite(dt) and dt > 0 and np.isfinite(q) and q > 0):
+        raise ValueError(f"simulate_white_jerk: dt and q must be finite and > 0, got dt={dt}, q={q}")
     P0 = initial_cov() if P0 is None else np.asarray(P0, dtype=np.float64)
     A = ca_transition(dt)
     Lq = np.linalg.cholesky(white_jerk_q(dt, q))
@@ -61,10 +73,20 @@ def simulate_white_jerk(n_runs: int, n_steps: int, dt: float, q: float, x0: Arra
     return x
 
 
+def _required_rng(rng, who: str) -> np.random.Generator:
+    """``rng`` as a Generator; None is refused (``default_rng(None)`` would draw from the
+    operating system's entropy, breaking the explicit-seed rule)."""
+    if rng is None:
+        raise TypeError(f"{who}: rng is required: pass np.random.default_rng(seed)")
+    return np.random.default_rng(rng)
+
+
 def measure(model, truth: ArrayLike, rng: np.random.Generator | int) -> F64:
     """Measurements of ``truth`` (n_runs, T, n_x) through ``model.measure`` (e.g. the
-    :class:`~pipeline.estimate.models.RadarModel`), returned as ``(T, n_runs, n_z)``."""
-    rng = np.random.default_rng(rng)
+    :class:`~pipeline.estimate.models.RadarModel`), returned as ``(T, n_runs, n_z)``.
+
+    ``rng`` (a Generator or a seed) is required: None raises TypeError."""
+    rng = _required_rng(rng, "measure")
     z = model.measure(np.asarray(truth, dtype=np.float64), rng)
     return np.ascontiguousarray(np.swapaxes(z, 0, 1))
 
@@ -79,8 +101,13 @@ class MonteCarloResult:
     nees, nis : (R, T)
     mean_err, err_var : (T, 9) mean and variance of the error over runs
     filter_var : (T, 9) run-mean of the filter's variances (diag P)
-    nees_avg, nis_avg : (T,) run-averaged NEES / NIS
-    nis_dof : int, measured scalars per step
+    nees_avg : (T,) run-averaged NEES
+    nis_avg : (T,) run-averaged NIS over the runs measured in full at that step (``dof ==
+        nis_dof``; NaN where none is): a predict-only step has no NIS, and a partly measured
+        run's NIS has fewer degrees of freedom
+    nis_dof : int, the NIS's degrees of freedom: the most measured scalars of any run and step
+    nis_count : (T,) int, the runs averaged in ``nis_avg`` (the ``n_runs`` of its χ² band,
+        :func:`~pipeline.estimate.metrics.fraction_in_band`)
     track : the filter run
     """
 
@@ -94,6 +121,7 @@ class MonteCarloResult:
     nis_avg: F64
     nis_dof: int
     track: FilterTrack
+    nis_count: NDArray[np.int64] | None = None
 
 
 def monte_carlo(ekf: ExtendedKalmanFilter, truth: ArrayLike, z: ArrayLike, t_ns: ArrayLike,
@@ -109,9 +137,16 @@ def monte_carlo(ekf: ExtendedKalmanFilter, truth: ArrayLike, z: ArrayLike, t_ns:
     prior : GaussianState
         Batch (R,) or one state for every run, at ``t_ns[0]`` (first step: update only).
     store : {"filtered", "all"}
-        ``"all"`` keeps what the RTS smoother needs.
+        ``"all"`` keeps what the RTS smoother needs (``"mean"`` is refused: NEES and the
+        filter variances need the covariances).
     """
+    if store not in ("filtered", "all"):
+        raise ValueError(f"monte_carlo: store must be 'filtered' or 'all' (NEES needs the covariances), not {store!r}")
     truth = np.asarray(truth, dtype=np.float64)
+    z_shape = np.shape(z)
+    if truth.ndim != 3 or len(z_shape) < 3 or z_shape[:2] != (truth.shape[1], truth.shape[0]):
+        raise ValueError(f"monte_carlo: truth shaped {truth.shape} (R, T, n_x) and z shaped {z_shape} "
+                         "(T, R, ...) do not match")
     R_ = truth.shape[0]
     if prior.mean.ndim == 1:
         prior = GaussianState(np.broadcast_to(prior.mean, (R_, prior.n_x)),
@@ -120,11 +155,16 @@ def monte_carlo(ekf: ExtendedKalmanFilter, truth: ArrayLike, z: ArrayLike, t_ns:
     err = track.mean - truth
     ne = nees_of(err, track.cov)
     dof = int(track.dof.max()) if track.dof.size else 0
+    # update_stats reports NIS 0 for a predict-only step: averaging those in biases the NIS low
+    full = (track.dof == dof) & (dof > 0)
+    count = full.sum(axis=0)
+    nis_sum = np.where(full, track.nis, 0.0).sum(axis=0)
+    nis_avg = np.divide(nis_sum, count, out=np.full(count.shape, np.nan), where=count > 0)
     return MonteCarloResult(err=err, nees=ne, nis=track.nis, mean_err=err.mean(axis=0),
                             err_var=err.var(axis=0, ddof=1) if R_ > 1 else np.zeros(err.shape[1:]),
                             filter_var=np.diagonal(track.cov, axis1=-2, axis2=-1).mean(axis=0),
-                            nees_avg=ne.mean(axis=0), nis_avg=track.nis.mean(axis=0), nis_dof=dof,
-                            track=track)
+                            nees_avg=ne.mean(axis=0), nis_avg=nis_avg, nis_dof=dof,
+                            track=track, nis_count=count)
 
 
 @dataclass(frozen=True)

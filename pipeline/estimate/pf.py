@@ -85,6 +85,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from numba import njit
 
+from .base import check_times
 from .markov import check_stochastic, retime
 from .resample import SCHEMES, get_resampler
 
@@ -139,9 +140,23 @@ class GaussianPositionLikelihood:
         s = np.broadcast_to(np.asarray(self.sigma, dtype=np.float64), (len(self.index),))
         return s
 
+    def check_width(self, n_z: int) -> None:
+        """Refuse a measurement of ``n_z`` components where the likelihood measures
+        ``len(index)`` (a (1,) z would broadcast against both N and E)."""
+        if n_z != len(self.index):
+            raise ValueError(f"GaussianPositionLikelihood: z has {n_z} component(s), the likelihood measures "
+                             f"{len(self.index)} (state components {tuple(self.index)})")
+
+    def _z(self, z: F64) -> F64:
+        z = np.atleast_1d(np.asarray(z, dtype=np.float64))
+        if z.ndim != 1:
+            raise ValueError(f"GaussianPositionLikelihood: z must be one measurement (m,), got shape {z.shape}")
+        self.check_width(len(z))
+        return z
+
     def __call__(self, x: F64, z: F64) -> F64:
         s = self._sig()
-        r = (np.asarray(z, dtype=np.float64)[None, :] - x[:, list(self.index)]) / s
+        r = (self._z(z)[None, :] - x[:, list(self.index)]) / s
         d2 = np.einsum("ij,ij->i", r, r)
         ll = -0.5 * d2 - float(np.sum(np.log(np.sqrt(2 * np.pi) * s)))
         if self.gate is not None:
@@ -152,8 +167,9 @@ class GaussianPositionLikelihood:
         out = np.array(x, dtype=np.float64, copy=True)
         s = self._sig()
         idx = list(self.index)
+        z = self._z(z)
         noise = rng.standard_normal((len(x), len(idx)))
-        out[:, idx] = np.asarray(z, dtype=np.float64)[None, :] + self.reinit_spread * s * noise
+        out[:, idx] = z[None, :] + self.reinit_spread * s * noise
         return out
 
 
@@ -459,7 +475,15 @@ class ParticleFilter:
         return False
 
     def step(self, dt: float, z: ArrayLike) -> StepStats:
-        """Predict over ``dt`` (skipped when 0), update with ``z``, estimate, maybe resample."""
+        """Predict over ``dt`` (skipped when 0), update with ``z``, estimate, maybe resample.
+
+        Raises
+        ------
+        ValueError
+            ``dt`` negative or NaN (it used to skip the predict silently).
+        """
+        if not dt >= 0:
+            raise ValueError(f"ParticleFilter.step: dt must be >= 0 (time runs forward), got {dt}")
         if dt > 0:
             self.predict(dt)
         z = np.asarray(z, dtype=np.float64)
@@ -475,9 +499,18 @@ def run_pf(pf: ParticleFilter, t_ns: ArrayLike, z: ArrayLike, *, t0_ns: int | No
     """Run an initialised filter over ``t_ns`` (T,) with measurements ``z`` (T, m).
 
     The first step predicts over ``t_ns[0] − t0_ns`` (nothing when ``t0_ns`` is None); a row
-    with a NaN is a predict-only step.
+    with a NaN is a predict-only step. ``t_ns`` must be non-decreasing (equal stamps: an update
+    without a predict), whole nanoseconds, and not before ``t0_ns``
+    (:func:`~pipeline.estimate.base.check_times`). T = 0 gives an empty track.
+
+    Raises
+    ------
+    ValueError
+        A bad ``t_ns`` (naming the first bad row), lengths that differ, no ``init``, or ``z``
+        of another width than the likelihood measures (where it says, like
+        :class:`GaussianPositionLikelihood`).
     """
-    t = np.asarray(t_ns, dtype=np.int64)
+    t = check_times(t_ns, "run_pf", t0_ns)
     Z = np.asarray(z, dtype=np.float64)
     if Z.ndim == 1:
         Z = Z[:, None]
@@ -485,6 +518,9 @@ def run_pf(pf: ParticleFilter, t_ns: ArrayLike, z: ArrayLike, *, t0_ns: int | No
         raise ValueError(f"run_pf: {len(t)} times but {len(Z)} measurements")
     if pf.x is None:
         raise ValueError("run_pf: initialise the filter first (pf.init)")
+    check = getattr(pf.likelihood, "check_width", None)
+    if check is not None:
+        check(Z.shape[1])  # up front: a predict-only (NaN) first row would hide it
     T, n = len(t), pf.x.shape[1]
     mean = np.full((T, n), np.nan)
     cov = np.full((T, n, n), np.nan)
@@ -494,7 +530,7 @@ def run_pf(pf: ParticleFilter, t_ns: ArrayLike, z: ArrayLike, *, t0_ns: int | No
     po = np.zeros(T, dtype=bool)
     ri = np.zeros(T, dtype=bool)
     ll = np.full(T, np.nan)
-    prev = t[0] if t0_ns is None else int(t0_ns)
+    prev = (t[0] if len(t) else 0) if t0_ns is None else int(t0_ns)
     n0 = pf.n_reinit
     for k in range(T):
         s = pf.step((t[k] - prev) * 1e-9, Z[k])
@@ -510,6 +546,12 @@ def dwell_transition(dwell_s: Sequence[float], dt: float, *, to: ArrayLike | Non
     Mode ``i`` is left at rate ``1/τ_i`` to the others in proportion to row ``i`` of ``to``
     (default: uniformly), so ``Π(Δt) = expm(G Δt)`` with ``G_ii = −1/τ_i``,
     ``G_ij = to_ij/(τ_i Σ_{l≠i} to_il)``; this is exactly the D5 re-timing of any one step.
+
+    Raises
+    ------
+    ValueError
+        A dwell time not positive and finite, a row of ``to`` with nowhere to go, or ``dt``
+        negative or not finite (a negative step used to come back as the identity).
     """
     from scipy.linalg import expm
 
@@ -517,6 +559,8 @@ def dwell_transition(dwell_s: Sequence[float], dt: float, *, to: ArrayLike | Non
     K = tau.size
     if K == 0 or np.any(~np.isfinite(tau)) or np.any(tau <= 0):
         raise ValueError(f"dwell_transition: dwell times must be positive and finite, got {tau.tolist()}")
+    if not (np.isfinite(dt) and dt >= 0):
+        raise ValueError(f"dwell_transition: dt must be finite and >= 0, got {dt}")
     if K == 1:
         return np.ones((1, 1))
     A = np.ones((K, K)) if to is None else np.asarray(to, dtype=np.float64).copy()

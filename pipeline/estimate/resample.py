@@ -66,6 +66,16 @@ def _weights(w: ArrayLike) -> F64:
     return w / s
 
 
+def _count(n: int | None, w: F64) -> int:
+    """The number of draws: ``N`` by default; a negative ``n`` is refused (``systematic`` would
+    return an empty array silently, ``residual`` fail inside ``np.repeat``)."""
+    if n is None:
+        return w.size
+    if int(n) != n or n < 0:
+        raise ValueError(f"resample: n must be a whole number >= 0, got {n}")
+    return int(n)
+
+
 def systematic(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> I64:
     """Systematic resampling: ancestor indices for positions ``(j + u)/n``, one ``u ~ U(0, 1)``.
 
@@ -75,7 +85,7 @@ def systematic(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> 
         Non-negative weights (normalised here).
     rng : numpy.random.Generator
     n : int, optional
-        Number of draws (default ``N``).
+        Number of draws (default ``N``), ≥ 0 (ValueError otherwise; 0 gives no index).
 
     Returns
     -------
@@ -83,7 +93,7 @@ def systematic(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> 
         Ancestor indices, ascending.
     """
     w = _weights(w)
-    n = w.size if n is None else int(n)
+    n = _count(n, w)
     pos = (np.arange(n, dtype=np.float64) + rng.random()) / n
     return _merge_sorted(_cdf(w), pos)
 
@@ -91,7 +101,7 @@ def systematic(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> 
 def stratified(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> I64:
     """Stratified resampling: positions ``(j + u_j)/n`` with independent ``u_j ~ U(0, 1)``."""
     w = _weights(w)
-    n = w.size if n is None else int(n)
+    n = _count(n, w)
     pos = (np.arange(n, dtype=np.float64) + rng.random(n)) / n
     return _merge_sorted(_cdf(w), pos)
 
@@ -99,7 +109,7 @@ def stratified(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> 
 def multinomial(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> I64:
     """Multinomial resampling: ``n`` i.i.d. draws from ``w`` (returned ascending)."""
     w = _weights(w)
-    n = w.size if n is None else int(n)
+    n = _count(n, w)
     pos = np.sort(rng.random(n))
     return _merge_sorted(_cdf(w), pos)
 
@@ -107,7 +117,7 @@ def multinomial(w: ArrayLike, rng: np.random.Generator, n: int | None = None) ->
 def residual(w: ArrayLike, rng: np.random.Generator, n: int | None = None) -> I64:
     """Residual resampling: ``⌊n w_i⌋`` copies, the rest multinomial on ``n w_i − ⌊n w_i⌋``."""
     w = _weights(w)
-    n = w.size if n is None else int(n)
+    n = _count(n, w)
     nw = n * w
     base = np.floor(nw).astype(np.int64)
     det = np.repeat(np.arange(w.size, dtype=np.int64), base)

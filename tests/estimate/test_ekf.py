@@ -190,3 +190,57 @@ def test_an_update_written_into_a_given_covariance_array_equals_the_plain_update
         np.testing.assert_array_equal(post_o.mean, post.mean)
         np.testing.assert_array_equal(st_o.nis, st.nis)
         np.testing.assert_array_equal(st_o.dof, st.dof)
+
+
+def _small_case(T=20):
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), position_measurement(1.0))
+    prior = GaussianState(np.zeros(9), initial_cov(), 0)
+    z = np.random.default_rng(1).standard_normal((T, 1, 3))
+    return ekf, prior, np.arange(T) * 10**9, z
+
+
+def test_time_running_backwards_or_a_late_prior_is_one_clear_error_naming_the_first_bad_row():
+    ekf, prior, t, z = _small_case()
+    t2 = t.copy()
+    t2[[3, 4]] = t[[4, 3]]  # used to predict backwards with a negative definite Q, silently
+    with pytest.raises(ValueError, match=r"run_filter: t_ns must be non-decreasing; row 4"):
+        run_filter(ekf, prior, t2, z)
+    with pytest.raises(ValueError, match=r"prior time 5000000000 ns is after the first step"):
+        run_filter(ekf, GaussianState(np.zeros(9), initial_cov(), 5 * 10**9), t, z)
+    with pytest.raises(ValueError, match=r"whole nanoseconds; row 2"):
+        run_filter(ekf, prior, t + np.r_[0.0, 0.0, 0.25, np.zeros(17)], z)  # was truncated
+
+
+def test_equal_stamps_update_twice_at_one_instant_and_whole_float_stamps_are_accepted():
+    ekf, prior, t, z = _small_case(6)
+    a = run_filter(ekf, prior, t, z)
+    assert np.array_equal(run_filter(ekf, prior, t.astype(np.float64), z).mean, a.mean)
+    t2 = np.r_[t[:3], t[2], t[3:5]]  # step 3 repeats step 2's time: no predict, one more update
+    z2 = np.concatenate([z[:3], z[2:3], z[3:5]])
+    b = run_filter(ekf, prior, t2, z2)
+    twice = ekf.update(GaussianState(b.mean[0, 2], b.cov[0, 2], int(t[2])), z[2, 0])
+    np.testing.assert_allclose(b.mean[0, 3], twice.mean, rtol=1e-12)
+
+
+def test_an_infinite_measurement_is_a_counted_predict_only_step_like_nan():
+    ekf, prior, t, z = _small_case()
+    zi, zn = z.copy(), z.copy()
+    zi[3, 0, 0], zn[3, 0, 0] = np.inf, np.nan
+    ti, tn = run_filter(ekf, prior, t, zi), run_filter(ekf, prior, t, zn)
+    assert np.isfinite(ti.mean).all()  # was NaN from step 3 on
+    np.testing.assert_array_equal(ti.mean, tn.mean)
+    assert ti.dof[0, 3] == 0 and ti.n_predict_only.tolist() == [1]
+    # stacked rows (the LAPACK path for > 8 scalars): a -inf row is left out like a NaN one
+    zs = np.repeat(z[:, :, None], 4, axis=2)
+    zsi, zsn = zs.copy(), zs.copy()
+    zsi[5, 0, 1, 2], zsn[5, 0, 1, 2] = -np.inf, np.nan
+    np.testing.assert_array_equal(run_filter(ekf, prior, t, zsi).mean, run_filter(ekf, prior, t, zsn).mean)
+
+
+@pytest.mark.parametrize("bad", ["mean", "cov"])
+def test_a_non_finite_prior_is_refused(bad):
+    ekf, prior, t, z = _small_case()
+    m, P = np.zeros((2, 9)), np.broadcast_to(initial_cov(), (2, 9, 9)).copy()
+    (m if bad == "mean" else P)[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"prior mean or covariance is not finite \(run 1"):
+        run_filter(ekf, GaussianState(m, P, 0), t, np.repeat(z, 2, axis=1))

@@ -133,3 +133,37 @@ def test_bad_imm_input_is_one_clear_error():
         run_imm([cv_mode_from(ct), mpc], switching_matrix(1e-3), t, z, SIG, own)
     with pytest.raises(ValueError, match="row 0 sums"):
         run_imm([ct, ct], np.array([[0.5, 0.4], [0.5, 0.5]]), t, z, SIG, own)
+
+
+def test_a_one_hot_mu0_with_an_identity_transmat_equals_the_single_mode_run():
+    # c̄_ct = 0 at every mix: the CT mode must keep its own components (not be zeroed by
+    # all-zero mixing weights) and the output must be the CV mode's run alone
+    t, X, z, own = scenario(T=60)
+    ct = bank_mode("cppv_10_1_6", z[:, 0], SIG)
+    cv = cv_mode_from(ct)
+    single = run_imm([cv], np.eye(1), t, z, SIG, own, output_names=CV_CPPV_STATE)
+    tr = run_imm([cv, ct], np.eye(2), t, z, SIG, own, mu0=[1, 0])
+    assert np.isfinite(tr.mean).all() and np.isfinite(tr.mode_p).all() and np.isfinite(tr.loglik).all()
+    assert (tr.mode_p[..., 0] == 1.0).all() and (tr.mode_p[..., 1] == 0.0).all()
+    assert tr.mode_mean[0] == pytest.approx(single.mean, rel=1e-12, abs=1e-12)
+    assert tr.mean[..., :4] == pytest.approx(single.mean, rel=1e-12, abs=1e-12)
+    assert tr.loglik == pytest.approx(single.loglik, rel=1e-12, abs=1e-12)
+    assert np.isfinite(tr.mode_mean[1]).all()  # the idle CT mode still runs on its own components
+
+
+@pytest.mark.parametrize("mu0, match", [([0, 0], "positive sum"), ([np.nan, 1], "finite"),
+                                        ([0.5, -0.1], ">= 0"), ([1, 0, 0], "mu0 must have shape"),
+                                        (np.ones((3, 2)), "mu0 must have shape")])
+def test_a_bad_mu0_is_one_clear_error(mu0, match):
+    t, X, z, own = scenario(T=10)
+    ct = bank_mode("cppv_10_1_6", z[:, 0], SIG)
+    with pytest.raises(ValueError, match=match):
+        run_imm([cv_mode_from(ct), ct], switching_matrix(1e-3), t, z, SIG, own, mu0=mu0)
+
+
+def test_an_unnormalised_mu0_is_normalised():
+    t, X, z, own = scenario(T=10)
+    ct = bank_mode("cppv_10_1_6", z[:, 0], SIG)
+    a = run_imm([cv_mode_from(ct), ct], switching_matrix(1e-3), t, z, SIG, own, mu0=[2, 6])
+    b = run_imm([cv_mode_from(ct), ct], switching_matrix(1e-3), t, z, SIG, own, mu0=[0.25, 0.75])
+    assert a.mode_p[:, 0] == pytest.approx(np.array([[0.25, 0.75]])) and np.array_equal(a.mean, b.mean)

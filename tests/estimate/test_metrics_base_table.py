@@ -72,3 +72,35 @@ def test_the_estimate_table_round_trips_the_mean_and_the_full_covariance(rng):
     np.testing.assert_array_equal(m2, m)
     np.testing.assert_array_equal(P2, P)
     np.testing.assert_array_equal(t, np.arange(T) * 10)
+
+
+def test_a_run_without_a_finite_error_is_neither_best_nor_worst():
+    assert best_worst(np.array([[[1.0]], [[np.nan]], [[0.5]]])) == (2, 0)
+    err = np.ones((3, 4, 9))
+    err[0] = np.nan
+    err[2] *= 3
+    assert best_worst(err) == (1, 2)
+    with pytest.raises(ValueError, match="none of the 2 runs has a finite error"):
+        best_worst(np.full((2, 3, 9), np.nan))
+
+
+def test_nees_is_nan_where_the_covariance_is_not_positive_definite():
+    assert np.isnan(nees([1.0, 2.0], np.diag([1.0, -4.0])))  # indefinite: was 0.0
+    assert np.isnan(nees([1.0, 2.0], np.diag([1.0, 0.0])))   # singular: was a bare LinAlgError
+    P = np.stack([np.diag([1.0, -4.0]), np.diag([1.0, 4.0]), np.diag([np.nan, 1.0]), np.zeros((2, 2))])
+    out = nees(np.ones((4, 2)), P)
+    assert np.isnan(out[[0, 2, 3]]).all() and out[1] == pytest.approx(1.25)
+    # one shared covariance against a batch of errors, and the positive definite fast path unchanged
+    assert nees(np.ones((2, 3, 2)), np.diag([1.0, 4.0])) == pytest.approx(np.full((2, 3), 1.25))
+
+
+def test_divergence_flag_without_steps_or_with_mismatched_lengths_is_one_clear_error():
+    from pipeline.estimate.metrics import divergence_flag
+
+    with pytest.raises(ValueError, match="T = 0"):
+        divergence_flag(np.zeros((2, 0)), np.zeros((2, 0)), np.zeros(0))
+    with pytest.raises(ValueError, match="do not match"):
+        divergence_flag(np.zeros((2, 5)), np.zeros((2, 5)), np.arange(4.0))
+    with pytest.raises(ValueError, match="do not match"):
+        divergence_flag(np.zeros((2, 5)), np.zeros((2, 4)), np.arange(5.0))
+    assert divergence_flag(np.zeros((2, 5)), np.zeros((2, 5)), np.arange(5.0)).tolist() == [False, False]

@@ -228,3 +228,53 @@ def test_a_filter_or_a_monte_carlo_draw_without_an_rng_is_refused_rather_than_se
         simulate_white_jerk(2, 3, 0.2, 1.0, np.zeros(9))
     with pytest.raises(TypeError, match="rng"):
         measure(RadarModel(), np.zeros((2, 3, 9)))
+
+
+def test_a_measurement_of_another_width_than_the_likelihood_measures_is_refused_naming_both():
+    Z = cv_track(10)
+    t = np.arange(10) * int(DT * 1e9)
+    with pytest.raises(ValueError, match=r"z has 1 component\(s\), the likelihood measures 2"):
+        run_pf(_cv_pf(200, 5).init(mean=np.zeros(4), cov=np.eye(4)), t, Z[:, :1])  # was: E tracked N
+    Z1 = np.c_[Z, Z[:, :1]]
+    Z1[0] = np.nan  # a predict-only first row does not hide it
+    with pytest.raises(ValueError, match=r"z has 3 component\(s\), the likelihood measures 2"):
+        run_pf(_cv_pf(200, 5).init(mean=np.zeros(4), cov=np.eye(4)), t, Z1)
+    pf = _cv_pf(200, 5).init(mean=np.zeros(4), cov=np.eye(4))
+    with pytest.raises(ValueError, match=r"z has 1 component\(s\), the likelihood measures 2"):
+        pf.step(0.5, [1.0])
+
+
+def test_time_running_backwards_is_one_clear_error_naming_the_first_bad_row():
+    Z = cv_track(12)
+    t = np.arange(12) * int(DT * 1e9)
+    t2 = t.copy()
+    t2[[5, 6]] = t[[6, 5]]  # used to skip the negative predict silently
+    with pytest.raises(ValueError, match=r"non-decreasing; row 6"):
+        run_pf(_cv_pf(200, 6).init(mean=np.zeros(4)), t2, Z)
+    with pytest.raises(ValueError, match=r"prior time 1 ns is after the first step"):
+        run_pf(_cv_pf(200, 6).init(mean=np.zeros(4)), t, Z, t0_ns=1)
+    with pytest.raises(ValueError, match=r"whole nanoseconds; row 1"):
+        run_pf(_cv_pf(200, 6).init(mean=np.zeros(4)), t + np.r_[0.0, 0.5, np.zeros(10)], Z)
+    pf = _cv_pf(200, 6).init(mean=np.zeros(4))
+    for dt in (-0.5, np.nan):
+        with pytest.raises(ValueError, match="dt must be >= 0"):
+            pf.step(dt, Z[0])
+
+
+def test_equal_stamps_and_whole_float_stamps_keep_their_current_meaning():
+    Z = cv_track(8)
+    t = np.arange(8) * int(DT * 1e9)
+    a = run_pf(_cv_pf(300, 7).init(mean=np.zeros(4), cov=np.eye(4)), t, Z)
+    b = run_pf(_cv_pf(300, 7).init(mean=np.zeros(4), cov=np.eye(4)), t.astype(np.float64), Z)
+    np.testing.assert_array_equal(a.mean, b.mean)
+    t3 = t.copy()
+    t3[4] = t3[3]  # a second update at the same instant, no predict
+    c = run_pf(_cv_pf(300, 7).init(mean=np.zeros(4), cov=np.eye(4)), t3, Z)
+    assert np.isfinite(c.mean).all()
+
+
+def test_an_empty_track_gives_an_empty_result():
+    pf = _cv_pf(50, 8).init(mean=np.zeros(4))
+    tr = run_pf(pf, np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
+    assert tr.mean.shape == (0, 4) and tr.cov.shape == (0, 4, 4) and tr.mode_p.shape == (0, 1)
+    assert tr.n_reinit == 0 and track_meta(tr)["n_predict_only"] == 0

@@ -84,3 +84,14 @@ def test_the_same_seed_draws_the_same_indices():
     for scheme in R.SCHEMES:
         f = R.get_resampler(scheme)
         assert np.array_equal(f(w, np.random.default_rng(9)), f(w, np.random.default_rng(9)))
+
+
+@pytest.mark.parametrize("scheme", R.SCHEMES)
+def test_a_negative_or_fractional_draw_count_is_refused_and_zero_draws_nothing(scheme):
+    f = R.get_resampler(scheme)
+    w = _weights(1)
+    for n in (-2, 2.5):  # -2 used to give [] (systematic) or a numpy "repeats" error (residual)
+        with pytest.raises(ValueError, match="n must be a whole number >= 0"):
+            f(w, np.random.default_rng(0), n=n)
+    assert f(w, np.random.default_rng(0), n=0).size == 0
+    assert f(w, np.random.default_rng(0), n=5).size == 5

@@ -82,6 +82,63 @@ def test_a_pi_without_a_real_logarithm_cannot_be_retimed():
         retime([[0.1, 0.9], [0.9, 0.1]], 0.1, 0.2)
 
 
+@pytest.mark.parametrize("Pi", [[[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5]],   # cyclic
+                                [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]])  # a permutation
+def test_a_pi_whose_real_logarithm_is_no_generator_cannot_be_retimed(Pi):
+    # clipping expm's negative entries used to break Π(Δt/2)² = Π(Δt) by 0.1 without a word
+    with pytest.raises(ValueError, match=r"no valid generator.*of row \d's probability would be clipped"):
+        retime(Pi, 0.5, 1.0)
+
+
+def test_a_left_to_right_hmm_is_retimed_only_within_the_clip_the_caller_accepts():
+    # a maneuver HMM's transmat has zeros two steps can reach: no valid generator, and its
+    # quarter step clips ~1e-3 of probability; refused by default, approximated on request
+    from pipeline.estimate.markov import hmm_to_step
+
+    T = np.array([[0.8, 0.2, 0.0, 0.0], [0.0, 0.7, 0.3, 0.0], [0.0, 0.0, 0.9, 0.1], [0.0, 0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="max_clip 0.0001"):
+        hmm_to_step(T, 0.05, 0.2)
+    q = hmm_to_step(T, 0.05, 0.2, max_clip=0.05)
+    assert np.allclose(q.sum(axis=1), 1.0) and (q >= 0).all()
+    np.testing.assert_allclose(np.linalg.matrix_power(q, 4), T, atol=0.05)
+
+
+def test_the_seed001_driving_matrices_retime_within_the_default_clip():
+    # the paper's Π_d and Π_p (40 Hz) have no valid generator either, but at 20 Hz or 80 Hz
+    # they clip at most 2e-5 of a row: the geolocation study's other rates keep working
+    from pipeline.simulate.geolocation import PI_D, PI_P, PI_RATE_HZ
+
+    for P in (PI_D, PI_P):
+        for rate in (20.0, 80.0):
+            out = retime(P, 1.0 / rate, 1.0 / PI_RATE_HZ)
+            assert np.allclose(out.sum(axis=1), 1.0) and (out >= 0).all()
+
+
+def test_a_valid_generator_with_zero_rates_is_still_retimed():
+    # rates of exactly zero (absorbing and one-way chains) are round-off, not an error
+    from pipeline.estimate.pf import dwell_transition
+
+    P = dwell_transition([2.0, 1.0, 3.0], 0.2, to=[[0, 1, 0], [0, 0, 1], [1, 0, 0]])
+    half = retime(P, 0.1, 0.2)
+    np.testing.assert_allclose(half @ half, P, atol=1e-12)
+    absorbing = np.array([[1.0, 0.0], [0.3, 0.7]])
+    np.testing.assert_allclose(retime(absorbing, 0.4, 0.2), absorbing @ absorbing, atol=1e-12)
+
+
+@pytest.mark.parametrize("dt, dt_ref", [(np.inf, 0.2), (np.nan, 0.2), (0.1, np.inf), (0.1, np.nan), (-0.1, 0.2)])
+def test_a_non_finite_or_negative_step_cannot_be_retimed(dt, dt_ref):
+    with pytest.raises(ValueError, match="need finite dt >= 0 and dt_ref > 0"):
+        retime(PI, dt, dt_ref)
+
+
+@pytest.mark.parametrize("dt", [-0.5, np.nan, np.inf])
+def test_dwell_transition_refuses_a_negative_or_non_finite_step(dt):
+    from pipeline.estimate.pf import dwell_transition
+
+    with pytest.raises(ValueError, match="dt must be finite and >= 0"):
+        dwell_transition([1.0, 2.0], dt)  # a negative step used to come back as the identity
+
+
 @pytest.mark.parametrize("dt, q", [(0.2, 1.0), (0.05, 3.0), (1.0, 0.1)])
 def test_white_jerk_q_equals_the_integral_of_the_continuous_model(dt, q):
     Fc = np.kron(np.array([[0, 1, 0], [0, 0, 1], [0, 0, 0]], float), np.eye(3))

@@ -37,14 +37,16 @@ SCHEMES: tuple[str, ...] = ("systematic", "stratified", "multinomial", "residual
 
 @njit(cache=True)
 def _merge_sorted(cdf: F64, positions: F64) -> I64:
-    """For ascending ``positions``, the first ``i`` with ``cdf[i] >= positions[j]`` (linear merge)."""
+    """For ascending ``positions``, the first ``i`` with ``cdf[i] > positions[j]`` (linear merge):
+    particle ``i`` owns ``[cdf[i-1], cdf[i])``, so a zero-weight particle (an empty interval) is
+    never drawn, not even by a position of exactly 0 (``rng.random()`` is in [0, 1))."""
     n = positions.shape[0]
     m = cdf.shape[0]
     out = np.empty(n, dtype=np.int64)
     i = 0
     for j in range(n):
         p = positions[j]
-        while i < m - 1 and p > cdf[i]:
+        while i < m - 1 and p >= cdf[i]:
             i += 1
         out[j] = i
     return out

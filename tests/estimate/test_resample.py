@@ -95,3 +95,19 @@ def test_a_negative_or_fractional_draw_count_is_refused_and_zero_draws_nothing(s
             f(w, np.random.default_rng(0), n=n)
     assert f(w, np.random.default_rng(0), n=0).size == 0
     assert f(w, np.random.default_rng(0), n=5).size == 5
+
+
+class _ZeroRng:
+    """A generator whose uniforms are all exactly 0 (``rng.random()`` is in [0, 1))."""
+
+    def random(self, n=None):
+        return 0.0 if n is None else np.zeros(n)
+
+
+@pytest.mark.parametrize("scheme", ["systematic", "stratified", "multinomial"])
+def test_a_zero_weight_particle_is_never_drawn_even_by_a_uniform_of_exactly_zero(scheme):
+    # the merge took the first cdf >= u: at u = 0 a leading zero-weight particle was drawn
+    from pipeline.estimate import resample as rs
+
+    idx = getattr(rs, scheme)(np.array([0.0, 0.5, 0.5]), _ZeroRng())
+    assert 0 not in idx.tolist()

@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from helpers import REALDATA, REQUIRE_SHARED, TEST_SEED, need_shared
+from hypothesis import settings
+
+# CI gates a merge: there the property tests draw the same examples every run (a newly found
+# counterexample is a local finding to fix, not a red build on someone else's change); locally
+# they keep exploring. HYPOTHESIS_PROFILE=ci or =dev chooses explicitly.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.register_profile("dev")
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if REQUIRE_SHARED else "dev"))
 
 
 def pytest_report_header(config):

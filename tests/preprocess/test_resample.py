@@ -129,7 +129,8 @@ def test_linear_resampling_property(steps, seed, mult):
     t = np.cumsum(np.asarray(steps, dtype=np.int64) * 1_000_000)
     x = np.random.default_rng(seed).normal(size=len(t))
     g = make_grid(int(t[0]) - 5_000_000, int(t[-1]) + 5_000_000, 97.0)
-    per = np.median(np.diff(t))
+    # the documented bridge limit (bridge_limit_ns): m x the longer of the source and grid periods
+    per = max(np.median(np.diff(t)), np.median(np.diff(g)) if len(g) > 1 else 0.0)
     r, valid = resample(pd.DataFrame({"t_ns": t, "x": x}), g, {"x": "linear"}, gap_multiple=mult)
     y = r["x"].to_numpy()
     k = np.searchsorted(t, g, side="right") - 1

@@ -115,6 +115,16 @@ class TrajectoryError(ValueError):
     """Bad demonstrations or settings for the trajectory learner (one clear line)."""
 
 
+def _real(v) -> bool:
+    """A real number (not a bool, a string or None)."""
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+
+
+def _whole_number(v, least: int) -> bool:
+    """``v`` is a whole number >= ``least`` (an integral float such as 20.0 counts; 1.9 does not)."""
+    return _real(v) and bool(np.isfinite(v)) and float(v).is_integer() and v >= least
+
+
 def kinematic_transition(dt: float, n_x: int) -> F64:
     """The kinematic model's ``F`` (``n_x`` = 9: position–velocity–acceleration, 13: plus the
     random-walk quaternion), Euler-integrated (seed 004 §4: "simple Euler integration") with the
@@ -180,6 +190,23 @@ def _align_dp(emis, lo, logd, T):  # pragma: no cover - compiled
         tau[s] = lo[s] + w
         w = back[s, w]
     return tau
+
+
+def _tau_indices(tk: ArrayLike, k: int) -> NDArray[np.int64]:
+    """Demo ``k``'s given τ as int64: integers, or floats holding whole numbers (a fractional,
+    NaN or infinite index is refused rather than truncated)."""
+    a = np.asarray(tk)
+    if a.dtype.kind not in "iuf":
+        raise TrajectoryError(f"TrajectoryLearner.fit: tau[{k}] must hold integer hidden indices, got dtype {a.dtype}")
+    if a.size == 0:
+        raise TrajectoryError(f"TrajectoryLearner.fit: tau[{k}] is empty")
+    if a.dtype.kind == "f":
+        bad = (~np.isfinite(a) | (a != np.round(a))).ravel()
+        if bad.any():
+            j = int(np.argmax(bad))
+            raise TrajectoryError(f"TrajectoryLearner.fit: tau[{k}] must hold integer hidden indices; sample {j} "
+                                  f"is {a.ravel()[j].item()!r} (refused rather than truncated)")
+    return np.asarray(a, dtype=np.int64)
 
 
 def alignment_band(N: int, T: int, C: int) -> NDArray[np.int64]:
@@ -298,8 +325,26 @@ class TrajectoryLearner:
             raise TrajectoryError(f"TrajectoryLearner: init_tau must be 'dtw' or 'linear', not {self.init_tau!r}")
         if self.cov_type not in ("diag", "full"):
             raise TrajectoryError(f"TrajectoryLearner: cov_type must be 'diag' or 'full', not {self.cov_type!r}")
-        if int(self.window_C) < 1 or int(self.max_iter) < 1 or not self.ridge >= 0 or not self.tol >= 0:
-            raise TrajectoryError("TrajectoryLearner: window_C and max_iter must be >= 1, ridge and tol >= 0")
+        for name in ("window_C", "max_iter"):
+            if not _whole_number(getattr(self, name), 1):
+                raise TrajectoryError(f"TrajectoryLearner: {name} must be a whole number >= 1, not "
+                                      f"{getattr(self, name)!r}")
+        if not self.ridge >= 0 or not self.tol >= 0:
+            raise TrajectoryError("TrajectoryLearner: ridge and tol must be >= 0")
+        if not (_real(self.d_prior) and np.isfinite(self.d_prior) and self.d_prior >= 0):
+            raise TrajectoryError(f"TrajectoryLearner: d_prior (a Dirichlet pseudo-count) must be a finite "
+                                  f"number >= 0, not {self.d_prior!r}")
+        for name in ("learn_d", "fix_tau", "use_bias"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TrajectoryError(f"TrajectoryLearner: {name} must be True or False, not "
+                                      f"{getattr(self, name)!r}")
+        # T = round(hidden_factor · mean N) hidden steps of dt/hidden_factor, and τ rises by 1..3
+        # hidden steps a sample: a demo of the mean length spans the axis with a mean step of
+        # hidden_factor, so 1 < hidden_factor <= 3 (1 leaves no room to warp time at all, above 3
+        # the alignment band c_s = s(T−1)/(N−1) outruns τ)
+        if not (_real(self.hidden_factor) and np.isfinite(self.hidden_factor) and 1 < self.hidden_factor <= 3):
+            raise TrajectoryError(f"TrajectoryLearner: hidden_factor must be a finite number in (1, 3] (τ steps "
+                                  f"1..3 hidden steps a sample), not {self.hidden_factor!r}")
         demos = list(demos)
         if len(demos) < 2:
             raise TrajectoryError(f"TrajectoryLearner.fit: needs at least 2 demos, got {len(demos)}")
@@ -452,7 +497,7 @@ class TrajectoryLearner:
             raise TrajectoryError(f"TrajectoryLearner.fit: tau has {len(tau)} entries for {len(Y)} demos")
         out = []
         for k, (tk, y) in enumerate(zip(tau, Y)):
-            tk = np.asarray(tk, dtype=np.int64)
+            tk = _tau_indices(tk, k)
             st = np.diff(tk)
             if (tk.shape != (len(y),) or tk[0] != 0 or tk[-1] > self._T - 1 or np.any(st < 1)
                     or np.any(st > 3)):
@@ -505,6 +550,7 @@ class TrajectoryLearner:
         self._driven = np.asarray(YAK54_DRIVEN) if yak else np.arange(6, n_x)
         T = int(round(self.hidden_factor * np.mean([len(y) for y in Y])))
         if tau is not None:
+            tau = [_tau_indices(tk, k) for k, tk in enumerate(tau)]
             # a given τ (e.g. the truth) may reach past 2 × mean N: the axis then ends at its end
             T = max(T, max(int(np.max(tk)) + 1 for tk in tau))
         self._T = T

@@ -64,7 +64,7 @@ from numpy.typing import NDArray
 
 from ..models.features import GMR_FEATURE_SETS, decimation_factor, run_sequences
 from ..models.metrics import UNKNOWN
-from .base import GaussianState
+from .base import GaussianState, check_times
 from .ekf import ExtendedKalmanFilter, FilterTrack, run_filter
 from .models import STATE_COLUMNS, ca_transition, hmm_input, hmm_transition
 
@@ -360,8 +360,11 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
         raise EkfHmmError(f"run_ekf_hmm: increments must be one of {', '.join(INCREMENTS)}, not {increments!r}")
     if store not in ("filtered", "mean"):
         raise EkfHmmError(f"run_ekf_hmm: store must be 'filtered' or 'mean', not {store!r}")
-    t_ns = np.asarray(t_ns, dtype=np.int64)
     prior, Q2 = _batched(prior), _q2(Q2, "run_ekf_hmm")   # before the costly baseline and classification
+    try:  # a fractional float stamp is refused here, not truncated (run_filter would see int64)
+        t_ns = check_times(t_ns, "run_ekf_hmm", prior.t_ns)
+    except ValueError as exc:
+        raise EkfHmmError(str(exc)) from None
     base = run_filter(ekf, prior, t_ns, z, store=store)
     R, T = base.mean.shape[:2]
     frame = ekf_state_frame(classifier_state(base.mean, t_ns, increments), t_ns, yaw_rad=yaw_rad)
@@ -396,7 +399,8 @@ def hmm_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, Q2, axe
         As :func:`run_ekf_hmm` (``prior`` batch ``(R,)``).
     Q2 : array_like, shape (9, 9)
     axes : ndarray of bool, shape (R, T, 3)
-        Step k is predicted with HMM inputs on these NED axes.
+        Step k is predicted with HMM inputs on these NED axes; ``axes[:, 0]`` must be False
+        (step 0 has no inputs before it).
     acc, jerk : ndarray, shape (R, T, 3)
         GMR inputs; the prediction into step k takes those of step k−1.
     store : {"filtered", "mean"}
@@ -404,15 +408,30 @@ def hmm_filter(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, Q2, axe
     Returns
     -------
     FilterTrack
+
+    Raises
+    ------
+    EkfHmmError
+        Bad shapes, ``axes[:, 0]`` True, or ``t_ns`` not 1-D, fractional, decreasing or before
+        the prior (naming the first bad row).
     """
-    t_ns = np.asarray(t_ns, dtype=np.int64)
     prior, Q2 = _batched(prior), _q2(Q2, "hmm_filter")
+    try:
+        t_ns = check_times(t_ns, "hmm_filter", prior.t_ns)
+    except ValueError as exc:
+        raise EkfHmmError(str(exc)) from None
     z = np.asarray(z, dtype=np.float64)
     R, T = prior.mean.shape[0], len(t_ns)
     axes = np.asarray(axes, dtype=bool)
     if axes.shape != (R, T, 3) or np.shape(acc) != (R, T, 3) or np.shape(jerk) != (R, T, 3):
         raise EkfHmmError(f"hmm_filter: axes/acc/jerk must be shaped {(R, T, 3)}, got {axes.shape}, "
                           f"{np.shape(acc)}, {np.shape(jerk)}")
+    if T and axes[:, 0].any():
+        # the prediction into step k takes the inputs of step k−1: step 0 has none before it
+        # (index −1 would silently be the last step's, i.e. future data)
+        r = int(np.argmax(axes[:, 0].any(axis=-1)))
+        raise EkfHmmError(f"hmm_filter: axes[:, 0] must be False (no HMM input before the first step); "
+                          f"run {r} has {axes[r, 0].tolist()}")
     mean = np.empty((T, R, 9))
     cov = np.empty((T, R, 9, 9)) if store == "filtered" else None
     nis = np.empty((T, R))

@@ -23,6 +23,8 @@ re-initialisation): a NaN measurement here is simply a predict-only step.
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 from numba import njit, prange
 from numpy.typing import ArrayLike, NDArray
@@ -217,6 +219,21 @@ def _systematic_indices(w, blksum, total, u, idx):
             idx[j] = i
 
 
+def _positive(v, name: str, who: str) -> float:
+    """``v`` as a float, or one ValueError unless it is a positive finite real number."""
+    if not (isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) and np.isfinite(v) and v > 0):
+        raise ValueError(f"{who}: {name} must be a positive finite number, got {v!r}")
+    return float(v)
+
+
+def _check_measurements(z: ArrayLike, who: str) -> F64:
+    """Measurements as a float array (T, 2) (NaN rows allowed: predict-only steps)."""
+    Z = np.asarray(z, dtype=np.float64)
+    if Z.ndim != 2 or Z.shape[1] != 2:
+        raise ValueError(f"{who}: z must have shape (T, 2) (N, E positions), got {Z.shape}")
+    return Z
+
+
 def cv_bootstrap_run(x0: ArrayLike, z: ArrayLike, dt: float, sigma_a: float, sigma_z: float,
                      seed: int) -> tuple[F64, F64]:
     """``T`` CV bootstrap steps (predict, weigh, normalise, mean, systematic resampling).
@@ -237,9 +254,20 @@ def cv_bootstrap_run(x0: ArrayLike, z: ArrayLike, dt: float, sigma_a: float, sig
         Weighted means before resampling.
     x : (N, 4)
         The final particles.
+
+    Raises
+    ------
+    ValueError
+        ``x0`` not (N, 4) with N >= 1, ``z`` not (T, 2), or ``dt``, ``sigma_a`` or ``sigma_z`` not a
+        positive finite number (checked before any kernel runs).
     """
-    X = np.ascontiguousarray(np.asarray(x0, dtype=np.float64).T).copy()
-    Z = np.asarray(z, dtype=np.float64)
+    X0 = np.asarray(x0, dtype=np.float64)
+    if X0.ndim != 2 or X0.shape[1] != 4 or X0.shape[0] < 1:
+        raise ValueError(f"cv_bootstrap_run: x0 must have shape (N, 4) with N >= 1 particles, got {X0.shape}")
+    Z = _check_measurements(z, "cv_bootstrap_run")
+    dt, sigma_a, sigma_z = (_positive(v, name, "cv_bootstrap_run")
+                            for v, name in ((dt, "dt"), (sigma_a, "sigma_a"), (sigma_z, "sigma_z")))
+    X = np.ascontiguousarray(X0.T).copy()
     n = X.shape[1]
     nb = (n + BLOCK - 1) // BLOCK
     ll = np.empty(n)
@@ -402,6 +430,52 @@ def _jm_sums(w, X, mode, K, blksum, blkmom, blkmode):
         blksum[b] = s
 
 
+#: round-off tolerance of jm_run's Π: row sums within it of 1, no entry below −tolerance
+PI_ROW_TOL = 1e-9
+
+
+def _check_jm_modes(kinds, Pi_dt, sigma, sigma_omega, enter_sigma):
+    """:func:`jm_run`'s mode settings as arrays, checked before any kernel indexes them: the kinds
+    (K of them), a row-stochastic K×K ``Pi_dt`` and K non-negative finite σ per parameter."""
+    kind = np.asarray(kinds)
+    if kind.ndim != 1 or kind.size < 1:
+        raise ValueError(f"jm_run: kinds must be a 1-D list of K >= 1 mode kinds, got shape {kind.shape}")
+    known = (KIND_CV, KIND_CA, KIND_CT)
+    bad = [k for k in kind.tolist() if k not in known]
+    if bad:
+        raise ValueError(f"jm_run: kinds must be KIND_CV ({KIND_CV}), KIND_CA ({KIND_CA}) or KIND_CT "
+                         f"({KIND_CT}), got {bad[0]!r}")
+    kind = kind.astype(np.int64)
+    K = kind.size
+    Pi = np.asarray(Pi_dt, dtype=np.float64)
+    if Pi.shape != (K, K):
+        raise ValueError(f"jm_run: Pi_dt must be {K}x{K} (K = len(kinds) = {K}), got shape {Pi.shape}")
+    if not np.all(np.isfinite(Pi)):
+        r = int(np.argmax(~np.isfinite(Pi).all(axis=1)))
+        raise ValueError(f"jm_run: Pi_dt row {r} is not finite: {Pi[r].tolist()}")
+    # negative only by round-off, as markov.check_stochastic allows (an entry of −1e-17 from a
+    # matrix product): the kernel then never draws that mode, the same as an exact 0
+    if np.any(Pi < -PI_ROW_TOL):
+        r = int(np.argmax((Pi < -PI_ROW_TOL).any(axis=1)))
+        raise ValueError(f"jm_run: Pi_dt row {r} has a negative probability: {Pi[r].tolist()}")
+    off = np.abs(Pi.sum(axis=1) - 1.0)
+    if np.any(off > PI_ROW_TOL):
+        r = int(np.argmax(off > PI_ROW_TOL))
+        raise ValueError(f"jm_run: Pi_dt row {r} sums to {Pi[r].sum():.12g}, not 1 (within {PI_ROW_TOL:g}): "
+                         f"{Pi[r].tolist()}")
+    out = []
+    for name, v in (("sigma", sigma), ("sigma_omega", sigma_omega), ("enter_sigma", enter_sigma)):
+        a = np.asarray(v, dtype=np.float64)
+        if a.shape != (K,):
+            raise ValueError(f"jm_run: {name} must have one entry per mode kind (K = len(kinds) = {K}), "
+                             f"got shape {a.shape}")
+        if not np.all(np.isfinite(a) & (a >= 0)):
+            i = int(np.argmax(~(np.isfinite(a) & (a >= 0))))
+            raise ValueError(f"jm_run: {name}[{i}] must be a finite number >= 0, got {a[i].item()!r}")
+        out.append(a)
+    return kind, Pi, *out
+
+
 def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: ArrayLike,
            kinds: ArrayLike, sigma: ArrayLike, sigma_omega: ArrayLike, enter_sigma: ArrayLike,
            sigma_z: float, seed: int) -> tuple[F64, F64, F64, NDArray[np.int64]]:
@@ -419,19 +493,44 @@ def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: Arra
     Returns
     -------
     mean : (T, 7); mode_p : (T, K); x : (N, 7) final particles; mode : (N,) final modes
+
+    Raises
+    ------
+    ValueError
+        Before any kernel runs (they index ``sigma[r]``, ``Pi_dt[r]`` ... unchecked): ``x0`` not
+        (N, 7); ``z`` not (T, 2); ``dt`` or ``sigma_z`` not positive and finite; a kind other than
+        ``KIND_CV``/``KIND_CA``/``KIND_CT``; ``Pi_dt`` not K×K (K = ``len(kinds)``), not finite,
+        negative or with a row sum off 1 by more than :data:`PI_ROW_TOL`; ``sigma``,
+        ``sigma_omega`` or ``enter_sigma`` not K finite values >= 0; ``mode0`` not N integers in
+        [0, K). The message names the row, entry or particle.
     """
-    X = np.ascontiguousarray(np.asarray(x0, dtype=np.float64).T).copy()
-    if X.shape[0] != 7:
-        raise ValueError(f"jm_run: particles must have shape (N, 7), got {X.T.shape}")
-    mode = np.asarray(mode0, dtype=np.int64).copy()
-    Z = np.asarray(z, dtype=np.float64)
-    kind = np.asarray(kinds, dtype=np.int64)
+    X0 = np.asarray(x0, dtype=np.float64)
+    if X0.ndim != 2 or X0.shape[1] != 7 or X0.shape[0] < 1:
+        raise ValueError(f"jm_run: particles must have shape (N, 7) with N >= 1, got {X0.shape}")
+    Z = _check_measurements(z, "jm_run")
+    dt = _positive(dt, "dt", "jm_run")
+    sigma_z = _positive(sigma_z, "sigma_z", "jm_run")
+    kind, Pi, sig, sigw, init = _check_jm_modes(kinds, Pi_dt, sigma, sigma_omega, enter_sigma)
     K = kind.size
-    F = np.cumsum(np.asarray(Pi_dt, dtype=np.float64), axis=1)
+    mode_in = np.asarray(mode0)
+    if mode_in.shape != (X0.shape[0],):
+        raise ValueError(f"jm_run: mode0 must have shape ({X0.shape[0]},) (one mode per particle), "
+                         f"got {mode_in.shape}")
+    if mode_in.dtype.kind not in "iu" and not (mode_in.dtype.kind == "f" and np.all(mode_in == np.round(mode_in))):
+        raise ValueError(f"jm_run: mode0 must hold integer mode indices, got dtype {mode_in.dtype}")
+    bad = ~((mode_in >= 0) & (mode_in < K))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"jm_run: mode0 must lie in [0, {K}) (K = len(kinds)); particle {i} has mode "
+                         f"{mode_in[i].item()!r} ({int(bad.sum())} particle(s) out of range)")
+    X = np.ascontiguousarray(X0.T).copy()
+    mode = np.asarray(mode_in, dtype=np.int64).copy()
+    F = np.cumsum(Pi, axis=1)
+    # a proper CDF per row: the last entry pinned to exactly 1. _check_jm_modes has refused any
+    # row whose sum misses 1 by more than PI_ROW_TOL (1e-9), so this moves it by round-off only
+    # (a retimed or printed Π), the sliver the kernel's search gives the last mode anyway; it
+    # never rewrites a wrong matrix
     F[:, -1] = 1.0
-    sig = np.asarray(sigma, dtype=np.float64)
-    sigw = np.asarray(sigma_omega, dtype=np.float64)
-    init = np.asarray(enter_sigma, dtype=np.float64)
     n = mode.size
     nb = (n + BLOCK - 1) // BLOCK
     ll = np.zeros(n)

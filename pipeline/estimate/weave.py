@@ -76,7 +76,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from ..config import build, cfield, validate_section
+from ..config import ConfigError, build, cfield, validate_section
 from .markov import check_stochastic
 from .models import Radar2DModel, ct_transition
 from .resample import get_resampler
@@ -139,17 +139,62 @@ class HmpfConfig:
         """From ``estimate.pf.hmpf`` (validated, defaulted; the ``vehicles``, ``from_train``,
         ``turn_threshold_radps`` and ``radar`` keys belong to the rule and the sensor), then ``override``."""
         sec = {k: v for k, v in validate_section(_h, sec).items() if k not in _NOT_FILTER_KEYS}
-        cfg = build(cls, {**sec, **override})
-        check_stochastic(cfg.pi_m, f"{_h}.pi_m")
-        lo, hi = cfg.omega_init_radps
-        if not 0 < lo <= hi:
-            raise ValueError(f"{_h}.omega_init_radps: need 0 < low <= high, got {cfg.omega_init_radps}")
-        return cfg
+        return build(cls, {**sec, **override})   # __post_init__ checks the result (check_hmpf_config)
+
+    def __post_init__(self) -> None:
+        # every instance, however made (from_config, direct construction, with_()), is checked
+        check_hmpf_config(self)
 
     def with_(self, **kw) -> "HmpfConfig":
         """A copy with some settings changed."""
         import dataclasses
         return dataclasses.replace(self, **kw)
+
+
+def _plain_value(v: Any) -> Any:
+    """A field value as the plain Python the config schema validates (numpy scalars and arrays
+    unwrapped, tuples as lists)."""
+    if isinstance(v, np.ndarray):
+        return _plain_value(v.tolist())
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, (list, tuple)):
+        return [_plain_value(x) for x in v]
+    return v
+
+
+def _numbers(v: Any):
+    if isinstance(v, (list, tuple)):
+        for x in v:
+            yield from _numbers(x)
+    elif isinstance(v, (int, float)) and not isinstance(v, bool):
+        yield v
+
+
+def check_hmpf_config(cfg: "HmpfConfig") -> None:
+    """The one check of the filter's settings, whatever made them (:meth:`HmpfConfig.from_config`,
+    direct construction or :meth:`HmpfConfig.with_`, via ``__post_init__``): every value against
+    the ``estimate.pf.hmpf`` schema (types, ranges, enums: p1/p2 in [0, 1], dt_s > 0,
+    n_particles >= 10, counters, enter_submode, method, resample...), every number finite (the
+    schema's bounds let NaN through), ``pi_m`` row-stochastic and ``omega_init_radps`` ordered.
+
+    Raises
+    ------
+    ConfigError (a ValueError)
+        One line naming the key and the value.
+    """
+    import dataclasses
+
+    sec = {f.name: _plain_value(getattr(cfg, f.name)) for f in dataclasses.fields(cfg)}
+    validate_section(_h, sec)
+    for k, v in sec.items():
+        bad = [x for x in _numbers(v) if not np.isfinite(x)]
+        if bad:
+            raise ConfigError(f"{_h}.{k}: {v!r} is not finite")
+    check_stochastic(cfg.pi_m, f"{_h}.pi_m")
+    lo, hi = cfg.omega_init_radps
+    if not 0 < lo <= hi:
+        raise ConfigError(f"{_h}.omega_init_radps: need 0 < low <= high, got {cfg.omega_init_radps}")
 
 
 # -- the exact parts ---------------------------------------------------------------------------------
@@ -196,6 +241,21 @@ def leaf_of(mode: ArrayLike, submode: ArrayLike) -> NDArray[np.int8]:
     return np.where(m == W, 3 + np.asarray(submode), m).astype(np.int8)
 
 
+def _whole(v: Any, name: str, least: int) -> int:
+    """``v`` as an int, or one ValueError unless it is a whole number >= ``least`` (an integral
+    float such as 80.0 is taken; 1.9 or True is not)."""
+    ok = not isinstance(v, (bool, np.bool_))
+    if ok:
+        try:
+            f = float(v)
+            ok = bool(np.isfinite(f)) and f.is_integer() and f >= least
+        except (TypeError, ValueError):
+            ok = False
+    if not ok:
+        raise ValueError(f"detector: {name} must be a whole number >= {least}, got {v!r}")
+    return int(v)
+
+
 def detector(F: ArrayLike, window: int = 80, tau: float = 0.269, startup: int = 25) -> tuple[F64, NDArray[np.bool_]]:
     """Seed-003 §6 detector over the last axis of the weave fraction ``F`` (..., T).
 
@@ -217,10 +277,24 @@ def detector(F: ArrayLike, window: int = 80, tau: float = 0.269, startup: int = 
     been seen: at small size (20 seeds, 2,000 particles) straight tracks never flagged 16/20 → 19/20,
     π-turn 6/20 → 7/20, the weave flagged within 80 steps of its 3rd turn 17/20 → 16/20, and weave
     runs flagged on the lead straight before the weave began 7/20 → 0/20.
+
+    Raises
+    ------
+    ValueError
+        ``window`` not a whole number >= 1, ``startup`` not a whole number >= 0, or ``tau`` not
+        finite.
     """
+    window = _whole(window, "window", 1)
+    startup = _whole(startup, "startup", 0)
+    try:
+        tau_ok = bool(np.isfinite(float(tau)))
+    except (TypeError, ValueError):
+        tau_ok = False
+    if not tau_ok:
+        raise ValueError(f"detector: tau must be a finite number, got {tau!r}")
     F = np.asarray(F, dtype=np.float64)
     T = F.shape[-1]
-    s = min(max(int(startup), 0), T)
+    s = min(startup, T)
     G = F.copy()
     G[..., :s] = 0.0                   # not taken into consideration
     c = np.cumsum(G, axis=-1)

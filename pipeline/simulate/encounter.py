@@ -81,6 +81,11 @@ class ScenarioSettings:
     sweeps: Mapping[str, tuple[float, ...]] = field(default_factory=lambda: {
         "ownship_vel_noise_mps": (0.0, 1.0, 3.0), "bias_deg": (0.0, 0.2), "ownship_speed_mps": (40.0, 50.0, 60.0)})
 
+    def __post_init__(self) -> None:
+        # every instance, however made (from_config, direct construction, replace() with the
+        # sweep overrides of simulate_encounters), gets the config path's checks
+        check_scenario_settings(self)
+
     @classmethod
     def from_config(cls, section: Mapping[str, Any] | None) -> "ScenarioSettings":
         """From the ``scenarios`` sub-section (validated and defaulted by the config schema)."""
@@ -103,6 +108,63 @@ class ScenarioSettings:
         """The settings as plain JSON values (output metadata)."""
         return {k: (dict(v) if isinstance(v, Mapping) else list(v) if isinstance(v, tuple) else v)
                 for k, v in self.__dict__.items()}
+
+
+#: ScenarioSettings' (lo, hi) ranges: U(lo, hi) draws, so lo <= hi
+_RANGES = ("omega_deg_s", "speed_mps", "range_m", "angle_deg")
+
+
+def _plain(v: Any) -> Any:
+    """A settings value as the plain Python the config schema validates."""
+    if isinstance(v, Mapping):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, np.ndarray):
+        return _plain(v.tolist())
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def _numbers(v: Any):
+    if isinstance(v, Mapping):
+        for x in v.values():
+            yield from _numbers(x)
+    elif isinstance(v, list):
+        for x in v:
+            yield from _numbers(x)
+    elif isinstance(v, (int, float)) and not isinstance(v, bool):
+        yield v
+
+
+def check_scenario_settings(s: ScenarioSettings) -> None:
+    """The one check of the encounter settings (``ScenarioSettings.__post_init__``): every value
+    against the ``estimate.bearing_only.scenarios`` schema (``place`` and ``second_ct_omega``
+    enums, dt_s > 0, σ >= 0, positive durations, |ω|, speeds and ranges...), every number finite
+    (the schema's bounds let NaN through), the (lo, hi) ranges ordered and every switching
+    scenario's durations given.
+
+    Raises
+    ------
+    ConfigError (a ValueError)
+        One line naming the key and the value.
+    """
+    from ..config import ConfigError, validate_section
+
+    where = "estimate.bearing_only.scenarios"
+    sec = {k: _plain(v) for k, v in s.__dict__.items()}
+    validate_section(where, sec)
+    for k, v in sec.items():
+        if any(not np.isfinite(x) for x in _numbers(v)):
+            raise ConfigError(f"{where}.{k}: {v!r} is not finite")
+    for k in _RANGES:
+        lo, hi = sec[k]
+        if lo > hi:
+            raise ConfigError(f"{where}.{k}: need low <= high, got {list(sec[k])}")
+    missing = [k for k in KINDS if k != "orbit" and k not in sec["segments_s"]]
+    if missing:
+        raise ConfigError(f"{where}.segments_s: gives no durations for {', '.join(missing)}")
 
 
 @dataclass(frozen=True)

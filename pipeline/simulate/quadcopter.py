@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.signal import lfilter
 
 from ..config import ConfigError, cfield
@@ -279,6 +279,31 @@ def integrate(f: F64, v0: F64, r0: F64, dt: float, params: QuadParams) -> tuple[
     return pos, vel, acc
 
 
+def uniform_step(t_s: ArrayLike) -> float:
+    """The step of a uniform time grid ``t_s`` (s), or one ValueError.
+
+    The FOH integrator and the jerk's finite differences assume one step throughout: a grid
+    with fewer than 2 samples, a non-finite time, a non-positive step, or a step that differs
+    from the first by more than round-off (``1e-9·dt`` plus a few ulps of the largest |t|, the
+    error of ``np.arange(n) / rate``) is refused, naming the first bad row.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.ndim != 1 or len(t) < 2:
+        raise ValueError(f"simulate: t_s must be a 1-D grid of at least 2 samples, got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"simulate: t_s row {int(np.argmax(~np.isfinite(t)))} is not finite")
+    dt = float(t[1] - t[0])
+    if not dt > 0:
+        raise ValueError(f"simulate: t_s must increase; its first step is {dt!r} s")
+    tol = 1e-9 * dt + 16 * np.finfo(np.float64).eps * float(np.max(np.abs(t)))
+    off = np.abs(np.diff(t) - dt) > tol
+    if off.any():
+        k = int(np.argmax(off)) + 1
+        raise ValueError(f"simulate: t_s must be a uniform grid; the step into row {k} is "
+                         f"{float(t[k] - t[k - 1])!r} s, the first {dt!r} s")
+    return dt
+
+
 def simulate(cmd: CommandSample, t_s: F64, params: QuadParams, *, yaw0: F64, pos0: F64,
              dist: F64 | None = None, vel0: F64 | None = None,
              label: NDArray[np.object_] | None = None) -> Truth:
@@ -289,7 +314,7 @@ def simulate(cmd: CommandSample, t_s: F64, params: QuadParams, *, yaw0: F64, pos
     cmd : CommandSample
         Commands on ``t_s`` (yaw relative to the heading).
     t_s : array (n_t,)
-        Uniform time grid (s), step = 1/rate.
+        Uniform time grid (s), step = 1/rate, at least 2 samples (:func:`uniform_step`).
     params : QuadParams
     yaw0 : array (n_runs,)
         Heading of each run (rad); the whole command profile is rotated with it.
@@ -303,8 +328,8 @@ def simulate(cmd: CommandSample, t_s: F64, params: QuadParams, *, yaw0: F64, pos
         Maneuver label per sample.
     """
     n_runs = len(yaw0)
+    dt = uniform_step(t_s)
     n_t = len(t_s)
-    dt = float(t_s[1] - t_s[0])
     euler = np.broadcast_to(cmd.euler, (n_runs, n_t, 3)).copy()
     euler[..., 2] += yaw0[:, None]
     euler[..., 2] = np.angle(np.exp(1j * euler[..., 2]))  # wrap to (-pi, pi]

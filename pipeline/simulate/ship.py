@@ -17,6 +17,7 @@ over seeds (:func:`gps_measure`, :func:`radar_measure`).
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -123,6 +124,8 @@ def build_track(segments: Sequence[Segment], *, start_ne: ArrayLike = THESIS_STA
     """
     if not segments or any(s.kind not in KINDS or s.steps < 1 for s in segments):
         raise ValueError(f"ship track {name}: segments need a kind in {KINDS} and steps >= 1")
+    if not _positive_finite(dt):
+        raise ValueError(f"ship track {name}: dt must be a positive finite step (s), got {dt!r}")
     x = np.array([*np.asarray(start_ne, float), *np.asarray(vel_ne, float), 0.0])
     states, kinds, turn_end = [x.copy()], ["S"], []
     for seg in segments:
@@ -143,6 +146,15 @@ def build_track(segments: Sequence[Segment], *, start_ne: ArrayLike = THESIS_STA
     return ShipTrack(name, float(dt), st, kind, w, np.asarray(turn_end, dtype=np.int64))
 
 
+def _real(v) -> bool:
+    """A real number (not a bool or a string)."""
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+
+
+def _positive_finite(v) -> bool:
+    return _real(v) and bool(np.isfinite(v) and v > 0)
+
+
 def _omega_per_step(segments: Sequence[Segment]) -> list[float]:
     out = [0.0]
     for seg in segments:
@@ -157,7 +169,11 @@ def straight_track(steps: int = 200, **kw) -> ShipTrack:
 
 def pi_turn_track(lead: int = 60, tail: int = 100, omega: float = THESIS_OMEGA, **kw) -> ShipTrack:
     """Straight – **left** turn of π – straight (digest 003 §4.2.3, A13); the turn takes
-    ``round(π/ω)`` steps at ω = −|omega| (NED: left)."""
+    ``round(π/ω)`` steps at ω = −|omega| (NED: left); ``omega`` must be non-zero and finite, and
+    below 2π rad/s (a turn of at least one step)."""
+    if not _positive_finite(abs(omega) if _real(omega) else None) or int(round(np.pi / abs(omega))) < 1:
+        raise ValueError(f"pi_turn_track: omega must be a non-zero finite turn rate with round(π/|omega|) >= 1 "
+                         f"steps (|omega| < 2π rad/s), got {omega!r}")
     n = int(round(np.pi / abs(omega)))
     return build_track([Segment("S", lead), Segment("L", n, abs(np.pi / n)), Segment("S", tail)],
                        name=kw.pop("name", "pi_turn"), **kw)
@@ -187,7 +203,10 @@ def weave_track(n_turns: int = 6, lead: int = 40, turn_steps: int = 12, straight
 
 
 def gps_measure(track: ShipTrack, n_seeds: int, rng: np.random.Generator, sigma_m: float = 1.0) -> F64:
-    """GPS positions ``(n_seeds, T, 2)``: the track's (N, E) plus N(0, σ²) per axis (seed 003: 1 m)."""
+    """GPS positions ``(n_seeds, T, 2)``: the track's (N, E) plus N(0, σ²) per axis (seed 003: 1 m);
+    ``sigma_m`` must be finite and >= 0 (0: the exact positions)."""
+    if not (_real(sigma_m) and np.isfinite(sigma_m) and sigma_m >= 0):
+        raise ValueError(f"gps_measure: sigma_m must be a finite number >= 0, got {sigma_m!r}")
     return track.state[None, :, 0:2] + sigma_m * rng.standard_normal((n_seeds, track.n_steps, 2))
 
 

@@ -180,3 +180,45 @@ def test_with_yak54_dynamics_em_learns_17_column_demos_with_bias_on_the_six_acce
         TrajectoryLearner(dt=ds.dt, dynamics="yak54").fit([y[:, :13] for y in ds.demos])
     with pytest.raises(TrajectoryError, match="known: kinematic, yak54"):
         TrajectoryLearner(dt=ds.dt, dynamics="f22").fit(ds.demos)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(window_C=1.9), r"window_C must be a whole number >= 1, not 1.9"),
+    (dict(window_C=0), r"window_C must be a whole number >= 1"),
+    (dict(window_C="20"), r"window_C must be a whole number >= 1"),
+    (dict(max_iter=2.7), r"max_iter must be a whole number >= 1, not 2.7"),
+    (dict(max_iter=np.nan), r"max_iter must be a whole number >= 1"),
+    (dict(max_iter=True), r"max_iter must be a whole number >= 1"),
+    (dict(d_prior=-1.0), r"d_prior \(a Dirichlet pseudo-count\) must be a finite number >= 0"),
+    (dict(d_prior=np.inf), r"d_prior .* must be a finite number >= 0"),
+    (dict(d_prior=np.nan), r"d_prior .* must be a finite number >= 0"),
+    (dict(learn_d="no"), r"learn_d must be True or False, not 'no'"),
+    (dict(learn_d=0), r"learn_d must be True or False"),
+    (dict(fix_tau="yes"), r"fix_tau must be True or False"),
+    (dict(hidden_factor=np.nan), r"hidden_factor must be a finite number in \(1, 3\]"),
+    (dict(hidden_factor=-2.0), r"hidden_factor must be a finite number in \(1, 3\]"),
+    (dict(hidden_factor=1.0), r"hidden_factor must be a finite number in \(1, 3\]"),
+    (dict(hidden_factor=3.5), r"hidden_factor must be a finite number in \(1, 3\]"),
+])
+def test_bad_learner_settings_are_refused_before_any_fitting(rng, kw, match):
+    _, demos, _ = _case(rng, D=3, n=30)
+    with pytest.raises(TrajectoryError, match=match):
+        TrajectoryLearner(dt=DT, **kw).fit(demos)
+
+
+@pytest.mark.parametrize("shift, match", [
+    (0.7, r"tau\[0\] must hold integer hidden indices; sample 0 is 0.7 \(refused rather than truncated\)"),
+    (np.nan, r"tau\[0\] must hold integer hidden indices; sample 0 is nan"),
+])
+def test_a_given_tau_must_hold_whole_hidden_indices(rng, shift, match):
+    _, demos, taus = _case(rng, D=3, n=30)
+    with pytest.raises(TrajectoryError, match=match):
+        TrajectoryLearner(dt=DT).fit(demos, tau=[tk + shift for tk in taus])
+
+
+def test_a_given_tau_of_whole_floats_fits_as_its_integers(rng):
+    _, demos, taus = _case(rng, D=3, n=30)
+    kw = dict(dt=DT, fix_tau=True, use_bias=False, max_iter=2, tol=0.0)
+    a = TrajectoryLearner(**kw).fit(demos, tau=taus)
+    b = TrajectoryLearner(**kw).fit(demos, tau=[tk.astype(float) for tk in taus])
+    np.testing.assert_array_equal(a.mean_, b.mean_)

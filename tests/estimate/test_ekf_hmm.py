@@ -417,3 +417,43 @@ def test_the_printed_increments_feed_the_classifier_causally_and_run_ekf_hmm_che
     np.testing.assert_array_equal(out2.mode[:, :k + 1], out.mode[:, :k + 1])
     with pytest.raises(EkfHmmError, match="run_ekf_hmm: increments must be one of"):
         run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2, increments="x")
+
+
+def _small_hmm_case(R=2, T=6):
+    """A tiny EKF+HMM input set: radar runs of a still target, the HMM on every axis after step 0."""
+    radar = RadarModel(site_ned_m=(-800.0, 600.0, 0.0))
+    truth = np.zeros((R, T, 9))
+    truth[..., 2] = -100.0
+    z = np.swapaxes(radar.measure(truth, np.random.default_rng(1)), 0, 1)
+    t_ns = np.arange(T, dtype=np.int64) * int(DT * 1e9)
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(20.0), radar)
+    prior = GaussianState(truth[:, 0], np.broadcast_to(initial_cov(), (R, 9, 9)).copy(), 0)
+    axes = np.ones((R, T, 3), dtype=bool)
+    axes[:, 0] = False
+    return ekf, prior, t_ns, z, np.eye(9), axes, np.zeros((R, T, 3)), np.zeros((R, T, 3))
+
+
+def test_the_hmm_filter_runs_on_the_small_case_it_is_checked_with():
+    out = hmm_filter(*_small_hmm_case(), store="mean")
+    assert np.all(np.isfinite(out.mean))
+
+
+@pytest.mark.parametrize("run, axis", [(0, 0), (1, 2)])
+def test_the_hmm_filter_refuses_hmm_inputs_before_the_first_step(run, axis):
+    ekf, prior, t_ns, z, Q2, axes, acc, jerk = _small_hmm_case()
+    axes[run, 0, axis] = True       # would take acc[:, −1], the last step's inputs (future data)
+    with pytest.raises(EkfHmmError, match=rf"axes\[:, 0\] must be False .*run {run}"):
+        hmm_filter(ekf, prior, t_ns, z, Q2, axes, acc, jerk)
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda t: t[[0, 1, 3, 2, 4, 5]], r"t_ns must be non-decreasing; row 3"),
+    (lambda t: t[::-1].copy(), r"t_ns must be non-decreasing; row 1"),
+    (lambda t: t.astype(float) + 0.5, r"t_ns must hold whole nanoseconds; row 0"),
+    (lambda t: t + (-1_000), r"the prior time 0 ns is after the first step"),
+    (lambda t: t[None], r"t_ns must be 1-D"),
+])
+def test_the_hmm_filter_refuses_step_times_that_go_back(change, match):
+    ekf, prior, t_ns, z, Q2, axes, acc, jerk = _small_hmm_case()
+    with pytest.raises(EkfHmmError, match=match):
+        hmm_filter(ekf, prior, change(t_ns), z, Q2, axes, acc, jerk)

@@ -95,3 +95,70 @@ def test_the_fused_jump_markov_step_agrees_with_the_generic_filter():
     tr = run_pf(pf, t, Z, t0_ns=-int(DT * 1e9))
     assert np.allclose(mean[:, :4], tr.mean[:, :4], atol=0.15)
     assert np.allclose(mode_p, tr.mode_p, atol=0.03)
+
+
+# -- bad input: one clear error before any kernel runs ------------------------------------------------
+
+_PI3 = np.array([[0.9, 0.05, 0.05], [0.05, 0.9, 0.05], [0.05, 0.05, 0.9]])
+_JM = dict(dt=0.1, Pi_dt=_PI3, kinds=[0, 1, 2], sigma=[1.0, 1.0, 1.0], sigma_omega=[0.1, 0.1, 0.1],
+           enter_sigma=[1.0, 1.0, 0.1], sigma_z=1.0, seed=7)
+
+
+def _jm(**kw):
+    x0 = kw.pop("x0", np.zeros((50, 7)))
+    mode0 = kw.pop("mode0", np.zeros(50, dtype=np.int64))
+    z = kw.pop("z", np.zeros((3, 2)))
+    return pf_fast.jm_run(x0, mode0, z, **{**_JM, **kw})
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(sigma=[1.0, 1.0]), r"sigma must have one entry per mode kind \(K = len\(kinds\) = 3\)"),
+    (dict(sigma_omega=[0.1] * 4), r"sigma_omega must have one entry per mode kind"),
+    (dict(enter_sigma=[1.0]), r"enter_sigma must have one entry per mode kind"),
+    (dict(sigma=[1.0, np.nan, 1.0]), r"sigma\[1\] must be a finite number >= 0"),
+    (dict(enter_sigma=[1.0, -1.0, 0.1]), r"enter_sigma\[1\] must be a finite number >= 0"),
+    (dict(mode0=np.full(50, 5)), r"mode0 must lie in \[0, 3\).*particle 0 has mode 5"),
+    (dict(mode0=np.r_[np.zeros(49, int), -1]), r"particle 49 has mode -1"),
+    (dict(mode0=np.zeros(49, int)), r"mode0 must have shape \(50,\)"),
+    (dict(mode0=np.full(50, 0.5)), r"mode0 must hold integer mode indices"),
+    (dict(Pi_dt=[[0.5, 0.6, 0.1], [0, 1, 0], [0, 0, 1]]), r"Pi_dt row 0 sums to 1.2"),
+    (dict(Pi_dt=[[1.0, 0, 0], [0, 1, 0], [0, 0, 0.9]]), r"Pi_dt row 2 sums to 0.9"),
+    (dict(Pi_dt=[[1.2, -0.2, 0], [0, 1, 0], [0, 0, 1]]), r"Pi_dt row 0 has a negative probability"),
+    (dict(Pi_dt=[[np.nan, 0.5, 0.5], [0, 1, 0], [0, 0, 1]]), r"Pi_dt row 0 is not finite"),
+    (dict(Pi_dt=np.eye(2)), r"Pi_dt must be 3x3"),
+    (dict(kinds=[0, 1, 7]), r"kinds must be KIND_CV"),
+    (dict(x0=np.zeros((50, 4))), r"particles must have shape \(N, 7\)"),
+    (dict(z=np.zeros((3, 3))), r"z must have shape \(T, 2\)"),
+    (dict(sigma_z=0.0), r"sigma_z must be a positive finite number"),
+    (dict(dt=np.nan), r"dt must be a positive finite number"),
+])
+def test_the_jump_markov_run_refuses_mismatched_mode_settings_with_one_clear_error(bad, match):
+    with pytest.raises(ValueError, match=match):
+        _jm(**bad)
+
+
+def test_the_jump_markov_run_keeps_a_pi_whose_rows_miss_one_by_round_off_only():
+    pi = _PI3.copy()
+    pi[:, 0] += 4e-10                                   # within the 1e-9 row-sum tolerance
+    a = _jm(Pi_dt=pi, mode0=np.arange(50) % 3)
+    assert all(np.all(np.isfinite(v)) for v in a[:3])
+
+
+@pytest.mark.parametrize("x0, z, kw, match", [
+    (np.zeros((4, 1000)), np.zeros((5, 2)), {}, r"x0 must have shape \(N, 4\)"),   # transposed
+    (np.zeros((1000, 7)), np.zeros((5, 2)), {}, r"x0 must have shape \(N, 4\)"),
+    (np.zeros((0, 4)), np.zeros((5, 2)), {}, r"x0 must have shape \(N, 4\) with N >= 1"),
+    (np.zeros((100, 4)), np.zeros((5, 3)), {}, r"z must have shape \(T, 2\)"),
+    (np.zeros((100, 4)), np.zeros(5), {}, r"z must have shape \(T, 2\)"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(sigma_z=np.nan), "sigma_z must be a positive finite number"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(sigma_z=0.0), "sigma_z must be a positive finite number"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(sigma_z=-1.0), "sigma_z must be a positive finite number"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(sigma_a=-1.0), "sigma_a must be a positive finite number"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(sigma_a=np.inf), "sigma_a must be a positive finite number"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(dt=0.0), "dt must be a positive finite number"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(dt=-0.1), "dt must be a positive finite number"),
+    (np.zeros((100, 4)), np.zeros((5, 2)), dict(dt="0.1"), "dt must be a positive finite number"),
+])
+def test_the_cv_bootstrap_run_refuses_bad_shapes_and_noise_levels_with_one_clear_error(x0, z, kw, match):
+    with pytest.raises(ValueError, match=match):
+        pf_fast.cv_bootstrap_run(x0, z, **{"dt": 0.1, "sigma_a": 1.0, "sigma_z": 1.0, "seed": 3, **kw})

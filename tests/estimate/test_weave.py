@@ -209,3 +209,58 @@ def test_with_segment_counters_a_straight_continued_into_the_weave_keeps_its_len
          .sum(axis=-1).mean() for k in ("leaf", "segment")}
     assert w["segment"] < 0.6 * w["leaf"], w
     assert HmpfConfig.from_config({}).counters == "leaf"   # the digest's A4, the default
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(window=0), "window must be a whole number >= 1"),
+    (dict(window=-3), "window must be a whole number >= 1"),
+    (dict(window=1.9), "window must be a whole number >= 1"),
+    (dict(window=np.nan), "window must be a whole number >= 1"),
+    (dict(window=True), "window must be a whole number >= 1"),
+    (dict(startup=-1), "startup must be a whole number >= 0"),
+    (dict(startup=2.5), "startup must be a whole number >= 0"),
+    (dict(tau=np.nan), "tau must be a finite number"),
+    (dict(tau=np.inf), "tau must be a finite number"),
+])
+def test_the_detector_refuses_a_window_start_up_or_threshold_it_cannot_use(kw, match):
+    with pytest.raises(ValueError, match=match):
+        detector(np.full(200, 0.3), **{"window": 80, "tau": 0.269, "startup": 25, **kw})
+
+
+def test_the_detector_takes_a_whole_window_given_as_a_float_and_gives_the_same_result():
+    F = np.random.default_rng(2).random(150)
+    for a, b in zip(detector(F, 80, 0.269, 25), detector(F, 80.0, 0.269, np.int64(25))):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(p1=1.5), r"p1: 1.5 is out of range"),
+    (dict(p2=-0.1), r"p2: -0.1 is out of range"),
+    (dict(dt_s=-1.0), r"dt_s: -1.0 is out of range"),
+    (dict(dt_s=np.nan), r"dt_s: nan is not finite"),
+    (dict(counters="bogus"), r"counters: 'bogus' is not one of leaf, segment"),
+    (dict(enter_submode="bogus"), r"enter_submode: 'bogus' is not one of keep, uniform, curve"),
+    (dict(method="max"), r"method: 'max' is not one of"),
+    (dict(resample="bogus"), r"resample: 'bogus' is not one of"),
+    (dict(n_particles=0), r"n_particles: 0 is out of range"),
+    (dict(n_particles=300.5), r"n_particles: 300.5 is not an integer"),
+    (dict(omega_init_radps=(0.3, 0.01)), r"omega_init_radps: need 0 < low <= high"),
+    (dict(pi_m=((0.5, 0.6, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1))), r"pi_m: row 0 sums to 1.1"),
+    (dict(detector_window=0), r"detector_window: 0 is out of range"),
+    (dict(tau=np.nan), r"tau: nan is not finite"),
+    (dict(tau=1.5), r"tau: 1.5 is out of range"),
+    (dict(delta_max_m=np.inf), r"delta_max_m: inf is not finite"),
+])
+def test_settings_made_by_with_or_direct_construction_get_the_config_paths_checks(cfg, bad, match):
+    with pytest.raises(ValueError, match=match):     # ConfigError (a ValueError), or pi_m's
+        cfg.with_(**bad)
+    with pytest.raises(ValueError, match=match):
+        HmpfConfig(**bad)
+    with pytest.raises(ValueError, match=match):
+        HmpfConfig.from_config({}, **bad)
+
+
+def test_valid_settings_made_with_numpy_values_are_kept_as_given(cfg):
+    c = cfg.with_(n_particles=np.int64(300), delta_max_m=np.float64(120.0), omega_init_radps=(0.2, 0.3))
+    assert c.n_particles == 300 and c.delta_max_m == 120.0 and c.omega_init_radps == (0.2, 0.3)
+    assert HmpfConfig() == HmpfConfig.from_config({})

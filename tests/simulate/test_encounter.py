@@ -142,3 +142,30 @@ def test_one_run_becomes_truth_of_two_instances_and_a_bearing_stream(settings):
 def test_an_unknown_scenario_is_one_clear_error():
     with pytest.raises(ValueError, match="unknown scenario 'loop'"):
         simulate_encounters("loop", 2, 0)
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(place="center"), r"place: 'center' is not one of intruder, centre"),
+    (dict(second_ct_omega="Redraw"), r"second_ct_omega: 'Redraw' is not one of same, redraw"),
+    (dict(range_m=(-100.0, -50.0)), r"range_m\[0\]: -100.0 is out of range"),
+    (dict(range_m=(6500.0, 1800.0)), r"range_m: need low <= high"),
+    (dict(speed_mps=(80.0, 60.0)), r"speed_mps: need low <= high"),
+    (dict(omega_deg_s=(0.0, 8.0)), r"omega_deg_s\[0\]: 0.0 is out of range"),
+    (dict(angle_deg=(180.0, 0.0)), r"angle_deg: need low <= high"),
+    (dict(sigma_bearing_deg=-1.0), r"sigma_bearing_deg: -1.0 is out of range"),
+    (dict(sigma_bearing_deg=np.nan), r"sigma_bearing_deg: nan is not finite"),
+    (dict(dt_s=0.0), r"dt_s: 0.0 is out of range"),
+    (dict(dt_s=-0.05), r"dt_s: -0.05 is out of range"),
+    (dict(orbit_s=np.inf), r"orbit_s: inf is not finite"),
+    (dict(ownship_vel_noise_mps=-1.0), r"ownship_vel_noise_mps: -1.0 is out of range"),
+    (dict(segments_s={"ct_cv": (10.0, 6.0)}), r"segments_s: gives no durations for ct_cv_ct, cv_ct, cv_ct_cv"),
+])
+def test_scenario_settings_however_made_get_the_config_paths_checks(bad, match):
+    with pytest.raises(ValueError, match=match):
+        simulate_encounters("ct_cv_ct", 2, 4, **bad)
+    with pytest.raises(ValueError, match=match):
+        ScenarioSettings(**bad)
+
+
+def test_the_default_settings_are_the_config_defaults():
+    assert ScenarioSettings() == ScenarioSettings.from_config({})

@@ -67,3 +67,26 @@ def test_sensor_noise_is_seeded_and_vectorised_over_seeds():
     z = radar_measure(tr, 500, np.random.default_rng(4))
     e = Radar2DModel().residual(z, Radar2DModel().h(tr.state))
     np.testing.assert_allclose(e.reshape(-1, 3).std(axis=0), [10, 0.005, 3], rtol=0.05)
+
+
+@pytest.mark.parametrize("dt", [0.0, -1.0, np.nan, np.inf, "1"])
+def test_a_track_refuses_a_step_that_is_not_a_positive_finite_time(dt):
+    with pytest.raises(ValueError, match="dt must be a positive finite step"):
+        build_track([Segment("S", 5)], dt=dt)
+
+
+@pytest.mark.parametrize("sigma", [-1.0, np.nan, np.inf, "1"])
+def test_gps_measurements_refuse_a_negative_or_non_finite_sigma(sigma):
+    with pytest.raises(ValueError, match="sigma_m must be a finite number >= 0"):
+        gps_measure(straight_track(5), 2, np.random.default_rng(0), sigma)
+
+
+def test_gps_measurements_with_zero_sigma_are_the_exact_positions():
+    tr = straight_track(5)
+    np.testing.assert_array_equal(gps_measure(tr, 2, np.random.default_rng(0), 0.0)[1], tr.state[:, :2])
+
+
+@pytest.mark.parametrize("omega", [0.0, -0.0, np.nan, np.inf, 7.0, "0.1"])
+def test_the_pi_turn_refuses_a_turn_rate_that_gives_no_turn(omega):
+    with pytest.raises(ValueError, match="pi_turn_track: omega must be a non-zero finite turn rate"):
+        pi_turn_track(omega=omega)

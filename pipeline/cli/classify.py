@@ -22,6 +22,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ..io.stage import caller_restates
 from .common import Claims, describe, folder_problem, pairing_problem, table_problem
 
 
@@ -91,8 +92,9 @@ def run(args) -> int:
         inputs = {"params": args.model / "params.npz", "meta": args.model / "meta.json", "state": path,
                   "segments": seg}
         try:
-            res = run_classify(inputs, {"classification": out}, {"reset_at_segments": args.reset_at_segments},
-                               model_set=args.model.name, mode=args.mode, decision=args.decision)
+            with caller_restates():  # this command prints the table's one line itself
+                res = run_classify(inputs, {"classification": out}, {"reset_at_segments": args.reset_at_segments},
+                                   model_set=args.model.name, mode=args.mode, decision=args.decision)
         except Exception as exc:  # one bad table never stops the others
             print(f"uavpipe classify: {path}: {describe(exc)}", file=sys.stderr)
             failed += 1

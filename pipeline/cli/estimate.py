@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
+from ..io.stage import caller_restates
 from .common import (Claims, describe, folder_problem, ingest_flight_id, model_problem, pairing_problem,
                      q2_problem, table_problem, vehicle_problem)
 
@@ -117,7 +118,8 @@ def run(args) -> int:
                   "model_params": args.model / "params.npz" if args.model else None, "q2": q2}
         outputs = {e: args.out / e / f"{fid}.parquet" for e in ESTIMATORS}
         try:
-            res = run_estimate(inputs, outputs, config, flight_id=fid, vehicle=args.vehicle, seed=int(cfg["seed"]))
+            with caller_restates():  # this command prints the flight's one line itself
+                res = run_estimate(inputs, outputs, config, flight_id=fid, vehicle=args.vehicle, seed=int(cfg["seed"]))
         except Exception as exc:  # one bad flight never stops the others
             print(f"uavpipe estimate: {d}: {describe(exc)}", file=sys.stderr)
             failed += 1

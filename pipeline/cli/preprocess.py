@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
+from ..io.stage import caller_restates
 from .common import Claims, describe, folder_problem, ingest_flight_id, vehicle_problem
 
 
@@ -66,7 +67,8 @@ def run(args) -> int:
         outputs = {"state": out / "state.parquet", "segments": out / "segments.parquet",
                    "calibration": out / "calibration.parquet", "info": out / "preprocess.json"}
         try:
-            res = run_preprocess({"meta": meta}, outputs, sec, vehicle=args.vehicle)
+            with caller_restates():  # this command prints the flight's one line itself
+                res = run_preprocess({"meta": meta}, outputs, sec, vehicle=args.vehicle)
         except Exception as exc:  # one bad flight never stops the others
             print(f"uavpipe preprocess: {d}: {describe(exc)}", file=sys.stderr)
             failed.append(d)

@@ -22,6 +22,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config
+from ..io.stage import caller_restates
 from .common import folder_problem, nonnegative_int, pairing_problem, table_problem
 
 
@@ -78,8 +79,9 @@ def run(args) -> int:
         inputs = ({"states": args.tables, "segments": args.segments} if args.segments
                   else {"sets": args.tables})
         seed = args.seed if args.seed is not None else int(cfg.get("seed", 0))
-        res = run_train(inputs, {"params": args.out / "params.npz", "meta": args.out / "meta.json"}, spec,
-                        model_set=name, seed=seed)
+        with caller_restates():  # this command prints one line per trained model itself
+            res = run_train(inputs, {"params": args.out / "params.npz", "meta": args.out / "meta.json"}, spec,
+                            model_set=name, seed=seed)
     except (ConfigError, ModelError, ValueError, OSError) as exc:
         print(f"uavpipe train: {exc}", file=sys.stderr)
         return 1

@@ -37,7 +37,6 @@ empty ``ekf_hmm`` table with the reason beside complete EKF tables (``status: pa
 from __future__ import annotations
 
 import json
-import sys
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,7 +48,7 @@ from numpy.typing import NDArray
 
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta, write_json, write_table
-from ..io.stage import declared, declared_list
+from ..io.stage import declared, declared_list, say
 from .base import ConstantAcceleration, GaussianState
 from .ekf import ExtendedKalmanFilter, run_filter
 from .ekf_hmm import GMR_FEATURE_SETS, q2_from_runs, run_ekf_hmm
@@ -96,8 +95,8 @@ class Q2Result:
     diagnostics: dict = field(default_factory=dict)
 
 
-def _say(msg: str) -> None:
-    print(f"uavpipe estimate: {msg}", file=sys.stderr, flush=True)
+def _say(msg: str, *, restated: bool = False) -> None:
+    say("uavpipe estimate", msg, restated=restated)
 
 
 def job_config(section: Mapping[str, Any], vehicle: str | None) -> dict:
@@ -471,7 +470,8 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
                      {**extra, "estimator": "ekf_hmm", "status": "failed", "error": reason})
     diag["rmse"] = err
     _say(f"{fid}: {len(t)} steps ({n_po} predict-only), radar {source}, reference {ref_name}"
-         + (f"; ekf_hmm placeholder ({reason})" if reason else f"; {diag.get('n_hmm_steps', 0)} HMM steps"))
+         + (f"; ekf_hmm placeholder ({reason})" if reason else f"; {diag.get('n_hmm_steps', 0)} HMM steps"),
+         restated=True)
     return EstimateResult(fid, status, reason, diag)
 
 

@@ -2,14 +2,41 @@
 ``snakemake.output`` (namedlists: key and attribute access) or a plain dict from the CLI.
 
 Every ``run_<stage>(inputs, outputs, config, **job)`` reads its paths through these two
-functions, so the two shapes behave the same everywhere.
+functions, so the two shapes behave the same everywhere. :func:`say` is how an entry point
+reports a job on stderr (the workflow's log), and :func:`caller_restates` how the command line,
+which prints its own line per input, keeps the job's summary from being said twice.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import os
-from collections.abc import Mapping
+import sys
+from collections.abc import Iterator, Mapping
 from typing import Any
+
+#: set while a caller prints each job's outcome itself (:func:`caller_restates`)
+_RESTATED: contextvars.ContextVar[bool] = contextvars.ContextVar("uavpipe_restated", default=False)
+
+
+def say(prefix: str, msg: str, *, restated: bool = False) -> None:
+    """One line ``<prefix>: <msg>`` on stderr. ``restated``: the job's summary or placeholder
+    line, which a caller inside :func:`caller_restates` prints in its own words (one line per
+    input, not two); every other notice is always said."""
+    if restated and _RESTATED.get():
+        return
+    print(f"{prefix}: {msg}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def caller_restates() -> Iterator[None]:
+    """Within: the entry points leave their ``restated`` lines to the caller (the CLI)."""
+    token = _RESTATED.set(True)
+    try:
+        yield
+    finally:
+        _RESTATED.reset(token)
 
 
 def declared(paths: Any, name: str, default: Any = None) -> Any:

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -46,7 +45,7 @@ from ..io import schema
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
-from ..io.stage import declared, declared_list, source_names
+from ..io.stage import declared, declared_list, say, source_names
 from .base import ModelError, ModelsConfig
 from .metrics import THESIS_CLASSIFICATION, per_maneuver_table, thesis_side_by_side
 
@@ -142,8 +141,8 @@ def hmm_config(config: Mapping, seed: int) -> ModelsConfig:
     return ModelsConfig.from_section(dict(config.get("hmm") or {}), seed=int(seed))
 
 
-def _say(msg: str) -> None:
-    print(f"uavpipe models: {msg}", file=sys.stderr, flush=True)
+def _say(msg: str, *, restated: bool = False) -> None:
+    say("uavpipe models", msg, restated=restated)
 
 
 def read_sets(paths: Sequence[str | os.PathLike]) -> pd.DataFrame:
@@ -257,7 +256,7 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
     meta.update({"status": "ok", "name": model_set, "spec": spec,
                  "training_inputs": [str(p) for p in (*sets, *states)]})
     write_json(meta, meta_path)
-    _say(f"{model_set}: trained {len(ms.labels_)} maneuver models {ms.labels_}")
+    _say(f"{model_set}: trained {len(ms.labels_)} maneuver models {ms.labels_}", restated=True)
     return ModelStageResult(model_set, "ok", "", meta)
 
 
@@ -333,10 +332,10 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
             cols = schema.layout("classification", res.columns)
             write_table(res, out_path, cols, name="classification",
                         extra={**extra, "status": "ok", "labels": ms.labels_, "mode": mode or ms.config.mode})
-            _say(f"{extra['flight_id']}: {len(res)} samples classified with {model_set}")
+            _say(f"{extra['flight_id']}: {len(res)} samples classified with {model_set}", restated=True)
             return ModelStageResult(model_set, "ok", "", {"n_samples": len(res),
                                                           "n_unknown": int((res["pred"] == "unknown").sum())})
-    _say(f"{extra['flight_id']}: placeholder classification ({reason})")
+    _say(f"{extra['flight_id']}: placeholder classification ({reason})", restated=True)
     empty = _empty_classification()
     write_table(empty, out_path, schema.layout("classification", empty.columns), name="classification",
                 extra={**extra, "status": "failed", "error": reason})

@@ -21,7 +21,6 @@ still raises: it is no flight's fault, and every flight would fail the same way.
 from __future__ import annotations
 
 import json
-import sys
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +29,7 @@ from typing import Mapping
 from ..config import ConfigError
 from ..io import schema
 from ..io.parquet import read_flightlog, write_json, write_table
-from ..io.stage import declared
+from ..io.stage import declared, say
 from .calibrate import CALIBRATION
 from .resample import TimeBaseError
 from .state import PreprocessResult, preprocess_log, summary_line, write_outputs
@@ -83,7 +82,7 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
                            diagnostics=diag)
     write_outputs(res, state_path=paths["state"], segments_path=paths["segments"],
                   calibration_path=paths["calibration"], info_path=paths["info"])
-    print(f"uavpipe preprocess: {fid}: {summary_line(diag)}", file=sys.stderr)
+    say("uavpipe preprocess", f"{fid}: {summary_line(diag)}", restated=True)
     return PreprocessStageResult(flight_id=fid, status="ok", diagnostics=diag)
 
 
@@ -109,5 +108,5 @@ def _placeholder(paths: Mapping, fid: str | None, reason: str) -> PreprocessStag
     write_table(schema.empty("segments"), paths["segments"], schema.SEGMENTS, name="segments", extra=extra)
     write_table(schema.empty("calibration"), paths["calibration"], CALIBRATION, name="calibration", extra=extra)
     write_json(diag, paths["info"])
-    print(f"uavpipe preprocess: {fid}: placeholder outputs ({reason})", file=sys.stderr)
+    say("uavpipe preprocess", f"{fid}: placeholder outputs ({reason})", restated=True)
     return PreprocessStageResult(flight_id=fid, status="failed", diagnostics=diag)

@@ -91,3 +91,23 @@ def test_preprocess_refuses_an_unknown_vehicle_in_one_line(ingested, tmp_path, c
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "unknown vehicle 'sim-qaud'" in err and "generic" in err
     assert not (tmp_path / "pp").exists()
+
+
+def test_preprocess_estimate_and_classify_say_one_line_per_input_not_the_library_line_too(
+        ingested, model_dir, tmp_path, capsys):
+    # the entry points' own summary went to stderr beside the command's line (twice per flight)
+    from pipeline.io.stage import say
+
+    assert main(["preprocess", str(ingested), "-o", str(tmp_path / "pp")]) == 0
+    out, err = capsys.readouterr()
+    assert out.count("\n") == 1 and err == ""
+    st = tmp_path / "pp" / "demo" / "state.parquet"
+    # the demo log has no radar: the flight fails, said once (the entry point's line, not restated)
+    assert main(["estimate", str(ingested), "--state", str(st), "-o", str(tmp_path / "e")]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "demo: placeholder estimates (no radar stream" in err
+    assert main(["classify", str(model_dir), str(st), "-o", str(tmp_path / "c.parquet")]) == 0
+    out, err = capsys.readouterr()
+    assert out.count("\n") == 1 and err == ""
+    say("uavpipe x", "outside a command the summary is said", restated=True)  # the workflow's log
+    assert capsys.readouterr().err == "uavpipe x: outside a command the summary is said\n"

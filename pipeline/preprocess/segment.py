@@ -10,7 +10,8 @@ in order of preference (``preprocess.segments.source: auto``, the first that giv
 3. ``windows``: time windows listed for the flight in the dataset config
    (``preprocess.segments.windows.<flight_id>: [{start_s, end_s, label}]``, s since log start);
 4. ``modes``: one segment per run of constant flight mode in the ``mode`` stream, labelled
-   ``mode:<name>``, lasting until the next mode change (the last until the end of the log).
+   ``mode:<name>``, lasting until the next mode change (the last until the end of the log),
+   clipped to the flight's end (``t_end_ns``).
 
 ``source`` may also name one of these, or ``all`` (their union).
 """
@@ -75,8 +76,15 @@ def _runs(df: pd.DataFrame | None, col: str, prefix: str, t_end_ns: int | None) 
     change = np.concatenate([[True], v[1:] != v[:-1]])
     idx = np.flatnonzero(change)
     starts = t[idx]
-    last = int(t_end_ns) if t_end_ns is not None else int(t[-1])
-    ends = np.concatenate([starts[1:], [max(last, int(t[-1]))]])
+    if t_end_ns is None:
+        ends = np.concatenate([starts[1:], [int(t[-1])]])
+    else:
+        # the flight ends at t_end_ns: a mode stream logged past it gave segments after the
+        # flight (zero-length or outside the state grid); clip them and drop the empty ones
+        end = int(t_end_ns)
+        ends = np.minimum(np.concatenate([starts[1:], [max(end, int(t[-1]))]]), end)
+        keep = starts < ends
+        starts, ends, idx = starts[keep], ends[keep], idx[keep]
     return _frame(starts, ends, [f"{prefix}{x}" for x in v[idx]])
 
 

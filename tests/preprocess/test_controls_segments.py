@@ -78,3 +78,14 @@ def test_segments_from_simulation_truth_labels():
     # an explicit labels stream wins under `auto`
     labels = pd.DataFrame({"t_start_ns": [0], "t_end_ns": [5], "label": ["x"], "source": "simulation_truth"})
     assert build_segments(labels, None, truth=truth)["label"].tolist() == ["x"]
+
+
+def test_mode_segments_end_with_the_flight_and_none_lies_after_it():
+    # the mode stream runs on past the state grid (7 s): segment B was 5-10 s and C 10-10 s
+    mode = pd.DataFrame({"t_ns": [0, 5_000_000_000, 10_000_000_000], "mode": ["A", "B", "C"]})
+    seg = build_segments(None, mode, t_end_ns=7_000_000_000)
+    assert seg["label"].tolist() == ["mode:A", "mode:B"]
+    assert seg["t_end_ns"].tolist() == [5_000_000_000, 7_000_000_000]
+    # a flight longer than its last mode change: the last segment still runs to the end
+    seg = build_segments(None, mode, t_end_ns=12_000_000_000)
+    assert seg["t_end_ns"].tolist() == [5_000_000_000, 10_000_000_000, 12_000_000_000]

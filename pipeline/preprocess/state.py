@@ -250,6 +250,14 @@ def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84
         alt_kind = "alt_msl_m"
     fix = gps["fix_type"].to_numpy(dtype=np.float64, na_value=np.nan)
     ok = np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0)) & (np.isnan(fix) | (fix >= min_fix))
+    # a latitude beyond ±90° or a longitude beyond ±180° is no position (a reader's unit slip,
+    # e.g. degE7 read as degrees, or a corrupt record): dropped and counted, never converted
+    # into a point thousands of km away
+    off_globe = ok & ((np.abs(lat) > 90.0) | (np.abs(lon) > 180.0))
+    if off_globe.any():
+        diag["notes"].append(f"gps: {int(off_globe.sum())} of {len(lat)} fixes dropped: latitude/longitude out "
+                             f"of range (|lat| > 90 or |lon| > 180 deg)")
+        ok &= ~off_globe
     if not ok.any():
         return gps.iloc[:0], np.empty((0, 3)), None
     g = gps[ok].reset_index(drop=True)

@@ -172,3 +172,19 @@ def test_calibrate_baro_direct_constant_offset():
     assert c.method == "rangefinder"
     np.testing.assert_allclose(c.alt_cal_m, h, atol=1e-9)
     assert "no attitude" in " ".join(c.notes)
+
+
+def test_gps_fixes_off_the_globe_are_dropped_and_counted_not_converted():
+    # a reader's unit slip (degE7 as degrees) or a corrupt record gave positions 6000 km away
+    n = 200
+    t = np.arange(n) * 0.2
+    ns = np.round(t * 1e9).astype(np.int64)
+    lat = 47.0 + 1e-6 * np.arange(n)
+    lat[[50, 120]] = 470_000_123.0
+    gps = pd.DataFrame({"t_ns": ns, "lat_deg": lat, "lon_deg": 8.0 + 0 * t, "alt_wgs84_m": 400.0 + 0 * t,
+                        "fix_type": 3.0})
+    meta = {"flight_id": "g", "ned_origin": {"lat_deg": 47.0, "lon_deg": 8.0, "alt_wgs84_m": 400.0}}
+    res = preprocess_log(FlightLog.from_streams(meta, {"gps": gps}))
+    state = res.tables[0]
+    assert np.nanmax(np.abs(state["pos_n_m"])) < 25.0   # the track spans 22 m north
+    assert any("2 of 200 fixes dropped: latitude/longitude out of range" in n_ for n_ in res.diagnostics["notes"])

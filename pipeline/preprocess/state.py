@@ -28,7 +28,8 @@ in this order, every constant from the ``preprocess`` config section (:class:`Pr
    (:mod:`.segment`).
 
 ``gap`` is True at grid points where the position source or the attitude stream (those present)
-has no sample within its gap limit. Streams that are absent give NaN columns; a log with no
+has no sample within its gap limit, or its sample holds no value (a NaN position, a zero or NaN
+quaternion). Streams that are absent give NaN columns; a log with no
 usable stream at all gives an empty ``state`` with the full schema. Diagnostics (timestamp
 repairs, sources, filter flags, calibration summary) are returned in
 :attr:`PreprocessResult.diagnostics` and written into the Parquet metadata and the JSON
@@ -419,8 +420,11 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     if pos_src:
         cols = POS + [v for v in VEL if v in pos_df.columns]
         r, pvalid = _resample_stream(pos_df, pos_src if pos_src != "gps" else "gps", cols, grid, cfg, diag)
-        gap |= ~pvalid
         pos = r[POS].to_numpy().copy()
+        # a sample in time but with no value (a NaN position row) is a gap too: consumers that
+        # keep ~gap rows must not meet NaN
+        pvalid = pvalid & np.isfinite(pos).all(axis=1)
+        gap |= ~pvalid
         vel_meas = r[VEL].to_numpy() if all(v in r.columns for v in VEL) else np.full((n, 3), np.nan)
         use_meas = cfg.velocity_source == "measured" and np.isfinite(vel_meas[pvalid]).all() and pvalid.any()
         if use_meas:
@@ -445,8 +449,10 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     qvalid = np.zeros(n, dtype=bool)
     if att_src:
         r, qvalid = _resample_stream(P[att_src], att_src, QUAT, grid, cfg, diag)
-        gap |= ~qvalid
         q = r[QUAT].to_numpy().copy()
+        # a zero or NaN quaternion (NaN after normalising) is no attitude: a gap, as above
+        qvalid = qvalid & np.isfinite(q).all(axis=1) & (np.abs(q).sum(axis=1) > 0)
+        gap |= ~qvalid
         ok = np.all(np.isfinite(q), axis=1)
         if ok.any():
             q[ok] = quat_continuity(q[ok])

@@ -188,3 +188,18 @@ def test_gps_fixes_off_the_globe_are_dropped_and_counted_not_converted():
     state = res.tables[0]
     assert np.nanmax(np.abs(state["pos_n_m"])) < 25.0   # the track spans 22 m north
     assert any("2 of 200 fixes dropped: latitude/longitude out of range" in n_ for n_ in res.diagnostics["notes"])
+
+
+def test_a_zero_quaternion_is_a_gap_not_a_nan_row_marked_good():
+    # consumers keep the ~gap rows (align demos): 15 NaN attitude rows had gap False
+    from pipeline.io.schema import new_meta
+
+    t = np.arange(0, 10, 0.1)
+    q = euler_to_quat(0.1, 0.2, np.linspace(0, 3, len(t)))
+    q[40:45] = 0.0
+    att = pd.DataFrame({"t_ns": (t * 1e9).astype(np.int64), "instance": 0, "src": "ATT",
+                        **{f"q_{c}": q[:, j] for j, c in enumerate("wxyz")}})
+    s = preprocess_log(FlightLog.from_streams(new_meta(flight_id="x"), {"attitude": att})).state
+    nan = s["q_w"].isna()
+    assert nan.sum() > 0 and s["gap"][nan].all()
+    assert not s["gap"][~nan].any()

@@ -18,14 +18,21 @@ reported as ``(peak - output tables) / file size`` (the acceptance bound is 3). 
 memory-mapped, not copied (``pipeline.io.base.read_file``), so its bytes are not in the peak.
 
 Scaling: one real log concatenated 40 times (in memory) against the single log:
-``(t40 / 40) / t1`` (acceptance bound 1.2).
+``(t40 / 40) / t1`` (acceptance bound 1.2; ``ingest_scaling_40x_met``). The single log (1.4 MB)
+decodes inside the CPU caches and the 40x copy (58 MB) does not, so this ratio mixes the memory
+hierarchy into the per-record cost: measured here, the time per copy is flat at 2.3-2.6 ms up to
+4 copies (5.8 MB), steps to 4.9 ms at 8 and stays within 10 % of that up to 80 copies.
+``ingest_scaling_16x_to_40x`` = ``(t40 / 40) / (t16 / 16)`` compares two sizes well beyond that step and so
+isolates the algorithm (a superlinear part would show there).
 
 Whole process: ``log_0036`` concatenated 40 times (~70 MB) written to a temporary file;
 pymavlink's ``recv_msg`` loop as a separate process against ``uavpipe ingest`` as a process
 (start-up, imports, decode, streams, Parquet write; to a temporary output folder), both timed
 by wall clock in the same run (pymavlink once, ours best of ``--repeat``, after a warm-up of
 each that writes the byte-code cache):
-``ingest_process_speedup_vs_pymavlink`` = t_pymavlink / t_uavpipe (target >= 10).
+``ingest_process_speedup_vs_pymavlink`` = t_pymavlink / t_uavpipe (target >= 10;
+``ingest_process_speedup_met``). A record count that differs from pymavlink's on any file ends the
+script with exit status 1 after its report: the ratio is then not of the same work.
 
 Usage: ``python benchmarks/ingest.py [--realdata DIR] [--repeat N]``. Ends with
 ``RESULT <name> <value>`` lines.
@@ -187,12 +194,14 @@ def main(argv=None) -> int:
     print(f"{'file':58s} {'MB':>6s} {'records':>8s} {'pymavlink s':>12s} {'ours s':>8s} "
           f"{'pym MB/s':>9s} {'ours MB/s':>9s} {'x':>6s}")
     t_pym = t_ours = mb_total = 0.0
+    mismatch = []
     for p in paths:
         mb = p.stat().st_size / 1e6
         tp, n_p = best_time(pymavlink_loop, p, max(1, args.repeat - 1))
         to, n_o = best_time(ours, p, args.repeat_ours)
         if n_p != n_o:
-            print(f"  WARNING: record counts differ on {p.name}: pymavlink {n_p}, ours {n_o}")
+            print(f"  MISMATCH: record counts differ on {p.name}: pymavlink {n_p}, ours {n_o}")
+            mismatch.append(p.name)
         t_pym += tp
         t_ours += to
         mb_total += mb
@@ -226,9 +235,11 @@ def main(argv=None) -> int:
     one = (args.realdata / SCALING_FILE).read_bytes()
     forty = one * 40
     t1, n1 = best_time(ours, one, args.repeat + 2)
+    t16, n16 = best_time(ours, one * 16, args.repeat + 1)
     t40, n40 = best_time(ours, forty, max(2, args.repeat - 1))
-    assert n40 == 40 * n1, (n1, n40)
+    assert n40 == 40 * n1 and n16 == 16 * n1, (n1, n16, n40)
     scaling = (t40 / 40) / t1
+    scaling_16_40 = (t40 / 40) / (t16 / 16)
     print(f"scaling {Path(SCALING_FILE).name}: t1 = {t1 * 1e3:.1f} ms, t40 = {t40 * 1e3:.0f} ms "
           f"({len(forty) / 1e6:.1f} MB, {len(forty) / 1e6 / t40:.0f} MB/s)")
 
@@ -243,7 +254,14 @@ def main(argv=None) -> int:
     print(f"RESULT ingest_ours_MBps {mb_total / t_ours:.1f}")
     print(f"RESULT ingest_peak_mem_over_filesize {mem_ratio:.2f}")
     print(f"RESULT ingest_scaling_40x {scaling:.3f}")
+    print(f"RESULT ingest_scaling_40x_met {int(scaling <= 1.2)}")
+    print(f"RESULT ingest_scaling_16x_to_40x {scaling_16_40:.3f}")
     print(f"RESULT ingest_process_speedup_vs_pymavlink {process_speedup:.1f}")
+    print(f"RESULT ingest_process_speedup_met {int(process_speedup >= 10)}")
+    if mismatch:
+        print(f"ingest: record counts differ from pymavlink's on {', '.join(mismatch)}: the speed-up is not "
+              f"of the same work", file=sys.stderr)
+        return 1
     return 0
 
 

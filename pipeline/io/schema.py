@@ -1620,7 +1620,8 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
         _f("p", "1", "", "one-sided paired sign-test p-value of the component (NaN without runs)"),
         Column("n", "int64", "1", "", "runs where the pair differs (ties and NaN pairs dropped)"),
         Column("n_better", "int64", "1", "", "runs where the claimed winner is better"),
-        _f("median_effect", "", "", "median paired difference b - a (> 0: a better); unit of the score: "
+        _f("median_effect", "", "", "median paired difference b - a over every finite pair, ties included "
+           "(> 0: a better); unit of the score: "
            "1 (relative range error or its spread) except trend mpc_heading: rad"),
         _f("frac_better", "1", "", "share of differing runs where the claimed winner is better"),
         _f("p_trend", "1", "", "the trend's p: the largest component p (NaN if any is undecided)"),

@@ -28,7 +28,8 @@ error over the same window) feed the trend tests. Divergence (D8): final relativ
 
 Trends (digest §12 item 9), each a one-sided **paired sign test** over the shared runs
 (:func:`sign_test`; ties dropped; p < ``alpha``), with its effect size (the median paired
-difference and the share of runs where the claimed winner is better):
+difference over every paired run, ties included, and the share of the runs that differ where the
+claimed winner is better — the sign test's own n):
 
 ``nr25`` N_r = 25 beats N_r = 10 and 150 on range (p = the larger of the two);
 ``cppv_range`` CPPV beats MPC on range, ``mpc_heading`` MPC beats CPPV on heading, each with
@@ -103,7 +104,8 @@ def sign_test(a, b) -> dict[str, float]:
 
     with ``n_+`` the runs where ``a < b`` and ``n`` the runs where they differ (ties and NaN
     pairs dropped). Returns ``p``, ``n``, ``n_better``, the median paired difference ``b − a``
-    (> 0: ``a`` better) and the share of runs where ``a`` is better.
+    over every finite pair, ties included (> 0: ``a`` better), and ``n_better / n``, the share of
+    the runs that differ where ``a`` is better.
     """
     from scipy.stats import binom
 
@@ -724,7 +726,7 @@ def write_report(path, size, st, seed, scen, run: Runner, tr_df, crlb_sum, switc
         for name in failing[~failing].index:
             g = tr_df[tr_df["trend"] == name]
             lines.append(f"- **{name} does not hold** at p < {st['alpha']}: " + "; ".join(
-                f"{c}: {int(b)}/{int(n)} runs better, median effect {e:.3g}, p {p:.3g}"
+                f"{c}: better in {int(b)} of the {int(n)} runs that differ, median effect {e:.3g}, p {p:.3g}"
                 for c, b, n, e, p in zip(g["comparison"], g["n_better"], g["n"], g["median_effect"], g["p"]))
                 + ". Reported as measured (not tuned).")
             arms = _trend_arms(g["comparison"], R)

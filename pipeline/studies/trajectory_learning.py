@@ -303,6 +303,17 @@ def run_trajectory_learning(inputs: Mapping | None, outputs: Mapping, config: Ma
                     "RMS after DTW: below 1 the left-out demo lies beside one other demo rather than among them, "
                     "where a path between the others is farther than that demo.")
         res.add("align_real_loo_maneuvers", len(summ), "Real maneuvers in the leave-one-out.")
+    if len(loo):
+        # the shares above are over the maneuvers with at least one scored fold: say how many were
+        # left out of their denominator (too few demos, or every fold failed) and how many folds failed
+        box = loo[loo["frame"] == "box"]
+        st_ = box["status"].astype(str)
+        keys = box[["set", "maneuver"]].apply(tuple, axis=1)
+        scored = set(keys[st_ == "ok"])
+        res.add("align_real_loo_maneuvers_unscored", len(set(keys) - scored),
+                "Real maneuvers left out of the leave-one-out shares: fewer than 2 usable demos, or no fold fitted.")
+        res.add("align_real_loo_folds_failed", int((~st_.str.startswith("skipped") & (st_ != "ok")).sum()),
+                "Box-frame leave-one-out folds whose learner failed (left out of their maneuver's mean).")
     res.add("align_trajectory_learning_wall_s", f"{progress.elapsed:.0f}", "Wall time of the study (s), page excluded.")
     res.write(paths["results"])
     md = [f"# Trajectory learning ({size})", "",

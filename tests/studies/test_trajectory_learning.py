@@ -51,6 +51,23 @@ def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_pa
     assert 0.0 <= pct <= 100.0
     assert "RESULT align_real_loo_better_pct" in Path(out["results"]).read_text()
     assert "align_real_loo_better_pct" in Path(out["page"]).read_text()
+    # what the shares leave out is counted: nothing here
+    assert res.results["align_real_loo_maneuvers_unscored"] == "0" and res.results["align_real_loo_folds_failed"] == "0"
+
+
+def test_a_maneuver_with_one_demo_is_counted_as_unscored_not_dropped_silently(tmp_path):
+    # maneuver "c" is flown in one flight only: it has no leave-one-out, and the shares' denominator
+    # leaves it out, so a RESULT line says so
+    paths = [write_flight(tmp_path, f"f{k}", synthetic_state(260, heading_rad=0.3 * k, seed=k),
+                          synthetic_segments([(0, 5, "a"), (5, 10, "b" if k else "c")]), 0.3 * k) for k in range(3)]
+    inputs = {"states": [p[0] for p in paths], "segments": [p[1] for p in paths]}
+    out = study_outputs("trajectory_learning", results_dir=tmp_path / "results", models=False)
+    res = run_study("trajectory_learning", inputs, out,
+                    {"size": "tiny", "trajectory_learning": {"sets": ["s"], "skip": ["simulated"],
+                                                             "sizes": {"tiny": {"real_max_iter": 2}}}},
+                    seed=1, align=_align({"s": {"flights": ["f0", "f1", "f2"], "reference": None}}))
+    assert res.results["align_real_loo_maneuvers_unscored"] == "1"
+    assert res.results["align_real_loo_maneuvers"] == "2"
 
 
 def test_a_set_whose_flights_are_absent_is_skipped_with_a_notice(tmp_path):

@@ -646,7 +646,7 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     geo_lines = ["## Seed 001: multi-UAV camera geo-location", "",
                  "Digest 001 §10–§13 scenarios with the values fixed in `estimate.pf.geolocation` before any run "
                  "(table `geo_config`); ε = mean 3-D error pooled over time (after the first second) and runs, "
-                 "η% = 100 ε / mean observer distance. Issue-17 checks as RESULT lines (`geo_*_met`, 1 = met); "
+                 "η% = 100 × the mean over steps of ε_k / d_k (d_k the mean observer–target distance at step k). Issue-17 checks as RESULT lines (`geo_*_met`, 1 = met); "
                  "nothing tuned to meet them.", "",
                  md_table(geo_summary[[c for c in ("case", "n_observers", "n_particles", "duration_s", "n_runs",
                                                    "eps_m", "median_eps_m", "eta_pct", "mean_dist_m")

@@ -165,8 +165,8 @@ def smooth_track(track: ArrayLike, dt: float, *, q: float | ArrayLike | str = "a
     Raises
     ------
     ValueError
-        A bad shape, dt, model or noise value, fewer than 2 valid rows in a feature, or
-        ``r="auto"`` with a given q.
+        A bad shape, dt, model or noise value, fewer than 2 valid rows in a feature (with
+        ``q="auto"``: no more than n_x + 1), or ``r="auto"`` with a given q.
     """
     z = np.asarray(track, dtype=np.float64)
     if z.ndim == 1:
@@ -191,6 +191,11 @@ def smooth_track(track: ArrayLike, dt: float, *, q: float | ArrayLike | str = "a
         raise ValueError(f"smooth: q and r are 'auto' or numbers, got q={q!r}, r={r!r}")
     if auto_r and not auto_q:
         raise ValueError("smooth: r='auto' needs q='auto' (they are estimated jointly)")
+    if auto_q and np.isfinite(z[:, 0]).sum() <= n + 1:
+        # the first n innovations belong to the diffuse prior: with no more rows nothing is left
+        # to estimate the noise levels from (r came back 0 and the loglik NaN, the data unsmoothed)
+        raise ValueError(f"smooth: q='auto' needs more than {n + 1} rows without NaN for the {model.upper()} "
+                         f"model, got {int(np.isfinite(z[:, 0]).sum())}; give q and r")
     rr = None if auto_r else _positive(r, D, "r")
     if not auto_q:
         lam = _positive(q, D, "q") / rr ** 2

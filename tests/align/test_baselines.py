@@ -182,6 +182,8 @@ def test_the_auto_grid_is_dimensionless_and_wide():
     ((np.zeros((5, 2)), DT), {"r": [1.0, 2.0, 3.0]}, "r must be"),
     ((np.zeros((5, 2)), DT), {"q": "ml"}, "'auto' or numbers"),
     ((np.full((5, 2), np.nan), DT), {}, "fewer than 2 rows"),
+    ((np.arange(8.0).reshape(4, 2), DT), {}, "q='auto' needs more than 4 rows"),   # r came back 0, ll NaN
+    ((np.arange(6.0).reshape(3, 2), DT), {"model": "cv"}, "q='auto' needs more than 3 rows"),
 ])
 def test_the_smoother_refuses_bad_input_with_one_clear_line(args, kw, match):
     with pytest.raises(ValueError, match=match):

@@ -145,6 +145,17 @@ def test_linear_resampling_property(steps, seed, mult):
     assert np.all((y[bridged] >= lo - 1e-12) & (y[bridged] <= hi + 1e-12))
 
 
+@pytest.mark.parametrize("hz, phase_ms", [(50, 0.0), (50, 2.0), (100, 0.0), (200, 1.0), (37, 3.0)])
+def test_the_mean_method_is_centred_on_the_grid_time(hz, phase_ms):
+    # a ramp x = t must come back as x = g: the plain mean of the samples in [g - T/2, g + T/2)
+    # was up to half a source period early (-10 ms for a 50 Hz IMU on the 25 Hz grid)
+    ts = np.arange(0, 4_000_000_000, int(1e9 / hz)) + int(phase_ms * 1e6)
+    g = make_grid(100_000_000, 3_800_000_000, 25.0)
+    r, valid = resample(pd.DataFrame({"t_ns": ts, "x": ts * 1e-9}), g, {"x": "mean"})
+    assert valid.all()
+    np.testing.assert_allclose(r["x"], g * 1e-9, atol=1e-9)
+
+
 def test_mean_method_is_an_anti_alias_boxcar(rng):
     # a 200 Hz gyro carrying 95 Hz vibration: point sampling on a 25 Hz grid aliases it to 5 Hz,
     # the cell mean removes most of it

@@ -27,16 +27,22 @@ def test_the_study_is_registered_with_its_tables():
     assert STUDY_TABLES["trajectory_learning"] == ("sim_cases", "sim_summary", "real_loo", "real_summary")
 
 
-def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_path):
-    seg = synthetic_segments([(0, 5, "a"), (5, 10, "b")])
-    paths = [write_flight(tmp_path, f"f{k}", synthetic_state(260, heading_rad=0.3 * k, seed=k), seg, 0.3 * k)
-             for k in range(3)]
+def _real_loo_of_three_flights(tmp_path, segments):
+    """The study's real part (tiny, 2 EM iterations) over three synthetic flights f0-f2 of set
+    ``s``, flight k with ``segments(k)``: ``(result, outputs)``."""
+    paths = [write_flight(tmp_path, f"f{k}", synthetic_state(260, heading_rad=0.3 * k, seed=k),
+                          synthetic_segments(segments(k)), 0.3 * k) for k in range(3)]
     inputs = {"states": [p[0] for p in paths], "segments": [p[1] for p in paths]}
     out = study_outputs("trajectory_learning", results_dir=tmp_path / "results", models=False)
     res = run_study("trajectory_learning", inputs, out,
                     {"size": "tiny", "trajectory_learning": {"sets": ["s"], "skip": ["simulated"],
                                                              "sizes": {"tiny": {"real_max_iter": 2}}}},
                     seed=1, align=_align({"s": {"flights": ["f0", "f1", "f2"], "reference": None}}))
+    return res, out
+
+
+def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_path):
+    res, out = _real_loo_of_three_flights(tmp_path, lambda k: [(0, 5, "a"), (5, 10, "b")])
     loo = read_table(out["real_loo"])
     assert len(loo) == 12 and set(loo["status"]) == {"ok"}  # 2 maneuvers x 3 folds x (box, centred)
     assert loo.groupby("frame").size().to_dict() == {"box": 6, "centred": 6}
@@ -58,14 +64,7 @@ def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_pa
 def test_a_maneuver_with_one_demo_is_counted_as_unscored_not_dropped_silently(tmp_path):
     # maneuver "c" is flown in one flight only: it has no leave-one-out, and the shares' denominator
     # leaves it out, so a RESULT line says so
-    paths = [write_flight(tmp_path, f"f{k}", synthetic_state(260, heading_rad=0.3 * k, seed=k),
-                          synthetic_segments([(0, 5, "a"), (5, 10, "b" if k else "c")]), 0.3 * k) for k in range(3)]
-    inputs = {"states": [p[0] for p in paths], "segments": [p[1] for p in paths]}
-    out = study_outputs("trajectory_learning", results_dir=tmp_path / "results", models=False)
-    res = run_study("trajectory_learning", inputs, out,
-                    {"size": "tiny", "trajectory_learning": {"sets": ["s"], "skip": ["simulated"],
-                                                             "sizes": {"tiny": {"real_max_iter": 2}}}},
-                    seed=1, align=_align({"s": {"flights": ["f0", "f1", "f2"], "reference": None}}))
+    res, _ = _real_loo_of_three_flights(tmp_path, lambda k: [(0, 5, "a"), (5, 10, "b" if k else "c")])
     assert res.results["align_real_loo_maneuvers_unscored"] == "1"
     assert res.results["align_real_loo_maneuvers"] == "2"
 

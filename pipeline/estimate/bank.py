@@ -50,7 +50,7 @@ Choices where the thesis is silent (recorded in :meth:`BankSettings.metadata`):
   update at the initialising step;
 - a bearing that is NaN is a predict-only step (weights unchanged); the optional gate
   rejects a bearing for the whole bank (predict-only) when the NIS of the bank's mixture
-  prediction exceeds ``gate_chi2`` (χ²₁(0.99) = 6.63), so the weights stay comparable;
+  prediction exceeds ``gate_chi2`` (χ²₁(0.99) = 6.635), so the weights stay comparable;
 - a filter whose mean or covariance stops being finite (or whose covariance loses a
   positive diagonal, or whose innovation variance is not positive) is flagged diverged at
   that step, frozen at its last finite estimate, and leaves the mixture (weight 0); the run
@@ -127,7 +127,7 @@ class BankSettings:
     gate : bool
         Apply the NIS gate by default (off).
     gate_chi2 : float
-        Gate threshold (χ²₁(0.99) = 6.63).
+        Gate threshold (χ²₁(0.99) = 6.635).
     name : str
         Preset name (metadata only).
     """

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .bank import BankSettings, omega_grid, range_grid, run_bank, settings_for, theta_grid
+from .bank import GATE_CHI2_1_099, BankSettings, omega_grid, range_grid, run_bank, settings_for, theta_grid
 
 F64 = NDArray[np.float64]
 
@@ -33,7 +33,7 @@ def bank_settings(cfg: Mapping[str, Any] | None, *, preset: str | None = None, c
     s = settings_for(preset or b.get("preset", "cppv_25_1_6"))
     kw: dict[str, Any] = {"q_faithful": b.get("q_form", "corrected") == "faithful",
                           "mpc_p0": b.get("mpc_p0", "faithful"),
-                          "gate": bool(g.get("enabled", False)), "gate_chi2": float(g.get("chi2", 6.63))}
+                          "gate": bool(g.get("enabled", False)), "gate_chi2": float(g.get("chi2", GATE_CHI2_1_099))}
     grid = grid or b.get("grid")
     if grid is not None:
         kw.update(n_r=int(grid[0]), n_omega=int(grid[1]), n_theta=int(grid[2]))

@@ -231,9 +231,10 @@ def divergence_flag(range_rel_err: ArrayLike, nees_values: ArrayLike, t_s: Array
                     final_rel: float = 0.5, nees_threshold: float = CHI2_5_0999,
                     nees_seconds: float = 10.0) -> NDArray[np.bool_]:
     """The D8 divergence flag per run (R,): the final |relative range error| exceeds
-    ``final_rel`` (50 %), or the NEES stays above ``nees_threshold`` (χ²₅(0.999) = 20.5) for
+    ``final_rel`` (50 %), or the NEES stays above ``nees_threshold`` (χ²₅(0.999) = 20.515) for
     more than ``nees_seconds`` (10 s) in one unbroken stretch (the longest consecutive run of
-    steps above it, timed by ``t_s``). A non-finite final error counts as diverged.
+    steps above it, from its first to its last step's ``t_s``: k steps at dt span (k − 1)·dt).
+    A non-finite final error counts as diverged.
 
     Raises
     ------

@@ -151,6 +151,13 @@ def gmr_state9(means: F64, covars: F64, obs: F64, states, normaliser: MinMaxNorm
         raise ValueError(f"align must be one of {GMR_ALIGN}, got {align!r}")
     obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
     states = np.asarray(states, dtype=np.int64)
+    if states.shape != (len(obs),):
+        raise ValueError(f"gmr_state9: states must have shape ({len(obs)},) like obs, got {states.shape}")
+    n_states = len(means)
+    if len(states) and states.max() >= n_states:
+        # a state of another (larger) model: slicing means[s:s+1] would hand gmr an empty mixture
+        raise ValueError(f"gmr_state9: state index {int(states.max())} out of range for a model with "
+                         f"{n_states} states (negative means no state)")
     in_idx = STATE9_POS if inputs == "pos" else (*STATE9_POS, *STATE9_VEL)
     out_idx = (*STATE9_VEL, *STATE9_ACC) if inputs == "pos" else STATE9_ACC
     out = np.full((len(obs), 6), np.nan)

@@ -4,7 +4,8 @@ Seed 004 §6 step 1 segments demonstrations by hand from plots and video; we tak
 in order of preference (``preprocess.segments.source: auto``, the first that gives any):
 
 1. ``labels``: the ``labels`` stream (FlightCoach ``mans``, simulation truth), one segment per
-   row, unchanged;
+   row, unchanged; a row without both times or ending before it starts (a hand-edited labels
+   side-car) is dropped and counted in the flight's notes, never passed on;
 2. ``truth``: runs of constant ``truth.label`` (simulated flights without a ``labels`` stream),
    each lasting until the next label change (the last until its final sample);
 3. ``windows``: time windows listed for the flight in the dataset config
@@ -37,12 +38,25 @@ def _frame(starts, ends, labels) -> pd.DataFrame:
                          "label": pd.array([str(x) for x in labels], dtype="string")})
 
 
-def from_labels(labels: pd.DataFrame) -> pd.DataFrame:
-    """One segment per ``labels`` row."""
+def from_labels(labels: pd.DataFrame, notes: list[str] | None = None) -> pd.DataFrame:
+    """One segment per valid ``labels`` row.
+
+    A row whose ``t_start_ns`` or ``t_end_ns`` is missing, or whose ``t_end_ns`` lies before its
+    ``t_start_ns``, is dropped; the count and the first such row go to ``notes`` (a downstream
+    maneuver slice of a negative interval would be silently empty)."""
     if labels is None or not len(labels):
         return _frame([], [], [])
-    lab = labels["label"].astype("string").fillna("").tolist()
-    return _frame(labels["t_start_ns"], labels["t_end_ns"], lab)
+    t0 = pd.to_numeric(labels["t_start_ns"], errors="coerce")
+    t1 = pd.to_numeric(labels["t_end_ns"], errors="coerce")
+    ok = (t0.notna() & t1.notna() & (t1 >= t0)).to_numpy(dtype=bool)
+    lab = labels["label"].astype("string").fillna("")
+    if not ok.all():
+        i = int(np.flatnonzero(~ok)[0])
+        msg = (f"labels: {int((~ok).sum())} of {len(ok)} rows dropped: missing time or t_end_ns before "
+               f"t_start_ns (first: row {i}, label {lab.iloc[i]!r}, {t0.iloc[i]} .. {t1.iloc[i]})")
+        if notes is not None:
+            notes.append(msg)
+    return _frame(t0[ok].astype(np.int64), t1[ok].astype(np.int64), lab[ok].tolist())
 
 
 def from_windows(windows: Sequence[Mapping] | None, flight_id: str | None = None) -> pd.DataFrame:
@@ -101,12 +115,12 @@ def from_truth(truth: pd.DataFrame) -> pd.DataFrame:
 def build_segments(labels: pd.DataFrame | None, mode: pd.DataFrame | None, *,
                    windows: Sequence[Mapping] | None = None, source: str = "auto",
                    t_end_ns: int | None = None, flight_id: str | None = None,
-                   truth: pd.DataFrame | None = None) -> pd.DataFrame:
+                   truth: pd.DataFrame | None = None, notes: list[str] | None = None) -> pd.DataFrame:
     """The ``segments`` table: ``segment_id`` (0..n-1 in start order), ``t_start_ns``,
-    ``t_end_ns``, ``label``."""
+    ``t_end_ns``, ``label``; what was dropped on the way is appended to ``notes``."""
     if source not in SOURCES:
         raise ValueError(f"preprocess.segments.source must be one of {SOURCES}, got {source!r}")
-    parts = {"labels": lambda: from_labels(labels), "truth": lambda: from_truth(truth),
+    parts = {"labels": lambda: from_labels(labels, notes), "truth": lambda: from_truth(truth),
              "windows": lambda: from_windows(windows, flight_id), "modes": lambda: from_modes(mode, t_end_ns)}
     if source == "auto":
         seg = _frame([], [], [])

@@ -240,6 +240,10 @@ def _resample_stream(df, name, cols, grid, cfg: PreprocessConfig, diag: dict):
     return res, valid
 
 
+#: plausible static pressure for a flying vehicle (Pa): ~16 km altitude to above the sea-level record
+PRESS_MIN_PA, PRESS_MAX_PA = 1.0e4, 1.2e5
+
+
 def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84", min_fix: int = 3):
     """GPS fixes -> NED about the origin; returns (rows used, ndarray (n,3), origin)."""
     lat = gps["lat_deg"].to_numpy(dtype=np.float64, na_value=np.nan)
@@ -403,7 +407,8 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         diag["notes"].append("no usable stream: empty state")
         st = _empty_state()
         seg = build_segments(S["labels"], S["mode"], windows=cfg.segments.get("windows", {}).get(fid),
-                             source=cfg.segments.get("source", "auto"), flight_id=fid, truth=S["truth"])
+                             source=cfg.segments.get("source", "auto"), flight_id=fid, truth=S["truth"],
+                             notes=diag["notes"])
         cal = calibrate_baro(np.empty(0, np.int64), None).points
         diag["calibration"] = {"method": "none", "regions": [], "notes": ["no data"]}
         return PreprocessResult(state=st, segments=seg, calibration=cal, diagnostics=diag)
@@ -495,8 +500,18 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     if has_baro:
         b = P["baro"]
         if not _has(b, ["alt_rel_m"]):
-            b = b.assign(alt_rel_m=pressure_altitude(b["press_Pa"].to_numpy(dtype=np.float64,
-                                                                              na_value=np.nan), cfg.bpm.p0_Pa))
+            p = b["press_Pa"].to_numpy(dtype=np.float64, na_value=np.nan)
+            # a static pressure outside 10-120 kPa (above ~16 km, or above any sea-level record)
+            # is no reading but a unit slip (hPa/mbar read as Pa) or a corrupt record: dropped
+            # and counted, never turned into an altitude tens of km off
+            bad = np.isfinite(p) & ((p < PRESS_MIN_PA) | (p > PRESS_MAX_PA))
+            if bad.any():
+                med = float(np.nanmedian(p[bad]))
+                hint = " (looks like hPa: the reader must convert to Pa)" if 100.0 <= med <= 1200.0 else ""
+                diag["notes"].append(f"baro: {int(bad.sum())} of {len(p)} pressures dropped: outside "
+                                     f"{PRESS_MIN_PA:.0f}-{PRESS_MAX_PA:.0f} Pa (median of those {med:.6g}){hint}")
+                p = np.where(bad, np.nan, p)
+            b = b.assign(alt_rel_m=pressure_altitude(p, cfg.bpm.p0_Pa))
             diag["notes"].append("baro altitude from pressure (international barometric formula)")
         r, _ = _resample_stream(b, "baro", ["alt_rel_m"], grid, cfg, diag)
         baro_f = r["alt_rel_m"].to_numpy().copy()
@@ -520,7 +535,7 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     # 9. segments
     seg = build_segments(S["labels"], S["mode"], windows=cfg.segments.get("windows", {}).get(fid),
                          source=cfg.segments.get("source", "auto"), t_end_ns=int(grid[-1]), flight_id=fid,
-                         truth=S["truth"])
+                         truth=S["truth"], notes=diag["notes"])
     return PreprocessResult(state=state, segments=seg, calibration=cal.points, diagnostics=diag)
 
 

@@ -307,6 +307,11 @@ def simulate_encounters(kind: str, n_runs: int, seed: int, settings: ScenarioSet
     velocity noise ``σ_o·m`` with ``m`` from the ``ownship_velocity`` stream; both are drawn for
     (R, T) of the *longest* scenario and cut, so two kinds share the draws of their common steps.
     """
+    if isinstance(n_runs, bool) or int(n_runs) != n_runs or n_runs < 1:
+        # zero runs gave an empty Encounter whose metrics are NaN means; a negative count numpy's
+        # "negative dimensions" error far from the cause
+        raise ValueError(f"simulate_encounters: n_runs must be a whole number >= 1, got {n_runs!r}")
+    n_runs = int(n_runs)
     s = replace(settings or ScenarioSettings(), **overrides)
     durations = s.durations(kind)
     modes = KINDS[kind]

@@ -69,6 +69,11 @@ def test_gmr_state9_denormalises_per_correction_13_3(rng):
     # a sample without a state gives NaN
     a2, _ = gmr_state9(mu[None], cov[None], q[:2], np.array([0, -1]), norm, dt)
     assert np.isfinite(a2[0]).all() and np.isnan(a2[1]).all()
+    # a state the model does not have, or states not one per sample: one line saying so
+    with pytest.raises(ValueError, match="state index 3 out of range for a model with 1 states"):
+        gmr_state9(mu[None], cov[None], q[:2], np.array([0, 3]), norm, dt)
+    with pytest.raises(ValueError, match=r"states must have shape \(2,\)"):
+        gmr_state9(mu[None], cov[None], q[:2], np.array([0, 0, 0]), norm, dt)
 
 
 def test_gmr_pos_fd_is_exact_on_a_constant_jerk_trajectory():

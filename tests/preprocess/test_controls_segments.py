@@ -89,3 +89,17 @@ def test_mode_segments_end_with_the_flight_and_none_lies_after_it():
     # a flight longer than its last mode change: the last segment still runs to the end
     seg = build_segments(None, mode, t_end_ns=12_000_000_000)
     assert seg["t_end_ns"].tolist() == [5_000_000_000, 10_000_000_000, 12_000_000_000]
+
+
+def test_a_labels_row_ending_before_it_starts_is_dropped_and_counted_in_the_notes():
+    labels = pd.DataFrame({"t_start_ns": [0, 50, 20], "t_end_ns": [10, 40, 30], "label": ["a", "bad", "c"],
+                           "source": "x"})
+    notes: list[str] = []
+    s = build_segments(labels, None, notes=notes)
+    assert s["label"].tolist() == ["a", "c"] and s["segment_id"].tolist() == [0, 1]
+    assert len(notes) == 1 and "1 of 3 rows dropped" in notes[0] and "'bad'" in notes[0]
+    # every row invalid: `auto` falls through to the next source, still saying why
+    notes.clear()
+    mode = pd.DataFrame({"t_ns": [0, 10], "mode": pd.array(["STAB", "RTL"], dtype="string")})
+    s = build_segments(labels.iloc[[1]], mode, t_end_ns=20, notes=notes)
+    assert s["label"].tolist() == ["mode:STAB", "mode:RTL"] and "1 of 1 rows dropped" in notes[0]

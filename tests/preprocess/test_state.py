@@ -227,3 +227,21 @@ def test_the_box_rotation_of_the_ingest_meta_reaches_the_state_metadata(tmp_path
     assert [box_rotation_rad(m) for m in (None, {}, {"params": {"box_rotation_rad": None}},
                                           {"params": {"box_rotation_rad": "x"}},
                                           {"params": {"box_rotation_rad": 3}})] == [None, None, None, None, 3.0]
+
+
+def test_a_pressure_logged_in_hpa_is_dropped_and_named_not_turned_into_a_wild_altitude():
+    t = np.arange(0, 10, 0.1)
+    good = pd.DataFrame({"t_ns": ns(t), "press_Pa": 101325.0 - 12.0 * t})  # ~1 m/s climb
+    res = preprocess_log(FlightLog.from_streams({"flight_id": "pa"}, {"baro": good}))
+    assert not any("pressures dropped" in n for n in res.diagnostics["notes"])
+    hpa = good.assign(press_Pa=good["press_Pa"] / 100.0)
+    res = preprocess_log(FlightLog.from_streams({"flight_id": "hpa"}, {"baro": hpa}))
+    note = [n for n in res.diagnostics["notes"] if "pressures dropped" in n]
+    assert note and "100 of 100" in note[0] and "looks like hPa" in note[0]
+    assert res.state["alt_cal_m"].isna().all()
+    # one corrupt record among good ones: that one is dropped, the rest kept
+    one = good.copy()
+    one.loc[50, "press_Pa"] = 0.0
+    res = preprocess_log(FlightLog.from_streams({"flight_id": "one"}, {"baro": one}))
+    note = [n for n in res.diagnostics["notes"] if "pressures dropped" in n]
+    assert note and "1 of 100" in note[0] and "hPa" not in note[0]

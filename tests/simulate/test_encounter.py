@@ -144,6 +144,12 @@ def test_an_unknown_scenario_is_one_clear_error():
         simulate_encounters("loop", 2, 0)
 
 
+@pytest.mark.parametrize("n_runs", [0, -3, 2.5, True])
+def test_a_run_count_below_one_or_not_whole_is_one_clear_error(n_runs):
+    with pytest.raises(ValueError, match=r"n_runs must be a whole number >= 1"):
+        simulate_encounters("orbit", n_runs, 0)
+
+
 @pytest.mark.parametrize("bad, match", [
     (dict(place="center"), r"place: 'center' is not one of intruder, centre"),
     (dict(second_ct_omega="Redraw"), r"second_ct_omega: 'Redraw' is not one of same, redraw"),

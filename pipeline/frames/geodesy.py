@@ -21,7 +21,7 @@ Every conversion between GPS fixes and the pipeline's local NED frame goes throu
     with ``r`` the mean Earth radius (the thesis leaves its value open; we use the IUGG mean
     radius ``R1 = (2a + b)/3``) and ``φ`` the latitude of the *point*, not of the origin. Its
     error against the exact conversion is derived in :func:`flat_earth_error_model` and
-    measured by :func:`flat_earth_error` (``benchmarks/flat_earth_error.py`` prints the table).
+    measured by :func:`flat_earth_error` (``tests/frames/test_geodesy.py`` holds both).
 
 Angles are in degrees at the public interface (``_deg`` columns of the canonical schema), heights
 are ellipsoidal (WGS-84) in metres. All functions broadcast over NumPy arrays. This module depends

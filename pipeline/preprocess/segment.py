@@ -43,7 +43,8 @@ def from_labels(labels: pd.DataFrame, notes: list[str] | None = None) -> pd.Data
 
     A row whose ``t_start_ns`` or ``t_end_ns`` is missing, or whose ``t_end_ns`` lies before its
     ``t_start_ns``, is dropped; the count and the first such row go to ``notes`` (a downstream
-    maneuver slice of a negative interval would be silently empty)."""
+    maneuver slice of a negative interval would be silently empty). Without ``notes`` such a
+    row is a ``ValueError`` naming it, never a silent drop."""
     if labels is None or not len(labels):
         return _frame([], [], [])
     t0 = pd.to_numeric(labels["t_start_ns"], errors="coerce")
@@ -54,8 +55,9 @@ def from_labels(labels: pd.DataFrame, notes: list[str] | None = None) -> pd.Data
         i = int(np.flatnonzero(~ok)[0])
         msg = (f"labels: {int((~ok).sum())} of {len(ok)} rows dropped: missing time or t_end_ns before "
                f"t_start_ns (first: row {i}, label {lab.iloc[i]!r}, {t0.iloc[i]} .. {t1.iloc[i]})")
-        if notes is not None:
-            notes.append(msg)
+        if notes is None:  # a caller with nowhere to count the drop gets the error instead
+            raise ValueError(msg)
+        notes.append(msg)
     return _frame(t0[ok].astype(np.int64), t1[ok].astype(np.int64), lab[ok].tolist())
 
 
@@ -117,7 +119,8 @@ def build_segments(labels: pd.DataFrame | None, mode: pd.DataFrame | None, *,
                    t_end_ns: int | None = None, flight_id: str | None = None,
                    truth: pd.DataFrame | None = None, notes: list[str] | None = None) -> pd.DataFrame:
     """The ``segments`` table: ``segment_id`` (0..n-1 in start order), ``t_start_ns``,
-    ``t_end_ns``, ``label``; what was dropped on the way is appended to ``notes``."""
+    ``t_end_ns``, ``label``; what was dropped on the way is appended to ``notes`` (without
+    ``notes``, an invalid ``labels`` row raises ``ValueError``)."""
     if source not in SOURCES:
         raise ValueError(f"preprocess.segments.source must be one of {SOURCES}, got {source!r}")
     parts = {"labels": lambda: from_labels(labels, notes), "truth": lambda: from_truth(truth),

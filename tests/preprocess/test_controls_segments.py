@@ -103,3 +103,6 @@ def test_a_labels_row_ending_before_it_starts_is_dropped_and_counted_in_the_note
     mode = pd.DataFrame({"t_ns": [0, 10], "mode": pd.array(["STAB", "RTL"], dtype="string")})
     s = build_segments(labels.iloc[[1]], mode, t_end_ns=20, notes=notes)
     assert s["label"].tolist() == ["mode:STAB", "mode:RTL"] and "1 of 1 rows dropped" in notes[0]
+    # with nowhere to count the drop, the row is an error naming it, not a silent loss
+    with pytest.raises(ValueError, match=r"1 of 3 rows dropped.*row 1, label 'bad'"):
+        build_segments(labels, None)

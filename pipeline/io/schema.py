@@ -34,7 +34,9 @@ import pyarrow as pa
 #: 1.5.0: study tables only: the ``seed000_ekf`` RMSE columns carry their unit in the name
 #: (``rmse_pos`` -> ``rmse_pos_m``, ``hmm_rmse`` ``acc`` -> ``acc_mps2``, ...); no stream or stage
 #: table changed.
-SCHEMA_VERSION = "1.5.0"
+#: 1.6.0 (minor): ``local_position`` gains ``reset_count`` (the estimator's reset counters, so a
+#: reset's step is not read as motion); every 1.5.0 column is unchanged.
+SCHEMA_VERSION = "1.6.0"
 
 #: Number of RC input / servo output channels carried by the ``control`` stream.
 N_RC = 18
@@ -113,6 +115,8 @@ STREAMS: dict[str, tuple[Column, ...]] = {
     "local_position": (
         *(_f(f"pos_{a}_m", "m", "NED", "about meta.ned_origin") for a in _NED),
         *(_f(f"vel_{a}_mps", "m/s", "NED") for a in _NED),
+        _f("reset_count", "1", "", "estimator resets so far (PX4: xy, z, vxy and vz reset counters summed); "
+           "a change is a step in the estimate, not motion"),
     ),
     "odometry": (
         *(_f(f"pos_{a}_m", "m", "source", "in meta.frames.odometry") for a in _XYZ),

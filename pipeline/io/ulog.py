@@ -21,7 +21,9 @@ ULog topic                                 stream             conversion
 ``vehicle_attitude``                       ``attitude``       ``q`` is FRD->NED, scalar first: as is
 ``vehicle_local_position``                 ``local_position`` ``x,y,z,vx,vy,vz`` NED; ``ref_lat``,
                                                               ``ref_lon``, ``ref_alt`` (AMSL) ->
-                                                              ``meta['ned_origin']``
+                                                              ``meta['ned_origin']``; the sum of
+                                                              ``xy/z/vxy/vz_reset_counter`` ->
+                                                              ``reset_count``
 ``distance_sensor``                        ``rangefinder``    m; ``valid`` = within
                                                               [min_distance, max_distance] and
                                                               ``signal_quality != 0``
@@ -534,6 +536,10 @@ def _local_position(d, conv: _Conv) -> pd.DataFrame | None:
                      ("vx", "vel_n_mps"), ("vy", "vel_e_mps"), ("vz", "vel_d_mps")):
         v = _f(d, src)
         cols[dst] = v if v is not None else _nan(d)
+    # the EKF's reset counters (uint8, wrapping): preprocessing breaks the track where their sum
+    # changes, so the reset's step (10.9 m in z on the ekf_failure fixture) is not read as motion
+    counters = [c for c in (_f(d, f"{k}_reset_counter") for k in ("xy", "z", "vxy", "vz")) if c is not None]
+    cols["reset_count"] = np.sum(counters, axis=0) if counters else _nan(d)
     return conv.frame(d, cols)
 
 

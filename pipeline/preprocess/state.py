@@ -29,7 +29,7 @@ in this order, every constant from the ``preprocess`` config section (:class:`Pr
 
 ``gap`` is True at grid points where the position source or the attitude stream (those present)
 has no sample within its gap limit, or its sample holds no value (a NaN position, a zero or NaN
-quaternion). Streams that are absent give NaN columns; a log with no
+quaternion), and around an estimator reset of the position source (``reset_count`` changes). Streams that are absent give NaN columns; a log with no
 usable stream at all gives an empty ``state`` with the full schema. Diagnostics (timestamp
 repairs, sources, filter flags, calibration summary) are returned in
 :attr:`PreprocessResult.diagnostics` and written into the Parquet metadata and the JSON
@@ -240,6 +240,40 @@ def _resample_stream(df, name, cols, grid, cfg: PreprocessConfig, diag: dict):
     return res, valid
 
 
+def _reset_steps(pos_df: pd.DataFrame, grid: NDArray[np.int64], diag: dict, name: str) -> NDArray[np.bool_]:
+    """Grid points touched by an estimator reset of the position source.
+
+    Where ``reset_count`` changes between two samples the estimate stepped (a PX4 EKF height
+    reset moved ``z`` by 10.9 m in one sample on the ``ekf_failure`` fixture); the grid points
+    from one grid period before the last sample ahead of it to one after the first sample behind
+    it are gaps, so positions and derivatives never bridge the step. Counted in the notes."""
+    out = np.zeros(len(grid), dtype=bool)
+    if pos_df is None or "reset_count" not in pos_df.columns or len(grid) == 0:
+        return out
+    rc = pd.to_numeric(pos_df["reset_count"], errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
+    t = pos_df["t_ns"].to_numpy(dtype=np.int64)
+    ok = np.isfinite(rc)
+    rc, t = rc[ok], t[ok]
+    k = np.flatnonzero(np.diff(rc) != 0)
+    if not len(k):
+        return out
+    period = int(grid[1] - grid[0]) if len(grid) > 1 else 0
+    lo = np.searchsorted(grid, t[k] - period, side="left")
+    hi = np.searchsorted(grid, t[k + 1] + period, side="right")
+    prev = None
+    for a, b in zip(lo, hi):
+        # resets a few samples apart (z at 71.94 s, vz at 72.14 s) leave no island too short to
+        # differentiate between them
+        if prev is not None and a - prev < 3:
+            a = prev
+        out[a:b] = True
+        prev = b
+    at = ", ".join(f"{(x - grid[0]) * 1e-9:.2f}" for x in t[k + 1][:5]) + (" ..." if len(k) > 5 else "")
+    diag["notes"].append(f"{name}: {len(k)} estimator reset(s) (reset_count changes) at {at} s after the grid "
+                         f"start: {int(out.sum())} grid samples marked as gap")
+    return out
+
+
 #: plausible static pressure for a flying vehicle (Pa): ~16 km altitude to above the sea-level record
 PRESS_MIN_PA, PRESS_MAX_PA = 1.0e4, 1.2e5
 
@@ -429,6 +463,7 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         # a sample in time but with no value (a NaN position row) is a gap too: consumers that
         # keep ~gap rows must not meet NaN
         pvalid = pvalid & np.isfinite(pos).all(axis=1)
+        pvalid &= ~_reset_steps(pos_df, grid, diag, pos_src)
         gap |= ~pvalid
         vel_meas = r[VEL].to_numpy() if all(v in r.columns for v in VEL) else np.full((n, 3), np.nan)
         use_meas = cfg.velocity_source == "measured" and np.isfinite(vel_meas[pvalid]).all() and pvalid.any()

@@ -118,6 +118,9 @@ def test_real_attitude_position_baro_mag(real):
     for s, dcol in (("x", "pos_n_m"), ("y", "pos_e_m"), ("z", "pos_d_m"),
                     ("vx", "vel_n_mps"), ("vy", "vel_e_mps"), ("vz", "vel_d_mps")):
         np.testing.assert_array_equal(got[dcol], lp[s].astype(np.float64))
+    # the EKF's reset counters, summed: a change marks a step in the estimate
+    resets = sum(lp[f"{k}_reset_counter"].astype(np.float64) for k in ("xy", "z", "vxy", "vz"))
+    np.testing.assert_array_equal(got["reset_count"], resets)
     o = log.meta["ned_origin"]
     k = int(np.argmax(lp["xy_global"] != 0))
     assert (o["lat_deg"], o["lon_deg"]) == (lp["ref_lat"][k], lp["ref_lon"][k])

@@ -141,3 +141,23 @@ def test_a_flightcoach_box_rotation_reaches_the_state_metadata(tmp_path, name):
     res = preprocess_log(log, CFG, vehicle="f3a-plane")
     write_outputs(res, state_path=tmp_path / "state.parquet", segments_path=tmp_path / "seg.parquet")
     assert read_table_meta(tmp_path / "state.parquet")["box_rotation_rad"] == pytest.approx(expected, abs=0)
+
+
+@pytest.mark.realdata
+def test_the_ekf_height_reset_of_the_px4_ekf_failure_log_is_a_gap_not_an_11_m_step():
+    """PX4's EKF resets z by -10.9 m at boot 118.84 s (and vz at 94.25/119.04 s): read as motion,
+    that was an 11 m altitude step in one grid period and a 19.7 m/s^2 acceleration spike with
+    ``gap`` False."""
+    log = read_log(realdata_file("ulg_px4_flight_review_fixtures/ekf_failure.ulg"))
+    res = preprocess_log(log, CFG, vehicle="px4-quad")
+    st = res.state
+    assert res.diagnostics["sources"]["position"] == "local_position"
+    note = [n for n in res.diagnostics["notes"] if "estimator reset" in n]
+    assert note and note[0].startswith("local_position: 3 estimator reset(s)")
+    t = st["t_ns"].to_numpy() * 1e-9
+    ok = ~st["gap"].to_numpy()
+    assert not ok[(t > 71.9) & (t < 72.0)].any()  # the z reset's grid period
+    step = np.abs(np.diff(st["pos_d_m"].to_numpy()))[ok[1:] & ok[:-1]]
+    assert step.max() < 1.0  # 13 m/s of descent at most over 0.04 s; the reset was 10.9 m
+    acc = st[["acc_n_mps2", "acc_e_mps2", "acc_d_mps2"]].to_numpy()[ok]
+    assert np.isfinite(acc).all() and np.abs(acc[:, 2]).max() < 12.0

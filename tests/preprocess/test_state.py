@@ -245,3 +245,24 @@ def test_a_pressure_logged_in_hpa_is_dropped_and_named_not_turned_into_a_wild_al
     res = preprocess_log(FlightLog.from_streams({"flight_id": "one"}, {"baro": one}))
     note = [n for n in res.diagnostics["notes"] if "pressures dropped" in n]
     assert note and "1 of 100" in note[0] and "hPa" not in note[0]
+
+
+def test_an_estimator_reset_in_the_local_position_is_a_gap_not_motion():
+    # a hover at 10 m whose EKF resets its height by -5 m at 20 s (the reset counter steps)
+    t = np.arange(0, 40, 0.1)
+    d = np.where(t < 20.0, -10.0, -15.0)
+    lp = pd.DataFrame({"t_ns": ns(t), "pos_n_m": 0.0, "pos_e_m": 0.0, "pos_d_m": d, "vel_n_mps": 0.0,
+                       "vel_e_mps": 0.0, "vel_d_mps": 0.0, "reset_count": np.where(t < 20.0, 3.0, 4.0)})
+    res = preprocess_log(FlightLog.from_streams({"flight_id": "reset"}, {"local_position": lp}),
+                         {"velocity_source": "differentiate"})
+    st = res.state
+    tt = st["t_ns"].to_numpy() * 1e-9
+    gap = st["gap"].to_numpy()
+    assert gap[(tt > 19.85) & (tt < 20.05)].all() and not gap[(tt < 19.7) | (tt > 20.3)].any()
+    # on the kept rows the differentiated velocity never sees the 5 m step
+    assert np.abs(st["vel_d_mps"].to_numpy()[~gap]).max() < 1e-6
+    assert any("1 estimator reset(s)" in n for n in res.diagnostics["notes"])
+    # without the counter the same step is (as before) motion: 5 m in one sample
+    res = preprocess_log(FlightLog.from_streams({"flight_id": "nocount"}, {"local_position": lp.drop(columns="reset_count")}),
+                         {"velocity_source": "differentiate"})
+    assert not res.state["gap"].any() and np.abs(res.state["vel_d_mps"]).max() > 5.0

@@ -29,8 +29,9 @@ in this order, every constant from the ``preprocess`` config section (:class:`Pr
 
 ``gap`` is True at grid points where the position source or the attitude stream (those present)
 has no sample within its gap limit, or its sample holds no value (a NaN position, a zero or NaN
-quaternion), and around an estimator reset of the position source (``reset_count`` changes). Streams that are absent give NaN columns; a log with no
-usable stream at all gives an empty ``state`` with the full schema. Diagnostics (timestamp
+quaternion), and around an estimator reset of the position source (``reset_count`` changes).
+Streams that are absent give NaN columns; a log with no usable stream at all gives an empty
+``state`` with the full schema. Diagnostics (timestamp
 repairs, sources, filter flags, calibration summary) are returned in
 :attr:`PreprocessResult.diagnostics` and written into the Parquet metadata and the JSON
 diagnostics file; the ingest meta's aerobatic box heading ``params.box_rotation_rad`` (FlightCoach)

@@ -148,8 +148,7 @@ def test_the_ekf_height_reset_of_the_px4_ekf_failure_log_is_a_gap_not_an_11_m_st
     """PX4's EKF resets z by -10.9 m at boot 118.84 s (and vz at 94.25/119.04 s): read as motion,
     that was an 11 m altitude step in one grid period and a 19.7 m/s^2 acceleration spike with
     ``gap`` False."""
-    log = read_log(realdata_file("ulg_px4_flight_review_fixtures/ekf_failure.ulg"))
-    res = preprocess_log(log, CFG, vehicle="px4-quad")
+    res = preprocess_log(_read("ulg_px4_flight_review_fixtures/ekf_failure.ulg"), CFG, vehicle="px4-quad")
     st = res.state
     assert res.diagnostics["sources"]["position"] == "local_position"
     note = [n for n in res.diagnostics["notes"] if "estimator reset" in n]

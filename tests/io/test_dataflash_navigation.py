@@ -25,15 +25,17 @@ WEEK, TOW0_MS = 1815, 3_880_600
 BOOT_US = 300_000_000
 
 
-def _gps_rows(t_us, ned, status):
+def _gps_rows(t_us, ned, status, settle_m=0.0):
     lat, lon, h = ned_to_geodetic(ned[:, 0], ned[:, 1], ned[:, 2], LAT0, LON0, ALT0)
     rel = -(ned[:, 2] - HOME_NED[2])  # height above home (as ArduCopter logs RelAlt)
+    # the inertial height still settling at the first fixes (as on the 2014 Austin logs)
+    rel = rel + settle_m * np.exp(-np.arange(len(rel)) / 3.0)
     return {"TimeUS": t_us, "Status": status, "GMS": TOW0_MS + (t_us - t_us[0]) // 1000, "GWk": WEEK,
             "NSats": 9, "HDop": 1.2, "Lat": lat, "Lng": lon, "RelAlt": rel, "Alt": h, "Spd": 0.0,
             "GCrs": 0.0, "VZ": 0.0}
 
 
-def _write_nav_log(path, *, ntun: bool = True, pos: bool = False, fix: bool = True):
+def _write_nav_log(path, *, ntun: bool = True, pos: bool = False, fix: bool = True, settle_m: float = 0.0):
     """60 s on a 20 m circle about home: GPS 5 Hz, NTUN + CTUN 10 Hz, ATT 10 Hz, CMD 0 home."""
     t10 = BOOT_US + np.arange(600, dtype=np.int64) * 100_000
     t5 = t10[::2] + 3_000
@@ -56,7 +58,7 @@ def _write_nav_log(path, *, ntun: bool = True, pos: bool = False, fix: bool = Tr
         p10 = truth(t10)
         rel = p10 - np.array(HOME_NED)
         s = (t10 - BOOT_US) * 1e-6
-        batches = {"GPS": _gps_rows(t5, truth(t5), 3 if fix else 0),
+        batches = {"GPS": _gps_rows(t5, truth(t5), 3 if fix else 0, settle_m),
                    "ATT": {"TimeUS": t10, "Roll": 0.0, "Pitch": 0.0, "Yaw": 90.0}}
         if not fix:
             batches["GPS"].update(Lat=0.0, Lng=0.0, Alt=0.0, RelAlt=0.0)
@@ -96,6 +98,17 @@ def test_ntun_gives_local_position_about_the_origin_with_pymavlinks_counts(tmp_p
     assert "NTUN" in log.meta["diagnostics"]["local_position_from"]
     res = preprocess_log(log, {"rate_hz": 10.0})
     assert res.diagnostics["sources"]["position"] == "local_position"
+
+
+def test_home_height_is_not_taken_from_the_inertial_height_settling_at_the_first_fix(tmp_path):
+    # RelAlt starts 5.3 m off and decays (3-fix time constant): the first fix alone would move
+    # every pos_d by 5.3 m; the median over the 300 fixes leaves it within the 2 cm logging error
+    path, truth, _ = _write_nav_log(tmp_path / "settle.bin", settle_m=-5.31)
+    log = registry.read_log(path)
+    lp = log["local_position"]
+    t_us = lp["t_boot_ns"].to_numpy() // 1000
+    np.testing.assert_allclose(lp["pos_d_m"].to_numpy(), truth(t_us - 1_000)[:, 2], atol=0.03)
+    assert "median of GPS Alt - RelAlt over 300 fixes" in log.meta["diagnostics"]["local_position_from"]
 
 
 def test_pos_is_the_fallback_without_ntun(tmp_path):
@@ -145,6 +158,11 @@ def test_2014_copter_log_navigates_at_10hz_within_2m_of_gps():
     pe = np.interp(t[inside], tl, lp["pos_e_m"].to_numpy())
     err = np.hypot(pn - n[inside], pe - e[inside])
     assert inside.sum() > 1000 and np.median(err) < 2.0, np.median(err)
+    # and vertically: GPS down minus pos_d was 6.6 m with home at the first fix's settling height
+    _, _, gd = geodetic_to_ned(g["lat_deg"].to_numpy(), g["lon_deg"].to_numpy(), g["alt_msl_m"].to_numpy(),
+                               o["lat_deg"], o["lon_deg"], o["alt_msl_m"])
+    dz = np.interp(t[inside], tl, lp["pos_d_m"].to_numpy()) - gd[inside]
+    assert abs(np.median(dz)) < 1.0, np.median(dz)
     res = preprocess_log(log, None, vehicle="copter-pixhawk")
     assert res.diagnostics["sources"]["position"] == "local_position"
     assert np.median(np.diff(tl)) == 100_000_000  # 10 Hz navigation, not 5 Hz GPS

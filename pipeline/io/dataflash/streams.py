@@ -71,7 +71,7 @@ from .decode import Columns, DecodeResult
 
 SOURCE_FORMAT = "ardupilot_dataflash"
 READER_NAME = "dataflash"
-READER_VERSION = "4"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: bad_timestamp drops
+READER_VERSION = "5"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: bad_timestamp drops; 5: NTUN home height from the median of the fixes
 
 GPS_EPOCH_UNIX_S = 315964800
 #: pymavlink's fixed GPS − UTC (DFReader._gpsTimeToTime), true since 2017-01-01; the reader
@@ -441,8 +441,14 @@ def _home_offset_ned(res: DecodeResult) -> tuple[np.ndarray, str]:
     """NED (m) of the vehicle's home about :func:`_origin` and how it was found.
 
     Home is the first ``CMD`` with ``CNum`` 0 (copter logs before the EKF, where inertial
-    navigation works about home), its height the first 3D GPS fix's ``Alt - RelAlt`` (MSL);
-    without them, home is taken to be the origin."""
+    navigation works about home), its height the median over the 3D GPS fixes of
+    ``Alt - RelAlt`` (MSL; ``RelAlt`` is the inertial height above home); without them, home is
+    taken to be the origin.
+
+    The median, not the first fix: at the first fix the inertial height is still settling (on
+    the 2014 Austin logs ``RelAlt`` starts at -5.31 m and -3.80 m on the ground and reaches 0
+    within 3 s), and one sample made that transient a constant offset of every ``pos_d``
+    (-6.6 m and -4.1 m against GPS over the flight)."""
     from ...frames.geodesy import geodetic_to_ned
 
     org = _origin(res)
@@ -459,8 +465,8 @@ def _home_offset_ned(res: DecodeResult) -> tuple[np.ndarray, str]:
     if g is not None and "RelAlt" in g and "Alt" in g and len(g["Alt"]):
         ok = np.flatnonzero((g["Status"] >= 3) & (g["Lat"] != 0)) if "Status" in g else np.arange(len(g["Alt"]))
         if len(ok):
-            h = float(g["Alt"][ok[0]]) - float(g["RelAlt"][ok[0]])
-            how += ", its height from GPS Alt - RelAlt"
+            h = float(np.median(np.asarray(g["Alt"], np.float64)[ok] - np.asarray(g["RelAlt"], np.float64)[ok]))
+            how += f", its height the median of GPS Alt - RelAlt over {len(ok)} fixes"
     n, e, d = geodetic_to_ned(lat, lon, h, org["lat_deg"], org["lon_deg"], org["alt_msl_m"])
     return np.array([float(n), float(e), float(d)]), how
 

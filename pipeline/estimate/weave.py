@@ -99,7 +99,7 @@ _h = "estimate.pf.hmpf"
 #: log of the smallest normal double: a likelihood below it is a zero weight
 _LOG_TINY = float(np.log(np.finfo(np.float64).tiny))
 #: keys of estimate.pf.hmpf that are not the filter's
-_NOT_FILTER_KEYS = ("vehicles", "from_train", "turn_threshold_radps", "radar")
+_NOT_FILTER_KEYS = ("vehicles", "from_train", "noise_from_train", "turn_threshold_radps", "radar")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -136,7 +136,7 @@ class HmpfConfig:
 
     @classmethod
     def from_config(cls, sec: Mapping[str, Any] | None, **override) -> "HmpfConfig":
-        """From ``estimate.pf.hmpf`` (validated, defaulted; the ``vehicles``, ``from_train``,
+        """From ``estimate.pf.hmpf`` (validated, defaulted; the ``vehicles``, ``from_train``, ``noise_from_train``,
         ``turn_threshold_radps`` and ``radar`` keys belong to the rule and the sensor), then ``override``."""
         sec = {k: v for k, v in validate_section(_h, sec).items() if k not in _NOT_FILTER_KEYS}
         return build(cls, {**sec, **override})   # __post_init__ checks the result (check_hmpf_config)

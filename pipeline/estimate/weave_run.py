@@ -16,6 +16,13 @@ and θ_max are the largest of each — "larger than every observed weave segment
 set its final values (§4.3). With no other training flight (or ``from_train: false``) the
 config values are used; the output metadata says which.
 
+Process noise (digest 003 A12: the thesis's ship values, σ_aN = 1.754e-5 m/s², are "likely too
+tight for UAVs"): with ``noise_from_train`` (default) σ_aT, σ_aN and σ_xy come from the same
+training segments by moments (:func:`weave_noise`). On the shipped F3A flights the ship values
+left every particle's likelihood below the smallest double on 85–124 of 442–569 steps, each a
+re-initialisation that resets the mode fractions; the F3A levels from fc-p23-036 (along-track
+RMS 4.3 m/s² on straights, 6.3 on curves) re-initialise on none of them.
+
 Failures are placeholders with the reason (no positions, fewer than two samples), never crashes.
 """
 
@@ -103,6 +110,19 @@ def segment_runs(t_ns: np.ndarray, z: np.ndarray, dt_s: float, turn_threshold: f
     return straights, turns
 
 
+def _segment_tracks(states: Sequence[pd.DataFrame], segments: Sequence[pd.DataFrame], dt_s: float):
+    """``(t_ns, z)`` of each labelled segment of each training flight, resampled at ``dt_s``
+    (:func:`sample_positions`); segments shorter than three steps are left out."""
+    for st, sg in zip(states, segments):
+        for r in sg.itertuples():
+            if not str(r.label):
+                continue
+            part = st[(st["t_ns"] >= r.t_start_ns) & (st["t_ns"] <= r.t_end_ns)]
+            tk, z = sample_positions(part, dt_s)
+            if len(tk) >= 3:
+                yield tk, z
+
+
 def weave_maxima(states: Sequence[pd.DataFrame], segments: Sequence[pd.DataFrame], dt_s: float,
                  turn_threshold: float) -> tuple[float, float, dict[str, Any]]:
     """δ_max (m) and θ_max (rad) from training flights' labelled segments (module docstring).
@@ -110,23 +130,77 @@ def weave_maxima(states: Sequence[pd.DataFrame], segments: Sequence[pd.DataFrame
     Returns ``(delta_max, theta_max, diagnostics)``; NaN where no straight (turn) was found.
     """
     straights, turns, n_seg = [], [], 0
-    for st, sg in zip(states, segments):
-        for r in sg.itertuples():
-            if not str(r.label):
-                continue
-            part = st[(st["t_ns"] >= r.t_start_ns) & (st["t_ns"] <= r.t_end_ns)]
-            tk, z = sample_positions(part, dt_s)
-            if len(tk) < 3:
-                continue
-            n_seg += 1
-            s_, t_ = segment_runs(tk, z, dt_s, turn_threshold)
-            straights += s_
-            turns += t_
+    for tk, z in _segment_tracks(states, segments, dt_s):
+        n_seg += 1
+        s_, t_ = segment_runs(tk, z, dt_s, turn_threshold)
+        straights += s_
+        turns += t_
     dm = max(straights) if straights else float("nan")
     tm = max(turns) if turns else float("nan")
     return dm, tm, {"n_segments": n_seg, "n_straights": len(straights), "n_turns": len(turns),
                     "straight_median_m": float(np.median(straights)) if straights else None,
                     "turn_median_rad": float(np.median(turns)) if turns else None}
+
+
+#: fewest second differences a noise level is estimated from (else the config value stays)
+MIN_NOISE_SAMPLES = 10
+
+
+def weave_noise(states: Sequence[pd.DataFrame], segments: Sequence[pd.DataFrame], dt_s: float,
+                turn_threshold: float) -> tuple[dict[str, float], dict[str, Any]]:
+    """The filter's process noise from training flights' labelled segments, by moments.
+
+    On each segment resampled at T, the step velocities are v_k = (z_{k+1} − z_k)/T and the
+    second differences a_k = (v_{k+1} − v_k)/T; a transition whose course changes faster than
+    ``turn_threshold`` (rad/s) is a curve, otherwise straight. Under the filter's own
+    piecewise-constant white acceleration w (x_{k+1} = F x_k + G w_k, G = [T²/2, T]),
+
+    .. math:: z_{k+2} - 2 z_{k+1} + z_k = \tfrac{T^2}{2}(w_k + w_{k+1})
+              \;\Rightarrow\; \sigma_w^2 = 2\,\overline{a_k^2},
+
+    so with t = v_k/|v_k| and n ⊥ t (seed 003 §4.2.2, CM: Q = σ_T² t tᵀ + σ_N² n nᵀ; ACT:
+    isotropic σ_xy, and a constant turn keeps the speed, so only the along-track part of a curve
+    transition is noise):
+
+    * ``sigma_at_mps2`` = √(2 mean((a·t)²)) and ``sigma_an_mps2`` = √(2 mean((a·n)²)) over
+      straight transitions;
+    * ``sigma_axy_mps2`` = √(2 mean((a·t)²)) over curve transitions.
+
+    Nothing is subtracted for the position's own noise: a fused track is smoother than its
+    nominal σ (on fc-p23-036 the straight steps' cross-track RMS is 0.82 m/s², below the 2.45
+    m/s² that 1 m of white position noise alone would give), so the estimate is an upper bound,
+    erring towards a wider cloud. σ_α (the turn-rate walk) keeps its config value: a course
+    projected from 3-D aerobatics is no constant-rate turn to measure it from.
+
+    Returns
+    -------
+    (dict, dict)
+        ``{sigma key: value}`` for each level with at least :data:`MIN_NOISE_SAMPLES`
+        transitions (others absent: the config value stays), and diagnostics (counts, RMS).
+    """
+    at_s, an_s, at_c = [], [], []
+    for _, z in _segment_tracks(states, segments, dt_s):
+        v = np.diff(z, axis=0) / dt_s
+        a = np.diff(v, axis=0) / dt_s
+        sp = np.hypot(v[:, 0], v[:, 1])
+        dchi = wrap_angle(np.diff(np.arctan2(v[:, 1], v[:, 0])))
+        ok = np.all(np.isfinite(a), axis=1) & (sp[:-1] > 1e-6) & (sp[1:] > 1e-6)
+        t = v[:-1] / np.where(sp[:-1] > 1e-6, sp[:-1], 1.0)[:, None]
+        a_t = a[:, 0] * t[:, 0] + a[:, 1] * t[:, 1]
+        a_n = -a[:, 0] * t[:, 1] + a[:, 1] * t[:, 0]
+        straight = ok & (np.abs(dchi) / dt_s <= turn_threshold)
+        curve = ok & ~straight
+        at_s.append(a_t[straight])
+        an_s.append(a_n[straight])
+        at_c.append(a_t[curve])
+    out: dict[str, float] = {}
+    diag: dict[str, Any] = {}
+    for key, parts in (("sigma_at_mps2", at_s), ("sigma_an_mps2", an_s), ("sigma_axy_mps2", at_c)):
+        x = np.concatenate(parts) if parts else np.empty(0)
+        diag[key] = {"n": int(len(x)), "rms": float(np.sqrt(np.mean(x * x))) if len(x) else None}
+        if len(x) >= MIN_NOISE_SAMPLES and np.mean(x * x) > 0:
+            out[key] = float(np.sqrt(2.0 * np.mean(x * x)))
+    return out, diag
 
 
 def hmpf_frame(t_ns: np.ndarray, track: HmpfTrack, run: int = 0) -> pd.DataFrame:
@@ -208,6 +282,22 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
             source = "config (no straight or turn found in the training flights' segments)"
     elif sec["from_train"]:
         source = "config (no other role-train flight of the vehicle)"
+    noise_source, noise_diag = "config", {}
+    if sec["noise_from_train"] and tr_states:
+        sig, noise_diag = weave_noise([read_table(p) for p in tr_states], [read_table(p) for p in tr_segs],
+                                      cfg.dt_s, float(sec["turn_threshold_radps"]))
+        # never below the config: a track smoother than the model (a noise-free simulation, a
+        # heavily fused position) would otherwise starve the cloud
+        raised = {k: v for k, v in sig.items() if v > getattr(cfg, k)}
+        if raised:
+            cfg = cfg.with_(**raised)
+            noise_source = "train" if len(raised) == 3 else f"train ({', '.join(sorted(raised))}), config (the others)"
+        elif sig:
+            noise_source = "config (the training flights' segments are no noisier)"
+        else:
+            noise_source = "config (too few straight or curve steps in the training flights' segments)"
+    elif sec["noise_from_train"]:
+        noise_source = "config (no other role-train flight of the vehicle)"
     rng = np.random.default_rng([int(seed), zlib.crc32(fid.encode())])
     track = hmpf_filter(z, GpsSensor(cfg.gps_sigma_m), cfg, rng)
     df = hmpf_frame(tk, track)
@@ -218,8 +308,12 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
             "train_flights": [Path(p).stem for p in tr_states], "maxima": mx, "n_particles": cfg.n_particles,
             "dt_s": cfg.dt_s, "method": cfg.method, "tau": cfg.tau, "detector_window": cfg.detector_window,
             "startup_steps": cfg.startup_steps, "first_detection_t_ns": first,
-            "fraction_flagged": float(flag.mean()), "n_reinit": int(track.n_reinit[0])}
+            "fraction_flagged": float(flag.mean()), "n_reinit": int(track.n_reinit[0]),
+            "sigma_at_mps2": cfg.sigma_at_mps2, "sigma_an_mps2": cfg.sigma_an_mps2,
+            "sigma_axy_mps2": cfg.sigma_axy_mps2, "noise_source": noise_source, "noise": noise_diag,
+            "n_neff_collapsed": int((track.neff[0] < 2.0).sum())}
     write_table(df, out, schema.columns(TABLE), name=TABLE, extra=diag)
     _say(f"{fid}: {len(tk)} steps, δ_max {cfg.delta_max_m:.0f} m, θ_max {cfg.theta_max_rad:.2f} rad ({source}); "
-         f"flagged {100 * flag.mean():.0f} % of steps")
+         f"σ_aT/σ_aN/σ_xy {cfg.sigma_at_mps2:.2f}/{cfg.sigma_an_mps2:.2g}/{cfg.sigma_axy_mps2:.2f} m/s² ({noise_source}); "
+         f"{int(track.n_reinit[0])} re-initialised; flagged {100 * flag.mean():.0f} % of steps")
     return HmpfResult(flight_id, "ok", "", diag)

@@ -260,7 +260,10 @@ def weave_panels(path: str | os.PathLike) -> tuple[list, list]:
     fact = (f"{meta.get('n_steps')} steps of {meta.get('dt_s')} s, δ_max {meta.get('delta_max_m', 0):.0f} m, "
             f"θ_max {meta.get('theta_max_rad', 0):.2f} rad ({meta.get('maxima_source')}), first weave "
             + (f"at {first / 1e9:.0f} s" if first is not None else "never") +
-            f", flagged {100 * meta.get('fraction_flagged', 0):.0f} % of steps")
+            f", flagged {100 * meta.get('fraction_flagged', 0):.0f} % of steps; "
+            + (f"σ_aT/σ_aN/σ_xy {meta['sigma_at_mps2']:.2f}/{meta['sigma_an_mps2']:.2g}/{meta['sigma_axy_mps2']:.2f} m/s² "
+               f"({meta.get('noise_source')}), " if "sigma_at_mps2" in meta else "")
+            + f"{meta.get('n_reinit')} re-initialised")
     return [("Weave classifier AF(k)", plots.weave_af(df, meta.get("tau", 0.269), meta.get("startup_steps", 25)))], \
         [("hmpf", fact)]
 

@@ -27,6 +27,7 @@ import copy
 import dataclasses
 import datetime
 import functools
+import math
 import os
 import re
 import types
@@ -278,7 +279,11 @@ def _validator_class():
                     instance[prop] = copy.deepcopy(sub["default"])
         yield from validate_properties(validator, properties, instance, schema)
 
-    return validators.extend(Draft202012Validator, {"properties": set_defaults})
+    # a YAML .nan/.inf passes every minimum/maximum (comparisons with NaN are false) and would
+    # fail deep inside a stage: "number" means a finite one
+    checker = Draft202012Validator.TYPE_CHECKER.redefine(
+        "number", lambda _c, x: isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x))
+    return validators.extend(Draft202012Validator, {"properties": set_defaults}, type_checker=checker)
 
 
 def _validate(instance: Any, schema_: Mapping[str, Any], where: str) -> None:
@@ -516,6 +521,16 @@ def _value(v: Any) -> str:
     return r if len(r) <= 60 else r[:57] + "..."
 
 
+#: numbers YAML 1.1 leaves as text: an exponent without a dot in the mantissa (1e-4, 2E3)
+_SCI_NUMBER = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
+
+
+def _sci_fix(text: str) -> str:
+    """``1e-4`` -> ``1.0e-4``: the same number in the form YAML 1.1 reads as a float."""
+    m, e = re.split("[eE]", text, maxsplit=1)
+    return f"{m}.0e{e}"
+
+
 def _explain(err, root: Mapping[str, Any]) -> tuple[int, tuple, str]:
     """(rank, path key, one-line message) of a jsonschema error; rank 0 = unknown key."""
     path = list(err.absolute_path)
@@ -547,7 +562,13 @@ def _explain(err, root: Mapping[str, Any]) -> tuple[int, tuple, str]:
             return 1, order, f"{pre}{_value(inst)} matches more than one of {_describe(sch, root)}"
         return 1, order, f"{pre}{_value(inst)} is not {_describe(sch, root)}"
     if kw == "type":
-        return 1, order, f"{pre}{_value(inst)} is not {_describe({'type': err.validator_value}, root)}"
+        hint = ""
+        if isinstance(inst, float) and not math.isfinite(inst):
+            return 1, order, f"{pre}{_value(inst)} is not a finite number"
+        if isinstance(inst, str) and _SCI_NUMBER.match(inst.strip()):
+            # YAML 1.1 (PyYAML, Snakemake) reads a float only with a dot before the exponent
+            hint = f" (YAML reads {inst} as text: write {_sci_fix(inst.strip())})"
+        return 1, order, f"{pre}{_value(inst)} is not {_describe({'type': err.validator_value}, root)}{hint}"
     if kw == "enum":
         return 1, order, f"{pre}{_value(inst)} is not one of {', '.join(map(str, err.validator_value))}"
     if kw == "const":

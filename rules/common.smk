@@ -2,6 +2,7 @@
 # declared inputs and outputs of every stage.
 import sys
 
+import numpy as np
 import pandas as pd
 from snakemake.utils import update_config, validate
 
@@ -83,7 +84,8 @@ def _available(row):
     return False
 
 
-flights = _manifest[[_available(r) for r in _manifest.itertuples()]].set_index(
+# a boolean array, not a list: an empty list (a manifest of only its header) would select columns
+flights = _manifest[np.array([_available(r) for r in _manifest.itertuples()], dtype=bool)].set_index(
     "flight_id", drop=False
 )
 FLIGHTS = list(flights.flight_id)

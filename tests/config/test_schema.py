@@ -245,6 +245,25 @@ def test_unknown_keys_are_reported_before_sibling_type_errors_deterministically(
         "preprocess.gap_multiple: 'x' is not a number"
 
 
+def test_a_yaml_nan_or_inf_is_not_a_number_even_where_a_range_is_set(tmp_path):
+    # NaN compares false with every bound, so only the type check can stop it before a stage
+    p = tmp_path / "cfg.yaml"
+    p.write_text("preprocess:\n  rate_hz: .nan\nsimulate:\n  rate_hz: .inf\n")
+    with pytest.raises(ConfigError, match=r": preprocess\.rate_hz: nan is not a finite number$"):
+        load_config(p)
+    assert str(_raises({"simulate": {"rate_hz": float("-inf")}})) == "simulate.rate_hz: -inf is not a finite number"
+
+
+def test_an_exponent_yaml_reads_as_text_is_refused_with_the_spelling_it_reads_as_a_number(tmp_path):
+    p = tmp_path / "cfg.yaml"
+    p.write_text("hmm:\n  min_covar: 1e-4\n")
+    with pytest.raises(ConfigError, match=r"hmm\.min_covar: '1e-4' is not a number \(YAML reads 1e-4 as text: "
+                                          r"write 1\.0e-4\)$"):
+        load_config(p)
+    p.write_text("hmm:\n  min_covar: 1.0e-4\n")
+    assert load_config(p)["hmm"]["min_covar"] == 1e-4
+
+
 def _raises(cfg) -> ConfigError:
     with pytest.raises(ConfigError) as exc:
         validate_config(cfg)

@@ -66,3 +66,13 @@ def test_a_yaml_mistake_in_the_config_file_is_one_line_with_its_line_and_column(
     wd = copy_workflow(tmp_path / "wf", [DEMO], extra_config="\nbroken: {a: 1\n", tiny=False)
     line = _one_line(_snakemake(wd, "-n"))
     assert line.startswith("uavpipe: datasets/config.yaml:") and "invalid YAML: while parsing a flow mapping" in line
+
+
+@pytest.mark.slow
+def test_a_manifest_of_only_its_header_plans_the_simulated_work_without_a_traceback(tmp_path):
+    # before: KeyError "None of ['flight_id'] are in the columns" from the empty selection
+    wd = copy_workflow(tmp_path / "wf", [], tiny=False)
+    p = _snakemake(wd, "-n")
+    out = p.stdout + p.stderr
+    assert p.returncode == 0 and "Traceback" not in out and "KeyError" not in out, out[-3000:]
+    assert "flight_report" not in out and "train_model" in out

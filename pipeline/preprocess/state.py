@@ -318,7 +318,7 @@ def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84
             if np.any(np.isfinite(sep)):
                 off = float(np.nanmedian(sep))
                 h0 = float(org[other]) + off
-                diag["notes"].append(f"NED origin altitude from its {other} + {off:.2f} m (the fixes' "
+                diag["notes"].append(f"NED origin altitude from its {other} {off:+.2f} m (the fixes' "
                                      f"median {alt_kind} - {other})")
         if h0 is None or not np.isfinite(float(h0)):
             h0 = np.nanmedian(alt[:10]) if np.any(np.isfinite(alt[:10])) else 0.0

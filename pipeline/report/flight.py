@@ -132,7 +132,7 @@ def calibration_table(preprocess: Mapping | None) -> tuple[str, list[str], list[
     parts = [how]
     if c.get("n_candidates"):
         parts.append(f"{c.get('n_used', 0)} of {c['n_candidates']} candidate points used")
-    parts += [plain_text(n) for n in c.get("notes") or []]
+    parts += [t for t in (plain_text(n) for n in c.get("notes") or []) if t != how]   # "no barometer" once
     return f"Barometric calibration ({'; '.join(parts)})", headers, rows
 
 
@@ -167,6 +167,8 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
     hm = estimates.pop("hmpf", None)
     if hm:
         figs, facts = estimate_panels(estimates, truth=truth, state=state)
+        # the weave classifier is this flight's estimate: no "not in estimate.vehicles" line above it
+        figs = [f for f in figs if f[1] is not None or not f[0].startswith(NO_EKF_TITLE)]
         wf, wfa = weave_panels(hm)
         return figs + wf, facts + wfa
     estimates = {e: p for e, p in estimates.items() if p and Path(p).exists()}
@@ -174,7 +176,7 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
     pf = {e: estimates.pop(e) for e in [e for e in estimates if e in PF_ESTIMATORS]}
     pf_figs, pf_facts = pf_panels(pf, classified)
     if not estimates:
-        return [("Estimates (the flight's vehicle is not in estimate.vehicles)", None), *pf_figs], pf_facts
+        return [(NO_EKF_TITLE, None), *pf_figs], pf_facts
     tables, metas = {}, {}
     for e, p in estimates.items():
         metas[e] = read_table_meta(p)
@@ -246,6 +248,25 @@ def pf_panels(estimates: Mapping[str, str | os.PathLike],
                              + (f"; classifier {m.get('classifier')}" if m.get("classifier") else "")))
         figs.append((f"{label} mode fractions", plots.pf_mode_fractions(t, label)))
     return figs, facts
+
+
+def rangefinder_height(rangefinder: pd.DataFrame | None) -> pd.DataFrame | None:
+    """``DataFrame(t_ns, alt_m)`` of the first rangefinder's distances for the altitude panel,
+    NaN where the reading is flagged invalid; ``None`` without a valid reading.
+
+    An out-of-range reading is logged at the sensor's limit (ArduPilot: ``RNGFND1_MAX_CM``), not
+    at a height: 495 of the 600 demo-quad samples sat at 7 m."""
+    rf = first_instance(rangefinder) if rangefinder is not None else None
+    if rf is None or not len(rf) or "dist_m" not in rf:
+        return None
+    d = rf["dist_m"]
+    if "valid" in rf:
+        d = d.where(rf["valid"].fillna(True).astype(bool))
+    return pd.DataFrame({"t_ns": rf["t_ns"], "alt_m": d}) if d.notna().any() else None
+
+
+#: the estimate panel's title on a flight no EKF runs on
+NO_EKF_TITLE = "Estimates (the flight's vehicle is not in estimate.vehicles)"
 
 
 def weave_panels(path: str | os.PathLike) -> tuple[list, list]:
@@ -424,9 +445,9 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         alt_series["−d (track)"] = pd.DataFrame({"t_ns": ned["t_ns"], "alt_m": -ned["pos_d_m"]})
     if st is not None and "alt_cal_m" in st:
         alt_series["calibrated"] = pd.DataFrame({"t_ns": st["t_ns"], "alt_m": st["alt_cal_m"]})
-    rf = first_instance(log["rangefinder"])
-    if len(rf) and rf["dist_m"].notna().any():
-        alt_series["rangefinder"] = pd.DataFrame({"t_ns": rf["t_ns"], "alt_m": rf["dist_m"]})
+    rf = rangefinder_height(log["rangefinder"])
+    if rf is not None:
+        alt_series["rangefinder"] = rf
     calib_pts = None
     if cal is not None and {"t_ns", "h_ref_m"} <= set(cal.columns) and len(cal):
         # the BPM reference heights the fit used (tilt-compensated range or GPS height)
@@ -442,6 +463,10 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
 
     att, euler, att_frame = attitude_source(st, log)
     rates, rates_frame = _body_rates(st, log["imu"])
+    # "vs setpoint" only where the log has a rate setpoint to draw
+    sp = first_instance(log["setpoint"])
+    has_sp = len(sp) > 0 and any(c in sp and sp[c].notna().any() for c in ("p_radps", "q_radps", "r_radps"))
+    rates_title = "Body rates vs setpoint" if has_sp else "Body rates"
     imu = log["imu"]
     figs = [
         # the ground track and altitude first, the 3-D path after them: a headless or GPU-less
@@ -451,9 +476,9 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("Altitude", plots.altitude(alt_series, calib_pts)),
         ("3-D path", plots.path_3d(ned)),
         ("Attitude", plots.attitude(att, euler, log["setpoint"], frame=att_frame)),
-        ("Body rates vs setpoint", plots.with_setpoint(
+        (rates_title, plots.with_setpoint(
             rates, ["p_radps", "q_radps", "r_radps"], log["setpoint"],
-            ["p_radps", "q_radps", "r_radps"], f"Body rates vs setpoint ({rates_frame})", "body rate [rad/s]")),
+            ["p_radps", "q_radps", "r_radps"], f"{rates_title} ({rates_frame})", "body rate [rad/s]")),
         ("Velocity", plots.with_setpoint(
             velocity, [f"vel_{a}_mps" for a in "ned"], log["setpoint"],
             [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),

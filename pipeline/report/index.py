@@ -61,8 +61,8 @@ tr.failed td{background:#fdecea} .reason{color:#b00020} .absent{color:#777}
 
 def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | None) -> str:
     """``"<n> segments; sim classifier: M1 62%, M3 20%"`` from the segments and the classify
-    tables ``{model_set: path}`` (share of classified samples per predicted maneuver, ``unknown``
-    left out), one part per model set."""
+    tables ``{model_set: path}`` (share of classified samples per predicted maneuver, the four
+    largest, then the ``unknown`` share), one part per model set."""
     parts = []
     if segments and Path(segments).exists():
         seg = pd.read_parquet(segments, columns=["label"])
@@ -73,9 +73,13 @@ def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | N
         c = pd.read_parquet(p)
         if len(c) and "pred" in c:
             share = c["pred"].astype(str).value_counts(normalize=True)
+            unknown = float(share.get("unknown", 0.0))
             share = share[share.index != "unknown"]
             found = ", ".join(f"{k} {100 * v:.0f}%" for k, v in share.head(4).items())
-            parts.append(f"{m} classifier: {found or 'unknown only'}" + (" …" if len(share) > 4 else ""))
+            more = " …" if len(share) > 4 else ""
+            # the unknown share said, last: "background 3%" alone read as the whole flight
+            rest = f", unknown {100 * unknown:.0f}%" if found and unknown > 0 else ""
+            parts.append(f"{m} classifier: {found or 'unknown only'}{more}{rest}")
     return "; ".join(parts)
 
 

@@ -135,6 +135,15 @@ def _t(df: pd.DataFrame) -> np.ndarray:
     return df["t_ns"].to_numpy() * 1e-9
 
 
+def right_axis(title: str, **kw) -> dict:
+    """A y axis on the right, over ``y``, with ticks of its own.
+
+    plotly.js 4 defaults an overlaying axis to ``tickmode="sync"``: its ticks land on the left
+    axis's grid lines, at values such as −0.01, 8.69, 17.39 clipping events; ``auto`` gives round
+    numbers of its own unit, and no second grid."""
+    return dict(overlaying="y", side="right", tickmode="auto", showgrid=False, zeroline=False, title=title, **kw)
+
+
 def layout(fig: go.Figure, title: str, **kw) -> go.Figure:
     """Apply the report's figure style (margins, height, template, horizontal legend) and
     ``title`` to ``fig``; ``kw`` overrides any of those options. Returns ``fig``."""
@@ -308,7 +317,7 @@ def gps_quality(gps: pd.DataFrame | None) -> go.Figure | None:
     if not fig.data:
         return None
     if right:
-        fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="accuracy [m]"))
+        fig.update_layout(yaxis2=right_axis("accuracy [m]"))
     fig.update_xaxes(title="t [s]")
     fig.layout.yaxis.title = "fix type (3 = 3-D), satellites, DOP"
     return layout(fig, "GPS quality")
@@ -356,7 +365,7 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
             fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis="y2",
                                      line=dict(dash="dot")))
         if clips:
-            fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="clipping events"))
+            fig.update_layout(yaxis2=right_axis("clipping events"))
         title, ylab = "Vibration (autopilot's metric)", "vibration [m/s²]"
     if not fig.data:
         r = accel_rms(imu)
@@ -488,7 +497,7 @@ def unit_axes(fig: go.Figure, titles: list[str], colours: list[str | None] | Non
     for k, (title, c) in enumerate(zip(titles, colours)):
         ax = dict(title=dict(text=title, font=dict(color=c) if c else None), tickfont=dict(color=c) if c else None)
         if k:
-            ax.update(overlaying="y", side="right", showgrid=False, zeroline=False)
+            ax.update({k: v for k, v in right_axis("").items() if k != "title"})
         if k == 2:
             ax.update(anchor="free", position=1.0)
         axes["yaxis" if k == 0 else f"yaxis{k + 1}"] = ax
@@ -758,7 +767,7 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
                                      text=[lab] * len(g), name=f"classifier: {lab}"))
         if "confidence" in d:
             fig.add_trace(go.Scatter(x=_t(d), y=d["confidence"], mode="lines", name="confidence V", yaxis="y2"))
-            fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="V [log10]"))
+            fig.update_layout(yaxis2=right_axis("V [log10]"))
     if not fig.data:
         return None
     fig.update_xaxes(title="t [s]")
@@ -807,7 +816,7 @@ def mode_timeline(df: pd.DataFrame | None) -> go.Figure | None:
                                  marker=dict(size=6, color=label_colour(lab)), name=f"classifier: {lab}"))
     if d["V_best"].notna().any():
         fig.add_trace(go.Scatter(x=_t(d), y=d["V_best"], mode="lines", name="confidence V", yaxis="y2"))
-        fig.update_layout(yaxis2=dict(overlaying="y", side="right", title="V [log10]"))
+        fig.update_layout(yaxis2=right_axis("V [log10]"))
     fig.update_xaxes(title="t [s]")
     n = int(df["mode"].astype(bool).sum())
     return layout(fig, f"EKF+HMM mode ({n} of {len(df)} steps with HMM inputs)", height=280)
@@ -838,7 +847,7 @@ def pf_mode_fractions(df: pd.DataFrame | None, name: str = "PF") -> go.Figure | 
         fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=f"classifier: {lab}", yaxis="y2",
                                  line=dict(dash="dot", color=label_colour(lab))))
     if cls:
-        fig.update_layout(yaxis2=dict(overlaying="y", side="right", range=[0, 1], title="classifier softmax"))
+        fig.update_layout(yaxis2=right_axis("classifier softmax", range=[0, 1]))
     fig.update_xaxes(title="t [s]")
     fig.update_layout(yaxis=dict(range=[0, 1], title="mode fraction"))
     return layout(fig, f"{name} mode fractions" + (" beside the classifier" if cls else ""), height=300)

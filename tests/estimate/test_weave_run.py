@@ -95,6 +95,7 @@ def test_the_flight_page_shows_the_weave_af_with_the_tau_line(tmp_path):
     figs, facts = estimate_panels({"hmpf": str(out)}, truth=None, state=None)
     title, fig = figs[-1]
     assert title == "Weave classifier AF(k)" and fig is not None
+    assert not [t for t, _ in figs if t.startswith("Estimates (")]   # no "not in estimate.vehicles" above it
     assert any(getattr(s, "y0", None) == 0.269 for s in fig.layout.shapes)
     assert facts[-1][0] == "hmpf" and "δ_max 500 m" in facts[-1][1]
     assert "σ_aT/σ_aN/σ_xy 2.00/1.8e-05/1.00 m/s²" in facts[-1][1] and "re-initialised" in facts[-1][1]

@@ -458,6 +458,30 @@ def _check_page(r: dict, page_path: Path, kind: str) -> None:
     assert size < MAX_PAGE_BYTES, f"{kind}: {page_path.name} is {size / 1e6:.2f} MB"
 
 
+def test_the_print_button_draws_every_plot_without_scrolling_then_opens_the_print_dialog(report_tree):
+    _need_browser()
+    from playwright.sync_api import sync_playwright
+
+    undrawn = "() => Array.from(document.querySelectorAll('.plotly-graph-div')).filter(d => !d.getAttribute('data-drawn')).length"
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                     args=["--no-sandbox", "--disable-gpu", '--host-resolver-rules=MAP * ~NOTFOUND'])
+        page = browser.new_page(viewport={"width": 1280, "height": 900})
+        page.goto((report_tree / "report" / "flights" / "demo-quad.html").as_uri(), wait_until="load")
+        page.wait_for_function(_VISIBLE_DRAWN, timeout=60_000, polling=50)
+        before = page.evaluate(undrawn)
+        # window.print is modal: count the calls instead
+        page.evaluate("() => { window.printed = 0; window.print = () => { window.printed += 1; }; }")
+        page.click("button.uavpipe-print")
+        page.wait_for_function("() => window.printed === 1", timeout=60_000, polling=50)
+        after, label = page.evaluate(undrawn), page.inner_text("button.uavpipe-print")
+        hidden = page.evaluate("""() => Array.from(document.styleSheets)
+            .some(s => Array.from(s.cssRules).some(r => r.conditionText === "print" && r.cssText.includes("uavpipe-print")))""")
+        browser.close()
+    assert before > 0 and after == 0, (before, after)   # lazily drawn at first, all drawn before printing
+    assert label == "Print with every plot" and hidden
+
+
 @pytest.mark.parametrize("kind", ["flight-dataflash", "flight-simulated", "flight-tlog", "flight-ros2", "model",
                                   "comparison", "study", "failed flight"])
 def test_every_page_kind_draws_every_panel_or_says_it_has_no_data_within_the_limits(

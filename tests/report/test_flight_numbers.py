@@ -173,3 +173,16 @@ def test_the_index_shows_the_flight_pages_duration_distance_and_speed(tmp_path):
     txt = fs.number_texts(fs.flight_numbers(read_flightlog(d)))
     assert f"<td class=num>{txt['duration']}</td><td class=num>{txt['distance']}</td>" in alone
     assert txt["duration"] == "79.6 s"
+
+
+def test_the_index_says_the_unknown_share_after_the_maneuvers_it_names(tmp_path):
+    from pipeline.report.index import maneuver_summary
+
+    p = tmp_path / "c.parquet"
+    pd.DataFrame({"pred": ["unknown"] * 97 + ["background"] * 3}).to_parquet(p)
+    # before: "f3a classifier: background 3%", read as if the flight were all background
+    assert maneuver_summary(None, {"f3a": p}) == "f3a classifier: background 3%, unknown 97%"
+    pd.DataFrame({"pred": ["M1"] * 3 + ["M2"]}).to_parquet(p)
+    assert maneuver_summary(None, {"sim": p}) == "sim classifier: M1 75%, M2 25%"
+    pd.DataFrame({"pred": ["unknown"] * 2}).to_parquet(p)
+    assert maneuver_summary(None, {"sim": p}) == "sim classifier: unknown only"

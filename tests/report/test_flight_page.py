@@ -83,6 +83,13 @@ def test_the_barometric_calibration_is_a_table_of_offset_drift_rms_and_points_pe
     assert "<td>1</td><td>12.7</td><td>21.3</td><td>-1.591</td>" in text
 
 
+def test_a_missing_barometer_is_said_once_in_the_calibration_heading(tmp_path):
+    from pipeline.report.flight import calibration_table
+
+    title, _, rows = calibration_table({"calibration": {"method": "none", "notes": ["no barometer"], "regions": []}})
+    assert title == "Barometric calibration (no barometer)" and rows == []
+
+
 def test_the_facts_read_as_text_without_python_reprs_and_every_page_is_marked_english(tmp_path):
     import re
 

@@ -37,6 +37,9 @@ def test_the_gps_quality_panel_draws_fix_type_satellites_dop_and_accuracy_on_its
     fig = plots.gps_quality(gps)
     assert _names(fig) == ["fix type", "satellites", "HDOP", "horizontal accuracy [m]"]
     assert fig.data[-1].yaxis == "y2" and fig.layout.yaxis2.title.text == "accuracy [m]"
+    # ticks of its own: plotly.js 4 would put an overlaying axis's ticks on the left grid
+    # ("sync"), at values such as 0.441 ... 0.917 m
+    assert fig.layout.yaxis2.tickmode == "auto" and fig.layout.yaxis2.overlaying == "y"
     assert plots.gps_quality(gps.assign(fix_type=np.nan, n_sats=np.nan, hdop=np.nan, hacc_m=np.nan)) is None
     assert plots.gps_quality(None) is None
 
@@ -77,6 +80,7 @@ def test_the_battery_panel_draws_voltage_left_and_current_and_remaining_percent_
     assert [t.yaxis for t in fig.data] == ["y", "y2", "y3"]
     assert [fig.layout.yaxis.title.text, fig.layout.yaxis2.title.text, fig.layout.yaxis3.title.text] == \
         ["voltage [V]", "current [A]", "remaining capacity [%]"]
+    assert fig.layout.yaxis2.tickmode == fig.layout.yaxis3.tickmode == "auto"
     np.testing.assert_allclose(fig.data[2].y, np.linspace(100.0, 70.0, n))
     assert plots.battery(bat.iloc[:0]) is None
 
@@ -137,7 +141,7 @@ def test_a_flight_without_the_new_streams_says_so_in_one_line_per_panel(tmp_path
                         plotly_js="plotly.min.js")
     text = html.unescape(page.read_text())
     for title in ("GPS quality (fix type, satellites, HDOP/EPH)", "Vibration", "Battery", "Attitude",
-                  "Body rates vs setpoint", "Velocity", "Log messages", "Parameters"):
+                  "Body rates", "Velocity", "Log messages", "Parameters"):
         assert f"{title}: no data in this flight" in text, title
 
 
@@ -152,8 +156,9 @@ def test_the_demo_flight_page_draws_the_new_panels_and_tables(tmp_path):
     build_flight_report(tmp_path / "ingest", page, template=ROOT / "reports" / "templates" / "flight.html.j2",
                         plotly_js="plotly.min.js")
     text = html.unescape(page.read_text())
-    for drawn in ("GPS quality", "Attitude vs setpoint", "Body rates vs setpoint", "Vibration (accelerometer RMS"):
+    for drawn in ("GPS quality", "Attitude vs setpoint", "Body rates", "Vibration (accelerometer RMS"):
         assert drawn in text and f"{drawn}: no data" not in text, drawn
+    assert "Body rates vs setpoint" not in text   # the demo logs attitude setpoints, no rate setpoints
     assert "<td>ArduCopter V4.5.0 (uavpipe demo flight)</td>" in text   # a MSG record, with its time
     assert "<td>INS_GYRO_FILTER</td><td>20</td>" in text                 # a PARM record
 
@@ -222,3 +227,16 @@ def test_flight_mode_segments_get_their_own_row_apart_from_the_labelled_maneuver
     assert rows == {"mode:MANUAL": "segments: flight mode", "mode:POSCTL": "segments: flight mode",
                     "M1": "segments: maneuvers"}
     assert [a.text for a in fig.layout.annotations] == ["MANUAL", "POSCTL", "M1"]
+
+
+def test_an_out_of_range_rangefinder_reading_is_no_height_on_the_altitude_panel():
+    from pipeline.report.flight import rangefinder_height
+
+    n = 6
+    rf = _stream("rangefinder", n, 10.0, dist_m=np.array([7.0, 2.5, 2.4, 7.0, 7.0, 2.2]))
+    rf["valid"] = pd.array([False, True, True, False, None, True], dtype="boolean")
+    h = rangefinder_height(rf)
+    # the two readings at the 7 m limit flagged invalid are gaps; an unknown flag keeps its value
+    np.testing.assert_array_equal(h["alt_m"].to_numpy(), [np.nan, 2.5, 2.4, np.nan, 7.0, 2.2])
+    rf["valid"] = pd.array([False] * n, dtype="boolean")
+    assert rangefinder_height(rf) is None and rangefinder_height(None) is None

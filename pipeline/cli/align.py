@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import folder_problem, table_problem
+from .common import add_config_option, folder_problem, table_problem
 
 
 def add_parser(sub) -> None:
@@ -28,7 +28,7 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--out", type=Path, required=True, metavar="DIR",
                    help="output folder: DIR/{learned,alignment,iterations,demos}.parquet")
     p.add_argument("--page", type=Path, default=None, metavar="HTML", help="also write the set's report page")
-    p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    add_config_option(p)
     p.set_defaults(func=run)
 
 

@@ -12,6 +12,7 @@
   checked once, before any flight, as the EKF+HMM will read them.
 * :class:`Claims`: outputs claimed in one run, so a second input that would overwrite the
   first one's files is refused by name instead of silently replacing them.
+* :func:`add_config_option`: every command's ``--config FILE``, with one help text for its default.
 """
 
 from __future__ import annotations
@@ -24,6 +25,16 @@ from pathlib import Path
 #: exception types whose message is already the whole story (no class name printed)
 _OWN_ERRORS = ("ConfigError", "ModelError", "IngestError", "StudyError", "TrajectoryError", "BearingReplayError",
                "EkfHmmError", "ColumnMapError", "SchemaError")
+
+
+#: where ``--config`` is read from when not given (:func:`pipeline.config.load_config`), said alike
+#: by every command's help
+CONFIG_DEFAULT = "default datasets/config.yaml of the current folder, else the project's"
+
+
+def add_config_option(p: argparse.ArgumentParser, what: str = "dataset config") -> None:
+    """``--config FILE`` on ``p``: ``what`` it is for, then the shared default (:data:`CONFIG_DEFAULT`)."""
+    p.add_argument("--config", type=Path, default=None, metavar="FILE", help=f"{what} ({CONFIG_DEFAULT})")
 
 
 def describe(exc: BaseException) -> str:

@@ -11,15 +11,14 @@ workflow resolves it; ``--defaults`` prints the schema defaults alone (a startin
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 from ..config import ConfigError, defaults, load_config
+from .common import add_config_option
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("config", help="print the validated configuration with every default filled")
-    p.add_argument("--config", type=Path, default=None,
-                   help="dataset config (default datasets/config.yaml of the current folder, else the project's)")
+    add_config_option(p)
     p.add_argument("--defaults", action="store_true", help="print the schema defaults only")
     p.add_argument("--section", default=None,
                    help="print one section or key only (e.g. preprocess, simulate.sensors.radar)")

@@ -22,8 +22,8 @@ from pathlib import Path
 
 from ..config import ConfigError, load_config, section
 from ..io.stage import caller_restates
-from .common import (Claims, describe, folder_problem, ingest_flight_id, model_problem, pairing_problem,
-                     q2_problem, table_problem, vehicle_problem)
+from .common import (Claims, add_config_option, describe, folder_problem, ingest_flight_id, model_problem,
+                     pairing_problem, q2_problem, table_problem, vehicle_problem)
 
 
 def add_parser(sub) -> None:
@@ -42,7 +42,7 @@ def add_parser(sub) -> None:
     p.add_argument("--train-sets", nargs="+", type=Path, default=None, metavar="SET",
                    help="the model set's simulated training sets: compute Q2 from them (needs --model)")
     p.add_argument("--vehicle", default=None, help="manifest vehicle (its estimate.synthetic_radar entry, if any)")
-    p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    add_config_option(p)
     p.set_defaults(func=run)
 
 

@@ -1,14 +1,20 @@
-"""``uavpipe info LOG...``: which reader took a file and why, duration, streams, diagnostics."""
+"""``uavpipe info LOG...``: which reader took a file and why, duration, streams, diagnostics.
+
+``--json`` prints one array with an entry per LOG, in order (a failed one as ``{path, status:
+"failed", error}``), as strict JSON: an undefined rate (a one-row stream) is ``null``, not NaN.
+"""
 
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
 from ..io import registry, schema
 from ..io.base import IngestError
 from ..io.manifest import reader_names
+from .common import add_config_option
 from .progress import progress_bar
 
 
@@ -19,8 +25,7 @@ def add_parser(sub) -> None:
     p.add_argument("--format", dest="fmt", default=None, choices=names, metavar="FORMAT",
                    help=f"force a reader instead of detecting: {', '.join(names)}")
     p.add_argument("--json", action="store_true", help="machine-readable output")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="dataset config whose 'ingest' section the readers use (default datasets/config.yaml)")
+    add_config_option(p, "dataset config whose 'ingest' section the readers use")
     p.set_defaults(func=run)
 
 
@@ -121,6 +126,8 @@ def run(args) -> int:
         except IngestError as exc:
             print(f"uavpipe info: {exc}", file=sys.stderr)
             failed += 1
+            if args.json:  # one entry per LOG, a failed one with its reason: the array covers every input
+                out.append({"path": str(path), "status": "failed", "error": exc.reason})
             continue
         d = describe(log)
         if args.json:
@@ -128,6 +135,18 @@ def run(args) -> int:
         else:
             _print_text(d)
     if args.json:
-        json.dump(out, sys.stdout, indent=1, default=str)
+        json.dump(json_safe(out), sys.stdout, indent=1, default=str, allow_nan=False)
         print()
     return 1 if failed else 0
+
+
+def json_safe(obj):
+    """``obj`` with every non-finite float (a one-row stream's NaN rate) as ``None``: ``null`` in
+    the JSON, which has no NaN or Infinity (RFC 8259)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    return obj

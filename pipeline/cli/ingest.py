@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..io.manifest import reader_names
 from ..io.registry import flight_id_for
-from .common import Claims, folder_problem
+from .common import Claims, add_config_option, folder_problem
 from .progress import progress_bar
 
 
@@ -27,9 +27,7 @@ def add_parser(sub) -> None:
     names = reader_names()
     p.add_argument("--format", dest="fmt", default=None, choices=names, metavar="FORMAT",
                    help=f"force a reader instead of detecting: {', '.join(names)}")
-    p.add_argument("--config", type=Path, default=None, metavar="FILE",
-                   help="dataset config whose 'ingest' section is passed to the readers "
-                        "(default datasets/config.yaml, as the workflow)")
+    add_config_option(p, "dataset config whose 'ingest' section is passed to the readers, as the workflow does")
     p.add_argument("--labels", type=Path, default=None, metavar="FILE",
                    help="labels/truth side-car to attach (one LOG only; default: <log>.truth.parquet "
                         "beside the log when present)")

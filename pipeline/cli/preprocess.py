@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..config import ConfigError, load_config, section
 from ..io.stage import caller_restates
-from .common import Claims, describe, folder_problem, ingest_flight_id, vehicle_problem
+from .common import Claims, add_config_option, describe, folder_problem, ingest_flight_id, vehicle_problem
 
 
 def add_parser(sub) -> None:
@@ -20,7 +20,7 @@ def add_parser(sub) -> None:
     p.add_argument("ingest_dirs", nargs="+", type=Path, metavar="INGEST_DIR")
     p.add_argument("-o", "--out", type=Path, required=True, metavar="DIR",
                    help="output root; each flight goes to DIR/<flight_id>/")
-    p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    add_config_option(p)
     p.add_argument("--vehicle", default=None,
                    help="vehicle key in preprocess.vehicles, or 'generic' (the default entry); "
                         "without it: preprocess.flights by flight id, else the default entry")

@@ -15,13 +15,13 @@ import sys
 from pathlib import Path
 
 from ..config import ConfigError, load_config, section
-from .common import folder_problem, nonnegative_int
+from .common import add_config_option, folder_problem, nonnegative_int
 
 
 def add_parser(sub) -> None:
     p = sub.add_parser("simulate", help="simulate the seed-000 maneuver data sets and log files")
     p.add_argument("out_dir", type=Path, metavar="OUT_DIR")
-    p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    add_config_option(p)
     p.add_argument("--seed", type=nonnegative_int, default=None, help="master seed (default: the config's seed)")
     p.add_argument("--size", default=None, help="datasets size row (small, thesis, or one defined in config)")
     p.add_argument("--no-logs", action="store_true", help="skip the log files")
@@ -46,10 +46,13 @@ def run(args) -> int:
         sim["datasets"] = ds
         seed = args.seed if args.seed is not None else int(cfg.get("seed", 0))
         out = args.out_dir
-        sets = run_simulate_sets({}, {"sets": [out / "sets" / f"{n}.parquet" for n in planned_sets(sim)],
+        # the plan first, as the workflow plans at start-up: a sensor rate that does not divide
+        # simulate.rate_hz stops here, not after every set has been simulated and written
+        names = planned_sets(sim)
+        logs = planned_logs(sim)
+        sets = run_simulate_sets({}, {"sets": [out / "sets" / f"{n}.parquet" for n in names],
                                       "summary": out / "summary.parquet", "index": out / "index.json"},
                                  sim, seed=seed)
-        logs = planned_logs(sim)
         if logs:
             run_simulate_logs({}, {"logs": [out / "logs" / r["log"] for r in logs],
                                    "sidecars": [out / "logs" / r["sidecar"] for r in logs],

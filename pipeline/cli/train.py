@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ..config import ConfigError, load_config
 from ..io.stage import caller_restates
-from .common import folder_problem, nonnegative_int, pairing_problem, table_problem
+from .common import add_config_option, folder_problem, nonnegative_int, pairing_problem, table_problem
 
 
 def add_parser(sub) -> None:
@@ -32,7 +32,7 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--out", type=Path, required=True, metavar="MODEL_DIR")
     p.add_argument("--segments", nargs="+", type=Path, default=None, metavar="SEGMENTS",
                    help="segments tables of the flights (one per TABLE): train on flights")
-    p.add_argument("--config", type=Path, default=None, help="dataset config (default datasets/config.yaml)")
+    add_config_option(p)
     p.add_argument("--model-set", default=None, help="use this model_sets entry of the config")
     p.add_argument("--labels", nargs="*", default=None, help="train only these maneuver labels")
     p.add_argument("--exclude", nargs="*", default=None, help="labels to leave out (e.g. take-off, landing)")

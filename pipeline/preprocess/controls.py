@@ -37,6 +37,87 @@ DEFAULT_CONTROLS: dict[str, dict] = {
 }
 
 
+#: stick -> the function each autopilot maps it by: (ArduPilot RCMAP_*, PX4 RC_MAP_*)
+_MAP_PARAMS = {"ail": ("RCMAP_ROLL", "RC_MAP_ROLL"), "ele": ("RCMAP_PITCH", "RC_MAP_PITCH"),
+               "thr": ("RCMAP_THROTTLE", "RC_MAP_THROTTLE"), "rud": ("RCMAP_YAW", "RC_MAP_YAW")}
+
+
+def log_parameters(params: pd.DataFrame | None) -> dict[str, float]:
+    """``{name: value}`` of a ``params`` stream, the last value logged of each name (a parameter
+    set in flight is logged again when it changes)."""
+    if params is None or not len(params) or not {"name", "value"} <= set(params.columns):
+        return {}
+    p = params.sort_values("t_ns", kind="stable") if "t_ns" in params else params
+    v = pd.to_numeric(p["value"], errors="coerce")
+    return {str(k): float(x) for k, x in zip(p["name"].astype(str), v) if np.isfinite(x)}
+
+
+def controls_from_params(params: pd.DataFrame | Mapping[str, float] | None,
+                         controls: Mapping[str, Mapping] | None = None) -> tuple[dict, list[str]]:
+    """The stick map and radio calibration the autopilot itself used, from the log's parameters.
+
+    Each stick's channel is the autopilot's map of its function (ArduPilot ``RCMAP_ROLL``,
+    ``_PITCH``, ``_THROTTLE``, ``_YAW``; PX4 ``RC_MAP_*``; an ArduPilot log with calibration but
+    no ``RCMAP_*`` uses its defaults 1, 2, 3, 4), and its ``min_us``/``trim_us``/``max_us`` and
+    ``reverse`` the channel's calibration ``RCn_MIN``/``RCn_TRIM``/``RCn_MAX`` and ``RCn_REVERSED``
+    (1 = reversed) or ``RCn_REV`` (−1 = reversed). So :func:`normalise_stick` maps the pulse as
+    the autopilot did: on px4-ekf-failure (calibrated 982–2006 µs) the fixed 1100–1900 µs scale
+    read the sticks 10–26 % too large and put the elevator at ±1 on 19 % of samples; on
+    px4-motor-failure (``RC_MAP_THROTTLE`` 1, ``ROLL`` 2, ``PITCH`` 3) ``ail`` was the throttle.
+
+    Parameters
+    ----------
+    params : DataFrame or mapping
+        The ``params`` stream (or ``{name: value}``).
+    controls : mapping, optional
+        The configured sticks (default :data:`DEFAULT_CONTROLS`): what the log does not give is
+        kept from them.
+
+    Returns
+    -------
+    (dict, list of str)
+        The sticks' specs (a function the autopilot leaves unmapped, map 0, is ``None``) and
+        notes saying what came from the log (empty when it has none of these parameters).
+    """
+    pv = dict(params) if isinstance(params, Mapping) else log_parameters(params)
+    base = {k: (dict(v) if v else None) for k, v in (DEFAULT_CONTROLS if controls is None else controls).items()}
+    px4 = any(k.startswith("RC_MAP_") for k in pv)
+    has_map = px4 or any(k.startswith("RCMAP_") for k in pv)
+    has_cal = any(f"RC{i}_MIN" in pv for i in range(1, 5))
+    if not (has_map or has_cal):
+        return base, []
+    out, said = dict(base), []
+    for stick, names in _MAP_PARAMS.items():
+        name = names[1] if px4 else names[0]
+        if has_map:
+            ch = int(pv.get(name, 0))
+            if ch <= 0:
+                out[stick] = None
+                said.append(f"{stick} unmapped ({name} 0)")
+                continue
+        else:  # ArduPilot calibration without RCMAP (older firmware): its fixed 1 roll, 2 pitch, 3 throttle, 4 yaw
+            ch = ("ail", "ele", "thr", "rud").index(stick) + 1
+        spec = {k: v for k, v in (base.get(stick) or {}).items() if k not in ("channel", "reverse")}
+        spec["channel"] = f"rc_{ch}_us"
+        lo, hi, trim = pv.get(f"RC{ch}_MIN"), pv.get(f"RC{ch}_MAX"), pv.get(f"RC{ch}_TRIM")
+        if lo is not None and hi is not None and lo < hi:
+            spec["min_us"], spec["max_us"] = lo, hi
+            if stick != "thr":
+                # a trim at an end (a throttle-style channel mapped to a stick) has no centre: the middle
+                spec["trim_us"] = trim if trim is not None and lo < trim < hi else 0.5 * (lo + hi)
+        rev = pv.get(f"RC{ch}_REVERSED")
+        reverse = (rev == 1) if rev is not None else (pv.get(f"RC{ch}_REV") == -1)
+        if reverse:
+            spec["reverse"] = True
+        out[stick] = spec
+        cal = f" {spec['min_us']:.0f}/{spec['trim_us']:.0f}/{spec['max_us']:.0f}" if "trim_us" in spec \
+            else f" {spec.get('min_us', 1100):.0f}-{spec.get('max_us', 1900):.0f}"
+        said.append(f"{stick} rc_{ch}{cal} µs{' reversed' if reverse else ''}")
+    what = ("PX4 RC_MAP_*" if px4 else "ArduPilot RCMAP_*" if has_map else "ArduPilot default map") + \
+        (", RCn_MIN/TRIM/MAX" if has_cal else "")
+    return out, [f"sticks from the log's parameters ({what}): " + ", ".join(said)]
+
+
 def _check_spec(name: str, spec: Mapping) -> None:
     if "channel" not in spec:
         raise ValueError(f"controls.{name}: missing 'channel' (e.g. rc_1_us)")

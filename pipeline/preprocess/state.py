@@ -58,7 +58,7 @@ from ..io import schema
 from ..io.base import FlightLog
 from ..io.parquet import write_json, write_table
 from .calibrate import CALIBRATION, BPMConfig, calibrate_baro, pressure_altitude
-from .controls import PHYSICAL, controls_from_pwm
+from .controls import PHYSICAL, controls_from_params, controls_from_pwm
 from .derivatives import Differentiator, body_rates_from_quat, differentiate
 from .filters import butterworth
 from .mount import apply_mount, apply_mount_attitude, mount_dcm
@@ -127,6 +127,9 @@ class PreprocessConfig:
     attitude_from_imu: bool = _veh("attitude_from_imu", metadata={"config_key": None})
     mag_mount: dict | None = field(default=None, metadata={"config_key": None})
     controls: dict = _veh("controls", metadata={"config_key": None})
+    controls_from_params: bool = _veh("controls_from_params", metadata={"config_key": None})
+    #: the config key the sticks come from (None: the built-in ArduPilot map), for the notes
+    controls_key: str | None = field(default=None, metadata={"config_key": None})
     physical: dict = _veh("physical", metadata={"config_key": None})
 
     @classmethod
@@ -150,7 +153,7 @@ def resolve_config(sec: Mapping[str, Any], *, flight_id: str | None = None,
 
     The vehicle is ``vehicle`` if given, else ``flights.<pattern>.vehicle`` for the first glob
     pattern matching ``flight_id``, else the ``default`` vehicle entry (if any); the flight's
-    ``windows`` join ``segments.windows``.
+    ``windows`` join ``segments.windows`` and its ``controls`` replace the vehicle's.
 
     Raises
     ------
@@ -159,10 +162,11 @@ def resolve_config(sec: Mapping[str, Any], *, flight_id: str | None = None,
     """
     vehicles = sec.get("vehicles") or {}
     fl_entry: dict = {}
+    fl_pat = None
     if flight_id:
         for pat, entry in (sec.get("flights") or {}).items():
             if fnmatch.fnmatchcase(flight_id, str(pat)):
-                fl_entry = dict(entry or {})
+                fl_entry, fl_pat = dict(entry or {}), str(pat)
                 break
     vname = vehicle or fl_entry.get("vehicle")
     # the manifest also names vehicles without special settings: those get `default`
@@ -173,8 +177,12 @@ def resolve_config(sec: Mapping[str, Any], *, flight_id: str | None = None,
     if fl_entry.get("windows"):
         windows[flight_id] = fl_entry["windows"]
     segs["windows"] = windows
-    per_vehicle = {k: ventry[k] for k in ("imu_mount", "attitude_from_imu", "controls", "physical")
-                   if k in ventry}
+    per_vehicle = {k: ventry[k] for k in ("imu_mount", "attitude_from_imu", "controls", "controls_from_params",
+                                          "physical") if k in ventry}
+    per_vehicle["controls_key"] = f"preprocess.vehicles.{vname_used}.controls" if "controls" in ventry else None
+    if fl_entry.get("controls"):
+        per_vehicle["controls"] = fl_entry["controls"]
+        per_vehicle["controls_key"] = f"preprocess.flights.{fl_pat}.controls"
     per_vehicle["mag_mount"] = ventry.get("mag_mount", ventry.get("imu_mount"))
     try:
         mount_dcm(per_vehicle.get("imu_mount"))
@@ -523,7 +531,12 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
             rows = _prepare(S["control"].dropna(subset=cols, how="all"), cfg, "control", diag,
                             f"control.{group}")
             r[cols] = _resample_stream(rows, "control", cols, grid, cfg, diag)[0]
-        cdf = controls_from_pwm(r, cfg.controls, cfg.physical)
+        sticks, said = cfg.controls, []
+        if cfg.controls_from_params:
+            sticks, said = controls_from_params(S["params"], cfg.controls)
+            diag["notes"] += said
+        diag["sources"]["controls"] = "log parameters" if said else (cfg.controls_key or "built-in ArduPilot map")
+        cdf = controls_from_pwm(r, sticks, cfg.physical)
     else:
         cdf = controls_from_pwm(pd.DataFrame(index=pd.RangeIndex(n)), cfg.controls, cfg.physical)
     for c in ("ail", "ele", "rud", "thr"):

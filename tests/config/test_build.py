@@ -114,7 +114,9 @@ def test_the_shipped_config_builds_the_same_settings_as_the_old_explicit_file():
     other = resolve_config(cfg["preprocess"], flight_id="x", vehicle="generic")
     assert other.vehicle == "default" and other.controls == default_at("preprocess.vehicles.*.controls")
     sim = resolve_config(cfg["preprocess"], flight_id="x", vehicle="sim-quad")
-    assert sim.vehicle == "sim-quad" and dataclasses.replace(sim, vehicle="default") == other
+    assert sim.vehicle == "sim-quad" and \
+        dataclasses.replace(sim, vehicle="default", controls_key=other.controls_key) == other
+    assert sim.controls_key == "preprocess.vehicles.sim-quad.controls"
 
 
 def test_the_stage_shims_validate_against_the_schema():

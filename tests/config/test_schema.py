@@ -106,6 +106,8 @@ def test_the_old_file_with_the_renames_validates_to_the_same_dict_as_the_new_one
     # ... which the EKF+HMM classifies with (the schema default is sim)
     assert new["estimate"]["ekf_hmm"].pop("model") == "simekf"
     new["estimate"]["ekf_hmm"]["model"] = "sim"
+    # stop 42: kd0aij's radio (throttle-first) for the CSV export without radio parameters
+    assert new["preprocess"]["flights"].pop("kd0aij-*")["controls"]["thr"]["channel"] == "rc_1_us"
     assert validate_config(old) == new
 
 

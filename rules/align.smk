@@ -48,7 +48,7 @@ rule align_report:
         ),
     params:
         code_version=PIPELINE_VERSION,
-        config=lambda wc: {"pitch_band_deg": config["align"]["pitch_band_deg"]},
+        config=lambda wc: {"pitch_band_deg": config["align"]["pitch_band_deg"], "tol": config["align"]["tol"]},
         job=lambda wc: {"set_name": wc.align_set, "index": "results/index.html"},
     log:
         "results/logs/align_report/{align_set}.log",

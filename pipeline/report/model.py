@@ -21,16 +21,18 @@ from plotly.subplots import make_subplots
 from ..io.parquet import read_table, read_table_meta
 from .glossary import glossary_rows
 from .pages import figure_divs, render, write_page
-from .plots import layout
+from .plots import label_colours, layout
 
 
 def training_curves(training: dict) -> go.Figure | None:
     """Baum-Welch log-likelihood per iteration, one line per maneuver model."""
     fig = go.Figure()
+    colours = label_colours(training)   # 16 F3A models: plotly's 10 default colours repeat
     for lab, t in training.items():
         h = t.get("history") or []
         if h:
-            fig.add_trace(go.Scatter(x=np.arange(1, len(h) + 1), y=h, mode="lines+markers", name=str(lab)))
+            fig.add_trace(go.Scatter(x=np.arange(1, len(h) + 1), y=h, mode="lines+markers", name=str(lab),
+                                     line=dict(color=colours[str(lab)])))
     if not fig.data:
         return None
     fig.update_xaxes(title="Baum-Welch iteration")

@@ -705,14 +705,48 @@ def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> g
     return layout(fig, title)
 
 
+#: maneuver-label colours: plotly's Dark24 without its near-black (the confidence line's colour)
+#: and its two pinks closest to the unknown grey and each other; F3A schedules hold ~17 maneuvers,
+#: which 10 colours (the default cycle) could not tell apart
+LABEL_PALETTE = ("#2E91E5", "#E15F99", "#1CA71C", "#FB0D0D", "#DA16FF", "#B68100", "#750D86", "#EB663B",
+                 "#511CFB", "#00A08B", "#FB00D1", "#FC0080", "#B2828D", "#6C7C32", "#778AAE", "#862A16",
+                 "#A777F1", "#620042", "#1616A7", "#DA60CA", "#6C4516", "#0D2A63", "#AF0038")
+#: the classifier's confidence line, apart from every label colour
+CONFIDENCE_COLOUR = "#222222"
+
+
 def label_colour(lab: str) -> str:
-    """The colour of a maneuver label, the same for the labelled segment and the classifier's
-    prediction on every page (``unknown``: grey)."""
+    """The colour of one maneuver label alone (its hash into :data:`LABEL_PALETTE`; ``unknown``:
+    grey). A panel of several labels takes :func:`label_colours`, which keeps them apart."""
     import zlib
 
     if str(lab) == "unknown":
         return "#999999"
-    return _CYCLE[zlib.crc32(str(lab).encode()) % len(_CYCLE)]
+    return LABEL_PALETTE[zlib.crc32(str(lab).encode()) % len(LABEL_PALETTE)]
+
+
+def label_colours(labels) -> dict[str, str]:
+    """``{label: colour}`` for the labels of one panel, no two alike while the palette lasts.
+
+    Each label (in sorted order) takes its :func:`label_colour`, or on a clash the next free
+    colour of the palette: a label has the same colour on every panel of the same label set
+    (a flight's segments and its classifier, a schedule's pages), and on any panel where its own
+    colour is free. ``unknown`` stays grey."""
+    out: dict[str, str] = {}
+    taken: set[str] = set()
+    n = len(LABEL_PALETTE)
+    for lab in sorted({str(x) for x in labels}):
+        if lab == "unknown":
+            out[lab] = "#999999"
+            continue
+        k = LABEL_PALETTE.index(label_colour(lab))
+        for j in range(n):
+            c = LABEL_PALETTE[(k + j) % n]
+            if c not in taken or len(taken) >= n:
+                break
+        out[lab] = c
+        taken.add(c)
+    return out
 
 
 def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None = None) -> go.Figure:
@@ -748,6 +782,8 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
     """Maneuver timeline: the segments as bars, flight-mode runs (``mode:<name>``) on their own
     row apart from the labelled maneuvers; the classifier's label and confidence if given."""
     fig = go.Figure()
+    colours = label_colours([*(segments["label"].astype(str) if segments is not None and len(segments) else []),
+                             *(classified["label"].astype(str).unique() if classified is not None and len(classified) else [])])
     if segments is not None and len(segments):
         for r in segments.itertuples():
             t0, t1 = r.t_start_ns * 1e-9, r.t_end_ns * 1e-9
@@ -755,7 +791,7 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
             is_mode = lab.startswith("mode:")
             row, text = (MODE_SEGMENTS_ROW, lab[len("mode:"):]) if is_mode else (LABEL_SEGMENTS_ROW, lab)
             fig.add_trace(go.Scatter(x=[t0, t1], y=[row, row], mode="lines",
-                                     line=dict(width=14, color=label_colour(lab)),
+                                     line=dict(width=14, color=colours[lab]),
                                      name=lab, showlegend=False, hovertext=lab))
             fig.add_annotation(x=(t0 + t1) / 2, y=row, text=text, showarrow=False, yshift=14,
                                font=dict(size=9))
@@ -763,10 +799,11 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
         d = decimate(classified)
         for lab, g in d.groupby(d["label"].astype(str), sort=True):
             fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers",
-                                     marker=dict(size=6, color=label_colour(lab)),
+                                     marker=dict(size=6, color=colours[lab]),
                                      text=[lab] * len(g), name=f"classifier: {lab}"))
         if "confidence" in d:
-            fig.add_trace(go.Scatter(x=_t(d), y=d["confidence"], mode="lines", name="confidence V", yaxis="y2"))
+            fig.add_trace(go.Scatter(x=_t(d), y=d["confidence"], mode="lines", name="confidence V", yaxis="y2",
+                                     line=dict(color=CONFIDENCE_COLOUR, width=1)))
             fig.update_layout(yaxis2=right_axis("V [log10]"))
     if not fig.data:
         return None
@@ -811,11 +848,13 @@ def mode_timeline(df: pd.DataFrame | None) -> go.Figure | None:
     fig.add_trace(go.Scatter(x=_t(d), y=np.where(mode, "HMM inputs", "CA"), mode="markers",
                              marker=dict(size=5, color=np.where(mode, "#d62728", "#1f77b4")),
                              name="prediction model", showlegend=False))
+    colours = label_colours(d["pred"].astype(str).unique())
     for lab, g in d.groupby(d["pred"].astype(str), sort=True):
         fig.add_trace(go.Scatter(x=_t(g), y=["classifier"] * len(g), mode="markers",
-                                 marker=dict(size=6, color=label_colour(lab)), name=f"classifier: {lab}"))
+                                 marker=dict(size=6, color=colours[lab]), name=f"classifier: {lab}"))
     if d["V_best"].notna().any():
-        fig.add_trace(go.Scatter(x=_t(d), y=d["V_best"], mode="lines", name="confidence V", yaxis="y2"))
+        fig.add_trace(go.Scatter(x=_t(d), y=d["V_best"], mode="lines", name="confidence V", yaxis="y2",
+                                 line=dict(color=CONFIDENCE_COLOUR, width=1)))
         fig.update_layout(yaxis2=right_axis("V [log10]"))
     fig.update_xaxes(title="t [s]")
     n = int(df["mode"].astype(bool).sum())
@@ -842,10 +881,11 @@ def pf_mode_fractions(df: pd.DataFrame | None, name: str = "PF") -> go.Figure | 
         m = c[len("mode_p_"):]
         fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", stackgroup="modes", name=f"{name}: {m.upper()}",
                                  line=dict(width=0.5, color=PF_MODE_COLOURS.get(m))))
+    cls_colours = label_colours(c[len("cls_p_"):] for c in cls)
     for c in cls:
         lab = c[len("cls_p_"):]
         fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=f"classifier: {lab}", yaxis="y2",
-                                 line=dict(dash="dot", color=label_colour(lab))))
+                                 line=dict(dash="dot", color=cls_colours[lab])))
     if cls:
         fig.update_layout(yaxis2=right_axis("classifier softmax", range=[0, 1]))
     fig.update_xaxes(title="t [s]")

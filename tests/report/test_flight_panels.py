@@ -240,3 +240,21 @@ def test_an_out_of_range_rangefinder_reading_is_no_height_on_the_altitude_panel(
     np.testing.assert_array_equal(h["alt_m"].to_numpy(), [np.nan, 2.5, 2.4, np.nan, 7.0, 2.2])
     rf["valid"] = pd.array([False] * n, dtype="boolean")
     assert rangefinder_height(rf) is None and rangefinder_height(None) is None
+
+
+def test_the_seventeen_labels_of_an_f3a_schedule_get_seventeen_colours_none_the_confidence_lines():
+    labs = ["tHat", "iSp", "rollC", "fTrn", "h8L", "hB", "pImm", "lnd", "M", "sqL", "2x4", "Stall",
+            "hSqL", "rollC2", "Av", "tkoff", "Z"]
+    c = plots.label_colours([*labs, "unknown", "M"])
+    assert len(c) == 18 and len({c[k] for k in labs}) == 17 and c["unknown"] == "#999999"
+    assert plots.CONFIDENCE_COLOUR not in c.values()
+    # the same set in another order, or another panel of it: the same colours
+    assert plots.label_colours(reversed(labs)) == {k: c[k] for k in labs}
+    # a label alone, or without a clash, keeps its own colour
+    assert plots.label_colours(["M1", "M2"])["M1"] == plots.label_colour("M1")
+    seg = pd.DataFrame({"t_start_ns": np.arange(17) * 10**9, "t_end_ns": np.arange(1, 18) * 10**9, "label": labs})
+    cls = pd.DataFrame({"t_ns": np.arange(17) * 10**9, "label": labs, "confidence": np.zeros(17)})
+    fig = plots.timeline(seg, cls)
+    v = [t for t in fig.data if t.name == "confidence V"][0]
+    assert v.line.color == plots.CONFIDENCE_COLOUR
+    assert len({t.marker.color for t in fig.data if t.mode == "markers"}) == 17

@@ -29,8 +29,10 @@ in this order, every constant from the ``preprocess`` config section (:class:`Pr
 
 ``gap`` is True at grid points where the position source or the attitude stream (those present)
 has no sample within its gap limit, or its sample holds no value (a NaN position, a zero or NaN
-quaternion), and around an estimator reset of the position source (``reset_count`` changes).
-Streams that are absent give NaN columns; a log with no usable stream at all gives an empty
+quaternion), and around an estimator reset of the position source (``reset_count`` changes):
+a row with ``gap`` False has a finite position, velocity and attitude. The other columns keep
+their own streams' coverage whatever ``gap`` says (on phoenix-mission1, ~1 Hz telemetry, the
+body rates are NaN on 404 rows with ``gap`` False), so a consumer of them checks them. Streams that are absent give NaN columns; a log with no usable stream at all gives an empty
 ``state`` with the full schema. Diagnostics (timestamp
 repairs, sources, filter flags, calibration summary) are returned in
 :attr:`PreprocessResult.diagnostics` and written into the Parquet metadata and the JSON

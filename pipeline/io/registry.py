@@ -93,9 +93,24 @@ def detect(path: str | os.PathLike) -> tuple[type[LogReader], str]:
             reason = None
         if reason:
             return r, reason
-    kind = "directory" if p.is_dir() else f"file starting {head[:8].hex(' ')}"
-    raise IngestError(p, f"unrecognised log format ({kind}); known formats: "
+    if p.is_dir():
+        raise IngestError(p, _folder_problem(p))
+    raise IngestError(p, f"unrecognised log format (file starting {head[:8].hex(' ')}); known formats: "
                       f"{', '.join(r.name for r in readers())}")
+
+
+def _folder_problem(p: Path) -> str:
+    """Why a folder is no log: the only folder format is a ROS 2 bag (``metadata.yaml`` beside
+    its storage files); say what the folder holds instead, or why it cannot be listed."""
+    try:
+        names = sorted(x.name for x in p.iterdir())
+    except OSError as exc:
+        return f"cannot list the folder: {exc.strerror or exc}"
+    if not names:
+        return "an empty folder, not a log"
+    shown = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+    return (f"a folder without metadata.yaml, so not a ROS 2 bag (it holds {shown}); "
+            f"give a log file itself, or the bag's folder")
 
 
 _ID_BAD = re.compile(r"[^A-Za-z0-9-]+")

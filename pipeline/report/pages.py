@@ -4,6 +4,7 @@ scheduler would take as done)."""
 
 from __future__ import annotations
 
+import html
 import json
 import math
 import os
@@ -21,7 +22,7 @@ DEFAULT_HEIGHT_PX = 450
 PLOT_CONFIG = {"responsive": True}
 
 
-def figure_div(fig, div_id: str) -> str:
+def figure_div(fig, div_id: str, label: str | None = None) -> str:
     """One figure as an empty ``<div>`` of its final height and a script that registers its
     drawing function in ``window.uavpipePlots[div_id]``; nothing is drawn here.
 
@@ -31,14 +32,22 @@ def figure_div(fig, div_id: str) -> str:
     takes ``(gd, edit)``: ``edit(layout)`` may change the layout before the draw (the linked
     time axis gives a late panel the range already zoomed to). The figure's JSON is plotly's
     own (``plotly.io.json.to_json_plotly``: typed arrays as base64, ``<``, ``>`` and ``/``
-    escaped, so it cannot end the ``<script>``)."""
+    escaped, so it cannot end the ``<script>``).
+
+    The ``<div>`` is an image to assistive technology (``role="img"``) named by ``label`` (the
+    panel's title, else the figure's) and the names of its traces: the plot's text lives in an
+    SVG that a screen reader does not read as a caption."""
     from plotly.io.json import to_json_plotly
 
     d = fig.to_dict()
     lay = d.get("layout", {})
     height = lay.get("height") or lay.get("template", {}).get("layout", {}).get("height") or DEFAULT_HEIGHT_PX
     data, layout = to_json_plotly(d.get("data", [])), to_json_plotly(lay)
-    return (f'<div id="{div_id}" class="plotly-graph-div" style="height:{float(height):g}px; width:100%;"></div>'
+    title = label or (lay.get("title") or {}).get("text") or "plot"
+    names = [str(t["name"]) for t in d.get("data", []) if t.get("name") and t.get("showlegend", True) is not False]
+    aria = title + (f" ({len(names)} traces: {', '.join(names[:12])}{' …' if len(names) > 12 else ''})" if names else "")
+    return (f'<div id="{div_id}" class="plotly-graph-div" role="img" aria-label="{html.escape(aria, quote=True)}" '
+            f'style="height:{float(height):g}px; width:100%;"></div>'
             f'<script>(window.uavpipePlots = window.uavpipePlots || {{}})["{div_id}"] = function (gd, edit) {{ '
             f'return Plotly.newPlot(gd, {data}, edit({layout}), {json.dumps(PLOT_CONFIG)}); }};</script>')
 
@@ -46,7 +55,7 @@ def figure_div(fig, div_id: str) -> str:
 def figure_divs(figs) -> list[tuple[str, str | None]]:
     """``[(title, figure or None)]`` -> ``[(title, <div> or None)]`` (:func:`figure_div`, ids
     ``plot-<i>``; plotly.js loaded once per page)."""
-    return [(title, None if f is None else figure_div(f, f"plot-{i}")) for i, (title, f) in enumerate(figs)]
+    return [(title, None if f is None else figure_div(f, f"plot-{i}", title)) for i, (title, f) in enumerate(figs)]
 
 
 def render(template: str | os.PathLike, **context) -> str:

@@ -115,3 +115,15 @@ def test_a_long_flight_page_stays_under_3_mb_with_every_panel_drawn_or_said_abse
     for shown in ("GPS quality", "Vibration (accelerometer RMS", "Attitude vs setpoint", "Log messages", "Parameters"):
         assert shown in text, shown
     assert "Battery: no data in this flight" in text  # the demo logs no battery: one line, not nothing
+
+
+def test_a_plot_is_an_image_named_by_its_panel_and_traces_for_a_screen_reader():
+    import plotly.graph_objects as go
+
+    from pipeline.report.pages import figure_divs
+
+    fig = go.Figure([go.Scatter(x=[0, 1], y=[0, 1], name="roll [°]"), go.Scatter(x=[0, 1], y=[1, 0], name="a<b")])
+    (title, div), (t2, none) = figure_divs([("Attitude & rates", fig), ("Battery", None)])
+    assert div.startswith('<div id="plot-0" class="plotly-graph-div" role="img" '
+                          'aria-label="Attitude &amp; rates (2 traces: roll [°], a&lt;b)"')
+    assert none is None and t2 == "Battery"

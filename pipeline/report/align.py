@@ -150,8 +150,9 @@ def loglik_figure(iterations: pd.DataFrame, tol: float | None = None) -> go.Figu
         fig.add_hline(y=tol, line=dict(color="#222222", dash="dash"), annotation_text=f"tol {tol:g}",
                       annotation_position="top right")
     fig.update_xaxes(title="EM iteration")
-    fig.update_yaxes(title="|Δ log L| / |log L| (per iteration)", type="log", exponentformat="power")
-    return layout(fig, f"EM convergence ({n_conv} of {n_all} maneuvers converged)", height=380)
+    fig.update_yaxes(title="|Δ log L| / |log L| (per iteration)", type="log")
+    layout(fig, f"EM convergence ({n_conv} of {n_all} maneuvers converged)", height=380)
+    return fig.update_yaxes(exponentformat="power")   # 10⁻⁶, not 0.000001 (layout's plain numbers)
 
 
 def anchor_table(learned: pd.DataFrame, demos: pd.DataFrame, band_deg: Sequence[float]) -> pd.DataFrame:

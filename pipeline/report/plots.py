@@ -144,12 +144,19 @@ def right_axis(title: str, **kw) -> dict:
     return dict(overlaying="y", side="right", tickmode="auto", showgrid=False, zeroline=False, title=title, **kw)
 
 
+#: the legend's top below the plot area (px): under the tick labels and the x-axis title
+LEGEND_BELOW_PX = 62.0
+
+
 def layout(fig: go.Figure, title: str, **kw) -> go.Figure:
     """Apply the report's figure style (margins, height, template, horizontal legend) and
     ``title`` to ``fig``; ``kw`` overrides any of those options. Returns ``fig``."""
-    # the horizontal legend sits below the x-axis title, never on it
-    opts = {"margin": dict(l=50, r=20, t=40, b=40), "height": 360, "template": "plotly_white",
-            "legend": dict(orientation="h", yanchor="top", y=-0.22), **kw}
+    # the horizontal legend sits below the x-axis title, never on it: 62 px under the plot area
+    # whatever the figure's height (a fixed -0.22 of a 260 px timeline put it on the title)
+    opts = {"margin": dict(l=50, r=20, t=40, b=40), "height": 360, "template": "plotly_white", **kw}
+    m = {"t": 40, "b": 40, **(opts["margin"] or {})}
+    plot_h = max(float(opts["height"] or 360) - m["t"] - m["b"], 60.0)
+    opts.setdefault("legend", dict(orientation="h", yanchor="top", y=-LEGEND_BELOW_PX / plot_h))
     fig.update_layout(title=title, **opts)
     # plain numbers on every axis: no SI-prefixed "−0.38k" ticks on confidence or log axes
     fig.update_xaxes(exponentformat="none")

@@ -46,6 +46,9 @@ class Differentiator:
     method : {"savgol", "butter", "gradient"}
     window_s : float
         Savitzky–Golay window length in seconds (rounded to an odd number of samples).
+    min_source_samples : int
+        :meth:`for_source`: the window spans at least this many samples of the differentiated
+        source (0: ``window_s`` alone).
     polyorder : int
         Savitzky–Golay polynomial degree; raised to the derivative order where lower.
     cutoff_hz, order : float, int
@@ -54,6 +57,7 @@ class Differentiator:
 
     method: str = _der("method")
     window_s: float = _der("window_s")
+    min_source_samples: int = _der("min_source_samples")
     polyorder: int = _der("polyorder")
     cutoff_hz: float = _der("cutoff_hz")
     order: int = _der("order")
@@ -61,6 +65,24 @@ class Differentiator:
     def __post_init__(self):
         if self.method not in DIFF_METHODS:
             raise ValueError(f"derivatives.method must be one of {DIFF_METHODS}, got {self.method!r}")
+
+    def for_source(self, period_s: float) -> "Differentiator":
+        """This differentiator for a source sampled every ``period_s`` and interpolated onto the
+        grid: the Savitzky–Golay window widened to ``min_source_samples`` source periods.
+
+        Between two source samples the grid holds interpolation, so a window counts the
+        source's samples, not the grid's: a cubic (4 coefficients) over the 5 samples a 5 Hz GPS
+        puts in 1 s barely smooths. On the simulated tlog flight (GPS position, 5 Hz; truth
+        known) the velocity was 0.75/0.75/1.46 m/s RMS off (N/E/D) and the acceleration
+        2.4/2.4/5.1 m/s²; over 10 samples (2 s) 0.29/0.29/0.55 m/s and 0.85/0.96/1.03 m/s².
+        A source at the grid rate or faster keeps ``window_s``."""
+        import dataclasses
+
+        if self.method != "savgol" or not self.min_source_samples or not np.isfinite(period_s) or period_s <= 0:
+            return self
+        w = self.min_source_samples * float(period_s)
+        # a source at the window's own count (10 Hz, 1 s) is no reason to change it
+        return dataclasses.replace(self, window_s=w) if w > self.window_s * (1 + 1e-3) else self
 
     @classmethod
     def from_dict(cls, d: Mapping | None) -> "Differentiator":

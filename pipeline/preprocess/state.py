@@ -64,7 +64,7 @@ from .controls import PHYSICAL, controls_from_params, controls_from_pwm
 from .derivatives import Differentiator, body_rates_from_quat, differentiate
 from .filters import butterworth
 from .mount import apply_mount, apply_mount_attitude, mount_dcm
-from .resample import make_grid, primary_instance, repair_timestamps, resample
+from .resample import make_grid, median_period_ns, primary_instance, repair_timestamps, resample
 from .segment import build_segments
 
 _NED = ("n", "e", "d")
@@ -478,14 +478,21 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         gap |= ~pvalid
         vel_meas = r[VEL].to_numpy() if all(v in r.columns for v in VEL) else np.full((n, 3), np.nan)
         use_meas = cfg.velocity_source == "measured" and np.isfinite(vel_meas[pvalid]).all() and pvalid.any()
+        # the window counts the source's samples, not the grid's interpolation between them
+        src_period_s = median_period_ns(pos_df["t_ns"].to_numpy(np.int64)) * 1e-9
+        der = cfg.derivatives.for_source(src_period_s)
+        if der is not cfg.derivatives:
+            diag["notes"].append(f"derivative window {der.window_s:.2f} s: {der.min_source_samples} samples of the "
+                                 f"{1 / src_period_s:.1f} Hz position source (derivatives.min_source_samples)")
+        diag["derivative_window_s"] = der.window_s
         if use_meas:
             vel = vel_meas
-            acc = differentiate(vel, dt, 1, cfg.derivatives, valid=pvalid)
-            jerk = differentiate(vel, dt, 2, cfg.derivatives, valid=pvalid)
+            acc = differentiate(vel, dt, 1, der, valid=pvalid)
+            jerk = differentiate(vel, dt, 2, der, valid=pvalid)
         else:
-            vel = differentiate(pos, dt, 1, cfg.derivatives, valid=pvalid)
-            acc = differentiate(pos, dt, 2, cfg.derivatives, valid=pvalid)
-            jerk = differentiate(pos, dt, 3, cfg.derivatives, valid=pvalid)
+            vel = differentiate(pos, dt, 1, der, valid=pvalid)
+            acc = differentiate(pos, dt, 2, der, valid=pvalid)
+            jerk = differentiate(pos, dt, 3, der, valid=pvalid)
         diag["sources"]["velocity"] = "measured" if use_meas else "differentiated position"
     else:
         pos = vel = acc = jerk = np.full((n, 3), np.nan)

@@ -102,3 +102,22 @@ def test_bad_method_rejected():
         Differentiator(method="spline")
     with pytest.raises(ValueError, match="unknown key"):
         Differentiator.from_dict({"windw_s": 1})
+
+
+def test_a_slow_source_interpolated_onto_the_grid_gets_a_window_of_ten_of_its_own_samples(rng):
+    # a 2.5 Hz GPS (the Husky's) with 0.5 m noise, linearly interpolated onto the 25 Hz grid
+    d = configured()
+    assert d.min_source_samples == 10
+    assert d.for_source(0.4).window_s == pytest.approx(4.0) and d.for_source(0.1) is d   # 10 Hz: 1 s already
+    assert d.for_source(0.04) is d and d.for_source(float("nan")) is d
+    assert Differentiator(method="butter").for_source(0.4).method == "butter"
+    dt, ts = 0.04, np.arange(0, 300, 0.4)
+    t = np.arange(0, 299.6, dt)
+    pos = np.stack([np.interp(t, ts, truth(ts, 0)[:, i] + rng.normal(scale=0.5, size=len(ts))) for i in range(3)], 1)
+    e1 = _rms(differentiate(pos, dt, 1, d) - truth(t, 1))
+    e10 = _rms(differentiate(pos, dt, 1, d.for_source(0.4)) - truth(t, 1))
+    a1 = _rms(differentiate(pos, dt, 2, d) - truth(t, 2))
+    a10 = _rms(differentiate(pos, dt, 2, d.for_source(0.4)) - truth(t, 2))
+    # 2.5 source samples per 1 s window barely smooth; ten of them do (the signal's highest
+    # rate, 0.9 rad/s, is slow enough for a 4 s cubic)
+    assert np.all(e10 < 0.5 * e1) and np.all(a10 < 0.25 * a1), (e1, e10, a1, a10)

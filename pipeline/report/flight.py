@@ -19,7 +19,7 @@ from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
 from .flight_summary import (PATH_BIN_S, PATH_NOISE_K, diagnostics_text, first_instance, flight_numbers,
-                             ned_track, numbers_script, plain_text, summary_rows, velocity_track)
+                             ned_track, numbers_script, plain_text, summary_rows, velocity_track, without_edges)
 from .pages import figure_divs, render, vector_text, write_page
 from . import plots
 
@@ -436,7 +436,12 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     failed = meta.get("status") == "failed"
     ned = ned_track(log, st)
     velocity = velocity_track(st, log)
-    numbers = flight_numbers(log, st, ned=ned, velocity=velocity)
+    pre0 = (read_table_meta(state).get("preprocess") or {}) if st is not None else {}
+    # a velocity differentiated from position: its run ends are extrapolations, kept out of the maxima
+    edge_s = 0.5 * float(pre0.get("derivative_window_s") or 1.0) \
+        if st is not None and "vel_n_mps" in st and st["vel_n_mps"].notna().any() \
+        and (pre0.get("sources") or {}).get("velocity") == "differentiated position" else 0.0
+    numbers = flight_numbers(log, st, ned=ned, velocity=without_edges(velocity, edge_s))
     alt_series = {}
     baro = baro_relative(log["baro"])
     if baro is not None:

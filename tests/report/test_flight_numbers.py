@@ -186,3 +186,17 @@ def test_the_index_says_the_unknown_share_after_the_maneuvers_it_names(tmp_path)
     assert maneuver_summary(None, {"sim": p}) == "sim classifier: M1 75%, M2 25%"
     pd.DataFrame({"pred": ["unknown"] * 2}).to_parquet(p)
     assert maneuver_summary(None, {"sim": p}) == "sim classifier: unknown only"
+
+
+def test_the_headline_speeds_leave_out_the_extrapolated_ends_of_a_differentiated_velocity():
+    t = np.arange(0, 100) * 40_000_000                       # 4 s at 25 Hz, a gap in the middle
+    v = pd.DataFrame({"t_ns": t, "vel_n_mps": 1.0, "vel_e_mps": 0.0, "vel_d_mps": 0.5})
+    v.loc[[0, 49, 99], "vel_d_mps"] = -9.4                   # the run ends: edge spikes
+    v.loc[50:52, ["vel_n_mps", "vel_e_mps", "vel_d_mps"]] = np.nan
+    w = fs.without_edges(v, 0.5)
+    kept = w["vel_d_mps"].notna().to_numpy()
+    # 0.5 s = 12.5 samples dropped at each end of both runs [0, 50) and [53, 100)
+    assert not kept[:13].any() and kept[13:37].all() and not kept[37:50].any() and not kept[53:66].any()
+    assert fs.track_numbers(None, w)["max_vspeed_mps"] == 0.5
+    assert fs.track_numbers(None, v)["max_vspeed_mps"] == 9.4
+    assert fs.without_edges(v, 0.0) is v

@@ -94,6 +94,18 @@ _TIME_WINDOW_IQRS = 4.0
 _TIME_SAMPLE = 1 << 20  # stamps pooled for the quantiles (every k-th of each stream)
 
 
+def last_params(params) -> dict[str, float]:
+    """``{name: the last value set}`` of a ``params`` stream (a DataFrame; a parameter set in
+    flight is logged again when it changes; a value that is no number is NaN)."""
+    import pandas as pd  # here, not at the top: DataFlash and tlog ingest never import pandas
+
+    if params is None or not len(params) or "name" not in params:
+        return {}
+    p = params.dropna(subset=["name"]).sort_values("t_ns", kind="stable")
+    v = pd.to_numeric(p["value"], errors="coerce").to_numpy(np.float64)
+    return {str(k): float(x) for k, x in zip(p["name"].astype(str), v)}
+
+
 def losses_text(diag: Mapping[str, Any]) -> str:
     """What decoding lost, from a log's ``diagnostics``: ``"3 bytes skipped, 1 records dropped
     (truncated)"``; ``""`` when nothing was lost."""

@@ -25,6 +25,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from ..io.base import last_params
+
 STICKS = ("ail", "ele", "rud", "thr")
 PHYSICAL = ("delta_a_rad", "delta_e_rad", "delta_r_rad", "thrust_N")
 
@@ -40,16 +42,6 @@ DEFAULT_CONTROLS: dict[str, dict] = {
 #: stick -> the function each autopilot maps it by: (ArduPilot RCMAP_*, PX4 RC_MAP_*)
 _MAP_PARAMS = {"ail": ("RCMAP_ROLL", "RC_MAP_ROLL"), "ele": ("RCMAP_PITCH", "RC_MAP_PITCH"),
                "thr": ("RCMAP_THROTTLE", "RC_MAP_THROTTLE"), "rud": ("RCMAP_YAW", "RC_MAP_YAW")}
-
-
-def log_parameters(params: pd.DataFrame | None) -> dict[str, float]:
-    """``{name: value}`` of a ``params`` stream, the last value logged of each name (a parameter
-    set in flight is logged again when it changes)."""
-    if params is None or not len(params) or not {"name", "value"} <= set(params.columns):
-        return {}
-    p = params.sort_values("t_ns", kind="stable") if "t_ns" in params else params
-    v = pd.to_numeric(p["value"], errors="coerce")
-    return {str(k): float(x) for k, x in zip(p["name"].astype(str), v) if np.isfinite(x)}
 
 
 def controls_from_params(params: pd.DataFrame | Mapping[str, float] | None,
@@ -79,7 +71,8 @@ def controls_from_params(params: pd.DataFrame | Mapping[str, float] | None,
         The sticks' specs (a function the autopilot leaves unmapped, map 0, is ``None``) and
         notes saying what came from the log (empty when it has none of these parameters).
     """
-    pv = dict(params) if isinstance(params, Mapping) else log_parameters(params)
+    pv = dict(params) if isinstance(params, Mapping) else last_params(params)
+    pv = {k: v for k, v in pv.items() if np.isfinite(v)}
     base = {k: (dict(v) if v else None) for k, v in (DEFAULT_CONTROLS if controls is None else controls).items()}
     px4 = any(k.startswith("RC_MAP_") for k in pv)
     has_map = px4 or any(k.startswith("RCMAP_") for k in pv)

@@ -20,6 +20,7 @@ import pandas as pd
 import plotly.graph_objects as go
 
 from ..io import schema
+from ..io.base import last_params
 from ..io.parquet import read_table, read_table_meta
 from . import plots
 from .flight_summary import utc_date
@@ -81,14 +82,6 @@ def takeoff_t_ns(state: pd.DataFrame) -> tuple[int | None, str]:
         k = int(np.argmax(hit))
         return int(t[k]), str(why[k])
     return int(t[0]), "first sample"
-
-
-def last_params(params: pd.DataFrame | None) -> dict[str, float]:
-    """``{name: the last value set}`` of a ``params`` stream."""
-    if params is None or not len(params):
-        return {}
-    p = params.dropna(subset=["name"]).sort_values("t_ns", kind="stable")
-    return {str(k): float(v) for k, v in zip(p["name"].astype(str), p["value"].to_numpy(np.float64))}
 
 
 def differing_params(per_flight: Mapping[str, Mapping[str, float]]) -> tuple[list[str], list[list[str]]]:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pipeline.io.base import last_params
 from pipeline.report import compare
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -49,7 +50,7 @@ def test_only_parameters_that_differ_or_are_missing_somewhere_are_listed():
     assert headers == ["parameter", "a", "b", "c"]
     assert rows == [["P2", "2", "3", "2"], ["P3", "0.1", "–", "–"]]
     p = pd.DataFrame({"t_ns": [2, 1, 3], "name": ["X", "X", "Y"], "value": [5.0, 4.0, 1.0]})
-    assert compare.last_params(p) == {"X": 5.0, "Y": 1.0}
+    assert last_params(p) == {"X": 5.0, "Y": 1.0}
 
 
 def test_the_comparison_page_and_the_index_columns(tmp_path):

@@ -131,3 +131,21 @@ def _py(v):
     if isinstance(v, np.generic):
         return v.item()
     return v
+
+
+#: PX4's sensor_combined fields (the IMU topic the ULog reader maps to ``imu``)
+SENSOR_COMBINED = [("uint64_t", "timestamp"), ("float[3]", "gyro_rad"), ("uint32_t", "gyro_integral_dt"),
+                   ("int32_t", "accelerometer_timestamp_relative"), ("float[3]", "accelerometer_m_s2"),
+                   ("uint32_t", "accelerometer_integral_dt")]
+
+
+def add_sensor_combined(w: "ULogWriter", n: int, rng: np.random.Generator, t0_us: int = 1_000_000) -> None:
+    """``n`` sensor_combined samples at 250 Hz from ``t0_us`` on ``w``: a level vehicle at rest
+    (gyro noise 0.01 rad/s, specific force (0, 0, −9.81) ± 0.05 m/s²)."""
+    w.topic("sensor_combined", SENSOR_COMBINED, {
+        "timestamp": t0_us + np.arange(n, dtype=np.uint64) * 4_000,
+        "gyro_rad": rng.normal(0, 0.01, (n, 3)).astype(np.float32),
+        "gyro_integral_dt": np.full(n, 4_000, np.uint32),
+        "accelerometer_timestamp_relative": np.zeros(n, np.int32),
+        "accelerometer_m_s2": rng.normal([0, 0, -9.81], 0.05, (n, 3)).astype(np.float32),
+        "accelerometer_integral_dt": np.full(n, 4_000, np.uint32)})

@@ -146,6 +146,11 @@ DEFAULT_WORLD_FRAMES: tuple[str, ...] = tuple(default_at("ingest.ros.world_frame
 NAVSAT_FIX_TYPE: dict[int, int] = {-1: 1, 0: 3, 1: 4, 2: 4}
 
 
+def per_topic_text(counts: Mapping[str, int]) -> str:
+    """``"/imu/data 7, /fix 1"``: a count per topic for a warning, largest first."""
+    return ", ".join(f"{t} {n}" for t, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
+
+
 def normalize_type(name: str) -> str:
     """``pkg/Type`` (ROS 1, MCAP ros1msg) or ``pkg/msg/Type`` -> ``pkg/msg/Type``."""
     name = name.strip()

@@ -20,20 +20,26 @@ canonical schema (frames, stamps, NED origin: see :mod:`pipeline.io.ros_common`)
 
 Damage: a ROS 1 bag rosbags cannot open (truncated, or never closed: its index at the end
 is missing or damaged) is scanned record by record without the index (:func:`_scan_ros1`),
-keeping the messages before the damage and counting the rest in ``bytes_skipped``; likewise a
-single-file MCAP-storage ROS 2 bag rosbags cannot open (no summary/footer) is read
-sequentially by the MCAP reader. Anything else unreadable (bad bag header, broken
-``metadata.yaml``, missing storage file, nothing decodable) raises :class:`IngestError` with
-the reason; a message
-that fails to deserialise is dropped and counted (``records_dropped['deserialize:<topic>']``);
-when the storage fails mid-way the messages read so far are kept and the rest counted
-(``records_dropped['unread_after_error']``).
+keeping the messages before the damage and counting the rest in ``bytes_skipped``. An indexed
+ROS 1 bag with a damaged chunk (one that fails to decompress) loses that chunk only: its
+messages, known from the index, are counted per topic in ``records_dropped['bad_chunk:<topic>']``
+and reading goes on with the next chunk (:func:`_ros1_messages`). A single-file MCAP-storage
+ROS 2 bag that rosbags cannot open (no summary/footer), or that yields fewer messages than its
+``metadata.yaml`` lists (rosbags stops at damage inside an MCAP chunk), is read sequentially by
+the MCAP reader, which keeps what the chunks' message indexes point to and counts the rest.
+Anything else unreadable (bad bag header, broken ``metadata.yaml``, missing storage file,
+nothing decodable) raises :class:`IngestError` with the reason; a message that fails to
+deserialise is dropped and counted (``records_dropped['deserialize:<topic>']``); when the
+storage fails mid-way the messages read so far are kept and the rest counted
+(``records_dropped['unread_after_error']``); when it ends without an error but short of the
+messages the bag lists (index or ``metadata.yaml``), the shortfall is counted per topic in
+``records_dropped['missing:<topic>']``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import yaml
 
@@ -47,8 +53,18 @@ ROS2_META_KEY = "rosbag2_bagfile_information"
 
 
 def _decode(path: Path, reader: Any, routes: dict[str, rc.Route], deser: Callable[[bytes, str], Any],
-            known_types: set[str], diag: dict, progress: Progress | None) -> dict[str, rc.Bucket]:
-    """Deserialise the routed topics of an open rosbags reader into buckets."""
+            known_types: set[str], diag: dict, progress: Progress | None, *,
+            messages: Callable[[list, dict[str, int]], Iterator[tuple[Any, int, bytes]]] | None = None,
+            listed_by: str = "the bag's index lists") -> dict[str, rc.Bucket]:
+    """Deserialise the routed topics of an open rosbags reader into buckets.
+
+    ``messages(connections, lost)`` replaces ``reader.messages`` (the ROS 1 reader's, which
+    skips a damaged chunk instead of stopping); it counts in ``lost`` the messages of the routed
+    topics it could not read. When the iteration ends, the messages read or counted lost per
+    topic are compared with the counts the bag lists (``listed_by``, for the warning): a
+    storage that ends short without raising (rosbags' MCAP storage stops at damage inside an
+    uncompressed chunk) is counted in ``records_dropped['missing:<topic>']``.
+    """
     drops = diag["records_dropped"]
     for topic, route in list(routes.items()):
         if route.msgtype not in known_types:
@@ -61,11 +77,14 @@ def _decode(path: Path, reader: Any, routes: dict[str, rc.Route], deser: Callabl
     conns = [c for c in reader.connections if c.topic in routes]
     total = sum(c.msgcount for c in conns)
     done = bad = 0
+    seen: dict[str, int] = {}
+    lost: dict[str, int] = {}
     if not conns:
         return buckets
     try:
-        for conn, ts, raw in reader.messages(connections=conns):
+        for conn, ts, raw in (reader.messages(connections=conns) if messages is None else messages(conns, lost)):
             b = buckets[conn.topic]
+            seen[conn.topic] = seen.get(conn.topic, 0) + 1
             try:
                 msg = deser(raw, conn.msgtype)
             except Exception:  # noqa: BLE001 - one bad message is a counted drop, not a failure
@@ -82,13 +101,105 @@ def _decode(path: Path, reader: Any, routes: dict[str, rc.Route], deser: Callabl
         reason = f"{type(exc).__name__}: {exc}"
         if done == 0:
             raise IngestError(path, f"cannot read messages: {reason}") from None
-        left = max(total - done - bad, 0)
+        left = max(total - done - bad - sum(lost.values()), 0)
         drops["unread_after_error"] = drops.get("unread_after_error", 0) + left
         diag["warnings"].append(f"reading stopped after {done} message(s): {reason}; "
                                 f"{left} message(s) not read")
+    else:
+        listed: dict[str, int] = {}
+        for c in conns:
+            listed[c.topic] = listed.get(c.topic, 0) + c.msgcount
+        short = {t: n - seen.get(t, 0) - lost.get(t, 0) for t, n in listed.items()
+                 if n > seen.get(t, 0) + lost.get(t, 0)}
+        for t, k in short.items():
+            drops[f"missing:{t}"] = drops.get(f"missing:{t}", 0) + k
+        if short:
+            diag["warnings"].append(f"storage ended after {done + bad} message(s) without an error: "
+                                    f"{sum(short.values())} message(s) that {listed_by} not found "
+                                    f"({rc.per_topic_text(short)})")
     if progress is not None:
         progress(total, total)
     return buckets
+
+
+def _ros1_messages(reader: Any, diag: dict) -> Callable[[list, dict[str, int]], Iterator[tuple[Any, int, bytes]]]:
+    """The messages of an open, indexed rosbags ROS 1 reader, in time order, skipping damage.
+
+    rosbags' own ``Reader.messages`` stops at the first chunk that fails to decompress (a
+    damaged bz2/lz4 chunk: ``OSError: Invalid data stream``), losing every message after it.
+    This walks the same index but drops only the damaged chunk: its messages, known from its
+    ``CHUNK_INFO`` record, are counted per topic in ``records_dropped['bad_chunk:<topic>']``
+    and its bytes in ``bytes_skipped``, as :func:`_scan_ros1` drops one bad chunk and goes on.
+    A message record unreadable at its indexed offset, or differing from its index entry
+    (connection, time), is counted in ``records_dropped['bad_record:<topic>']``.
+    """
+    import heapq
+    import io
+    import os
+
+    from rosbags.rosbag1.reader import Header, RecordType, read_bytes, read_uint32
+
+    def messages(conns: list, lost: dict[str, int]) -> Iterator[tuple[Any, int, bytes]]:
+        drops = diag["records_dropped"]
+        connmap = {c.id: c for c in reader.connections}
+        infos = {ci.pos: ci for ci in reader.chunk_infos}
+        wanted = {c.id for c in conns}
+        bad_chunks: set[int] = set()
+        bad_records: dict[str, int] = {}
+        cur_pos, cur = -1, io.BytesIO()
+
+        def keyed(cid: int) -> Iterator[tuple[int, int, int, int]]:
+            return ((e.time, e.chunk_pos, e.offset, cid) for e in reader.indexes[cid])
+
+        entries = heapq.merge(*(keyed(c.id) for c in conns))
+        for time, chunk_pos, offset, cid in entries:
+            if chunk_pos in bad_chunks:
+                continue  # counted when the chunk failed
+            topic = connmap[cid].topic
+            if chunk_pos != cur_pos:
+                chunk = reader.chunks[chunk_pos]
+                try:
+                    reader.bio.seek(chunk.datapos)
+                    cur = io.BytesIO(chunk.decompressor(read_bytes(reader.bio, chunk.datasize)))
+                    cur_pos = chunk_pos
+                except Exception as exc:  # noqa: BLE001 - bad compression: drop this chunk only
+                    bad_chunks.add(chunk_pos)
+                    in_chunk: dict[str, int] = {}
+                    for c, k in infos[chunk_pos].connection_counts.items():
+                        t = connmap[c].topic if c in connmap else f"connection {c}"
+                        in_chunk[t] = in_chunk.get(t, 0) + k
+                        if c in wanted:
+                            lost[t] = lost.get(t, 0) + k
+                    for t, k in in_chunk.items():
+                        drops[f"bad_chunk:{t}"] = drops.get(f"bad_chunk:{t}", 0) + k
+                    diag["bytes_skipped"] = diag.get("bytes_skipped", 0) + chunk.datasize
+                    reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+                    diag["warnings"].append(
+                        f"chunk at byte {chunk_pos} dropped: {reason}; {sum(in_chunk.values())} "
+                        f"message(s) lost ({rc.per_topic_text(in_chunk)}); {chunk.datasize} byte(s) skipped")
+                    continue
+            try:
+                cur.seek(offset)
+                while True:  # connection records may stand before the message (as in rosbags)
+                    header = Header.read(cur)
+                    op = header.get_uint8("op")
+                    if op != RecordType.CONNECTION:
+                        break
+                    cur.seek(read_uint32(cur), os.SEEK_CUR)
+                if op != RecordType.MSGDATA or header.get_uint32("conn") != cid or header.get_time("time") != time:
+                    raise ValueError("record differs from its index entry")
+                data = read_bytes(cur, read_uint32(cur))
+            except Exception:  # noqa: BLE001 - one unreadable message record is a counted drop
+                bad_records[topic] = bad_records.get(topic, 0) + 1
+                lost[topic] = lost.get(topic, 0) + 1
+                drops[f"bad_record:{topic}"] = drops.get(f"bad_record:{topic}", 0) + 1
+                continue
+            yield connmap[cid], time, data
+        if bad_records:
+            diag["warnings"].append(f"{sum(bad_records.values())} message record(s) unreadable at the "
+                                    f"offsets the bag's index gives ({rc.per_topic_text(bad_records)})")
+
+    return messages
 
 
 def _connections(reader: Any) -> list[tuple[str, str, int]]:
@@ -135,11 +246,24 @@ class Ros1BagReader(LogReader):
             for t, e in errs.items():
                 diag["warnings"].append(f"message definition of {t} unparsable: {e}")
             buckets = _decode(path, reader, routes, store.deserialize_ros1, set(store.fielddefs),
-                              diag, progress)
+                              diag, progress, messages=_ros1_messages(reader, diag))
         finally:
             reader.close()
         return rc.build_flightlog(buckets, unmapped, cfg, path=path, source_format=self.source_format,
                                   diag=diag)
+
+
+def _listed_counts(bi: dict) -> dict[str, int] | None:
+    """Messages per topic from ``metadata.yaml``'s ``topics_with_message_count`` (None when it
+    is missing or malformed: then nothing is checked against it)."""
+    out: dict[str, int] = {}
+    try:
+        for entry in bi.get("topics_with_message_count") or []:
+            name = str(entry["topic_metadata"]["name"])
+            out[name] = out.get(name, 0) + int(entry["message_count"])
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return None
+    return out or None
 
 
 def _bag_dir(path: Path) -> Path:
@@ -187,13 +311,15 @@ class Ros2BagReader(LogReader):
         if missing:
             raise IngestError(path, f"storage file(s) listed in metadata.yaml missing: {', '.join(map(str, missing))}")
         diag: dict = {"records_dropped": {}, "warnings": [], "storage": storage}
+        single_mcap = storage == "mcap" and len(files) == 1
         try:
             reader = Reader(bag)
             reader.open()
         except Exception as exc:  # noqa: BLE001 - rosbags ReaderError, sqlite3/mcap errors
             reason = f"unreadable ROS 2 bag ({storage} storage): {type(exc).__name__}: {exc}"
-            if storage == "mcap" and len(files) == 1:
-                return self._mcap_fallback(path, bag / str(files[0]), reason, config, progress)
+            if single_mcap:
+                return self._mcap_fallback(path, bag / str(files[0]), reason, config, progress,
+                                           _listed_counts(bi))
             raise IngestError(path, reason) from None
         try:
             conns = _connections(reader)
@@ -214,22 +340,46 @@ class Ros2BagReader(LogReader):
                     n = sum(c.msgcount for c in reader.connections if c.topic == topic)
                     diag["records_dropped"][f"unsupported_serialization:{topic}"] = n
                     del routes[topic]
-            buckets = _decode(path, reader, routes, store.deserialize_cdr, set(store.fielddefs),
-                              diag, progress)
+            listed = {c.topic: 0 for c in reader.connections}
+            for c in reader.connections:
+                listed[c.topic] += c.msgcount
+            try:
+                buckets = _decode(path, reader, routes, store.deserialize_cdr, set(store.fielddefs),
+                                  diag, progress, listed_by="metadata.yaml lists")
+            except IngestError as exc:
+                if not single_mcap:
+                    raise
+                buckets, failed = None, exc.reason  # nothing read: the chunk was parsed whole first
         finally:
             reader.close()
+        if buckets is None:
+            return self._mcap_fallback(path, bag / str(files[0]), f"rosbags' MCAP storage: {failed}",
+                                       config, progress, listed)
+        short = sum(v for k, v in diag["records_dropped"].items()
+                    if k.startswith("missing:") or k == "unread_after_error")
+        if short and single_mcap:
+            # rosbags stops at damage inside an MCAP chunk (without a word when the chunk has no
+            # CRC); the MCAP reader reads on, the chunk's other messages through its message index
+            reason = (f"rosbags' MCAP storage read {short} message(s) fewer than metadata.yaml "
+                      "lists for the decoded topics")
+            try:
+                return self._mcap_fallback(path, bag / str(files[0]), reason, config, progress, listed)
+            except IngestError:
+                pass  # keep rosbags' messages, the shortfall counted
         return rc.build_flightlog(buckets, unmapped, cfg, path=path, source_format=self.source_format,
                                   diag=diag)
 
-
     def _mcap_fallback(self, path: Path, file: Path, reason: str, config: dict | None,
-                       progress: Progress | None) -> FlightLog:
-        """rosbags needs an intact MCAP summary; a damaged single-file MCAP bag is read
-        sequentially instead, keeping the messages before the damage (counted in diagnostics)."""
+                       progress: Progress | None, listed: dict[str, int] | None = None) -> FlightLog:
+        """rosbags needs an intact MCAP summary and stops at damage inside a chunk; a damaged
+        single-file MCAP bag is read sequentially instead by the MCAP reader, which recovers
+        what the chunks' message indexes point to, counts the rest in the diagnostics and checks
+        the messages per topic against ``listed`` (``metadata.yaml``) when the file's own
+        summary cannot tell."""
         from .mcap_reader import McapReader
 
         try:
-            log = McapReader().read(file, config=config, progress=progress)
+            log = McapReader().read(file, config=config, progress=progress, expected_counts=listed)
         except IngestError as exc:
             raise IngestError(path, f"{reason}; sequential read failed too: {exc.reason}") from None
         d = log.meta["diagnostics"]

@@ -85,6 +85,20 @@ Logged text messages (``L`` and tagged ``C``) go to ``diagnostics['messages']``
 (``{t_ns, level, text}``), dropouts to ``diagnostics['dropouts']`` (``count``, ``total_ms``) and
 make the log ``partial``; a file cut mid-message is counted in ``bytes_skipped``.
 
+Damage. pyulog steps over damage by the sizes it reads there, out of step with the messages,
+and may end its data loop at it without a word (``motor_failure.ulg`` with 4 kB flipped
+mid-file lost its second half: 53 % of the rows, the sensors ending at 24.0 s of 44.0 s, under
+"count unknown"). So the messages are walked once more checking each one's form
+(:class:`_Chain`): damaged spans are located (from the message before the first malformed one
+up to where a chain of well-formed messages starts again), cut out, and the rest parsed again,
+so the data after the damage is kept and none of the bytes read out of step becomes samples.
+Each span is counted (``records_dropped['corrupt']``, its bytes in ``bytes_skipped``) with a
+warning naming its byte offsets and the log times on both sides; DATA messages whose
+subscription was lost to the damage are counted in ``records_dropped['no_subscription']``,
+messages of a type ULog does not define in ``records_dropped['unknown_type']``, a last message
+cut by the end of the file in ``records_dropped['truncated']``. A message whose header survived
+but whose payload was hit cannot be told from a good one (ULog has no checksums).
+
 Config (``ingest: ulog:``): ``imu``, ``gps``, ``mag``, ``baro``: ``auto`` (the first listed topic
 present, default) or a topic name / list of topic names to take; ``rangefinder_valid_m: [lo, hi]``
 narrows ``valid`` to a trusted window inside the sensor's declared range (``motor_failure.ulg``
@@ -97,6 +111,7 @@ import contextlib
 import functools
 import io
 import mmap
+import re
 import struct
 from pathlib import Path
 
@@ -157,6 +172,11 @@ class ULogReader(LogReader):
              progress: Progress | None = None) -> FlightLog:
         cfg = dict((config or {}).get("ulog") or {})
         ulog, pyulog_out = _parse(path)
+        chain = _check_chain(path, ulog)
+        if chain.repaired is not None:
+            # pyulog read on out of step after the damage (or stopped there): parse the file
+            # again without the damaged spans, so the messages after them decode and no garbage does
+            ulog, pyulog_out = _parse(path, chain.repaired)
         if progress:
             progress(1, 2)
         diag = schema.new_diagnostics()
@@ -167,6 +187,11 @@ class ULogReader(LogReader):
             topics.setdefault(d.name, []).append(d)
             diag["record_counts"][f"{d.name}[{d.multi_id}]"] = int(len(d.data["timestamp"]))
         if not topics:
+            if chain.spans:
+                sp = chain.spans[0]
+                raise IngestError(path, f"corrupt ULog: no data messages decoded (damaged from byte "
+                                        f"{sp.start}; {sum(x.end - x.start for x in chain.spans)} of "
+                                        f"{chain.size} bytes not decodable)")
             if ulog.file_corruption:
                 raise IngestError(path, "corrupt ULog: no data messages decoded (pyulog met bytes it could "
                                         "not read: damaged, or cut before the data section)")
@@ -248,12 +273,14 @@ class ULogReader(LogReader):
             meta["status"] = "partial"
         else:
             diag["dropouts"] = {"count": 0, "total_ms": 0}
-        tail = _walk_tail(path)
+        tail = chain.tail
+        _report_damage(chain, t0_us, diag)
         if tail:
             diag["bytes_skipped"] += tail
             diag["records_dropped"]["truncated"] = diag["records_dropped"].get("truncated", 0) + 1
             diag["warnings"].append(f"file cut mid-message: last {tail} byte(s) not decoded")
-        if ulog.file_corruption:
+        if ulog.file_corruption and not (chain.spans or chain.unsubscribed or chain.unknown_type):
+            # damage pyulog met but the message walk did not place (it is counted above if it did)
             diag["records_dropped"]["corrupt"] = diag["records_dropped"].get("corrupt", 0) + 1
             diag["warnings"].append("pyulog detected corrupt data and resynchronised; "
                                     "some records were skipped (count unknown)")
@@ -333,15 +360,16 @@ def _ulog_class():
     return _GuardedULog
 
 
-def _parse(path: Path):
-    """Run pyulog (guarded against its end-of-file rescan loop, :class:`_FullReadSeeks`),
-    wrapping its exceptions and capturing what it prints."""
+def _parse(path: Path, data: bytes | None = None):
+    """Run pyulog (guarded against its end-of-file rescan loop, :class:`_FullReadSeeks`) on
+    ``path``, or on ``data`` (the repaired bytes of ``path``) when given, wrapping its
+    exceptions and capturing what it prints."""
     from pyulog.exceptions import ULogException
 
     buf = io.StringIO()
     try:
         # our own handle: pyulog leaves its file open when it raises
-        with open(path, "rb") as fh, contextlib.redirect_stdout(buf):
+        with (open(path, "rb") if data is None else io.BytesIO(data)) as fh, contextlib.redirect_stdout(buf):
             ulog = _ulog_class()(fh)
     except ULogException as exc:
         raise IngestError(path, f"not a readable ULog: {exc}") from None
@@ -353,23 +381,287 @@ def _parse(path: Path):
     return ulog, buf.getvalue()
 
 
-def _walk_tail(path: Path) -> int:
-    """Bytes left over after the last complete message (a cut file), 0 when the file ends on a
-    message boundary. Walks the 3-byte message headers (uint16 size, uint8 type); stops at the
-    first byte that cannot be a message type (corruption: pyulog resyncs, we report separately)."""
-    n = path.stat().st_size
-    if n <= 16:
-        return 0
+class _ChainCheck:
+    """What :func:`_check_chain` found: ``spans`` (:class:`_Damage`), ``tail`` (bytes of a
+    last message cut by the end of the file), ``unsubscribed`` (DATA messages of ids no
+    ADD_LOGGED subscribed), ``unknown_type`` (messages of a type ULog does not define),
+    ``size`` (file bytes) and ``repaired`` (the file without the
+    damaged spans, to parse again; None when there is nothing to repair)."""
+
+    __slots__ = ("spans", "tail", "unsubscribed", "unknown_type", "size", "repaired")
+
+    def __init__(self, spans, tail, unsubscribed, unknown_type, size, repaired):
+        self.spans, self.tail, self.unsubscribed, self.unknown_type = spans, tail, unsubscribed, unknown_type
+        self.size, self.repaired = size, repaired
+
+
+def _check_chain(path: Path, ulog) -> _ChainCheck:
+    """Walk the messages of the file pyulog parsed (:class:`_Chain`): where their chain breaks,
+    and the file without the damaged spans to parse again.
+
+    The walk runs on every file, not only those pyulog calls corrupt: a damaged header of a
+    variable-size type (LOGGING, PARAMETER) swallows the messages behind it without pyulog
+    noticing, and a DATA message too short for its id ends pyulog's data loop without a word.
+    It costs about half of pyulog's own parse.
+    """
+    size = path.stat().st_size
+    if size <= 16:
+        return _ChainCheck([], 0, 0, 0, size, None)
     with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
-        pos = 16
-        while pos + 3 <= n:
-            size = data[pos] | (data[pos + 1] << 8)
-            if data[pos + 2] not in _VALID_MSG_TYPES:
-                return 0
-            if pos + 3 + size > n:
-                return n - pos
-            pos += 3 + size
-        return n - pos if pos < n else 0
+        walker = _Chain(data, ulog)
+        spans, tail = walker.walk(16)
+        repaired = None
+        # appended data sits at absolute offsets that cutting bytes out would move
+        if spans and not (ulog.has_data_appended and ulog._appended_offsets):
+            keep, at = [], 0
+            for sp in spans:
+                keep.append(data[at:sp.start])
+                at = sp.end
+            keep.append(data[at:])
+            repaired = b"".join(keep)
+        counts = walker.unsubscribed, walker.unknown_type
+        del walker  # the mapping closes only when no view of it is left
+    return _ChainCheck(spans, tail, *counts, size, repaired)
+
+
+def _report_damage(chain: _ChainCheck, t0_us: int, diag: dict) -> None:
+    """Count the damaged spans (``bytes_skipped``, ``records_dropped['corrupt']``) and the
+    DATA messages left without a subscription; one warning each, naming the byte offsets and
+    the log times on both sides of the damage."""
+    def at(t_us: int | None) -> str:
+        return "?" if t_us is None else f"{(t_us - t0_us) * 1e-6:.3f} s"
+
+    for sp in chain.spans:
+        n = sp.end - sp.start
+        diag["bytes_skipped"] += n
+        diag["records_dropped"]["corrupt"] = diag["records_dropped"].get("corrupt", 0) + 1
+        if sp.end < chain.size:
+            diag["warnings"].append(
+                f"ULog damaged from byte {sp.start} (after the record at t = {at(sp.t_before_us)}): "
+                f"{n} byte(s) up to byte {sp.end} not decoded; decoding resumed there "
+                f"(t = {at(sp.t_after_us)})")
+        else:
+            diag["warnings"].append(
+                f"ULog undecodable from byte {sp.start} of {chain.size} (after the record at "
+                f"t = {at(sp.t_before_us)}): the last {n} byte(s) not decoded")
+    if chain.unsubscribed:
+        diag["records_dropped"]["no_subscription"] = chain.unsubscribed
+        diag["warnings"].append(f"{chain.unsubscribed} DATA message(s) of an id that no ADD_LOGGED "
+                                "message subscribed (lost to the damage) not decoded")
+    if chain.unknown_type:
+        diag["records_dropped"]["unknown_type"] = chain.unknown_type
+        diag["warnings"].append(f"{chain.unknown_type} message(s) of a type ULog does not define (a "
+                                "later ULog version's, or a damaged type byte) skipped")
+
+
+#: consecutive well-formed messages that mark an offset as a message boundary again after
+#: damage (a random offset passes one header check with p < 0.05: 13 of 256 type bytes, and
+#: a size that must chain on to the next header)
+_RESYNC_CHAIN = 8
+_SYNC_BYTES = b"\x2f\x73\x13\x20\x25\x0c\xbb\x12"
+_VALID_MSG_TYPES_ORDERED = bytes(sorted(_VALID_MSG_TYPES))
+_KEY = re.compile(rb"[a-z0-9_]+(\[[0-9]+\])? [A-Za-z0-9_./\[\]-]+")  # "type name" of I/P/Q/M
+_FORMAT = re.compile(rb"[A-Za-z0-9_]+:")  # FORMAT: "name:type field;..."
+_MAX_UNKNOWN = 10000  # pyulog skips a message of a type it does not know up to this size
+
+
+class _Damage:
+    """Where a ULog's message chain breaks: bytes ``[start, end)`` are not decodable (``end`` is
+    the file size when no message boundary follows); ``t_before_us``/``t_after_us`` are the
+    last DATA timestamp before and the first after (None when there is none)."""
+
+    __slots__ = ("start", "end", "t_before_us", "t_after_us")
+
+    def __init__(self, start: int, end: int, t_before_us: int | None, t_after_us: int | None):
+        self.start, self.end = start, end
+        self.t_before_us, self.t_after_us = t_before_us, t_after_us
+
+
+class _Chain:
+    """Walk a ULog's messages checking each one's form, as pyulog does not.
+
+    pyulog (1.3) steps over a damaged header by its declared size, so after damage it reads on
+    out of step with the messages (feeding garbage into topics whose id happens to match) until
+    a ``struct.error`` ends its data loop without a word (``motor_failure.ulg`` with 4 kB
+    flipped mid-file: 47 % of the file never decoded) or the end of the file; a damaged
+    LOGGING or PARAMETER header swallows up to 64 kB behind it unnoticed. Here a message is
+    well-formed when its type is a ULog type, its size fits the file, and, for the types with
+    a layout, its size matches it: a DATA message of a subscribed id has the size of its
+    format (pyulog's own bounds), DROPOUT 2 bytes, SYNC its magic, a key/value message a
+    ``"type name"`` key inside it, and so on. Where a message is not, the damage began at the
+    message before it (its declared size led here; its payload is suspect too), and decoding
+    resumes at the first offset after that message's start from which :data:`_RESYNC_CHAIN`
+    well-formed messages follow each other (or reach the end of the file).
+
+    In the walk itself (``commit``) two kinds pass that a resync chain does not, both counted
+    (pyulog decodes neither): a DATA message of an id no ``ADD_LOGGED`` subscribed (its
+    subscription lost to the damage; :attr:`unsubscribed`) and a message of a type ULog does
+    not define that a chain follows (a later ULog version's, or a damaged type byte;
+    :attr:`unknown_type`).
+    """
+
+    def __init__(self, data, ulog):
+        from pyulog import ULog
+
+        self.data = data
+        self.n = len(data)
+        self.formats = ulog._message_formats  # pyulog's parsed FORMAT definitions
+        self._add_logged = ULog._MessageAddLogged
+        #: msg_id -> (min payload, max payload, timestamp offset), from the ADD_LOGGED messages
+        self.subs: dict[int, tuple[int, int, int]] = {}
+        self.unsubscribed = 0
+        self.unknown_type = 0
+        self.in_data = False  # an ADD_LOGGED or DATA message was seen: FORMAT no longer stands
+
+    def _subscription(self, payload: bytes) -> tuple[int, tuple[int, int, int]] | None:
+        try:
+            a = self._add_logged(payload, None, self.formats)
+        except Exception:  # noqa: BLE001 - unknown format name, garbage: not an ADD_LOGGED
+            return None
+        return a.msg_id, (a.dtype.itemsize, a.max_data_size, a.timestamp_offset)
+
+    def size_ok(self, pos: int, commit: bool = False, chain_subs: dict | None = None) -> int | None:
+        """End offset of the message at ``pos`` when it is well-formed, else None; with
+        ``commit`` (the walk itself, see the class docstring) its subscription is recorded,
+        else in ``chain_subs`` (given by :meth:`chained`: the ADD_LOGGED messages of the chain
+        being checked, for the DATA messages after them)."""
+        d, n = self.data, self.n
+        if pos + 3 > n:
+            return None
+        size = d[pos] | (d[pos + 1] << 8)
+        typ = d[pos + 2]
+        end = pos + 3 + size
+        if size == 0 or end > n:
+            return None
+        if typ == 0x44:  # 'D'
+            sub = None
+            if size >= 2:
+                msg_id = d[pos + 3] | (d[pos + 4] << 8)
+                sub = self.subs.get(msg_id) or (chain_subs.get(msg_id) if chain_subs else None)
+            if sub is not None:
+                ok = sub[0] <= size - 2 <= sub[1]
+            else:
+                ok = commit and size >= 10
+                if ok:
+                    self.unsubscribed += 1
+            if ok and commit:
+                self.in_data = True
+            return end if ok else None
+        if typ == 0x41:  # 'A'
+            got = self._subscription(bytes(d[pos + 3:end])) if size > 3 else None
+            if got is None:
+                return None
+            if commit:
+                self.subs[got[0]] = got[1]
+                self.in_data = True
+            elif chain_subs is not None:
+                chain_subs[got[0]] = got[1]
+            return end
+        if typ in (0x4F, 0x52):  # 'O' dropout, 'R' remove logged
+            return end if size == 2 else None
+        if typ == 0x53:  # 'S'
+            return end if bytes(d[pos + 3:end]) == _SYNC_BYTES else None
+        if typ in (0x4C, 0x43):  # 'L', 'C': log level (0-7, or the ASCII digit), [tag], time, text
+            return end if size >= (9 if typ == 0x4C else 11) and (d[pos + 3] & ~0x30) <= 7 else None
+        if typ in (0x49, 0x50, 0x51, 0x4D):  # 'I', 'P', 'Q', 'M': [flag,] key length, "type name", value
+            off = 2 if typ in (0x51, 0x4D) else 1
+            if size <= off:
+                return None
+            klen = d[pos + 2 + off]
+            return end if off + klen <= size and _KEY.fullmatch(bytes(d[pos + 3 + off:pos + 3 + off + klen])) \
+                else None
+        if typ == 0x46:  # 'F' stands in the definitions section only
+            return end if not self.in_data and _FORMAT.match(bytes(d[pos + 3:end])) else None
+        if typ == 0x42 or typ in _VALID_MSG_TYPES:  # 'B' stands first and only once
+            return None
+        # a type of a later ULog version (or a damaged type byte): pyulog skips it without a
+        # word; here it passes where a chain follows, counted
+        if commit and size <= _MAX_UNKNOWN and self.chained(end):
+            self.unknown_type += 1
+            return end
+        return None
+
+    def chained(self, pos: int) -> bool:
+        """:data:`_RESYNC_CHAIN` well-formed messages follow each other from ``pos`` (or reach
+        the end of the file)."""
+        chain_subs: dict[int, tuple[int, int, int]] = {}
+        for _ in range(_RESYNC_CHAIN):
+            if pos == self.n:
+                return True
+            nxt = self.size_ok(pos, chain_subs=chain_subs)
+            if nxt is None:
+                return False
+            pos = nxt
+        return True
+
+    def resync(self, pos: int) -> int | None:
+        """The first offset after ``pos`` where a chain of well-formed messages starts (only
+        offsets whose type byte is a ULog type are tried, found 64 KiB at a time)."""
+        valid = np.frombuffer(_VALID_MSG_TYPES_ORDERED, np.uint8)
+        lo = pos + 1
+        while lo + 3 <= self.n:
+            hi = min(self.n - 2, lo + (1 << 16))  # candidate starts [lo, hi): type bytes [lo+2, hi+2)
+            types = np.frombuffer(self.data, np.uint8, count=hi - lo, offset=lo + 2)
+            for k in np.flatnonzero(np.isin(types, valid)):
+                if self.chained(lo + int(k)):
+                    return lo + int(k)
+            lo = hi
+        return None
+
+    def timestamp(self, pos: int | None) -> int | None:
+        """The timestamp of the DATA message at ``pos`` (of a subscribed id), else None."""
+        if pos is None:
+            return None
+        d = self.data
+        sub = self.subs.get(d[pos + 3] | (d[pos + 4] << 8))
+        if d[pos + 2] != 0x44 or sub is None:
+            return None
+        at = pos + 5 + sub[2]
+        return int.from_bytes(d[at:at + 8], "little")
+
+    def walk(self, start: int) -> tuple[list[_Damage], int]:
+        """Damaged spans from ``start`` (the first message after the header) and the bytes of a
+        last message cut by the end of the file (0 when it ends on a message)."""
+        d, n, subs = self.data, self.n, self.subs
+        spans: list[_Damage] = []
+        pos, prev = start, None
+        last_d = last_d_before_prev = None  # offsets of the last DATA message, and of the one before prev
+        after_pending = False  # the last span still wants the time of the first DATA message after it
+        if pos + 3 <= n and d[pos + 2] == 0x42 and pos + 3 + (d[pos] | d[pos + 1] << 8) <= n:
+            pos += 3 + (d[pos] | d[pos + 1] << 8)  # FLAG_BITS, the first message
+        while pos < n:
+            # the bulk of a log: DATA messages of a subscribed id, checked here without a call
+            if pos + 5 <= n and d[pos + 2] == 0x44:
+                size = d[pos] | (d[pos + 1] << 8)
+                sub = subs.get(d[pos + 3] | (d[pos + 4] << 8))
+                if sub is not None and sub[0] <= size - 2 <= sub[1] and pos + 3 + size <= n:
+                    last_d_before_prev, last_d = last_d, pos
+                    if after_pending:
+                        spans[-1].t_after_us, after_pending = self.timestamp(pos), False
+                    prev, pos = pos, pos + 3 + size
+                    continue
+            nxt = self.size_ok(pos, commit=True)
+            if nxt is not None:
+                last_d_before_prev = last_d
+                if d[pos + 2] == 0x44 and self.timestamp(pos) is not None:
+                    last_d = pos
+                prev, pos = pos, nxt
+                continue
+            size = (d[pos] | (d[pos + 1] << 8)) if pos + 2 <= n else 0
+            cut = pos + 3 > n or (d[pos + 2] in _VALID_MSG_TYPES and pos + 3 + size > n)
+            # the message before led here: its size may be what is damaged, its payload suspect
+            first = prev if prev is not None else pos
+            again = self.resync(first)
+            if again is None and cut:
+                return spans, n - pos  # a file cut mid-message (or mid-header)
+            before = last_d_before_prev if first == prev else last_d
+            spans.append(_Damage(first, n if again is None else again, self.timestamp(before), None))
+            after_pending = True
+            if again is None:
+                break
+            pos, prev = again, None
+            last_d = last_d_before_prev = before
+        return spans, 0
 
 
 class _Conv:
@@ -795,6 +1087,11 @@ def _messages(ulog, diag: dict, t0_us: int) -> pd.DataFrame | None:
     for lst in ulog.logged_messages_tagged.values():
         msgs += [(int(m.timestamp), m.log_level_str(), str(m.message).strip(), _level(m),
                   "logged_messages_tagged") for m in lst]
+    bad = [m for m in msgs if not 0 <= m[0] < 1 << 63]
+    if bad:  # a damaged LOGGING message whose header survived: no time to place it at
+        msgs = [m for m in msgs if 0 <= m[0] < 1 << 63]
+        diag["records_dropped"]["bad_timestamp"] = diag["records_dropped"].get("bad_timestamp", 0) + len(bad)
+        diag["warnings"].append(f"{len(bad)} logged message(s) with a time stamp beyond 2^63 µs dropped")
     msgs.sort(key=lambda m: m[0])
     diag["messages"] = [{"t_ns": (t - t0_us) * 1000, "level": lvl, "text": txt}
                         for t, lvl, txt, _, _ in msgs[:1000]]

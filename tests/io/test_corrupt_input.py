@@ -19,7 +19,7 @@ import pytest
 
 import helpers_tabular
 from helpers import realdata_file
-from helpers_ulog import ULogWriter
+from helpers_ulog import ULogWriter, add_sensor_combined
 from pipeline.io import registry
 from pipeline.io.base import IngestError, losses_text
 from pipeline.io.dataflash.streams import TIME_OUTLIER_US, time_outliers
@@ -131,16 +131,7 @@ def _ulog_definitions_never_end(path):
     w = ULogWriter(start_us=1_000_000)
     w.add_info("sys_name", "PX4")
     w.add_param("SYS_AUTOSTART", 4001)
-    fields = [("uint64_t", "timestamp"), ("float[3]", "gyro_rad"), ("uint32_t", "gyro_integral_dt"),
-              ("int32_t", "accelerometer_timestamp_relative"), ("float[3]", "accelerometer_m_s2"),
-              ("uint32_t", "accelerometer_integral_dt")]
-    w.topic("sensor_combined", fields, {
-        "timestamp": 1_000_000 + np.arange(n, dtype=np.uint64) * 4_000,
-        "gyro_rad": rng.normal(0, 0.01, (n, 3)).astype(np.float32),
-        "gyro_integral_dt": np.full(n, 4_000, np.uint32),
-        "accelerometer_timestamp_relative": np.zeros(n, np.int32),
-        "accelerometer_m_s2": rng.normal([0, 0, -9.81], 0.05, (n, 3)).astype(np.float32),
-        "accelerometer_integral_dt": np.full(n, 4_000, np.uint32)})
+    add_sensor_combined(w, n, rng)
     raw = bytearray(w.to_bytes())
     add = raw.find(b"A" + struct.pack("<BH", 0, 0) + b"sensor_combined") - 2
     assert add > 0

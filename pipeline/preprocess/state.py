@@ -127,6 +127,7 @@ class PreprocessConfig:
     vehicle: str | None = field(default=None, metadata={"config_key": None})
     imu_mount: dict | None = _veh("imu_mount", metadata={"config_key": None})
     attitude_from_imu: bool = _veh("attitude_from_imu", metadata={"config_key": None})
+    ground: bool = _veh("ground", metadata={"config_key": None})
     mag_mount: dict | None = field(default=None, metadata={"config_key": None})
     controls: dict = _veh("controls", metadata={"config_key": None})
     controls_from_params: bool = _veh("controls_from_params", metadata={"config_key": None})
@@ -179,8 +180,8 @@ def resolve_config(sec: Mapping[str, Any], *, flight_id: str | None = None,
     if fl_entry.get("windows"):
         windows[flight_id] = fl_entry["windows"]
     segs["windows"] = windows
-    per_vehicle = {k: ventry[k] for k in ("imu_mount", "attitude_from_imu", "controls", "controls_from_params",
-                                          "physical") if k in ventry}
+    per_vehicle = {k: ventry[k] for k in ("imu_mount", "attitude_from_imu", "ground", "controls",
+                                          "controls_from_params", "physical") if k in ventry}
     per_vehicle["controls_key"] = f"preprocess.vehicles.{vname_used}.controls" if "controls" in ventry else None
     if fl_entry.get("controls"):
         per_vehicle["controls"] = fl_entry["controls"]
@@ -398,7 +399,8 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     fid = (log.meta or {}).get("flight_id")
     cfg = config if isinstance(config, PreprocessConfig) else \
         PreprocessConfig.from_config(config, flight_id=fid, vehicle=vehicle)
-    diag: dict[str, Any] = {"flight_id": fid, "vehicle": cfg.vehicle, "rate_hz": cfg.rate_hz,
+    diag: dict[str, Any] = {"flight_id": fid, "vehicle": cfg.vehicle, "ground_vehicle": cfg.ground,
+                            "rate_hz": cfg.rate_hz,
                             "timestamp_repairs": {}, "filter_short_samples": {}, "sources": {},
                             "notes": []}
     box = box_rotation_rad(log.meta)

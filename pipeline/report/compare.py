@@ -30,6 +30,8 @@ from .pages import figure_divs, render, write_page
 TAKEOFF_HEIGHT_M = 2.0
 #: ... or this fast horizontally [m/s], whichever comes first
 TAKEOFF_SPEED_MPS = 2.0
+#: ... or, for a ground vehicle, its first motion: faster than this [m/s] (the Husky drives at ~1)
+GROUND_MOTION_MPS = 0.5
 #: ... held for this long [s]
 TAKEOFF_HOLD_S = 1.0
 #: display points per flight and panel (min/max decimation; the page holds many flights)
@@ -42,16 +44,18 @@ FLIGHT_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564
 TAKEOFF_RULE = (f"t = 0 is each flight's takeoff: the first sample of its preprocessed state from which it "
                 f"stays more than {TAKEOFF_HEIGHT_M:g} m above its starting height, or faster than "
                 f"{TAKEOFF_SPEED_MPS:g} m/s horizontally, for {TAKEOFF_HOLD_S:g} s (a flight that does "
-                f"neither starts at its first sample)")
+                f"neither starts at its first sample; a ground vehicle at its first motion, faster than "
+                f"{GROUND_MOTION_MPS:g} m/s)")
 
 
-def takeoff_t_ns(state: pd.DataFrame) -> tuple[int | None, str]:
+def takeoff_t_ns(state: pd.DataFrame, ground: bool = False) -> tuple[int | None, str]:
     """Takeoff time of a state table and how it was found (``"height"``, ``"speed"`` or
     ``"first sample"``); ``(None, "no state")`` for an empty table.
 
     Height above start is ``d₀ − d`` with ``d₀`` the first finite ``pos_d_m``; horizontal speed
     ``√(v_n² + v_e²)``; a condition counts from sample k when it holds at samples
-    k … k + n − 1, n = :data:`TAKEOFF_HOLD_S` / median step."""
+    k … k + n − 1, n = :data:`TAKEOFF_HOLD_S` / median step. A ``ground`` vehicle (the state's
+    ``ground_vehicle``) starts at its first motion: speed alone, its GPS height is noise."""
     if state is None or not len(state):
         return None, "no state"
     t = state["t_ns"].to_numpy(np.int64)
@@ -70,12 +74,12 @@ def takeoff_t_ns(state: pd.DataFrame) -> tuple[int | None, str]:
     hit = np.zeros(len(t), bool)
     why = np.full(len(t), "", object)
     fin = np.isfinite(d)
-    if fin.any():
+    if fin.any() and not ground:   # a rover's GPS height swings tens of metres: only its motion counts
         up = held((d[fin][0] - d) > TAKEOFF_HEIGHT_M)
         hit |= up
         why[up] = "height"
     v = np.hypot(state["vel_n_mps"].to_numpy(np.float64), state["vel_e_mps"].to_numpy(np.float64))
-    fast = held(v > TAKEOFF_SPEED_MPS)
+    fast = held(v > (GROUND_MOTION_MPS if ground else TAKEOFF_SPEED_MPS))
     why[fast & ~hit] = "speed"
     hit |= fast
     if hit.any():
@@ -152,7 +156,7 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
             row["status"] = f"no state ({err or 'empty'})"
             rows.append(row)
             continue
-        t0, how = takeoff_t_ns(st)
+        t0, how = takeoff_t_ns(st, bool((read_table_meta(s).get("preprocess") or {}).get("ground_vehicle")))
         row["takeoff [s]"], row["takeoff found by"] = f"{t0 * 1e-9:.1f}", how
         d0 = st["pos_d_m"].dropna()
         tracks[f] = pd.DataFrame({

@@ -442,6 +442,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         if st is not None and "vel_n_mps" in st and st["vel_n_mps"].notna().any() \
         and (pre0.get("sources") or {}).get("velocity") == "differentiated position" else 0.0
     numbers = flight_numbers(log, st, ned=ned, velocity=without_edges(velocity, edge_s))
+    if pre0.get("ground_vehicle"):   # a rover's height is GPS noise: no altitude or climb to report
+        numbers.update(max_alt_m=float("nan"), max_vspeed_mps=float("nan"), ground_vehicle=True)
     alt_series = {}
     baro = baro_relative(log["baro"])
     if baro is not None:

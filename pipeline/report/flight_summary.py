@@ -399,11 +399,13 @@ def number_texts(numbers: Mapping) -> dict[str, str]:
         v = _num(numbers.get(key))
         return f"{v:{spec}} {unit}" if v == v else f"{_NONE} ({why})"
 
+    ground = bool(numbers.get("ground_vehicle"))
+
     return {"duration": fmt("duration_s", ",.1f", "s", "no samples"),
             "distance": fmt("distance_m", ",.0f", "m", "no track"),
-            "max_alt": fmt("max_alt_m", ".1f", "m", "no height"),
+            "max_alt": fmt("max_alt_m", ".1f", "m", "ground vehicle" if ground else "no height"),
             "max_hspeed": fmt("max_hspeed_mps", ".1f", "m/s", "no velocity"),
-            "max_vspeed": fmt("max_vspeed_mps", ".1f", "m/s", "no velocity")}
+            "max_vspeed": fmt("max_vspeed_mps", ".1f", "m/s", "ground vehicle" if ground else "no velocity")}
 
 
 #: the id of the ``<script type="application/json">`` that carries a flight page's numbers

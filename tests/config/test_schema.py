@@ -108,6 +108,9 @@ def test_the_old_file_with_the_renames_validates_to_the_same_dict_as_the_new_one
     new["estimate"]["ekf_hmm"]["model"] = "sim"
     # stop 42: kd0aij's radio (throttle-first) for the CSV export without radio parameters
     assert new["preprocess"]["flights"].pop("kd0aij-*")["controls"]["thr"]["channel"] == "rc_1_us"
+    # ... and the Husky is a ground vehicle (no takeoff, no altitude numbers)
+    assert new["preprocess"]["vehicles"]["husky"]["ground"] is True
+    new["preprocess"]["vehicles"]["husky"]["ground"] = False
     assert validate_config(old) == new
 
 

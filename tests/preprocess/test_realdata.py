@@ -129,6 +129,7 @@ def test_husky_imu_mount(rel):
     # a robot at walking pace, |acc| median 0.19 m/s² (1.45 before), |v_d| > 0.5 m/s on 9 % of
     # samples (27 %)
     assert res.diagnostics["derivative_window_s"] == pytest.approx(4.0, rel=0.01)
+    assert res.diagnostics["ground_vehicle"] is True   # preprocess.vehicles.husky.ground: the pages' cue
     acc = np.linalg.norm(state[["acc_n_mps2", "acc_e_mps2", "acc_d_mps2"]].to_numpy(), axis=1)
     assert np.nanmedian(acc) < 0.3 and (state["vel_d_mps"].abs() > 0.5).mean() < 0.12
 

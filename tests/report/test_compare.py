@@ -118,3 +118,13 @@ def test_the_parameters_table_writes_integers_as_integers_and_floats_to_their_sh
                       "THIRD": "0.3333333333333333"}
     for text, v in zip(map(values.get, p["name"]), p["value"]):
         assert float(text) == v or float(np.float32(text)) == v       # every text reads back exactly
+
+
+def test_a_ground_vehicle_starts_at_its_first_motion_not_at_a_gps_height_swing():
+    # a rover whose GPS height wanders 6 m up at 2 s and drives off at 6 s
+    n, dt = 250, 0.04
+    t = (np.arange(n) * dt * 1e9).astype(np.int64)
+    st = pd.DataFrame({"t_ns": t, "pos_d_m": np.where(np.arange(n) >= 50, -6.0, 0.0),
+                       "vel_n_mps": np.where(np.arange(n) >= 150, 1.0, 0.0), "vel_e_mps": 0.0})
+    assert compare.takeoff_t_ns(st) == (t[50], "height")
+    assert compare.takeoff_t_ns(st, ground=True) == (t[150], "speed")

@@ -200,3 +200,12 @@ def test_the_headline_speeds_leave_out_the_extrapolated_ends_of_a_differentiated
     assert fs.track_numbers(None, w)["max_vspeed_mps"] == 0.5
     assert fs.track_numbers(None, v)["max_vspeed_mps"] == 9.4
     assert fs.without_edges(v, 0.0) is v
+
+
+def test_a_ground_vehicle_has_no_altitude_or_climb_numbers_and_says_why():
+    n = {"duration_s": 395.0, "distance_m": 320.0, "max_alt_m": float("nan"), "max_hspeed_mps": 1.7,
+         "max_vspeed_mps": float("nan"), "ground_vehicle": True}
+    txt = fs.number_texts(n)
+    assert txt["max_alt"] == "– (ground vehicle)" and txt["max_vspeed"] == "– (ground vehicle)"
+    assert txt["max_hspeed"] == "1.7 m/s"
+    assert fs.number_texts({**n, "ground_vehicle": False})["max_alt"] == "– (no height)"

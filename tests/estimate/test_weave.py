@@ -237,7 +237,7 @@ def test_the_detector_takes_a_whole_window_given_as_a_float_and_gives_the_same_r
     (dict(p1=1.5), r"p1: 1.5 is out of range"),
     (dict(p2=-0.1), r"p2: -0.1 is out of range"),
     (dict(dt_s=-1.0), r"dt_s: -1.0 is out of range"),
-    (dict(dt_s=np.nan), r"dt_s: nan is not finite"),
+    (dict(dt_s=np.nan), r"dt_s: nan is not a finite number"),
     (dict(counters="bogus"), r"counters: 'bogus' is not one of leaf, segment"),
     (dict(enter_submode="bogus"), r"enter_submode: 'bogus' is not one of keep, uniform, curve"),
     (dict(method="max"), r"method: 'max' is not one of"),
@@ -247,9 +247,9 @@ def test_the_detector_takes_a_whole_window_given_as_a_float_and_gives_the_same_r
     (dict(omega_init_radps=(0.3, 0.01)), r"omega_init_radps: need 0 < low <= high"),
     (dict(pi_m=((0.5, 0.6, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1))), r"pi_m: row 0 sums to 1.1"),
     (dict(detector_window=0), r"detector_window: 0 is out of range"),
-    (dict(tau=np.nan), r"tau: nan is not finite"),
+    (dict(tau=np.nan), r"tau: nan is not a finite number"),
     (dict(tau=1.5), r"tau: 1.5 is out of range"),
-    (dict(delta_max_m=np.inf), r"delta_max_m: inf is not finite"),
+    (dict(delta_max_m=np.inf), r"delta_max_m: inf is not a finite number"),
 ])
 def test_settings_made_by_with_or_direct_construction_get_the_config_paths_checks(cfg, bad, match):
     with pytest.raises(ValueError, match=match):     # ConfigError (a ValueError), or pi_m's

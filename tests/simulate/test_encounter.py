@@ -159,10 +159,10 @@ def test_a_run_count_below_one_or_not_whole_is_one_clear_error(n_runs):
     (dict(omega_deg_s=(0.0, 8.0)), r"omega_deg_s\[0\]: 0.0 is out of range"),
     (dict(angle_deg=(180.0, 0.0)), r"angle_deg: need low <= high"),
     (dict(sigma_bearing_deg=-1.0), r"sigma_bearing_deg: -1.0 is out of range"),
-    (dict(sigma_bearing_deg=np.nan), r"sigma_bearing_deg: nan is not finite"),
+    (dict(sigma_bearing_deg=np.nan), r"sigma_bearing_deg: nan is not a finite number"),
     (dict(dt_s=0.0), r"dt_s: 0.0 is out of range"),
     (dict(dt_s=-0.05), r"dt_s: -0.05 is out of range"),
-    (dict(orbit_s=np.inf), r"orbit_s: inf is not finite"),
+    (dict(orbit_s=np.inf), r"orbit_s: inf is not a finite number"),
     (dict(ownship_vel_noise_mps=-1.0), r"ownship_vel_noise_mps: -1.0 is out of range"),
     (dict(segments_s={"ct_cv": (10.0, 6.0)}), r"segments_s: gives no durations for ct_cv_ct, cv_ct, cv_ct_cv"),
 ])

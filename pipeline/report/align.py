@@ -147,8 +147,11 @@ def loglik_figure(iterations: pd.DataFrame, tol: float | None = None) -> go.Figu
     if not fig.data:
         return None
     if tol is not None:
-        fig.add_hline(y=tol, line=dict(color="#222222", dash="dash"), annotation_text=f"tol {tol:g}",
-                      annotation_position="top right")
+        fig.add_hline(y=tol, line=dict(color="#222222", dash="dash"))
+        # placed by hand: on a log axis an annotation's y is log10 of the value (plotly's
+        # add_hline annotation lands at 10^tol, the top of the plot)
+        fig.add_annotation(x=1.0, xref="paper", y=float(np.log10(tol)), yref="y", text=f"tol {tol:g}",
+                           showarrow=False, xanchor="right", yanchor="bottom")
     fig.update_xaxes(title="EM iteration")
     fig.update_yaxes(title="|Δ log L| / |log L| (per iteration)", type="log")
     layout(fig, f"EM convergence ({n_conv} of {n_all} maneuvers converged)", height=380)

@@ -45,7 +45,8 @@ def figure_div(fig, div_id: str, label: str | None = None) -> str:
     data, layout = to_json_plotly(d.get("data", [])), to_json_plotly(lay)
     title = label or (lay.get("title") or {}).get("text") or "plot"
     names = [str(t["name"]) for t in d.get("data", []) if t.get("name") and t.get("showlegend", True) is not False]
-    aria = title + (f" ({len(names)} traces: {', '.join(names[:12])}{' …' if len(names) > 12 else ''})" if names else "")
+    traces = f"{len(names)} trace{'s' if len(names) != 1 else ''}"
+    aria = title + (f" ({traces}: {', '.join(names[:12])}{' …' if len(names) > 12 else ''})" if names else "")
     return (f'<div id="{div_id}" class="plotly-graph-div" role="img" aria-label="{html.escape(aria, quote=True)}" '
             f'style="height:{float(height):g}px; width:100%;"></div>'
             f'<script>(window.uavpipePlots = window.uavpipePlots || {{}})["{div_id}"] = function (gd, edit) {{ '

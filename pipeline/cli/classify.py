@@ -52,7 +52,7 @@ def run(args) -> int:
 
     if not (args.model / "meta.json").is_file():
         print(f"uavpipe classify: {args.model}: not a model directory (no meta.json)", file=sys.stderr)
-        return 1
+        return 2   # refused before any work, as estimate --model
     if args.segments is not None and len(args.segments) != len(args.tables):
         print(f"uavpipe classify: --segments: {len(args.segments)} given for {len(args.tables)} tables",
               file=sys.stderr)
@@ -65,7 +65,7 @@ def run(args) -> int:
         ManeuverModelSet.load(args.model)
     except ModelError as exc:
         print(f"uavpipe classify: {exc}", file=sys.stderr)
-        return 1
+        return 2
     # several tables (or one, into an existing folder): DIR/<name>.parquet, the name telling the
     # inputs apart (a/state, b/state); said once, not as a "File exists" per table
     into_folder = len(args.tables) > 1 or args.out.is_dir()

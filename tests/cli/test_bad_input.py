@@ -107,15 +107,15 @@ def test_classify_checks_the_model_and_the_tables_before_running_and_names_each(
     bad = tmp_path / "badmodel"
     shutil.copytree(model_dir, bad)
     (bad / "params.npz").write_bytes((model_dir / "params.npz").read_bytes()[:200])
-    assert main(["classify", str(bad), str(st), "-o", str(tmp_path / "d.parquet")]) == 1
+    assert main(["classify", str(bad), str(st), "-o", str(tmp_path / "d.parquet")]) == 2   # refused before any work, as estimate --model
     err = _err_lines(capsys)
     assert len(err) == 1 and err[0].startswith(f"uavpipe classify: {bad}: unreadable model files: BadZipFile")
     (bad / "params.npz").write_bytes(b"")
-    assert main(["classify", str(bad), str(st), "-o", str(tmp_path / "d.parquet")]) == 1
+    assert main(["classify", str(bad), str(st), "-o", str(tmp_path / "d.parquet")]) == 2
     assert _err_lines(capsys) == [f"uavpipe classify: {bad}: unreadable model files: EOFError: No data left in file"]
     shutil.copy(model_dir / "params.npz", bad / "params.npz")
     (bad / "meta.json").write_text("[1]")
-    assert main(["classify", str(bad), str(st), "-o", str(tmp_path / "d.parquet")]) == 1
+    assert main(["classify", str(bad), str(st), "-o", str(tmp_path / "d.parquet")]) == 2
     assert _err_lines(capsys) == [f"uavpipe classify: {bad}: unreadable model files: meta.json holds a JSON "
                                   f"list, not an object"]
 

@@ -164,7 +164,7 @@ def test_cli_train_and_classify(synth, rng, tmp_path, capsys):
     assert (final["pred"] == final["truth"]).mean() == 1.0
     assert read_table_meta(tmp_path / "out.parquet")["schema_version"]
     # a bad model directory: one line, non-zero exit
-    assert main(["classify", str(tmp_path), str(tmp_path / "test.parquet"), "-o", str(tmp_path / "x.parquet")]) == 1
+    assert main(["classify", str(tmp_path), str(tmp_path / "test.parquet"), "-o", str(tmp_path / "x.parquet")]) == 2
     assert "not a model directory" in capsys.readouterr().err
 
 

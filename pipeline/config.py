@@ -562,9 +562,9 @@ def _explain(err, root: Mapping[str, Any]) -> tuple[int, tuple, str]:
             return 1, order, f"{pre}{_value(inst)} matches more than one of {_describe(sch, root)}"
         return 1, order, f"{pre}{_value(inst)} is not {_describe(sch, root)}"
     if kw == "type":
-        hint = ""
         if isinstance(inst, float) and not math.isfinite(inst):
             return 1, order, f"{pre}{_value(inst)} is not a finite number"
+        hint = ""
         if isinstance(inst, str) and _SCI_NUMBER.match(inst.strip()):
             # YAML 1.1 (PyYAML, Snakemake) reads a float only with a dot before the exponent
             hint = f" (YAML reads {inst} as text: write {_sci_fix(inst.strip())})"

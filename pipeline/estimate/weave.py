@@ -136,8 +136,9 @@ class HmpfConfig:
 
     @classmethod
     def from_config(cls, sec: Mapping[str, Any] | None, **override) -> "HmpfConfig":
-        """From ``estimate.pf.hmpf`` (validated, defaulted; the ``vehicles``, ``from_train``, ``noise_from_train``,
-        ``turn_threshold_radps`` and ``radar`` keys belong to the rule and the sensor), then ``override``."""
+        """From ``estimate.pf.hmpf`` (validated, defaulted; the ``vehicles``, ``from_train``,
+        ``noise_from_train``, ``turn_threshold_radps`` and ``radar`` keys belong to the rule and the
+        sensor), then ``override``."""
         sec = {k: v for k, v in validate_section(_h, sec).items() if k not in _NOT_FILTER_KEYS}
         return build(cls, {**sec, **override})   # __post_init__ checks the result (check_hmpf_config)
 

@@ -272,9 +272,11 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
 
     source, mx = "config", {}
     tr_states, tr_segs = _paths_of(inputs, "train_states"), _paths_of(inputs, "train_segments")
+    # read once: the maxima and the noise both come from these segments
+    train = ([read_table(p) for p in tr_states], [read_table(p) for p in tr_segs]) \
+        if tr_states and (sec["from_train"] or sec["noise_from_train"]) else ([], [])
     if sec["from_train"] and tr_states:
-        dm, tm, mx = weave_maxima([read_table(p) for p in tr_states], [read_table(p) for p in tr_segs],
-                                  cfg.dt_s, float(sec["turn_threshold_radps"]))
+        dm, tm, mx = weave_maxima(*train, cfg.dt_s, float(sec["turn_threshold_radps"]))
         if np.isfinite(dm) and np.isfinite(tm) and dm > 0 and tm > 0:
             cfg = cfg.with_(delta_max_m=float(dm), theta_max_rad=float(tm))
             source = "train"
@@ -284,8 +286,7 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
         source = "config (no other role-train flight of the vehicle)"
     noise_source, noise_diag = "config", {}
     if sec["noise_from_train"] and tr_states:
-        sig, noise_diag = weave_noise([read_table(p) for p in tr_states], [read_table(p) for p in tr_segs],
-                                      cfg.dt_s, float(sec["turn_threshold_radps"]))
+        sig, noise_diag = weave_noise(*train, cfg.dt_s, float(sec["turn_threshold_radps"]))
         # never below the config: a track smoother than the model (a noise-free simulation, a
         # heavily fused position) would otherwise starve the cloud
         raised = {k: v for k, v in sig.items() if v > getattr(cfg, k)}

@@ -149,17 +149,14 @@ class McapReader(LogReader):
                 if rc.is_candidate(rec.topic, msgtype, cfg, _definition(sch)):
                     raw[rec.id] = []
 
-        def topic_of(cid: int) -> str:
-            ch = channels.get(cid)
-            return ch.topic if ch is not None else f"channel {cid}"
-
         def count_lost(per_channel: Mapping[int, int]) -> str:
             """Count messages lost in a chunk per topic; the warning's ``"N message(s) lost (...)"``."""
             by_topic: dict[str, int] = {}
             for cid, k in per_channel.items():
                 if k:
                     lost[cid] = lost.get(cid, 0) + k
-                    by_topic[topic_of(cid)] = by_topic.get(topic_of(cid), 0) + k
+                    t = _topic(channels, cid)
+                    by_topic[t] = by_topic.get(t, 0) + k
             for t, k in by_topic.items():
                 drops[f"bad_chunk:{t}"] = drops.get(f"bad_chunk:{t}", 0) + k
             if not by_topic:
@@ -441,6 +438,12 @@ class _Bounded:
         return out
 
 
+def _topic(channels: Mapping[int, Any], cid: int) -> str:
+    """The topic of channel ``cid``, or ``"channel <cid>"`` when no Channel record named it."""
+    ch = channels.get(cid)
+    return ch.topic if ch is not None else f"channel {cid}"
+
+
 def _check_counts(stats: Any, expected: Mapping[str, int] | None, channels: Mapping[int, Any],
                  counts: Mapping[int, int], lost: Mapping[int, int], drops: dict[str, int],
                  warnings: list[str]) -> None:
@@ -452,7 +455,7 @@ def _check_counts(stats: Any, expected: Mapping[str, int] | None, channels: Mapp
     if stats is not None and stats.channel_message_counts \
             and sum(stats.channel_message_counts.values()) == stats.message_count:
         for cid, n in stats.channel_message_counts.items():
-            t = channels[cid].topic if cid in channels else f"channel {cid}"
+            t = _topic(channels, cid)
             want[t] = want.get(t, 0) + n
         source = "the MCAP summary's Statistics record lists"
     elif expected:
@@ -462,11 +465,9 @@ def _check_counts(stats: Any, expected: Mapping[str, int] | None, channels: Mapp
         return
     seen: dict[str, int] = {}
     for cid in counts.keys() | lost.keys():
-        t = channels[cid].topic if cid in channels else f"channel {cid}"
+        t = _topic(channels, cid)
         seen[t] = seen.get(t, 0) + counts.get(cid, 0) + lost.get(cid, 0)
-    short = {t: n - seen.get(t, 0) for t, n in want.items() if n > seen.get(t, 0)}
-    for t, k in short.items():
-        drops[f"missing:{t}"] = drops.get(f"missing:{t}", 0) + k
+    short = rc.count_missing(want, seen, drops)
     if short:
         warnings.append(f"{sum(short.values())} message(s) that {source} not found in the file "
                         f"({rc.per_topic_text(short)})")

@@ -151,6 +151,16 @@ def per_topic_text(counts: Mapping[str, int]) -> str:
     return ", ".join(f"{t} {n}" for t, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
 
 
+def count_missing(listed: Mapping[str, int], accounted: Mapping[str, int], drops: dict[str, int]) -> dict[str, int]:
+    """The messages per topic a log lists (its index, summary or ``metadata.yaml``) beyond those
+    read or counted lost (``accounted``), each counted in ``drops['missing:<topic>']``; returns
+    them per topic (empty when nothing is short) for the caller's warning."""
+    short = {t: n - accounted.get(t, 0) for t, n in listed.items() if n > accounted.get(t, 0)}
+    for t, k in short.items():
+        drops[f"missing:{t}"] = drops.get(f"missing:{t}", 0) + k
+    return short
+
+
 def normalize_type(name: str) -> str:
     """``pkg/Type`` (ROS 1, MCAP ros1msg) or ``pkg/msg/Type`` -> ``pkg/msg/Type``."""
     name = name.strip()

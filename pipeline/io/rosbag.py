@@ -109,10 +109,7 @@ def _decode(path: Path, reader: Any, routes: dict[str, rc.Route], deser: Callabl
         listed: dict[str, int] = {}
         for c in conns:
             listed[c.topic] = listed.get(c.topic, 0) + c.msgcount
-        short = {t: n - seen.get(t, 0) - lost.get(t, 0) for t, n in listed.items()
-                 if n > seen.get(t, 0) + lost.get(t, 0)}
-        for t, k in short.items():
-            drops[f"missing:{t}"] = drops.get(f"missing:{t}", 0) + k
+        short = rc.count_missing(listed, {t: seen.get(t, 0) + lost.get(t, 0) for t in listed}, drops)
         if short:
             diag["warnings"].append(f"storage ended after {done + bad} message(s) without an error: "
                                     f"{sum(short.values())} message(s) that {listed_by} not found "

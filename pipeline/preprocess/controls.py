@@ -88,8 +88,8 @@ def controls_from_params(params: pd.DataFrame | Mapping[str, float] | None,
                 out[stick] = None
                 said.append(f"{stick} unmapped ({name} 0)")
                 continue
-        else:  # ArduPilot calibration without RCMAP (older firmware): its fixed 1 roll, 2 pitch, 3 throttle, 4 yaw
-            ch = ("ail", "ele", "thr", "rud").index(stick) + 1
+        else:  # ArduPilot calibration without RCMAP (older firmware): its fixed map, DEFAULT_CONTROLS's
+            ch = int(DEFAULT_CONTROLS[stick]["channel"].split("_")[1])
         spec = {k: v for k, v in (base.get(stick) or {}).items() if k not in ("channel", "reverse")}
         spec["channel"] = f"rc_{ch}_us"
         lo, hi, trim = pv.get(f"RC{ch}_MIN"), pv.get(f"RC{ch}_MAX"), pv.get(f"RC{ch}_TRIM")

@@ -32,8 +32,9 @@ has no sample within its gap limit, or its sample holds no value (a NaN position
 quaternion), and around an estimator reset of the position source (``reset_count`` changes):
 a row with ``gap`` False has a finite position, velocity and attitude. The other columns keep
 their own streams' coverage whatever ``gap`` says (on phoenix-mission1, ~1 Hz telemetry, the
-body rates are NaN on 404 rows with ``gap`` False), so a consumer of them checks them. Streams that are absent give NaN columns; a log with no usable stream at all gives an empty
-``state`` with the full schema. Diagnostics (timestamp
+body rates are NaN on 404 rows with ``gap`` False), so a consumer of them checks them. Streams
+that are absent give NaN columns; a log with no usable stream at all gives an empty ``state``
+with the full schema. Diagnostics (timestamp
 repairs, sources, filter flags, calibration summary) are returned in
 :attr:`PreprocessResult.diagnostics` and written into the Parquet metadata and the JSON
 diagnostics file; the ingest meta's aerobatic box heading ``params.box_rotation_rad`` (FlightCoach)

@@ -426,6 +426,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     log = read_flightlog(ingest_dir)
     meta = log.meta
     st = read_table(state) if state and Path(state).exists() else None
+    state_meta = read_table_meta(state) if st is not None else {}
+    pre = state_meta.get("preprocess") or {}
     seg = read_table(segments) if segments and Path(segments).exists() else None
     if seg is None and len(log["labels"]):
         seg = log["labels"]
@@ -436,13 +438,12 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     failed = meta.get("status") == "failed"
     ned = ned_track(log, st)
     velocity = velocity_track(st, log)
-    pre0 = (read_table_meta(state).get("preprocess") or {}) if st is not None else {}
     # a velocity differentiated from position: its run ends are extrapolations, kept out of the maxima
-    edge_s = 0.5 * float(pre0.get("derivative_window_s") or 1.0) \
+    edge_s = 0.5 * float(pre.get("derivative_window_s") or 1.0) \
         if st is not None and "vel_n_mps" in st and st["vel_n_mps"].notna().any() \
-        and (pre0.get("sources") or {}).get("velocity") == "differentiated position" else 0.0
+        and (pre.get("sources") or {}).get("velocity") == "differentiated position" else 0.0
     numbers = flight_numbers(log, st, ned=ned, velocity=without_edges(velocity, edge_s))
-    if pre0.get("ground_vehicle"):   # a rover's height is GPS noise: no altitude or climb to report
+    if pre.get("ground_vehicle"):   # a rover's height is GPS noise: no altitude or climb to report
         numbers.update(max_alt_m=float("nan"), max_vspeed_mps=float("nan"), ground_vehicle=True)
     alt_series = {}
     baro = baro_relative(log["baro"])
@@ -529,7 +530,6 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     divs = figure_divs(figs)
     # one linked time axis: zooming any time panel zooms them all (the template's script)
     linked = [f"plot-{i}" for i, (_, f) in enumerate(figs) if plots.is_time_panel(f)]
-    pre = (read_table_meta(state).get("preprocess") or {}) if state and Path(state).exists() else {}
     tables = [("Log messages", *plots.messages_table(log["messages"])),
               ("Parameters", *plots.params_table(log["params"]))]
     if pre and not failed:
@@ -548,12 +548,12 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
              ("diagnostics", diagnostics_text(meta.get("diagnostics")))]
     summary = summary_rows(meta, vehicle=vehicle, messages=log["messages"], gps=log["gps"], rates=rates,
                            euler=euler, preprocess=pre, numbers=numbers)
-    if state and Path(state).exists():
+    if st is not None:
         src = pre.get("sources") or {}
         cinfo = pre.get("calibration") or {}
         facts.append(("preprocess", f"{pre.get('n_samples', 0)} samples @ {known(pre.get('rate_hz'))} Hz; position "
                                     f"{known(src.get('position'))}; body rates {known(src.get('body_rates'))}; BPM "
-                                    f"{known(cinfo.get('method'))}" if pre else known(read_table_meta(state).get("error"))))
+                                    f"{known(cinfo.get('method'))}" if pre else known(state_meta.get("error"))))
     for m, p in classified.items():
         cm = read_table_meta(p)
         facts.append(("classifier", f"model set {m}: {cm.get('status')}"

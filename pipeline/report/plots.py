@@ -135,13 +135,14 @@ def _t(df: pd.DataFrame) -> np.ndarray:
     return df["t_ns"].to_numpy() * 1e-9
 
 
-def right_axis(title: str, **kw) -> dict:
-    """A y axis on the right, over ``y``, with ticks of its own.
+def right_axis(title: str | None = None, **kw) -> dict:
+    """A y axis on the right, over ``y``, with ticks of its own (and ``title``, when given).
 
     plotly.js 4 defaults an overlaying axis to ``tickmode="sync"``: its ticks land on the left
     axis's grid lines, at values such as −0.01, 8.69, 17.39 clipping events; ``auto`` gives round
     numbers of its own unit, and no second grid."""
-    return dict(overlaying="y", side="right", tickmode="auto", showgrid=False, zeroline=False, title=title, **kw)
+    ax = dict(overlaying="y", side="right", tickmode="auto", showgrid=False, zeroline=False, **kw)
+    return ax if title is None else {**ax, "title": title}
 
 
 #: the legend's top below the plot area (px): under the tick labels and the x-axis title
@@ -504,7 +505,7 @@ def unit_axes(fig: go.Figure, titles: list[str], colours: list[str | None] | Non
     for k, (title, c) in enumerate(zip(titles, colours)):
         ax = dict(title=dict(text=title, font=dict(color=c) if c else None), tickfont=dict(color=c) if c else None)
         if k:
-            ax.update({k: v for k, v in right_axis("").items() if k != "title"})
+            ax.update(right_axis())
         if k == 2:
             ax.update(anchor="free", position=1.0)
         axes["yaxis" if k == 0 else f"yaxis{k + 1}"] = ax
@@ -744,7 +745,7 @@ def label_colours(labels) -> dict[str, str]:
     n = len(LABEL_PALETTE)
     for lab in sorted({str(x) for x in labels}):
         if lab == "unknown":
-            out[lab] = "#999999"
+            out[lab] = label_colour(lab)   # grey
             continue
         k = LABEL_PALETTE.index(label_colour(lab))
         for j in range(n):

@@ -441,7 +441,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     # a velocity differentiated from position: its run ends are extrapolations, kept out of the maxima
     edge_s = 0.5 * float(pre.get("derivative_window_s") or 1.0) \
         if st is not None and "vel_n_mps" in st and st["vel_n_mps"].notna().any() \
-        and (pre.get("sources") or {}).get("velocity") == "differentiated position" else 0.0
+        and "differentiated" in str((pre.get("sources") or {}).get("velocity")) else 0.0
     numbers = flight_numbers(log, st, ned=ned, velocity=without_edges(velocity, edge_s))
     if pre.get("ground_vehicle"):   # a rover's height is GPS noise: no altitude or climb to report
         numbers.update(max_alt_m=float("nan"), max_vspeed_mps=float("nan"), ground_vehicle=True)

@@ -266,3 +266,32 @@ def test_an_estimator_reset_in_the_local_position_is_a_gap_not_motion():
     res = preprocess_log(FlightLog.from_streams({"flight_id": "nocount"}, {"local_position": lp.drop(columns="reset_count")}),
                          {"velocity_source": "differentiate"})
     assert not res.state["gap"].any() and np.abs(res.state["vel_d_mps"]).max() > 5.0
+
+
+def test_a_fix_without_a_climb_rate_keeps_its_measured_horizontal_velocity(rng):
+    # GPS_RAW_INT carries ground speed and course but no vertical velocity: the measured north
+    # and east velocities are used as they are (noisy positions would give a far noisier
+    # derivative), only down is differentiated from the position, and the source says so
+    log, w = synthetic_flight(rng, gap=False)
+    gps = log["gps"].copy()
+    # 2 m of white position noise: the differentiated horizontal velocity would be off by ~1 m/s
+    gps["lat_deg"] += rng.normal(0.0, 2.0 / 111_000.0, len(gps))
+    h = 0.3 * gps["t_ns"].to_numpy() * 1e-9                   # a 0.3 m/s climb
+    gps["alt_wgs84_m"] += h
+    gps["vel_d_mps"] = np.nan
+    streams = {k: log[k] for k in ("attitude", "imu")}
+    res = preprocess_log(FlightLog.from_streams(log.meta, {**streams, "gps": gps}))
+    st = res.state
+    t = st["t_ns"].to_numpy() * 1e-9
+    mid = (t > 2) & (t < 58)
+    # on the fix times the measured velocity is returned exactly (interpolated in between)
+    on_fix = np.isin(st["t_ns"].to_numpy(), gps["t_ns"].to_numpy()) & mid
+    np.testing.assert_allclose(st["vel_n_mps"][on_fix], -20 * w * np.sin(w * t[on_fix]), atol=1e-9)
+    np.testing.assert_allclose(st["vel_e_mps"][on_fix], 20 * w * np.cos(w * t[on_fix]), atol=1e-9)
+    np.testing.assert_allclose(st["vel_d_mps"][mid], -0.3, atol=1e-4)  # the noisy latitude leaks ~2e-5 through the curvature
+    assert res.diagnostics["sources"]["velocity"] == "measured (n, e); differentiated position (d)"
+    # the same fixes without any measured velocity: every axis differentiated, the noise shows
+    res = preprocess_log(FlightLog.from_streams(log.meta, {**streams, "gps": gps.assign(vel_n_mps=np.nan)}))
+    assert res.diagnostics["sources"]["velocity"] == "measured (e); differentiated position (n, d)"
+    err = res.state["vel_n_mps"][mid] + 20 * w * np.sin(w * t[mid])
+    assert np.sqrt(np.mean(err ** 2)) > 0.3

@@ -292,6 +292,35 @@ def test_a_fix_without_a_climb_rate_keeps_its_measured_horizontal_velocity(rng):
     assert res.diagnostics["sources"]["velocity"] == "measured (n, e); differentiated position (d)"
     # the same fixes without any measured velocity: every axis differentiated, the noise shows
     res = preprocess_log(FlightLog.from_streams(log.meta, {**streams, "gps": gps.assign(vel_n_mps=np.nan)}))
-    assert res.diagnostics["sources"]["velocity"] == "measured (e); differentiated position (n, d)"
+    assert res.diagnostics["sources"]["velocity"] == "differentiated position (n, d); measured (e)"
     err = res.state["vel_n_mps"][mid] + 20 * w * np.sin(w * t[mid])
     assert np.sqrt(np.mean(err ** 2)) > 0.3
+
+
+def test_a_gps_flight_takes_its_climb_rate_from_the_baro_not_from_the_noisy_fix_heights(rng):
+    # fixes with 1 m of height noise and no climb rate beside a 20 Hz baro with 0.1 m: the down
+    # velocity follows the baro's derivative (a 0.3 m/s climb), pos_d stays the GPS's
+    log, w = synthetic_flight(rng, gap=False)
+    gps = log["gps"].copy()
+    tg = gps["t_ns"].to_numpy() * 1e-9
+    gps["alt_wgs84_m"] += 0.3 * tg + rng.normal(0.0, 1.0, len(gps))
+    gps["vel_d_mps"] = np.nan
+    tb = np.arange(0, 60, 0.05)
+    baro = pd.DataFrame({"t_ns": ns(tb), "alt_rel_m": 7.0 + 0.3 * tb + rng.normal(0.0, 0.1, len(tb))})
+    streams = {"attitude": log["attitude"], "imu": log["imu"], "gps": gps, "baro": baro}
+    res = preprocess_log(FlightLog.from_streams(log.meta, streams))
+    st = res.state
+    t = st["t_ns"].to_numpy() * 1e-9
+    mid = (t > 2) & (t < 58)
+    err = st["vel_d_mps"][mid] + 0.3
+    assert np.sqrt(np.mean(err ** 2)) < 0.15       # the 1 Hz-filtered baro noise: ~0.1 m/s
+    assert np.sqrt(np.mean(st["acc_d_mps2"][mid] ** 2)) < 0.5
+    assert res.diagnostics["sources"]["velocity"] == "measured (n, e); baro height (d)"
+    # the position's down axis is still the fixes' (noisy) height about the origin
+    assert np.std(st["pos_d_m"][mid] + 10 + 0.3 * t[mid]) > 0.5
+    # switched off, or without a baro: the down axis differentiated from the fixes, ~10x noisier
+    for cfg, s in (({"vertical_from_baro": False}, streams), (None, {k: v for k, v in streams.items() if k != "baro"})):
+        res = preprocess_log(FlightLog.from_streams(log.meta, s), cfg)
+        assert res.diagnostics["sources"]["velocity"] == "measured (n, e); differentiated position (d)"
+        assert np.sqrt(np.mean((res.state["vel_d_mps"][mid] + 0.3) ** 2)) > 0.3
+        assert np.sqrt(np.mean(res.state["acc_d_mps2"][mid] ** 2)) > 1.0

@@ -165,7 +165,6 @@ def test_a_set_with_nothing_to_learn_writes_empty_tables_with_the_reason(tmp_pat
 
 
 def test_the_real_learner_fits_a_synthetic_set_and_its_likelihood_rises(tmp_path):
-    pytest.importorskip("pipeline.align.trajectory", reason="TrajectoryLearner (h15-em) not merged")
     out = _outputs(tmp_path)
     res = align_run.run_align(_inputs(_two_flights(tmp_path)), out,
                               _config({"s": {"flights": ["f1", "f2"]}}, max_iter=3, sample_hz=2.5), set_name="s")
@@ -191,7 +190,6 @@ def test_a_demo_the_tau_steps_cannot_stretch_is_dropped_with_the_reason():
 
 
 def test_the_same_set_learned_twice_gives_the_same_bytes(tmp_path):
-    pytest.importorskip("pipeline.align.trajectory", reason="TrajectoryLearner (h15-em) not merged")
     flights = _inputs(_two_flights(tmp_path))
     cfg = _config({"s": {"flights": ["f1", "f2"]}}, max_iter=2, sample_hz=2.5)
     a, b = _outputs(tmp_path / "a"), _outputs(tmp_path / "b")

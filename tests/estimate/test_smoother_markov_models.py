@@ -16,7 +16,7 @@ from pipeline.estimate.models import (A_H, B, Q, ca_transition, hmm_input, hmm_t
 from pipeline.estimate.montecarlo import measure, simulate_white_jerk
 from pipeline.estimate.smoother import rts_smooth
 
-kalman = pytest.importorskip("filterpy.kalman")
+from filterpy import kalman  # noqa: E402  (the test extra: the oracle, never skipped)
 
 DT = 0.2
 X0 = np.array([10.0, 20.0, -30.0, 1.0, -2.0, 0.5, 0.1, 0.0, -0.1])

@@ -272,12 +272,9 @@ def test_tlog_renamed_bin_never_reaches_the_dataflash_decoder(tmp_path, monkeypa
     if which == "synthetic":
         blob = _tlog_bytes()
     else:
-        src = REALDATA / "tlog_phoenix_ubc_quad/phoenix_mission1_2018-09-17_16-44-06.tlog"
-        if not src.exists():
-            from helpers import need_shared
+        from helpers import realdata_file
 
-            need_shared(str(src))
-            pytest.skip(f"missing {src}")
+        src = realdata_file("tlog_phoenix_ubc_quad/phoenix_mission1_2018-09-17_16-44-06.tlog")
         blob = src.read_bytes()[:200_000]
     p = tmp_path / "telemetry.bin"
     p.write_bytes(blob)

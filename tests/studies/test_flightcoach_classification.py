@@ -14,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
-from helpers import REALDATA, need_shared
+from helpers import REALDATA, realdata_file
 
 from pipeline.config import ROOT
 from pipeline.studies import STUDY_TABLES, flightcoach_inputs
@@ -24,9 +24,7 @@ NAME = "flightcoach_classification"
 
 
 def _inputs():
-    need_shared("FlightCoach F3A flights")
-    if not (REALDATA / FLIGHTCOACH_DIR).is_dir():
-        pytest.skip(f"{FLIGHTCOACH_DIR} missing")
+    realdata_file(FLIGHTCOACH_DIR)   # skips, or fails under UAVPIPE_REQUIRE_SHARED=1, when absent
     return flightcoach_inputs(REALDATA)
 
 

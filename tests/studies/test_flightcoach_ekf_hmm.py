@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import REALDATA, need_shared
+from helpers import REALDATA, realdata_file
 
 from pipeline.studies import STUDY_TABLES, flightcoach_inputs
 from pipeline.studies.base import FLIGHTCOACH_DIR, FLIGHTCOACH_EKF_HMM_FILES, StudyError
@@ -25,9 +25,7 @@ NAME = "flightcoach_ekf_hmm"
 
 
 def _inputs():
-    need_shared("FlightCoach F3A flights")
-    if not (REALDATA / FLIGHTCOACH_DIR).is_dir():
-        pytest.skip(f"{FLIGHTCOACH_DIR} missing")
+    realdata_file(FLIGHTCOACH_DIR)   # skips, or fails under UAVPIPE_REQUIRE_SHARED=1, when absent
     return flightcoach_inputs(REALDATA, FLIGHTCOACH_EKF_HMM_FILES, study=NAME)
 
 

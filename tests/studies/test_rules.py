@@ -55,11 +55,9 @@ def test_the_flightcoach_ekf_hmm_target_without_real_logs_stops_naming_the_file(
 
 
 def test_the_flightcoach_ekf_hmm_target_plans_only_the_study_and_plotly_js():
-    from helpers import REALDATA, need_shared
+    from helpers import REALDATA, realdata_file
 
-    need_shared("FlightCoach F3A flights")
-    if not (REALDATA / "flightcoach_f3a_json").is_dir():
-        pytest.skip("../shared/realdata/flightcoach_f3a_json absent")
+    realdata_file("flightcoach_f3a_json")
     assert _jobs(_dry("study_flightcoach_ekf_hmm", "--config", f"realdata_dir={REALDATA}")) == {
         "plotly_js": 1, "study_flightcoach_ekf_hmm": 1}
 

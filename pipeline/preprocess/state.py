@@ -14,8 +14,9 @@ in this order, every constant from the ``preprocess`` config section (:class:`Pr
    default ``baro.alt_rel_m``: 3rd order, 1 Hz, seed 004), per gap-free segment (:mod:`.filters`).
 4. **Position** source, in priority order: ``local_position`` (the autopilot EKF) if it has
    positions, else ``gps`` converted to NED about ``meta['ned_origin']`` (first 3D fix when
-   absent; ``frames.geodesy``, exact WGS84 or flat Earth), else ``truth``. ``position_source`` in the config
-   forces one.
+   absent; ``frames.geodesy``, exact WGS84 or flat Earth; fused with the fixes' measured velocity
+   by a Kalman smoother, :mod:`.smoother`, ``gps_smoother``), else ``truth``. ``position_source``
+   in the config forces one.
 5. **Derivatives**: velocity from the source's measured velocity on each axis it measures (else
    the differentiated position on that axis: a ``GPS_RAW_INT`` fix has no climb rate; a GPS
    source's down axis from the filtered baro height, ``vertical_from_baro``), acceleration and jerk from the velocity by the configured
@@ -66,8 +67,9 @@ from .controls import PHYSICAL, controls_from_params, controls_from_pwm
 from .derivatives import Differentiator, body_rates_from_quat, differentiate
 from .filters import butterworth
 from .mount import apply_mount, apply_mount_attitude, mount_dcm
-from .resample import make_grid, median_period_ns, primary_instance, repair_timestamps, resample
+from .resample import bridge_limit_ns, make_grid, median_period_ns, primary_instance, repair_timestamps, resample
 from .segment import build_segments
+from .smoother import GpsSmoother, smooth_track
 
 _NED = ("n", "e", "d")
 POS = [f"pos_{a}_m" for a in _NED]
@@ -110,6 +112,8 @@ class PreprocessConfig:
     ned_method : {"wgs84", "flat"}
         GPS -> NED conversion (``frames.geodesy``): exact, or seed 004's flat Earth (5.1).
     bpm : BPMConfig
+    gps_smoother : GpsSmoother
+        A GPS position source fused with its measured velocity (:mod:`.smoother`).
     segments : dict
         ``source`` and ``windows`` (``{flight_id: [{start_s, end_s, label}]}``).
     vehicle : str or None
@@ -128,6 +132,7 @@ class PreprocessConfig:
     position_source: str = _pre("position_source")
     ned_method: str = _pre("ned_method")
     bpm: BPMConfig = field(default_factory=BPMConfig)
+    gps_smoother: GpsSmoother = field(default_factory=GpsSmoother)
     segments: dict = _pre("segments")
     # per vehicle (preprocess.vehicles.<name>), filled by resolve_config
     vehicle: str | None = field(default=None, metadata={"config_key": None})
@@ -442,7 +447,8 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
             g, ned, gps_origin = _gps_ned(P["gps"], log.meta or {}, diag, cfg.ned_method, cfg.bpm.gps_min_fix)
             if len(g):
                 pos_df = pd.DataFrame({"t_ns": g["t_ns"].to_numpy(), POS[0]: ned[:, 0], POS[1]: ned[:, 1],
-                                       POS[2]: ned[:, 2], **{v: g[v].to_numpy() for v in VEL}})
+                                       POS[2]: ned[:, 2], **{v: g[v].to_numpy() for v in VEL},
+                                       **{c: g[c].to_numpy() for c in ("hacc_m", "vacc_m") if c in g.columns}})
                 pos_src = "gps"
                 break
     diag["sources"]["position"] = pos_src
@@ -486,6 +492,8 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         pvalid = pvalid & np.isfinite(pos).all(axis=1)
         pvalid &= ~_reset_steps(pos_df, grid, diag, pos_src)
         gap |= ~pvalid
+        if pos_src == "gps" and cfg.gps_smoother.enabled and pvalid.any():
+            pos = _smoothed_gps(pos_df, grid, pos, pvalid, cfg, diag)
         vel_meas = np.column_stack([r[v].to_numpy() if v in r.columns else np.full(n, np.nan) for v in VEL])
         # per axis: a GPS_RAW_INT fix carries ground speed and course but no climb rate, and its
         # measured horizontal velocity (0.05 m/s RMS on the simulated tlog) beats the
@@ -613,6 +621,39 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
                          source=cfg.segments.get("source", "auto"), t_end_ns=int(grid[-1]), flight_id=fid,
                          truth=S["truth"], notes=diag["notes"])
     return PreprocessResult(state=state, segments=seg, calibration=cal.points, diagnostics=diag)
+
+
+def _smoothed_gps(fixes: pd.DataFrame, grid: NDArray[np.int64], pos: NDArray, pvalid: NDArray[np.bool_],
+                  cfg: PreprocessConfig, diag: dict) -> NDArray:
+    """The GPS fixes fused with their measured velocity on the grid (:mod:`.smoother`); the
+    rows the interpolation called gaps stay as they were (NaN-free rows only change)."""
+    g = cfg.gps_smoother
+    t = fixes["t_ns"].to_numpy(np.int64)
+    z = fixes[POS].to_numpy(dtype=np.float64)
+    v = np.column_stack([fixes[c].to_numpy(dtype=np.float64, na_value=np.nan) if c in fixes.columns
+                         else np.full(len(fixes), np.nan) for c in VEL])
+
+    def sigma(col, default):
+        x = fixes[col].to_numpy(dtype=np.float64, na_value=np.nan) if col in fixes.columns \
+            else np.full(len(fixes), np.nan)
+        # a fix that reports no accuracy (or zero, a reader's placeholder) gets the config's
+        return np.where(np.isfinite(x) & (x > 0), x, default)
+
+    sh, sv = sigma("hacc_m", g.sigma_h_m), sigma("vacc_m", g.sigma_v_m)
+    out = smooth_track(t, z, v, np.column_stack([sh, sh, sv]), grid, g,
+                       max_gap_ns=bridge_limit_ns(t, grid, cfg.gap_multiple), causal=cfg.causal)
+    ok = pvalid & np.isfinite(out).all(axis=1)
+    res = pos.copy()
+    res[ok] = out[ok]
+    with_vel = [a for a, c in zip(_NED, VEL) if np.isfinite(v[:, _NED.index(a)]).any()]
+    diag["gps_smoother"] = {"jerk_psd": g.jerk_psd, "causal": cfg.causal, "velocity_axes": with_vel,
+                            "median_sigma_h_m": float(np.median(sh)), "median_sigma_v_m": float(np.median(sv)),
+                            "rms_change_m": float(np.sqrt(np.mean((res[ok] - pos[ok]) ** 2))) if ok.any() else 0.0}
+    diag["notes"].append(f"gps positions smoothed (white-jerk RTS{' forward only' if cfg.causal else ''}, "
+                         f"q {g.jerk_psd:g} m²/s⁵, with the fixes' velocity on "
+                         f"{', '.join(with_vel) or 'no axis'}): {diag['gps_smoother']['rms_change_m']:.3f} m RMS "
+                         "from the interpolated fixes (preprocess.gps_smoother)")
+    return res
 
 
 def _baro_height(b: pd.DataFrame, grid: NDArray[np.int64], cfg: PreprocessConfig, diag: dict) -> NDArray:

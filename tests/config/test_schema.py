@@ -244,7 +244,7 @@ def test_unknown_keys_are_reported_before_sibling_type_errors_deterministically(
     msgs = {str(_raises(bad)) for _ in range(3)}
     assert msgs == {"preprocess.rate_hx: unknown key (allowed: rate_hz, gap_multiple, clock_jump_s, "
                     "position_source, ned_method, velocity_source, vertical_from_baro, methods, causal, butterworth, "
-                    "derivatives, bpm, segments, vehicles, flights)"}
+                    "derivatives, gps_smoother, bpm, segments, vehicles, flights)"}
     # no unknown key: the first error in key order
     assert str(_raises({"preprocess": {"rate_hz": "fast", "gap_multiple": "x"}})) == \
         "preprocess.gap_multiple: 'x' is not a number"

@@ -218,7 +218,48 @@ def _prepare(df: pd.DataFrame, cfg: PreprocessConfig, name: str, diag: dict | No
     df, d = repair_timestamps(df, clock_jump_s=cfg.clock_jump_s)
     if diag is not None and any(d.values()):
         diag["timestamp_repairs"][key or name] = d
+    if diag is not None:
+        df = implausible_to_nan(df, name, diag)
     return df
+
+
+#: What no sensor of a small aircraft reads, by stream and column (``*`` a wildcard): beyond it
+#: a value is a damaged record that still decoded (a DataFlash NTUN with 2,000 flipped bytes
+#: read ``vel_e`` 1.06e11 m/s; an IMU record 2.9e38 rad/s) and would become the page's "max
+#: speed". Far outside any flight envelope on purpose (2,000 °/s is a common gyro full scale,
+#: 1,000 m/s thrice the fastest UAV), so no real reading is lost. Latitude/longitude and static
+#: pressure have their own checks (:func:`_gps_ned`, step 8).
+PHYSICAL_LIMITS: dict[str, tuple[tuple[str, float, float], ...]] = {
+    "imu": (("gyr_*_radps", -100.0, 100.0), ("acc_*_mps2", -2000.0, 2000.0), ("temp_degC", -100.0, 200.0)),
+    "gps": (("alt_*_m", -2000.0, 100_000.0), ("vel_*_mps", -1000.0, 1000.0)),
+    "baro": (("alt_rel_m", -100_000.0, 100_000.0), ("temp_degC", -100.0, 200.0)),
+    "local_position": (("pos_*_m", -1e7, 1e7), ("vel_*_mps", -1000.0, 1000.0)),
+    "rangefinder": (("dist_m", -1.0, 100_000.0),),
+}
+
+
+def implausible_to_nan(df: pd.DataFrame, name: str, diag: dict) -> pd.DataFrame:
+    """``df`` with every value outside :data:`PHYSICAL_LIMITS` set to NaN (the row's other
+    columns kept), counted in ``diag["implausible_values"][name]`` and said in the notes."""
+    limits = PHYSICAL_LIMITS.get(name)
+    if not limits or not len(df):
+        return df
+    counts: dict[str, int] = {}
+    out = None
+    for pat, lo, hi in limits:
+        for c in (c for c in df.columns if fnmatch.fnmatchcase(c, pat)):
+            x = pd.to_numeric(df[c], errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
+            bad = np.isfinite(x) & ((x < lo) | (x > hi)) | np.isinf(x)
+            if bad.any():
+                out = df.copy() if out is None else out
+                out[c] = np.where(bad, np.nan, x)
+                counts[c] = int(bad.sum())
+    if not counts:
+        return df
+    diag.setdefault("implausible_values", {})[name] = counts
+    diag["notes"].append(f"{name}: {sum(counts.values())} value(s) outside physical limits set to NaN ("
+                         + ", ".join(f"{c} {n}" for c, n in counts.items()) + "): damaged records")
+    return out
 
 
 def _control_groups(ctrl: pd.DataFrame, cols: list[str]) -> dict[str, list[str]]:

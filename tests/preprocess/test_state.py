@@ -300,3 +300,27 @@ def test_a_gps_flight_takes_its_climb_rate_from_the_baro_not_from_the_noisy_fix_
         assert res.diagnostics["sources"]["velocity"] == "measured (n, e); differentiated position (d)"
         assert np.sqrt(np.mean((res.state["vel_d_mps"][mid] + 0.3) ** 2)) > 0.3
         assert np.sqrt(np.mean(res.state["acc_d_mps2"][mid] ** 2)) > 1.0
+
+
+def test_values_no_sensor_reads_are_set_to_nan_counted_and_kept_out_of_the_state(rng):
+    # damaged records that still decoded: a 1e11 m/s GPS velocity, a 2.9e38 rad/s gyro sample
+    log, w = synthetic_flight(rng, gap=False)
+    gps, imu = log["gps"].copy(), log["imu"].copy()
+    gps.loc[40, "vel_e_mps"] = 1.06e11
+    gps.loc[41, "alt_wgs84_m"] = 6.9e17
+    imu.loc[[100, 200], "gyr_z_radps"] = [2.9e38, -np.inf]
+    res = preprocess_log(FlightLog.from_streams(log.meta, {**{k: log[k] for k in ("attitude", "control")},
+                                                           "gps": gps, "imu": imu}))
+    d = res.diagnostics
+    assert d["implausible_values"] == {"imu": {"gyr_z_radps": 2}, "gps": {"alt_wgs84_m": 1, "vel_e_mps": 1}}
+    assert "gps: 2 value(s) outside physical limits set to NaN (alt_wgs84_m 1, vel_e_mps 1): damaged records" \
+        in d["notes"]
+    st = res.state
+    assert np.nanmax(np.abs(st[["vel_n_mps", "vel_e_mps", "vel_d_mps"]].to_numpy())) < 20
+    assert np.nanmax(np.abs(st["pos_d_m"])) < 20 and np.nanmax(np.abs(st["r_radps"])) < 1
+    # the row's other columns are kept: the fix with the bad velocity still gives its position
+    assert not st["gap"].any() or st["gap"].mean() < 0.02
+    # readings at the edge of a real envelope are not touched (2,000 °/s, 900 m/s)
+    imu2 = log["imu"].assign(gyr_x_radps=34.9)
+    res = preprocess_log(FlightLog.from_streams(log.meta, {"gps": log["gps"].assign(vel_d_mps=-900.0), "imu": imu2}))
+    assert "implausible_values" not in res.diagnostics

@@ -100,14 +100,22 @@ def repair_timestamps(df: pd.DataFrame, *, clock_jump_s: float | None = 3600.0
     Returns
     -------
     (DataFrame, dict)
-        Repaired rows (index reset) and counts ``{non_monotonic, duplicate, clock_jumps}``:
-        rows that stepped back in arrival order (put in order), rows with a repeated stamp
-        (the first is kept: later ones carry no new time information) and closed jumps.
+        Repaired rows (index reset) and counts ``{non_monotonic, duplicate, clock_jumps,
+        stray}``: rows that stepped back in arrival order (put in order), rows with a repeated
+        stamp (the first is kept: later ones carry no new time information), closed jumps and
+        dropped stray stamps (:func:`stray_samples`).
     """
-    diag = {"non_monotonic": 0, "duplicate": 0, "clock_jumps": 0}
+    diag = {"non_monotonic": 0, "duplicate": 0, "clock_jumps": 0, "stray": 0}
     if len(df) < 2:
         return df.reset_index(drop=True), diag
     t = df["t_ns"].to_numpy(dtype=np.int64).copy()
+    # strays first: a lone record days away is dropped, not taken for a clock jump and moved
+    order = np.argsort(t, kind="stable")
+    stray = np.zeros(len(t), dtype=bool)
+    stray[order] = stray_samples(t[order])
+    if stray.any():
+        diag["stray"] = int(stray.sum())
+        df, t = df[~stray], t[~stray]
     d = np.diff(t)
     if clock_jump_s is not None:
         jump_ns = int(clock_jump_s * 1e9)
@@ -131,6 +139,45 @@ def repair_timestamps(df: pd.DataFrame, *, clock_jump_s: float | None = 3600.0
     if dup.any():
         out = out[~dup]
     return out.reset_index(drop=True), diag
+
+
+#: :func:`stray_samples`: a step longer than this many median periods (and :data:`STRAY_GAP_S`)
+#: separates islands of samples
+STRAY_GAP_PERIODS = 100
+STRAY_GAP_S = 60.0
+
+
+def stray_samples(t_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Samples whose stamps lie apart from the rest of a sorted stream: damaged time fields.
+
+    The sorted stamps split into islands at every step longer than ``max(STRAY_GAP_S,
+    STRAY_GAP_PERIODS × median step)``; an island of at most ``max(3, n / 1000)`` samples
+    beside one ten times its size is stray. A bit flipped in one record's time puts that
+    record minutes or days away (a 44 s ULog with 20 flipped bytes spanned 3,072 s on its grid,
+    a tlog 3,601 s instead of 867 s, 87–99 % of it gap); a real pause of the logger leaves
+    samples on both sides, each far more than a handful.
+    """
+    t = np.asarray(t_ns, dtype=np.int64)
+    out = np.zeros(len(t), dtype=bool)
+    if len(t) < 8:
+        return out
+    d = np.diff(t)
+    pos = d[d > 0]
+    if not len(pos):
+        return out
+    gap = max(STRAY_GAP_S * 1e9, STRAY_GAP_PERIODS * float(np.median(pos)))
+    cuts = np.flatnonzero(d > gap) + 1
+    if not len(cuts):
+        return out
+    starts, ends = np.r_[0, cuts], np.r_[cuts, len(t)]
+    sizes = ends - starts
+    small = max(3, len(t) // 1000)
+    if sizes.max() < 10 * small:
+        return out
+    for a, b, n in zip(starts, ends, sizes):
+        if n <= small:
+            out[a:b] = True
+    return out
 
 
 def make_grid(t_start_ns: int, t_end_ns: int, rate_hz: float, *,

@@ -23,15 +23,16 @@ def _outputs(root):
             "calibration": root / "calibration.parquet", "info": root / "info.json"}
 
 
-def _flight(rng, *, absurd_ns=None):
-    """20 s of attitude (20 Hz) and GPS (5 Hz); one attitude sample at ``absurd_ns`` if given."""
+def _flight(rng, *, absurd_ns=None, gps_at_ns=0):
+    """20 s of attitude (20 Hz) and GPS (5 Hz); one attitude sample at ``absurd_ns`` if given;
+    the whole GPS stream shifted by ``gps_at_ns``."""
     ta = np.arange(0, 20, 0.05)
     t_ns = np.round(ta * 1e9).astype(np.int64)
     if absurd_ns is not None:
         t_ns[len(t_ns) // 2] = absurd_ns
     att = pd.DataFrame({"t_ns": t_ns, "q_w": 1.0, "q_x": 0.0, "q_y": 0.0, "q_z": 0.0})
     tg = np.arange(0, 20, 0.2)
-    gps = pd.DataFrame({"t_ns": np.round(tg * 1e9).astype(np.int64), "lat_deg": 46.5 + 1e-6 * tg,
+    gps = pd.DataFrame({"t_ns": np.round(tg * 1e9).astype(np.int64) + gps_at_ns, "lat_deg": 46.5 + 1e-6 * tg,
                         "lon_deg": 6.6 + rng.normal(0, 1e-7, len(tg)), "alt_wgs84_m": 500.0, "fix_type": 3.0})
     return FlightLog.from_streams({"flight_id": "f1"}, {"attitude": att, "gps": gps})
 
@@ -46,9 +47,22 @@ def test_a_grid_spanning_centuries_is_a_time_base_error_naming_span_and_rate():
         make_grid(0, 4_000_000_000, 25.0, max_samples=100)
 
 
-def test_a_flight_with_an_absurd_stamp_gets_a_placeholder_with_a_one_line_reason(tmp_path, rng, capsys):
-    # written straight to the store, as a reader without ingest's guard would have
+def test_a_lone_absurd_stamp_is_dropped_as_stray_and_counted(tmp_path, rng):
+    # one attitude record 146 years early: damaged, not the flight's time base
     write_flightlog(_flight(rng, absurd_ns=-(1 << 62)), tmp_path / "in")
+    out = _outputs(tmp_path / "out")
+    res = prun.run_preprocess({"meta": tmp_path / "in" / "meta.json"}, out, {})
+    assert res.status == "ok"
+    st = read_table(out["state"], schema.STATE)
+    assert len(st) == 499 and st["t_ns"].iloc[-1] < 20e9        # the 20 s of the flight at 25 Hz
+    assert st["gap"].mean() < 0.01
+    assert res.diagnostics["timestamp_repairs"]["attitude"]["stray"] == 1
+
+
+def test_a_flight_with_an_absurd_time_base_gets_a_placeholder_with_a_one_line_reason(tmp_path, rng, capsys):
+    # written straight to the store, as a reader without ingest's guard would have: a whole
+    # stream 146 years away from the others (not a stray record: its own clock)
+    write_flightlog(_flight(rng, gps_at_ns=-(1 << 62)), tmp_path / "in")
     out = _outputs(tmp_path / "out")
     res = prun.run_preprocess({"meta": tmp_path / "in" / "meta.json"}, out, {})
     assert res.status == "failed"

@@ -83,7 +83,7 @@ def test_repair_counts_duplicates_reorders_and_clock_jumps():
     t = np.array([0, 10, 20, 20, 15, 30, 40], dtype=np.int64) * 1_000_000
     df = pd.DataFrame({"t_ns": t, "x": np.arange(7.0)})
     out, d = repair_timestamps(df, clock_jump_s=None)
-    assert d == {"non_monotonic": 1, "duplicate": 1, "clock_jumps": 0}
+    assert d == {"non_monotonic": 1, "duplicate": 1, "clock_jumps": 0, "stray": 0}
     assert np.all(np.diff(out["t_ns"]) > 0)
     assert out["x"].tolist() == [0, 1, 4, 2, 5, 6]  # 15 ms sample put in order, first 20 ms kept
     # a host-clock jump of +1 h in the middle is closed to one median period
@@ -176,3 +176,24 @@ def test_mean_method_is_an_anti_alias_boxcar(rng):
     empty = np.searchsorted(ts, g - 20_000_000) == np.searchsorted(ts, g + 20_000_000)
     assert 0 < empty.sum() < len(g)
     np.testing.assert_allclose(a["x"][empty], b["x"][empty])
+
+
+def test_a_few_stamps_far_from_the_rest_are_strays_and_a_logger_pause_is_not():
+    from pipeline.preprocess.resample import stray_samples
+
+    t = np.arange(0, 100, 0.1)
+    ns_ = np.round(t * 1e9).astype(np.int64)
+    # one record 2,734 s before the flight and two at 1e5 s: strays
+    damaged = np.sort(np.r_[ns_, -2_734_000_000_000, 100_000_000_000_000, 100_000_100_000_000])
+    s = stray_samples(damaged)
+    assert s.sum() == 3 and not s[1:-2].any()
+    # a 5 min pause with 10 s of samples after it: two islands, both kept
+    pause = np.r_[ns_, ns_[:100] + 400_000_000_000]
+    assert not stray_samples(pause).any()
+    # no island dominates (two equal halves, or too few samples): nothing is called stray
+    assert not stray_samples(np.r_[ns_[:5], ns_[:5] + 10**15]).any()
+    assert not stray_samples(ns_).any()
+    # the repair drops them before it looks for clock jumps (they are not moved next to the flight)
+    df = pd.DataFrame({"t_ns": damaged, "x": 1.0})
+    out, d = repair_timestamps(df)
+    assert d["stray"] == 3 and d["clock_jumps"] == 0 and np.array_equal(out["t_ns"], ns_)

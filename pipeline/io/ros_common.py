@@ -411,6 +411,19 @@ def is_candidate(topic: str, msgtype: str, cfg: RosConfig, definition: tuple[str
     return False
 
 
+def warn_configured_topics_absent(connections: Iterable[tuple[str, str, int]], cfg: RosConfig,
+                                  warnings: list[str]) -> None:
+    """One warning naming the ``ingest.ros.topics``/``custom`` topics the source does not hold: a
+    misspelt topic would otherwise change nothing and say nothing."""
+    present = {t for t, _, _ in connections}
+    for key, names in (("topics", cfg.topics), ("custom", cfg.custom)):
+        absent = [t for t in names if t not in present]
+        if absent:
+            warnings.append(
+                f"ingest.ros.{key}: topic(s) {', '.join(absent)} not in the log (it has "
+                f"{', '.join(sorted(present)[:12])}{', ...' if len(present) > 12 else ''})")
+
+
 def plan_topics(connections: Iterable[tuple[str, str, int]], cfg: RosConfig,
                 path: Path | str | None = None,
                 fielddefs: Mapping[str, Any] | None = None) -> tuple[dict[str, Route], dict[str, dict]]:

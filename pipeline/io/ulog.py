@@ -206,7 +206,14 @@ class ULogReader(LogReader):
                 streams.setdefault(stream, []).append(df)
 
         for stream, builder in (("imu", _imu), ("gps", _gps), ("mag", _mag), ("baro", _baro)):
-            for d in _select(topics, stream, cfg.get(stream, "auto"), path):
+            choice = cfg.get(stream, "auto")
+            missing = configured_topics_absent(topics, choice)
+            if missing:
+                # a misspelt topic would otherwise leave the stream silently empty
+                diag["warnings"].append(
+                    f"ingest.ulog.{stream}: topic(s) {', '.join(missing)} not in the log; logged "
+                    f"candidates: {', '.join(n for n in DEFAULT_TOPICS[stream] if n in topics) or 'none'}")
+            for d in _select(topics, stream, choice, path):
                 add(stream, builder(d, conv))
         for d in topics.get("vehicle_attitude", []):
             add("attitude", _attitude(d, conv))
@@ -678,6 +685,13 @@ class _Conv:
                 "instance": np.full(len(ts), d.multi_id, dtype=np.uint8),
                 "src": np.full(len(ts), d.name, dtype=object)}
         return pd.DataFrame({**base, **(cols or {})})
+
+
+def configured_topics_absent(topics: dict, choice) -> list[str]:
+    """The topic names a non-``auto`` config choice names that the log does not hold."""
+    if choice in (None, "auto"):
+        return []
+    return [n for n in ([choice] if isinstance(choice, str) else list(choice)) if n not in topics]
 
 
 def _select(topics: dict, stream: str, choice, path: Path) -> list:

@@ -492,6 +492,18 @@ def test_custom_mapping_by_topic_and_stamp_from_record_time(msgs, tmp_path):
     assert rd["dcos_u"].isna().all()
 
 
+def test_a_configured_topic_the_bag_lacks_is_a_warning_naming_it(msgs, tmp_path):
+    # a misspelt topic in the map changes nothing; it must say so, not pass in silence
+    cfg = {"ros": {"topics": {"/sonarr": {"stream": "rangefinder"}, "/radar": None}}}
+    for path, reader in ((write_ros1bag(tmp_path / "w.bag", msgs), Ros1BagReader()),
+                         (write_mcap_ros2(tmp_path / "w.mcap", msgs), McapReader())):
+        log = reader.read(path, config=cfg)
+        warn = [w for w in log.meta["diagnostics"]["warnings"] if w.startswith("ingest.ros.topics:")]
+        assert len(warn) == 1 and warn[0].startswith("ingest.ros.topics: topic(s) /sonarr not in the log (it has "), \
+            log.meta["diagnostics"]["warnings"]
+        assert "/sonar" in warn[0] and "/radar" not in warn[0].split("(")[0]
+
+
 def test_topic_map_overrides(msgs, tmp_path):
     """Instance, ignore, and Odometry as a world ENU pose (local_position: position ENU->NED,
     body twist rotated by the orientation into the world, then ENU->NED)."""

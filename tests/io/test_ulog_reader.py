@@ -195,6 +195,20 @@ def test_real_vehicle_imu_multi_instance_by_config():
                                    rtol=1e-12)
 
 
+
+def test_a_configured_topic_the_log_lacks_is_a_warning_naming_it_not_a_silently_empty_stream():
+    p = realdata_file(REAL[0])
+    log = registry.read_log(p, config={"ulog": {"gps": "vehicle_gps_positon"}})   # misspelt
+    assert len(log["gps"]) == 0
+    warn = [w for w in log.meta["diagnostics"]["warnings"] if w.startswith("ingest.ulog.gps:")]
+    assert warn == ["ingest.ulog.gps: topic(s) vehicle_gps_positon not in the log; logged candidates: "
+                    "vehicle_gps_position, sensor_gps"], log.meta["diagnostics"]["warnings"]
+    # auto and a present topic say nothing
+    for choice in ("auto", "vehicle_gps_position"):
+        log = registry.read_log(p, config={"ulog": {"gps": choice}})
+        assert len(log["gps"]) and not any(w.startswith("ingest.ulog.") for w in log.meta["diagnostics"]["warnings"])
+
+
 # --- synthetic round trips -----------------------------------------------------------------------
 
 F = [("uint64_t", "timestamp")]

@@ -13,6 +13,7 @@ from pipeline.estimate.pf_run import job_config as pf_job_config
 from pipeline.io.manifest import COLUMNS as MANIFEST_COLUMNS, check_manifest, expand_path, log_available
 from pipeline.io.schema import STREAM_NAMES
 from pipeline.models.run import check_model_set_labels, model_set_config
+from pipeline.preprocess.state import check_preprocess_config
 from pipeline.simulate.maneuvers import MANEUVERS as SIM_KNOWN_MANEUVERS
 from pipeline.report.summary import run_summary
 from pipeline.simulate.run import planned_logs, planned_sets
@@ -65,6 +66,7 @@ EKF_SETS = [n for n in SIM_SETS if n.endswith(("_train", "_test"))]
 MODEL_SETS = config["model_sets"]
 try:
     check_model_set_labels(MODEL_SETS, SIM_MANEUVERS, SIM_KNOWN_MANEUVERS)
+    check_preprocess_config(config["preprocess"])   # what the schema cannot: mounts, stick ranges
 except ConfigError as _exc:
     sys.exit(f"uavpipe: {_exc}")
 STUDY_NAMES = list(STUDY_TABLES)  # rules/studies.smk: one target each, not in `all`

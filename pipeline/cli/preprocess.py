@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..config import ConfigError, load_config, section
+from ..config import ConfigError, default_config_path, load_config, section
 from ..io.stage import caller_restates
 from .common import Claims, add_config_option, describe, folder_problem, ingest_flight_id, vehicle_problem
 
@@ -35,13 +35,18 @@ def vehicle_profile(diag: dict) -> str:
 
 def run(args) -> int:
     from ..preprocess.run import run_preprocess
-    from ..preprocess.state import summary_line
+    from ..preprocess.state import check_preprocess_config, summary_line
 
     try:
         cfg = load_config(args.config)
         sec = section(cfg, "preprocess")
     except ConfigError as exc:
         print(f"uavpipe preprocess: {exc}", file=sys.stderr)
+        return 2
+    try:    # what the schema cannot check (mounts, stick ranges), named with the file
+        check_preprocess_config(sec)
+    except ConfigError as exc:
+        print(f"uavpipe preprocess: {args.config or default_config_path()}: {exc}", file=sys.stderr)
         return 2
     # once, before any flight (an output folder that is a file: "Not a directory" per flight)
     bad = vehicle_problem(args.vehicle, cfg) or folder_problem("-o", args.out)

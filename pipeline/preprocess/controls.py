@@ -111,7 +111,9 @@ def controls_from_params(params: pd.DataFrame | Mapping[str, float] | None,
     return out, [f"sticks from the log's parameters ({what}): " + ", ".join(said)]
 
 
-def _check_spec(name: str, spec: Mapping) -> None:
+def check_stick(name: str, spec: Mapping) -> None:
+    """Raise ValueError (``controls.<name>: ...``) for a stick spec without a channel or with
+    pulse widths out of order (min < trim < max; throttle: min < max)."""
     if "channel" not in spec:
         raise ValueError(f"controls.{name}: missing 'channel' (e.g. rc_1_us)")
     lo, hi = float(spec.get("min_us", 1100)), float(spec.get("max_us", 1900))
@@ -181,7 +183,7 @@ def controls_from_pwm(ctrl: pd.DataFrame, controls: Mapping[str, Mapping] | None
         if not spec or spec.get("channel") not in ctrl.columns:
             out[name] = np.full(n, np.nan)
             continue
-        _check_spec(name, spec)
+        check_stick(name, spec)
         out[name] = normalise_stick(ctrl[spec["channel"]].to_numpy(dtype=np.float64, na_value=np.nan),
                                     spec, unipolar=(name == "thr"))
     for name, spec in (physical or {}).items():

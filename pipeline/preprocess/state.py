@@ -63,7 +63,7 @@ from ..io import schema
 from ..io.base import FlightLog
 from ..io.parquet import write_json, write_table
 from .calibrate import CALIBRATION, BPMConfig, calibrate_baro, pressure_altitude
-from .controls import PHYSICAL, controls_from_params, controls_from_pwm
+from .controls import PHYSICAL, check_stick, controls_from_params, controls_from_pwm
 from .derivatives import Differentiator, body_rates_from_quat, differentiate
 from .filters import butterworth
 from .mount import apply_mount, apply_mount_attitude, mount_dcm
@@ -154,11 +154,40 @@ class PreprocessConfig:
         sec = dict(cfg or {})
         if "preprocess" in sec and isinstance(sec["preprocess"], Mapping):
             sec = dict(sec["preprocess"] or {})
-        return resolve_config(validate_section("preprocess", sec), flight_id=flight_id, vehicle=vehicle)
+        sec = validate_section("preprocess", sec)
+        check_preprocess_config(sec)
+        return resolve_config(sec, flight_id=flight_id, vehicle=vehicle)
 
     def method(self, stream: str, column: str, default: str = "linear") -> str:
         return self.methods.get(f"{stream}.{column}", self.methods.get(stream, default))
 
+
+
+def check_preprocess_config(sec: Mapping[str, Any]) -> None:
+    """What the schema cannot check in a validated ``preprocess`` section, for start-up: every
+    vehicle's mounts are rotations and every stick of ``vehicles.<v>.controls`` and
+    ``flights.<glob>.controls`` has its pulse widths in order.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the key, e.g. ``preprocess.vehicles.copter.controls.ail: min_us 2000.0
+        must be below max_us 1000.0``.
+    """
+    for v, entry in (sec.get("vehicles") or {}).items():
+        entry = entry or {}
+        for k in ("imu_mount", "mag_mount"):
+            try:
+                mount_dcm(entry.get(k))
+            except ValueError as exc:
+                raise ConfigError(f"preprocess.vehicles.{v}.{k}: {exc}") from None
+    for where, entries in (("vehicles", sec.get("vehicles")), ("flights", sec.get("flights"))):
+        for name, entry in (entries or {}).items():
+            for stick, spec in ((entry or {}).get("controls") or {}).items():
+                try:
+                    check_stick(stick, spec or {})
+                except ValueError as exc:
+                    raise ConfigError(f"preprocess.{where}.{name}.{exc}") from None
 
 
 def resolve_config(sec: Mapping[str, Any], *, flight_id: str | None = None,

@@ -324,3 +324,33 @@ def test_values_no_sensor_reads_are_set_to_nan_counted_and_kept_out_of_the_state
     imu2 = log["imu"].assign(gyr_x_radps=34.9)
     res = preprocess_log(FlightLog.from_streams(log.meta, {"gps": log["gps"].assign(vel_d_mps=-900.0), "imu": imu2}))
     assert "implausible_values" not in res.diagnostics
+
+
+@pytest.mark.parametrize("sec,message", [
+    ({"vehicles": {"copter": {"controls": {"ail": {"channel": "rc_1_us", "min_us": 2000, "max_us": 1000}}}}},
+     "preprocess.vehicles.copter.controls.ail: min_us 2000.0 must be below max_us 1000.0"),
+    ({"flights": {"kd0aij-*": {"controls": {"ele": {"channel": "rc_2_us", "trim_us": 2500}}}}},
+     "preprocess.flights.kd0aij-*.controls.ele: trim_us 2500.0 must lie in (1100.0, 1900.0)"),
+    ({"vehicles": {"q": {"imu_mount": {"roll_deg": "x"}}}}, "preprocess.vehicles.q.imu_mount"),
+])
+def test_what_the_schema_cannot_check_is_one_error_naming_the_key_before_any_flight(sec, message, tmp_path, capsys):
+    from pipeline.config import validate_section
+    from pipeline.preprocess.state import check_preprocess_config
+
+    try:
+        full = validate_section("preprocess", sec)
+    except ConfigError as exc:        # the schema itself refuses it: as good
+        assert message in str(exc)
+        return
+    with pytest.raises(ConfigError) as err:
+        check_preprocess_config(full)
+    assert str(err.value) == message
+    # the command line stops before any flight, naming the file
+    cfg = tmp_path / "bad.yaml"
+    import yaml
+    cfg.write_text(yaml.safe_dump({"preprocess": sec}))
+    (tmp_path / "IN").mkdir()
+    assert main(["preprocess", str(tmp_path / "IN"), "-o", str(tmp_path / "OUT"), "--config", str(cfg)]) == 2
+    err_lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert err_lines == [f"uavpipe preprocess: {cfg}: {message}"]
+    assert not (tmp_path / "OUT").exists()

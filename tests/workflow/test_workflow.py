@@ -152,6 +152,19 @@ def test_an_ekf_hmm_model_that_is_no_model_set_stops_the_dry_run_naming_it(tmp_p
     assert "estimate.ekf_hmm.model: no model set 'simm' (model_sets: sim, simekf, f3a)" in lines[0]
 
 
+
+@pytest.mark.slow
+def test_stick_pulse_widths_out_of_order_stop_the_dry_run_naming_the_key(tmp_path):
+    # valid for the schema, but no stick can be normalised: said at start-up, not once per flight
+    wd = _copy_workflow(tmp_path / "wf", [DEMO])
+    p = _smk(wd, "-n", "--config",
+             "preprocess={vehicles: {copter: {controls: {ail: {channel: rc_1_us, min_us: 2000, max_us: 1000}}}}}",
+             check=False)
+    lines = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("uavpipe: ")]
+    assert p.returncode != 0 and lines == [
+        "uavpipe: preprocess.vehicles.copter.controls.ail: min_us 2000.0 must be below max_us 1000.0"], \
+        p.stdout + p.stderr
+
 CLI_COMMANDS = (["simulate", "OUT"], ["preprocess", "IN", "-o", "OUT"], ["ingest", "IN", "-o", "OUT"],
                 ["train", "IN", "-o", "OUT"])
 

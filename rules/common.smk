@@ -115,6 +115,7 @@ def ingest_job(wildcards):
     return {
         "flight_id": wildcards.flight,
         "fmt": flights.loc[wildcards.flight, "format"] or None,
+        "labels_embedded": flights.loc[wildcards.flight, "labels"] == "embedded",
     }
 
 

@@ -94,7 +94,7 @@ def outputs_for(out_dir: str | os.PathLike) -> dict:
 
 
 def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str | None = None,
-               progress: Progress | None = None) -> IngestResult:
+               labels_embedded: bool = False, progress: Progress | None = None) -> IngestResult:
     """Decode ``inputs.log`` and write exactly the declared ``outputs``.
 
     Parameters
@@ -111,6 +111,9 @@ def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str
         Manifest flight id.
     fmt : str, optional
         Forced reader name (manifest ``format`` column); detected from the bytes when empty.
+    labels_embedded : bool
+        The manifest says ``labels: embedded``: a log that carries none gets a warning (its
+        segments would otherwise come out empty with nothing said).
     progress : callable, optional
         ``progress(done, total)`` while decoding (the CLI's progress bar).
 
@@ -134,6 +137,10 @@ def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str
         print(f"uavpipe ingest: FAILED {exc}", file=sys.stderr)  # the one line; no traceback
         log = FlightLog.from_streams({"flight_id": flight_id, "source_path": str(log_path),
                                       "status": "failed", "error": exc.reason}, {})
+    if labels_embedded and log.meta.get("status") != "failed" and not len(log["labels"]):
+        log.meta.setdefault("diagnostics", {}).setdefault("warnings", []).append(
+            "manifest labels 'embedded', but the log carries no labelled segment (FlightCoach JSON "
+            "'mans', a labels stream): its segments come from modes or windows instead")
     written = write_flightlog(log, paths=paths)
     m = log.meta
     duration = log.duration_s

@@ -176,17 +176,25 @@ def label_state(state: pd.DataFrame, segments: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def flight_runs(states: Sequence, segments: Sequence) -> pd.DataFrame:
+def flight_runs(states: Sequence, segments: Sequence, skipped: dict | None = None) -> pd.DataFrame:
     """One training run per labelled segment of each flight (``run_id`` = ``<flight>:<segment>``,
-    ``<flight>`` the state file's :func:`pipeline.io.stage.source_names` name: its stem in the workflow)."""
+    ``<flight>`` the state file's :func:`pipeline.io.stage.source_names` name: its stem in the workflow).
+    A flight that gives no labelled sample is left out with its reason in ``skipped``
+    (``{flight: reason}``), so training can say so instead of passing over it in silence."""
     frames = []
+    skipped = {} if skipped is None else skipped
     for sp, gp, src in zip(states, segments, source_names(states)):
         st = read_table(sp)
         if not len(st):
+            meta = read_table_meta(sp)
+            skipped[src] = f"no state ({meta.get('error') or 'preprocessing gave no samples'})"
             continue
         seg = read_table(gp)
         lab = label_state(st, seg)
         lab = lab[lab["segment_id"] >= 0]
+        if not len(lab):
+            skipped[src] = "no labelled segments" if not len(seg) else "no state sample inside its segments"
+            continue
         lab["run_id"] = [f"{src}:{s}" for s in lab["segment_id"]]
         frames.append(lab.drop(columns="segment_id"))
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
@@ -233,10 +241,15 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
     spec = {k: v for k, v in dict(config).items() if k != "hmm"}
     sets, states, segments = declared_list(inputs, "sets"), declared_list(inputs, "states"), declared_list(inputs, "segments")
     cfg = hmm_config(config, seed)  # a bad hyperparameter is a config error, not a placeholder
+    skipped: dict[str, str] = {}
     try:
-        df = read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments)
+        df = read_sets(sets) if spec.get("data", "simulated") == "simulated" else flight_runs(states, segments, skipped)
+        if skipped:
+            _say(f"{model_set}: {len(skipped)} of {len(states)} training flight(s) gave no labelled sample: "
+                 + "; ".join(f"{f} ({why})" for f, why in skipped.items()))
         if not len(df) or "label" not in df.columns:
-            raise ModelError("no labelled training data (no training flights with segments?)")
+            why = "; ".join(f"{f}: {r}" for f, r in skipped.items()) or "no training flights with segments?"
+            raise ModelError(f"no labelled training data ({why})")
         keep = df["label"].notna() & ~df["label"].isin(list(spec.get("exclude") or []))
         if spec.get("labels"):
             keep &= df["label"].isin(list(spec["labels"]))
@@ -254,7 +267,7 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
     ms.save(out)
     meta = json.loads(meta_path.read_text())
     meta.update({"status": "ok", "name": model_set, "spec": spec,
-                 "training_inputs": [str(p) for p in (*sets, *states)]})
+                 "training_inputs": [str(p) for p in (*sets, *states)], "training_skipped": skipped})
     write_json(meta, meta_path)
     _say(f"{model_set}: trained {len(ms.labels_)} maneuver models {ms.labels_}", restated=True)
     return ModelStageResult(model_set, "ok", "", meta)

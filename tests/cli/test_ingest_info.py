@@ -213,3 +213,12 @@ def test_ingest_conforms_each_stream_once_and_never_through_pandas(demo_log, tmp
     assert res.status == "ok"
     # every stream the decoder produced is conformed exactly once; written as conformed
     assert sorted(calls) == sorted(set(calls)) and "imu" in calls
+
+
+def test_a_log_the_manifest_says_embeds_labels_but_carries_none_gets_a_warning(demo_log, tmp_path):
+    res = run_ingest(*_job(demo_log, tmp_path / "o"), None, flight_id="demo", labels_embedded=True)
+    assert res.status == "ok"
+    assert any(w.startswith("manifest labels 'embedded', but the log carries no labelled segment")
+               for w in res.diagnostics["warnings"])
+    res = run_ingest(*_job(demo_log, tmp_path / "p"), None, flight_id="demo")
+    assert not any("manifest labels" in w for w in res.diagnostics["warnings"])

@@ -118,3 +118,39 @@ def test_classification_and_flight_evaluation_files_carry_the_declared_layout_an
     assert len(ev) == 2 and ev_arrow.names == [c.name for c in schema.MODEL_EVALUATION]
     assert str(ev_arrow.field("thesis_FA_pct").type) == "double"  # NaN for flights, never int64
     assert read_table_meta(ev_out)["columns"]["FA_pct"]["unit"] == "%"
+
+
+def test_training_flights_that_give_no_labelled_sample_are_named_with_the_reason(synth, rng, tmp_path, capsys):
+    from pipeline.io import schema
+    from pipeline.io.parquet import write_table
+    from pipeline.models.run import run_train
+
+    run = synth[0]
+    flight = pd.concat([run("M1", rng), run("M2", rng, t0_ns=26_000_000_000)], ignore_index=True)
+    labelled = pd.DataFrame({"segment_id": [0, 1], "t_start_ns": [0, 26_000_000_000],
+                             "t_end_ns": [25_000_000_000, 51_000_000_000], "label": ["M1", "M2"]})
+    states, segments = [], []
+    for name, st, seg, extra in (("good", flight, labelled, {}),
+                                 ("nolabels", flight, labelled.iloc[:0], {}),
+                                 ("failed", flight.iloc[:0], labelled.iloc[:0],
+                                  {"status": "failed", "error": "preprocessing failed: time span"})):
+        write_table(schema.conform("state", st.drop(columns="label")), tmp_path / f"{name}.parquet",
+                    schema.STATE, name="state", extra={"flight_id": name, **extra})
+        write_table(schema.conform("segments", seg), tmp_path / f"{name}.seg.parquet", schema.SEGMENTS,
+                    name="segments")
+        states.append(tmp_path / f"{name}.parquet")
+        segments.append(tmp_path / f"{name}.seg.parquet")
+    d = tmp_path / "m"
+    spec = {"data": "flights", "vehicles": ["q"], "hmm": {"n_states": 3, "n_iter": 3, "phases": False}}
+    res = run_train({"states": states, "segments": segments}, {"params": d / "params.npz", "meta": d / "meta.json"},
+                    spec, model_set="m", seed=1)
+    assert res.status == "ok"
+    assert res.diagnostics["training_skipped"] == {
+        "nolabels": "no labelled segments", "failed": "no state (preprocessing failed: time span)"}
+    err = capsys.readouterr().err
+    assert ("m: 2 of 3 training flight(s) gave no labelled sample: nolabels (no labelled segments); "
+            "failed (no state (preprocessing failed: time span))") in err
+    # none left: the placeholder's reason names them, not a guess
+    res = run_train({"states": states[1:], "segments": segments[1:]},
+                    {"params": d / "params.npz", "meta": d / "meta.json"}, spec, model_set="m", seed=1)
+    assert res.status == "failed" and "nolabels: no labelled segments; failed: no state" in res.error

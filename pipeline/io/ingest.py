@@ -135,8 +135,10 @@ def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str
         log = read_log(log_path, **kwargs)
     except IngestError as exc:
         print(f"uavpipe ingest: FAILED {exc}", file=sys.stderr)  # the one line; no traceback
-        log = FlightLog.from_streams({"flight_id": flight_id, "source_path": str(log_path),
-                                      "status": "failed", "error": exc.reason}, {})
+        # the log is named beside the reason everywhere; another file (a labels side-car) is not
+        other = exc.path and Path(exc.path).resolve() != Path(log_path).resolve()
+        log = FlightLog.from_streams({"flight_id": flight_id, "source_path": str(log_path), "status": "failed",
+                                      "error": f"{exc.path}: {exc.reason}" if other else exc.reason}, {})
     if labels_embedded and log.meta.get("status") != "failed" and not len(log["labels"]):
         log.meta.setdefault("diagnostics", {}).setdefault("warnings", []).append(
             "manifest labels 'embedded', but the log carries no labelled segment (FlightCoach JSON "

@@ -222,3 +222,11 @@ def test_a_log_the_manifest_says_embeds_labels_but_carries_none_gets_a_warning(d
                for w in res.diagnostics["warnings"])
     res = run_ingest(*_job(demo_log, tmp_path / "p"), None, flight_id="demo")
     assert not any("manifest labels" in w for w in res.diagnostics["warnings"])
+
+
+def test_a_damaged_labels_side_car_is_named_in_the_flights_reason(demo_log, tmp_path):
+    bad = tmp_path / "labels.parquet"
+    bad.write_text("not parquet\n")
+    inputs, outputs = _job(demo_log, tmp_path / "o")
+    res = run_ingest({**inputs, "labels": [bad]}, outputs, None, flight_id="demo")
+    assert res.status == "failed" and res.error.startswith(f"{bad}: not a readable truth side-car")

@@ -50,8 +50,8 @@ try:
         check_manifest(config["manifest"], config, simulated_logs={s["log"] for s in SIM_LOGS}),
         columns=list(MANIFEST_COLUMNS), dtype=str,
     )
-except ConfigError as _exc:
-    sys.exit(f"uavpipe: {_exc}")
+except ConfigError as _exc:  # one line per bad row
+    sys.exit("\n".join(f"uavpipe: {_ln}" for _ln in str(_exc).splitlines()))
 validate(_manifest, schema="schemas/flights.schema.yaml", set_default=True)
 
 

@@ -107,8 +107,9 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
     Raises
     ------
     ConfigError
-        One line ``<path>:<line>: flight <id>: <reason>`` for the first bad row, or
-        ``<path>: <reason>`` when the file or its header is unusable.
+        One line ``<path>:<line>: flight <id>: <reason>`` per bad row (every one, in file
+        order, joined by newlines), or ``<path>: <reason>`` when the file or its header is
+        unusable.
     """
     src = str(path)
     root = Path(base) if base is not None else Path.cwd()
@@ -116,10 +117,10 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
     vehicles = dict((config.get("preprocess") or {}).get("vehicles") or {})
     realdata = config.get("realdata_dir")
     known_vehicles = [GENERIC_VEHICLE, *sorted(v for v in vehicles if v != GENERIC_VEHICLE)]
-    formats: list[str] | None = None  # imported on first non-blank format only
 
     header: list[str] | None = None
     rows: list[dict[str, str]] = []
+    problems: list[str] = []
     first_line: dict[str, int] = {}
     for lineno, raw in enumerate(text.splitlines(), start=1):
         if not raw.strip() or raw.lstrip().startswith("#"):
@@ -129,51 +130,66 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
             header = [c.strip() for c in cells]
             missing = [c for c in COLUMNS if c not in header]
             if missing:
+                hint = " (the line has commas and no tab: the manifest is tab-separated)" \
+                    if len(cells) == 1 and raw.count(",") >= len(COLUMNS) - 2 else ""
                 raise ConfigError(f"{src}:{lineno}: header lacks column(s) {', '.join(missing)} "
-                                  f"(expected: {', '.join(COLUMNS)})")
+                                  f"(expected: {', '.join(COLUMNS)}){hint}")
             continue
         if len(cells) > len(header):
-            raise ConfigError(f"{src}:{lineno}: {len(cells)} tab-separated fields, the header has "
-                              f"{len(header)}")
+            problems.append(f"{src}:{lineno}: {len(cells)} tab-separated fields, the header has {len(header)}")
+            continue
         row = dict(zip(header, cells + [""] * (len(header) - len(cells))))
+        why = _row_problem(row, lineno, first_line, vehicles, known_vehicles, realdata, root, simulated_logs)
+        if why is None:
+            rows.append(row)
+            continue
         fid = row["flight_id"]
-        where = f"{src}:{lineno}: flight {fid or '(no id)'}"
-        if not FLIGHT_ID.fullmatch(fid):
-            raise ConfigError(f"{src}:{lineno}: flight_id {fid!r} must be letters, digits and '-' only "
-                              "(it becomes a file name and a workflow wildcard)")
-        if not row["path"].strip():
-            raise ConfigError(f"{where}: empty path")
-        if any(b in expand_path(row[c], realdata or "") for b in "{}" for c in ("path", "labels")):
-            raise ConfigError(f"{where}: braces in a path are read as workflow wildcards; only "
-                              f"{{realdata}} may appear (rename the file or link it)")
-        if row["role"] not in ROLES:
-            raise ConfigError(f"{where}: role {row['role']!r} must be one of {', '.join(ROLES)}")
-        if fid in first_line:
-            raise ConfigError(f"{where}: duplicate flight_id (first on line {first_line[fid]})")
-        first_line[fid] = lineno
-        veh = row["vehicle"]
-        if veh != GENERIC_VEHICLE and veh not in vehicles:
-            raise ConfigError(f"{where}: unknown vehicle {veh!r}: add it to preprocess.vehicles or "
-                              f"write {GENERIC_VEHICLE!r} (known: {', '.join(known_vehicles)})")
-        fmt = row["format"]
-        if fmt:
-            formats = formats if formats is not None else reader_names()
-            if fmt not in formats:
-                raise ConfigError(f"{where}: unknown format {fmt!r} (readers: {', '.join(formats)}; "
-                                  f"blank = detect from the file's bytes)")
-        lab = row["labels"]
-        log = expand_path(row["path"], realdata)
-        if (simulated_logs is not None and log.startswith(SIM_LOG_DIR)
-                and log.rstrip("/")[len(SIM_LOG_DIR):] not in simulated_logs):
-            raise ConfigError(f"{where}: {row['path']} is not written by the simulate stage with "
-                              f"this config (simulate.datasets: sizes, log_formats)")
-        if lab not in LABEL_WORDS and log_available(log, root):
-            lab_path = expand_path(lab, realdata)
-            if not log_available(lab_path, root) or not (
-                    lab_path.startswith("results/") or (root / lab_path).is_file()):
-                raise ConfigError(f"{where}: labels {lab!r} is neither 'embedded', 'none' nor an "
-                                  f"existing file")
-        rows.append(row)
+        short = f" (the row has {len(cells)} of the header's {len(header)} fields: a missing tab shifts " \
+                "the columns after it)" if len(cells) < len(header) and len(cells) > 1 else ""
+        problems.append(f"{src}:{lineno}: " + (why if why.startswith("flight_id ") else
+                                               f"flight {fid or '(no id)'}: {why}") + short)
     if header is None:
         raise ConfigError(f"{src}: empty manifest (no header line)")
+    if problems:
+        raise ConfigError("\n".join(problems))
     return rows
+
+
+def _row_problem(row: dict[str, str], lineno: int, first_line: dict[str, int], vehicles: Mapping,
+                 known_vehicles: list[str], realdata: str | None, root: Path,
+                 simulated_logs: Collection[str] | None) -> str | None:
+    """What is wrong with one manifest row (``None``: nothing); records its id in ``first_line``."""
+    fid = row["flight_id"]
+    if not FLIGHT_ID.fullmatch(fid):
+        return (f"flight_id {fid!r} must be letters, digits and '-' only "
+                "(it becomes a file name and a workflow wildcard)")
+    if not row["path"].strip():
+        return "empty path"
+    if any(b in expand_path(row[c], realdata or "") for b in "{}" for c in ("path", "labels")):
+        return "braces in a path are read as workflow wildcards; only {realdata} may appear (rename the file or link it)"
+    if row["role"] not in ROLES:
+        return f"role {row['role']!r} must be one of {', '.join(ROLES)}"
+    if fid in first_line:
+        return f"duplicate flight_id (first on line {first_line[fid]})"
+    first_line[fid] = lineno
+    veh = row["vehicle"]
+    if veh != GENERIC_VEHICLE and veh not in vehicles:
+        return (f"unknown vehicle {veh!r}: add it to preprocess.vehicles or "
+                f"write {GENERIC_VEHICLE!r} (known: {', '.join(known_vehicles)})")
+    fmt = row["format"]
+    if fmt:
+        formats = reader_names()
+        if fmt not in formats:
+            return f"unknown format {fmt!r} (readers: {', '.join(formats)}; blank = detect from the file's bytes)"
+    lab = row["labels"]
+    log = expand_path(row["path"], realdata)
+    if (simulated_logs is not None and log.startswith(SIM_LOG_DIR)
+            and log.rstrip("/")[len(SIM_LOG_DIR):] not in simulated_logs):
+        return (f"{row['path']} is not written by the simulate stage with "
+                f"this config (simulate.datasets: sizes, log_formats)")
+    if lab not in LABEL_WORDS and log_available(log, root):
+        lab_path = expand_path(lab, realdata)
+        if not log_available(lab_path, root) or not (
+                lab_path.startswith("results/") or (root / lab_path).is_file()):
+            return f"labels {lab!r} is neither 'embedded', 'none' nor an existing file"
+    return None

@@ -165,3 +165,25 @@ def test_realdata_is_the_one_brace_a_path_may_hold(tmp_path):
     rows = check_manifest(_manifest(tmp_path, DEMO, "x1\t{realdata}/a.bin\tsim-quad\ttest\tnone\t\t"),
                           CONFIG, base=tmp_path)
     assert rows[1]["path"] == "{realdata}/a.bin"
+
+
+def test_every_bad_row_is_one_line_of_the_error_and_a_short_row_says_a_tab_is_missing(tmp_path):
+    p = _manifest(tmp_path, DEMO, "a1\tresults/sim/demo/x.bin\tsim-qaud\ttest\tnone\t\t",
+                  DEMO, "b2\tresults/sim/demo/y.bin\ttest\tnone\t\t",          # the vehicle field left out
+                  "c3\tresults/sim/demo/z.bin\tsim-quad\tsometimes\tnone\t\t")
+    with pytest.raises(ConfigError) as exc:
+        check_manifest(p, CONFIG, base=tmp_path)
+    lines = str(exc.value).splitlines()
+    assert [ln.split(": flight ")[0].rsplit(":", 1)[1] for ln in lines] == ["4", "5", "6", "7"]
+    assert all(ln.startswith(f"{p}:") for ln in lines)
+    assert "unknown vehicle 'sim-qaud'" in lines[0] and "duplicate flight_id (first on line 3)" in lines[1]
+    assert "unknown vehicle 'test'" in lines[2]
+    assert lines[2].endswith("(the row has 6 of the header's 7 fields: a missing tab shifts the columns after it)")
+    assert "role 'sometimes'" in lines[3]
+
+
+def test_a_comma_separated_manifest_is_told_it_must_use_tabs(tmp_path):
+    p = tmp_path / "flights.tsv"
+    p.write_text(HEADER.replace("\t", ",") + DEMO.replace("\t", ",") + "\n")
+    with pytest.raises(ConfigError, match=r"header lacks column\(s\) .*the manifest is tab-separated\)$"):
+        check_manifest(p, CONFIG, base=tmp_path)

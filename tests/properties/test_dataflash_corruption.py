@@ -338,3 +338,24 @@ def test_unknown_message_types_are_skipped_and_counted(tmp_path_factory, seed):
         assert d["records_dropped"][f"format_lost:{t}"] == n
     if unknown:
         assert d["bytes_skipped"] > 0 and out.meta["status"] == "partial"
+
+
+def test_a_signalling_nan_in_a_record_is_read_as_nan_without_a_console_warning(tmp_path):
+    # random bytes hold signalling NaNs (exponent all ones, quiet bit clear); their float32 ->
+    # float64 cast raised NumPy's "invalid value encountered in cast" (an error under pytest)
+    import struct
+
+    buf = io.BytesIO()
+    with DataFlashWriter(buf) as w:
+        w.define("IMU", 131, "Qffffff", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
+        for k in range(50):
+            w.write("IMU", TimeUS=1000 * k, GyrX=0.5, AccZ=-9.8)
+    data = bytearray(buf.getvalue())
+    snan = struct.pack("<I", 0x7F800001)
+    at = data.index(struct.pack("<f", 0.5), len(data) // 2)
+    data[at:at + 4] = snan
+    p = tmp_path / "snan.bin"
+    p.write_bytes(bytes(data))
+    log = read_log(p)
+    gx = log["imu"]["gyr_x_radps"].to_numpy()
+    assert np.isnan(gx).sum() == 1 and np.count_nonzero(gx == 0.5) == 49

@@ -876,7 +876,10 @@ def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,
             if not present:
                 continue
             try:
-                got = builder(ctx, msg if isinstance(msg, str) else msg[0], parts)
+                # random bytes decode to signalling NaNs, whose float32 -> float64 cast sets the
+                # FPU's invalid flag: a RuntimeWarning on the console for a value that is NaN either way
+                with np.errstate(invalid="ignore"):
+                    got = builder(ctx, msg if isinstance(msg, str) else msg[0], parts)
             except (KeyError, ValueError, TypeError, IndexError) as exc:
                 diag["warnings"].append(f"{stream}: not mapped ({type(exc).__name__}: {exc})")
                 parts = None

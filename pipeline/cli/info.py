@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from ..io import registry, schema
-from ..io.base import IngestError
+from ..io.base import IngestError, grouped_drops
 from ..io.manifest import reader_names
 from .common import add_config_option
 from .progress import progress_bar
@@ -102,7 +102,7 @@ def _print_text(d: dict) -> None:
         print(f"    {name:15s} {s['rows']:9d} rows  {s['instances']} inst  {rate}")
     diag = d["diagnostics"]
     print(f"  diagnostics: bytes skipped {diag.get('bytes_skipped', 0)}, "
-          f"records dropped {json.dumps(diag.get('records_dropped', {}))}, "
+          f"records dropped {json.dumps(dict(grouped_drops(diag.get('records_dropped'))))}, "
           f"timestamp anomalies {json.dumps(diag.get('timestamp_anomalies', {}))}")
     for w in diag.get("warnings", [])[:20]:
         print(f"    warning: {w}")

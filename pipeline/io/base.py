@@ -106,6 +106,30 @@ def last_params(params) -> dict[str, float]:
     return {str(k): float(x) for k, x in zip(p["name"].astype(str), v)}
 
 
+#: more kinds of one drop reason than this (``format_lost:<type>``) are said as one phrase
+MAX_DROP_KINDS = 3
+
+
+def grouped_drops(dropped: Mapping[str, int] | None) -> list[tuple[str, int]]:
+    """``records_dropped`` as ``(reason, count)``: the kinds of one reason (``format_lost:131``,
+    ``format_lost:42``, ... one per message type a damaged log lost) folded into one entry,
+    ``("format_lost, 48 kinds: 131, 42, 200, ...", total)``, when there are more than
+    :data:`MAX_DROP_KINDS`; a damaged DataFlash log listed 50 of them in one line."""
+    by: dict[str, list[tuple[str, int]]] = {}
+    for reason, n in (dropped or {}).items():
+        head, _, kind = str(reason).partition(":")
+        by.setdefault(head if kind else str(reason), []).append((kind or str(reason), int(n)))
+    out = []
+    for head, kinds in by.items():
+        if len(kinds) > MAX_DROP_KINDS:
+            kinds.sort(key=lambda k: -k[1])
+            shown = ", ".join(k for k, _ in kinds[:MAX_DROP_KINDS])
+            out.append((f"{head}, {len(kinds)} kinds: {shown}, ...", sum(n for _, n in kinds)))
+        else:
+            out += [(f"{head}:{k}" if k != head else head, n) for k, n in kinds]
+    return out
+
+
 def losses_text(diag: Mapping[str, Any]) -> str:
     """What decoding lost, from a log's ``diagnostics``: ``"3 bytes skipped, 1 records dropped
     (truncated)"``; ``""`` when nothing was lost."""
@@ -115,7 +139,7 @@ def losses_text(diag: Mapping[str, Any]) -> str:
     dropped = diag.get("records_dropped") or {}
     if isinstance(dropped, dict) and dropped:  # {record type: count}
         n = sum(v for v in dropped.values() if isinstance(v, (int, float)))
-        parts.append(f"{n} records dropped ({', '.join(sorted(map(str, dropped)))})")
+        parts.append(f"{n} records dropped ({'; '.join(r for r, _ in sorted(grouped_drops(dropped)))})")
     return ", ".join(parts)
 
 

@@ -44,6 +44,7 @@ import numpy as np
 import pandas as pd
 
 from ..io import schema
+from ..io.base import grouped_drops
 from ..io.parquet import json_safe
 
 #: MAV_AUTOPILOT enum values that name an autopilot (MAVLink common.xml)
@@ -178,7 +179,7 @@ def loss_parts(diag: Mapping | None) -> list[str]:
     parts = []
     if diag.get("bytes_skipped"):
         parts.append(f"{diag['bytes_skipped']} byte{'s' * (diag['bytes_skipped'] != 1)} skipped")
-    for reason, n in (diag.get("records_dropped") or {}).items():
+    for reason, n in grouped_drops(diag.get("records_dropped")):
         parts.append(f"{n} record{'s' * (n != 1)} dropped ({reason})")
     return parts + timestamp_anomalies(diag)
 
@@ -195,7 +196,7 @@ def worst_warning(meta: Mapping, preprocess: Mapping | None = None) -> str:
         ranked.append((5, f"ingest failed: {meta.get('error') or 'unknown reason'}"))
     if diag.get("bytes_skipped"):
         ranked.append((4, f"ingest: {diag['bytes_skipped']} bytes skipped"))
-    for reason, n in (diag.get("records_dropped") or {}).items():
+    for reason, n in grouped_drops(diag.get("records_dropped")):
         ranked.append((4, f"ingest: {n} records dropped ({reason})"))
     ranked += [(3, f"ingest: {w}") for w in diag.get("warnings") or []]
     ranked += [(2, f"ingest: {w}") for w in timestamp_anomalies(diag)]

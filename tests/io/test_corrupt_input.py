@@ -228,3 +228,16 @@ def test_a_csv_with_garbled_non_utf8_lines_keeps_the_others_and_counts_the_lost_
     p.write_bytes(b"\xff" + b"\n".join(lines))
     with pytest.raises(IngestError, match="garbled.csv: CSV is not UTF-8 text: the header line is not UTF-8"):
         registry.read_log(p, fmt="tabular", config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
+
+
+def test_the_many_kinds_of_one_drop_reason_fold_into_one_phrase():
+    from pipeline.io.base import grouped_drops, losses_text
+
+    dropped = {"bad_timestamp": 116, "truncated": 1, **{f"format_lost:{t}": n for t, n in
+                                                       ((162, 9), (178, 7), (225, 5), (3, 1), (4, 1))}}
+    assert grouped_drops(dropped) == [("bad_timestamp", 116), ("truncated", 1),
+                                      ("format_lost, 5 kinds: 162, 178, 225, ...", 23)]
+    assert losses_text({"bytes_skipped": 10, "records_dropped": dropped}) == (
+        "10 bytes skipped, 140 records dropped (bad_timestamp; format_lost, 5 kinds: 162, 178, 225, ...; truncated)")
+    # a few kinds are each said
+    assert grouped_drops({"format_lost:7": 2, "format_lost:42": 1}) == [("format_lost:7", 2), ("format_lost:42", 1)]

@@ -61,6 +61,10 @@ def test_console_script_runs():
     exe = Path(sys.executable).parent / "uavpipe"
     p = subprocess.run([str(exe), "--version"], capture_output=True, text=True)
     assert p.returncode == 0 and "uavpipe" in p.stdout
+    # and as a module, by either name a user tries
+    for mod in ("pipeline", "pipeline.cli"):
+        q = subprocess.run([sys.executable, "-m", mod, "--version"], capture_output=True, text=True)
+        assert q.returncode == 0 and q.stdout == p.stdout, (mod, q.stderr)
 
 
 def _job(log, out_dir, labels=()):

@@ -171,7 +171,15 @@ def _load(path: Path) -> dict:
     try:
         obj = json.loads(raw)
     except UnicodeDecodeError as exc:
-        raise IngestError(path, f"not UTF-8 text: {exc.reason} at byte {exc.start}") from None
+        # json.loads guesses UTF-16/32 from the first bytes of a binary file and then reports
+        # "truncated data" at its end: name the first byte that is not UTF-8 instead
+        try:
+            raw.decode("utf-8")
+            pos = exc.start
+        except UnicodeDecodeError as exc8:
+            pos = exc8.start
+        raise IngestError(path, f"not UTF-8 text: byte 0x{raw[pos]:02x} at offset {pos} "
+                                "(a binary file, not FlightCoach JSON?)") from None
     except json.JSONDecodeError as exc:
         hint = " (file truncated?)" if exc.pos >= len(raw.rstrip()) - 1 else ""
         raise IngestError(path, f"invalid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}{hint}") from None

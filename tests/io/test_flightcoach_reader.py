@@ -171,3 +171,12 @@ def test_structural_errors(tmp_path, text, reason):
     p.write_text(text)
     with pytest.raises(IngestError, match=f"bad.json: .*{reason}"):
         registry.read_log(p)
+
+
+def test_a_binary_file_forced_through_the_reader_names_its_first_non_utf8_byte(tmp_path):
+    # json.loads took these bytes for UTF-16 and said "truncated data at byte 13": not the reason
+    p = tmp_path / "log.tlog"
+    p.write_bytes(b"\x00\x05\xbf\x12" + bytes(range(256)) * 4 + b"\x01")   # odd length: UTF-16 "truncated"
+    with pytest.raises(IngestError, match=r"log\.tlog: not UTF-8 text: byte 0xbf at offset 2 \(a binary file, "
+                                          r"not FlightCoach JSON\?\)$"):
+        FlightCoachReader().read(p)

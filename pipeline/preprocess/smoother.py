@@ -52,7 +52,10 @@ class GpsSmoother:
     enabled : bool
         Off: the fixes are interpolated onto the grid as they are.
     jerk_psd : float
-        White-jerk power spectral density ``q``, m²/s⁵.
+        White-jerk power spectral density ``q``, m²/s⁵. Default 10 (a jerk of ~3 m/s³ per
+        second): on the simulated M1 flight's ROS bag (fixes without velocity, 0.3 m, 10 Hz)
+        the velocity RMS against truth is 0.34 / 0.21 / 0.30 / 0.47 m/s at q = 1 / 10 / 100 /
+        1000; with the fixes' velocity (DataFlash, tlog) 0.041 m/s at every q.
     sigma_h_m, sigma_v_m : float
         Horizontal / vertical position noise of a fix that reports no ``hacc_m`` / ``vacc_m``.
     sigma_vel_mps : float

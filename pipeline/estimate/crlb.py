@@ -116,7 +116,7 @@ def _result(x: F64, cov: F64) -> Crlb:
 
 def q_floor(x_true: ArrayLike, t_s: ArrayLike, P0: ArrayLike, sigma_rad: float, process_noise, *,
             update_first: bool = False) -> Crlb:
-    """The actual error covariance of a Kalman filter that assumes ``Q`` on a noise-free truth.
+    r"""The actual error covariance of a Kalman filter that assumes ``Q`` on a noise-free truth.
 
     The filter is linearised on the **true** trajectory (the best case of any EKF that carries
     ``Q``) and starts with error covariance ``P₀``. Its gain follows its own covariance,

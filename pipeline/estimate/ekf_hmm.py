@@ -179,7 +179,7 @@ INCREMENTS = ("prior", "posterior")
 
 
 def prior_increment_track(mean, t_ns) -> F64:
-    """A pseudo-track whose increments are the EKF's predicted ones, ``x̂⁻_{k+1} − x̂⁺_k``.
+    r"""A pseudo-track whose increments are the EKF's predicted ones, ``x̂⁻_{k+1} − x̂⁺_k``.
 
     Seed 000 §4.1 as printed: "After each dynamic update, x̂⁻_{k+1} and x̂⁺_k are passed to the
     pre-processing block", whose observation (4.1) is their difference. Under the CA model that

@@ -148,7 +148,7 @@ MIN_NOISE_SAMPLES = 10
 
 def weave_noise(states: Sequence[pd.DataFrame], segments: Sequence[pd.DataFrame], dt_s: float,
                 turn_threshold: float) -> tuple[dict[str, float], dict[str, Any]]:
-    """The filter's process noise from training flights' labelled segments, by moments.
+    r"""The filter's process noise from training flights' labelled segments, by moments.
 
     On each segment resampled at T, the step velocities are v_k = (z_{k+1} − z_k)/T and the
     second differences a_k = (v_{k+1} − v_k)/T; a transition whose course changes faster than

@@ -175,10 +175,11 @@ def _load(path: Path) -> dict:
         # "truncated data" at its end: name the first byte that is not UTF-8 instead
         try:
             raw.decode("utf-8")
-            pos = exc.start
         except UnicodeDecodeError as exc8:
-            pos = exc8.start
-        raise IngestError(path, f"not UTF-8 text: byte 0x{raw[pos]:02x} at offset {pos} "
+            raise IngestError(path, f"not UTF-8 text: byte 0x{raw[exc8.start]:02x} at offset {exc8.start} "
+                                    "(a binary file, not FlightCoach JSON?)") from None
+        # UTF-8, but NUL bytes near the start made json.loads take it for UTF-16/32
+        raise IngestError(path, f"invalid JSON: a NUL byte at offset {raw.index(0) if 0 in raw else exc.start} "
                                 "(a binary file, not FlightCoach JSON?)") from None
     except json.JSONDecodeError as exc:
         hint = " (file truncated?)" if exc.pos >= len(raw.rstrip()) - 1 else ""

@@ -163,15 +163,15 @@ def _row_problem(row: dict[str, str], lineno: int, first_line: dict[str, int], v
     if not FLIGHT_ID.fullmatch(fid):
         return (f"flight_id {fid!r} must be letters, digits and '-' only "
                 "(it becomes a file name and a workflow wildcard)")
+    if fid in first_line:
+        return f"duplicate flight_id (first on line {first_line[fid]})"
+    first_line[fid] = lineno
     if not row["path"].strip():
         return "empty path"
     if any(b in expand_path(row[c], realdata or "") for b in "{}" for c in ("path", "labels")):
         return "braces in a path are read as workflow wildcards; only {realdata} may appear (rename the file or link it)"
     if row["role"] not in ROLES:
         return f"role {row['role']!r} must be one of {', '.join(ROLES)}"
-    if fid in first_line:
-        return f"duplicate flight_id (first on line {first_line[fid]})"
-    first_line[fid] = lineno
     veh = row["vehicle"]
     if veh != GENERIC_VEHICLE and veh not in vehicles:
         return (f"unknown vehicle {veh!r}: add it to preprocess.vehicles or "

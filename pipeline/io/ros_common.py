@@ -416,7 +416,9 @@ def warn_configured_topics_absent(connections: Iterable[tuple[str, str, int]], c
     """One warning naming the ``ingest.ros.topics``/``custom`` topics the source does not hold: a
     misspelt topic would otherwise change nothing and say nothing."""
     present = {t for t, _, _ in connections}
-    for key, names in (("topics", cfg.topics), ("custom", cfg.custom)):
+    # a topic the config skips (null) may well be absent: a shared config lists what some bags hold
+    used = [t for t, m in cfg.topics.items() if m is not None]
+    for key, names in (("topics", used), ("custom", list(cfg.custom))):
         absent = [t for t in names if t not in present]
         if absent:
             warnings.append(

@@ -20,11 +20,11 @@ Feature sets (``FEATURE_SETS``):
     one model; GMR outputs are rotated back to NED.
 ``state9box``
     ``state9`` with every NED triple rotated into the aerobatic box frame,
-    :math:`x_{box} = R_z(\psi_{box})\,x_{NED}` (:func:`heading_rotation`, ``box_heading_rad``:
+    :math:`x_{box} = R_z(\\psi_{box})\\,x_{NED}` (:func:`heading_rotation`, ``box_heading_rad``:
     the flight's box rotation, ``params.box_rotation_rad`` of a FlightCoach log, carried into the
     ``state`` metadata by preprocessing), differenced like ``state9``. Flights flown in boxes of
     different headings share one model; GMR outputs are rotated back to NED,
-    :math:`a_{NED} = R_z(\psi_{box})^T a_{box}`.
+    :math:`a_{NED} = R_z(\\psi_{box})^T a_{box}`.
 ``box``
     Velocity and acceleration in the aerobatic box frame (NED rotated about down by the box
     heading ``box_heading_rad``), the gravity direction in the body frame (attitude without
@@ -112,7 +112,7 @@ GMR_FEATURE_SETS = ("state9", "state9h", "state9box")
 
 
 def heading_rotation(psi_rad: float) -> F64:
-    """NED -> heading-frame rotation about down by ``psi_rad``.
+    r"""NED -> heading-frame rotation about down by ``psi_rad``.
 
     .. math:: R_z(\psi) = \begin{pmatrix} \cos\psi & \sin\psi & 0 \\ -\sin\psi & \cos\psi & 0
               \\ 0 & 0 & 1 \end{pmatrix}, \qquad x_{frame} = R_z(\psi)\,x_{NED}

@@ -70,7 +70,7 @@ def apply_mount(df: pd.DataFrame, spec: Mapping | None, stream: str = "imu") -> 
 
 
 def apply_mount_attitude(df: pd.DataFrame, spec: Mapping | None) -> pd.DataFrame:
-    """Attitude of the sensor (e.g. a ROS ``Imu.orientation``) -> attitude of the body:
+    r"""Attitude of the sensor (e.g. a ROS ``Imu.orientation``) -> attitude of the body:
     :math:`q_{wb} = q_{ws} \otimes q_{sb}`, :math:`q_{sb} = q_{bs}^*` (``R_{bs}`` the mount)."""
     r = mount_dcm(spec)
     if r is None or not len(df):

@@ -144,7 +144,7 @@ def repair_timestamps(df: pd.DataFrame, *, clock_jump_s: float | None = 3600.0
 #: :func:`stray_samples`: a step longer than this many median periods (and :data:`STRAY_GAP_S`)
 #: separates islands of samples
 STRAY_GAP_PERIODS = 100
-STRAY_GAP_S = 60.0
+STRAY_GAP_S = 1800.0
 
 
 def stray_samples(t_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -153,9 +153,10 @@ def stray_samples(t_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
     The sorted stamps split into islands at every step longer than ``max(STRAY_GAP_S,
     STRAY_GAP_PERIODS × median step)``; an island of at most ``max(3, n / 1000)`` samples
     beside one ten times its size is stray. A bit flipped in one record's time puts that
-    record minutes or days away (a 44 s ULog with 20 flipped bytes spanned 3,072 s on its grid,
-    a tlog 3,601 s instead of 867 s, 87–99 % of it gap); a real pause of the logger leaves
-    samples on both sides, each far more than a handful.
+    record far away (a 44 s ULog with 20 flipped bytes spanned 3,072 s on its grid, a tlog
+    3,601 s instead of 867 s, 87–99 % of it gap). The gap is half an hour, longer than any
+    telemetry dropout or disarmed pause a log of one flight holds (a 1 Hz tlog's 3 s after a
+    2 min link loss is kept).
     """
     t = np.asarray(t_ns, dtype=np.int64)
     out = np.zeros(len(t), dtype=bool)
@@ -233,7 +234,7 @@ def _cell_mean(t: NDArray, x: NDArray, g: NDArray) -> NDArray[np.float64]:
     span) of the piecewise-linear interpolant of the finite samples; NaN where the cut cell is
     empty. O(n) through the cumulative trapezoid integral.
 
-    .. math:: \bar x(g) = \frac{1}{b - a}\int_a^b \tilde x(\tau)\,d\tau
+    .. math:: \\bar x(g) = \\frac{1}{b - a}\\int_a^b \\tilde x(\\tau)\\,d\\tau
 
     A boxcar of the signal, centred on ``g``: the plain mean of the samples inside a half-open
     cell is centred on the samples' own times instead, up to half a source period early (a 50 Hz

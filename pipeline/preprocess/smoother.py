@@ -72,7 +72,9 @@ class GpsSmoother:
 @numba.njit(cache=True)
 def _rts_axis(t_s, zp, sp, zv, sv, q, smooth):  # pragma: no cover - compiled
     """One axis: forward Kalman filter over the sorted event times ``t_s`` (NaN ``zp``/``zv``:
-    no measurement at that event), then RTS unless ``smooth`` is False. Returns (n, 3)."""
+    no measurement at that event), started at the first position fix ``k0`` (its state and
+    variance the prior; earlier events hold that state), then RTS unless ``smooth`` is False.
+    Returns (n, 3); all NaN when the axis has no finite position."""
     n = len(t_s)
     xf = np.zeros((n, 3))
     Pf = np.zeros((n, 3, 3))
@@ -84,11 +86,14 @@ def _rts_axis(t_s, zp, sp, zv, sv, q, smooth):  # pragma: no cover - compiled
     k0 = 0
     while k0 < n and not np.isfinite(zp[k0]):
         k0 += 1
-    # start at the first fix: its position, a velocity (if measured) and a loose acceleration
-    x[0] = zp[k0] if k0 < n else 0.0
-    P[0, 0] = sp[k0] ** 2 if k0 < n else 1e6
-    x[1] = zv[k0] if k0 < n and np.isfinite(zv[k0]) else 0.0
-    P[1, 1] = sv ** 2 if k0 < n and np.isfinite(zv[k0]) else 1e4
+    if k0 == n:                       # no position on this axis: nothing to say
+        return np.full((n, 3), np.nan)
+    # start at the first fix: its position, a velocity (if measured) and a loose acceleration;
+    # that fix is then in the prior and not applied again
+    x[0] = zp[k0]
+    P[0, 0] = sp[k0] ** 2
+    x[1] = zv[k0] if np.isfinite(zv[k0]) else 0.0
+    P[1, 1] = sv ** 2 if np.isfinite(zv[k0]) else 1e4
     P[2, 2] = 1e2
     for k in range(n):
         dt = t_s[k] - t_s[k - 1] if k > 0 else 0.0
@@ -108,7 +113,7 @@ def _rts_axis(t_s, zp, sp, zv, sv, q, smooth):  # pragma: no cover - compiled
             P = F @ P @ F.T + Q
         xp[k] = x
         Pp[k] = P
-        if k >= k0:
+        if k > k0:
             for j in range(2):          # scalar updates: position, then velocity
                 z = zp[k] if j == 0 else zv[k]
                 if not np.isfinite(z):

@@ -184,8 +184,10 @@ def check_preprocess_config(sec: Mapping[str, Any]) -> None:
     for where, entries in (("vehicles", sec.get("vehicles")), ("flights", sec.get("flights"))):
         for name, entry in (entries or {}).items():
             for stick, spec in ((entry or {}).get("controls") or {}).items():
+                if spec is None:    # a stick the vehicle has not (a flying wing's rudder)
+                    continue
                 try:
-                    check_stick(stick, spec or {})
+                    check_stick(stick, spec)
                 except ValueError as exc:
                     raise ConfigError(f"preprocess.{where}.{name}.{exc}") from None
 
@@ -252,18 +254,22 @@ def _prepare(df: pd.DataFrame, cfg: PreprocessConfig, name: str, diag: dict | No
     return df
 
 
+#: Measured velocity is used on an axis where it is finite on at least this share of the kept
+#: samples (the rest filled from the differentiated position)
+MEASURED_MIN_SHARE = 0.95
+
+
 #: What no sensor of a small aircraft reads, by stream and column (``*`` a wildcard): beyond it
 #: a value is a damaged record that still decoded (a DataFlash NTUN with 2,000 flipped bytes
 #: read ``vel_e`` 1.06e11 m/s; an IMU record 2.9e38 rad/s) and would become the page's "max
 #: speed". Far outside any flight envelope on purpose (2,000 °/s is a common gyro full scale,
 #: 1,000 m/s thrice the fastest UAV), so no real reading is lost. Latitude/longitude and static
-#: pressure have their own checks (:func:`_gps_ned`, step 8).
+#: pressure have their own checks (:func:`_gps_ned`, step 8), the rangefinder its ``valid`` flag.
 PHYSICAL_LIMITS: dict[str, tuple[tuple[str, float, float], ...]] = {
     "imu": (("gyr_*_radps", -100.0, 100.0), ("acc_*_mps2", -2000.0, 2000.0), ("temp_degC", -100.0, 200.0)),
     "gps": (("alt_*_m", -2000.0, 100_000.0), ("vel_*_mps", -1000.0, 1000.0)),
     "baro": (("alt_rel_m", -100_000.0, 100_000.0), ("temp_degC", -100.0, 200.0)),
     "local_position": (("pos_*_m", -1e7, 1e7), ("vel_*_mps", -1000.0, 1000.0)),
-    "rangefinder": (("dist_m", -1.0, 100_000.0),),
 }
 
 
@@ -567,10 +573,12 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         vel_meas = np.column_stack([r[v].to_numpy() if v in r.columns else np.full(n, np.nan) for v in VEL])
         # per axis: a GPS_RAW_INT fix carries ground speed and course but no climb rate, and its
         # measured horizontal velocity (0.05 m/s RMS on the simulated tlog) beats the
-        # differentiated position (0.75 m/s) by an order of magnitude; only the axes the source
-        # does not measure on every kept row are differentiated
+        # differentiated position (0.75 m/s) by an order of magnitude. An axis is measured where
+        # the source measures it on nearly every kept row (MEASURED_MIN_SHARE): a damaged
+        # record's NaN (or a stationary fix without a course) is filled from the differentiated
+        # position, not the whole axis given up
         meas_ax = np.array([cfg.velocity_source == "measured" and pvalid.any()
-                            and bool(np.isfinite(vel_meas[pvalid, i]).all()) for i in range(3)])
+                            and np.isfinite(vel_meas[pvalid, i]).mean() >= MEASURED_MIN_SHARE for i in range(3)])
         # the window counts the source's samples, not the grid's interpolation between them
         src_period_s = median_period_ns(pos_df["t_ns"].to_numpy(np.int64)) * 1e-9
         der = cfg.derivatives.for_source(src_period_s)
@@ -582,11 +590,18 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         acc, jerk = vel.copy(), vel.copy()
         if meas_ax.any():
             m = meas_ax
-            vel[:, m] = vel_meas[:, m]
-            acc[:, m] = differentiate(vel_meas[:, m], dt, 1, der, valid=pvalid)
-            jerk[:, m] = differentiate(vel_meas[:, m], dt, 2, der, valid=pvalid)
+            vm = vel_meas[:, m].copy()
+            holes = pvalid[:, None] & ~np.isfinite(vm)
+            if holes.any():
+                vm = np.where(holes, differentiate(pos[:, m], dt, 1, der, valid=pvalid), vm)
+                diag["notes"].append(f"measured velocity missing on {int(holes.any(axis=1).sum())} of "
+                                     f"{int(pvalid.sum())} kept samples: the differentiated position there")
+            vel[:, m] = vm
+            acc[:, m] = differentiate(vm, dt, 1, der, valid=pvalid)
+            jerk[:, m] = differentiate(vm, dt, 2, der, valid=pvalid)
         how = ["measured" if x else "differentiated position" for x in meas_ax]
-        if not meas_ax[2] and pos_src == "gps" and cfg.vertical_from_baro and baro_f is not None:
+        if (not meas_ax[2] and pos_src == "gps" and cfg.vertical_from_baro and baro_f is not None
+                and cfg.velocity_source == "measured"):
             # a GPS height is ~5x noisier than a barometer (simulated tlog: down velocity 1.46
             # m/s RMS from the fixes, 0.09 from the baro): the climb rate comes from the baro
             # height, as an autopilot's own height estimate does, when it covers every kept
@@ -715,7 +730,7 @@ def _smoothed_gps(fixes: pd.DataFrame, grid: NDArray[np.int64], pos: NDArray, pv
     ok = pvalid & np.isfinite(out).all(axis=1)
     res = pos.copy()
     res[ok] = out[ok]
-    with_vel = [a for a, c in zip(_NED, VEL) if np.isfinite(v[:, _NED.index(a)]).any()]
+    with_vel = [a for i, a in enumerate(_NED) if np.isfinite(v[:, i]).any()]
     diag["gps_smoother"] = {"jerk_psd": g.jerk_psd, "causal": cfg.causal, "velocity_axes": with_vel,
                             "median_sigma_h_m": float(np.median(sh)), "median_sigma_v_m": float(np.median(sv)),
                             "rms_change_m": float(np.sqrt(np.mean((res[ok] - pos[ok]) ** 2))) if ok.any() else 0.0}

@@ -121,7 +121,7 @@ def path_figure(man: str, learned: pd.DataFrame, demos: pd.DataFrame) -> go.Figu
 
 
 def loglik_figure(iterations: pd.DataFrame, tol: float | None = None) -> go.Figure | None:
-    """EM convergence: the relative log-likelihood change per iteration,
+    r"""EM convergence: the relative log-likelihood change per iteration,
     :math:`|\log L_k - \log L_{k-1}| / |\log L_{k-1}|`, one line per maneuver on a log axis, with
     the stopping tolerance ``tol`` (``align.tol``) as a line.
 

@@ -402,7 +402,7 @@ def _smooth2(s: F64) -> F64:
 
 @dataclass(frozen=True)
 class AltitudeCommand(Command):
-    """Level-attitude thrust command that flies a smooth altitude schedule on the nominal model.
+    r"""Level-attitude thrust command that flies a smooth altitude schedule on the nominal model.
 
     The schedule ``h(t)`` is a knot channel (m, up); the thrust command is the inverse
     dynamics of the vertical axis, :math:`U_1/(mg) = 1 + (\ddot h + k_z \dot h)/g` with

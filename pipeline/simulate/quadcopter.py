@@ -165,7 +165,7 @@ def rotate_to_heading(v: F64, yaw0: F64) -> F64:
 
 def gauss_markov(n_runs: int, n_t: int, dt: float, tau_s: float, sigma_mps2: float,
                  rng: np.random.Generator, clip_mps2: float | None = None, knot_s: float = 0.1) -> F64:
-    """Band-limited first-order Gauss–Markov acceleration disturbance, (n_runs, n_t, 3) NED.
+    r"""Band-limited first-order Gauss–Markov acceleration disturbance, (n_runs, n_t, 3) NED.
 
     The process is drawn exactly at knots ``knot_s`` apart (stationary start),
 

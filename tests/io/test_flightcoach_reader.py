@@ -180,3 +180,11 @@ def test_a_binary_file_forced_through_the_reader_names_its_first_non_utf8_byte(t
     with pytest.raises(IngestError, match=r"log\.tlog: not UTF-8 text: byte 0xbf at offset 2 \(a binary file, "
                                           r"not FlightCoach JSON\?\)$"):
         FlightCoachReader().read(p)
+
+
+
+def test_utf8_bytes_with_nul_near_the_start_are_said_to_be_no_json_not_no_utf8(tmp_path):
+    p = tmp_path / "nul.json"
+    p.write_bytes(b'{\x00"a": 1}')
+    with pytest.raises(IngestError, match=r"nul\.json: invalid JSON: a NUL byte at offset 1 \(a binary file"):
+        FlightCoachReader().read(p)

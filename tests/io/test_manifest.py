@@ -187,3 +187,12 @@ def test_a_comma_separated_manifest_is_told_it_must_use_tabs(tmp_path):
     p.write_text(HEADER.replace("\t", ",") + DEMO.replace("\t", ",") + "\n")
     with pytest.raises(ConfigError, match=r"header lacks column\(s\) .*the manifest is tab-separated\)$"):
         check_manifest(p, CONFIG, base=tmp_path)
+
+
+def test_a_row_rejected_for_its_role_still_counts_for_a_later_duplicate(tmp_path):
+    p = _manifest(tmp_path, "d1\tresults/sim/demo/x.bin\tsim-quad\tsometimes\tnone\t\t",
+                  "d1\tresults/sim/demo/y.bin\tsim-quad\ttest\tnone\t\t")
+    with pytest.raises(ConfigError) as exc:
+        check_manifest(p, CONFIG, base=tmp_path)
+    lines = str(exc.value).splitlines()
+    assert "role 'sometimes'" in lines[0] and "duplicate flight_id (first on line 3)" in lines[1]

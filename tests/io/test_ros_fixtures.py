@@ -502,6 +502,9 @@ def test_a_configured_topic_the_bag_lacks_is_a_warning_naming_it(msgs, tmp_path)
         assert len(warn) == 1 and warn[0].startswith("ingest.ros.topics: topic(s) /sonarr not in the log (it has "), \
             log.meta["diagnostics"]["warnings"]
         assert "/sonar" in warn[0] and "/radar" not in warn[0].split("(")[0]
+    # a topic the config skips (null) may be absent: a shared config lists what some bags hold
+    log = Ros1BagReader().read(write_ros1bag(tmp_path / "s.bag", msgs), config={"ros": {"topics": {"/camera": None}}})
+    assert not any(w.startswith("ingest.ros.") for w in log.meta["diagnostics"]["warnings"])
 
 
 def test_topic_map_overrides(msgs, tmp_path):

@@ -24,7 +24,8 @@ def _filterpy(t_s, zp, sp, zv, sv, q, x0, P0, smooth=True):
                           [dt ** 3 / 6, dt ** 2 / 2, dt]])
         if k:
             kf.predict(F=F, Q=Q)
-        for j, (z, r) in enumerate(((zp[k], sp[k] ** 2), (zv[k], sv ** 2))):
+        # the first event is the first fix, already the prior (x0, P0): not applied twice
+        for j, (z, r) in enumerate(((zp[k], sp[k] ** 2), (zv[k], sv ** 2)) if k else ()):
             if np.isfinite(z):
                 H = np.zeros((1, 3))
                 H[0, j] = 1.0
@@ -101,3 +102,18 @@ def test_a_noisy_gps_flight_gets_positions_within_a_fifth_of_the_fix_noise(rng):
         assert any("gps positions smoothed" in x for x in res.diagnostics["notes"]) is on
     assert rms[False][0] > 0.3 and rms[False][1] > 0.6          # the interpolated fixes
     assert rms[True][0] < 0.1 and rms[True][1] < 0.2            # fused with the velocity
+
+
+def test_the_first_fix_is_the_prior_once_and_an_axis_without_fixes_is_nan():
+    from pipeline.preprocess.smoother import _rts_axis
+
+    # two fixes 1 ms apart, 0 and 1 m, equal noise, no process noise to speak of: the filtered
+    # second state is their mean (the first fix weighted once, not twice: it read 0.338)
+    x = _rts_axis(np.array([0.0, 1e-3]), np.array([0.0, 1.0]), np.ones(2), np.full(2, np.nan), 0.1, 1e-9, False)
+    assert abs(x[1, 0] - 1.01 / 2.01) < 1e-6     # prior 1 + the unknown velocity over 1 ms (1e4 * 1e-6)
+    # no finite position on an axis: NaN there, not zeros
+    t = np.arange(0, 5, 0.1)
+    pos = np.c_[t, t, np.full_like(t, np.nan)]
+    out = smooth_track(ns(t), pos, np.full((len(t), 3), np.nan), np.ones((len(t), 3)), ns(np.arange(0, 4.9, 0.04)),
+                       GpsSmoother(), max_gap_ns=1e9)
+    assert np.isnan(out[:, 2]).all() and np.isfinite(out[:, :2]).all()

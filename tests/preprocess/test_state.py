@@ -354,3 +354,30 @@ def test_what_the_schema_cannot_check_is_one_error_naming_the_key_before_any_fli
     err_lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert err_lines == [f"uavpipe preprocess: {cfg}: {message}"]
     assert not (tmp_path / "OUT").exists()
+
+
+
+def test_a_stick_the_vehicle_has_not_is_null_and_passes_the_start_up_check():
+    from pipeline.config import validate_section
+    from pipeline.preprocess.state import check_preprocess_config
+
+    sec = validate_section("preprocess", {"vehicles": {"wing": {"controls": {
+        "ail": {"channel": "rc_1_us"}, "ele": {"channel": "rc_2_us"}, "thr": {"channel": "rc_3_us"}, "rud": None}}}})
+    check_preprocess_config(sec)
+    assert PreprocessConfig.from_config({"preprocess": sec}, vehicle="wing").controls["rud"] is None
+
+
+def test_a_few_missing_measured_velocities_are_filled_not_the_axis_given_up(rng):
+    # one damaged fix among 300 (its velocity NaN): the axis stays measured, that fix's
+    # neighbourhood takes the differentiated position, and the notes say how many samples
+    log, w = synthetic_flight(rng, gap=False)
+    gps = log["gps"].copy()
+    gps.loc[150, "vel_n_mps"] = np.nan
+    res = preprocess_log(FlightLog.from_streams(log.meta, {"gps": gps, "attitude": log["attitude"]}))
+    assert res.diagnostics["sources"]["velocity"] == "measured"
+    assert any(n.startswith("measured velocity missing on ") for n in res.diagnostics["notes"])
+    st = res.state
+    t = st["t_ns"].to_numpy() * 1e-9
+    mid = (t > 2) & (t < 58)
+    assert np.isfinite(st["vel_n_mps"][mid]).all()
+    np.testing.assert_allclose(st["vel_n_mps"][mid], -20 * w * np.sin(w * t[mid]), atol=0.1)

@@ -89,7 +89,7 @@ def test_a_yak54_reference_gives_the_airframe_candidates_beside_the_baselines():
 
 
 def test_bad_study_settings_name_the_key():
-    with pytest.raises(ValueError, match="yak54_references: unknown \['barrel'\]"):
+    with pytest.raises(ValueError, match=r"yak54_references: unknown \['barrel'\]"):
         simulated_study({"yak54_references": ["barrel"]}, seed=0)
     with pytest.raises(ValueError, match="references: unknown \\['barrel'\\]"):
         simulated_study({"references": ["barrel"]}, seed=0)

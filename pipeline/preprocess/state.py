@@ -273,9 +273,36 @@ PHYSICAL_LIMITS: dict[str, tuple[tuple[str, float, float], ...]] = {
 }
 
 
+#: Heights and positions checked for spikes (:func:`spikes`), by stream
+SPIKE_COLUMNS: dict[str, str] = {"baro": "alt_rel_m", "gps": "alt_*_m", "local_position": "pos_*_m"}
+#: :func:`spikes`: the fastest a checked height or position may move [m/s] (as PHYSICAL_LIMITS'
+#: velocity) and the margin added for sensor noise [m]
+SPIKE_SPEED_MPS, SPIKE_MARGIN_M = 1000.0, 10.0
+
+
+def spikes(t_ns: NDArray[np.int64], x: NDArray) -> NDArray[np.bool_]:
+    """Samples farther from the median of themselves and their two neighbours on each side than
+    anything flying at :data:`SPIKE_SPEED_MPS` could move in two median sample periods, plus
+    :data:`SPIKE_MARGIN_M`:
+
+    .. math:: |x_k - \\operatorname{med}(x_{k-2..k+2})| > v_{max} \\cdot 2\\,\\overline{\\Delta t} + m
+
+    One or two damaged records (a DataFlash baro record with flipped bytes read 10.7 km in a
+    10 m hover) are spikes; a step (an estimator reset) is not, since the median follows it."""
+    x = np.asarray(x, dtype=np.float64)
+    if len(x) < 5:
+        return np.zeros(len(x), dtype=bool)
+    per = median_period_ns(np.asarray(t_ns, dtype=np.int64)) * 1e-9
+    if not np.isfinite(per):
+        return np.zeros(len(x), dtype=bool)
+    med = pd.Series(x).rolling(5, center=True, min_periods=3).median().to_numpy()
+    return np.isfinite(x) & np.isfinite(med) & (np.abs(x - med) > SPIKE_SPEED_MPS * 2 * per + SPIKE_MARGIN_M)
+
+
 def implausible_to_nan(df: pd.DataFrame, name: str, diag: dict) -> pd.DataFrame:
-    """``df`` with every value outside :data:`PHYSICAL_LIMITS` set to NaN (the row's other
-    columns kept), counted in ``diag["implausible_values"][name]`` and said in the notes."""
+    """``df`` with every value outside :data:`PHYSICAL_LIMITS`, and every spike of a height or
+    position (:func:`spikes`, :data:`SPIKE_COLUMNS`), set to NaN (the row's other columns kept),
+    counted in ``diag["implausible_values"][name]`` and said in the notes."""
     limits = PHYSICAL_LIMITS.get(name)
     if not limits or not len(df):
         return df
@@ -285,6 +312,8 @@ def implausible_to_nan(df: pd.DataFrame, name: str, diag: dict) -> pd.DataFrame:
         for c in (c for c in df.columns if fnmatch.fnmatchcase(c, pat)):
             x = pd.to_numeric(df[c], errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan)
             bad = np.isfinite(x) & ((x < lo) | (x > hi)) | np.isinf(x)
+            if fnmatch.fnmatchcase(c, SPIKE_COLUMNS.get(name, "")):
+                bad |= spikes(df["t_ns"].to_numpy(np.int64), np.where(bad, np.nan, x))
             if bad.any():
                 out = df.copy() if out is None else out
                 out[c] = np.where(bad, np.nan, x)

@@ -381,3 +381,21 @@ def test_a_few_missing_measured_velocities_are_filled_not_the_axis_given_up(rng)
     mid = (t > 2) & (t < 58)
     assert np.isfinite(st["vel_n_mps"][mid]).all()
     np.testing.assert_allclose(st["vel_n_mps"][mid], -20 * w * np.sin(w * t[mid]), atol=0.1)
+
+
+def test_a_height_spike_no_aircraft_could_fly_is_dropped_and_a_step_is_kept():
+    from pipeline.preprocess.state import spikes
+
+    t = ns(np.arange(0, 20, 0.05))                       # a 20 Hz baro: limit 1000 * 0.1 + 10 = 110 m
+    h0 = 10.0 + 0.5 * np.sin(np.arange(len(t)) * 0.05)
+    h = h0.copy()
+    h[100], h[250:252] = 10_700.0, [-900.0, -850.0]      # one and two damaged records
+    s = spikes(t, h)
+    assert np.flatnonzero(s).tolist() == [100, 250, 251]
+    step = np.where(np.arange(len(t)) < 200, 10.0, 400.0)  # a 390 m reset: a step, not a spike
+    assert not spikes(t, step).any()
+    assert not spikes(t, h0 + 105.0 * (np.arange(len(t)) == 300)).any()  # 105 m in 0.1 s: kept
+    # through preprocessing: counted with the limits, and the calibrated height stays sane
+    baro = pd.DataFrame({"t_ns": t, "alt_rel_m": h})
+    res = preprocess_log(FlightLog.from_streams({"flight_id": "spk"}, {"baro": baro}))
+    assert res.diagnostics["implausible_values"] == {"baro": {"alt_rel_m": 3}}

@@ -687,21 +687,26 @@ class _Conv:
         return pd.DataFrame({**base, **(cols or {})})
 
 
+def _topic_names(choice) -> list[str] | None:
+    """The topic names a config choice gives (None for ``auto``: the candidates decide)."""
+    if choice in (None, "auto"):
+        return None
+    return [choice] if isinstance(choice, str) else list(choice)
+
+
 def configured_topics_absent(topics: dict, choice) -> list[str]:
     """The topic names a non-``auto`` config choice names that the log does not hold."""
-    if choice in (None, "auto"):
-        return []
-    return [n for n in ([choice] if isinstance(choice, str) else list(choice)) if n not in topics]
+    return [n for n in _topic_names(choice) or [] if n not in topics]
 
 
 def _select(topics: dict, stream: str, choice, path: Path) -> list:
     """The datasets feeding ``stream``: ``auto`` = all instances of the first candidate present."""
-    if choice in (None, "auto"):
+    names = _topic_names(choice)
+    if names is None:
         for name in DEFAULT_TOPICS[stream]:
             if name in topics:
                 return topics[name]
         return []
-    names = [choice] if isinstance(choice, str) else list(choice)
     return [d for n in names for d in topics.get(n, [])]
 
 

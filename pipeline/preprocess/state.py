@@ -265,24 +265,24 @@ MEASURED_MIN_SHARE = 0.95
 #: speed". Far outside any flight envelope on purpose (2,000 °/s is a common gyro full scale,
 #: 1,000 m/s thrice the fastest UAV), so no real reading is lost. Latitude/longitude and static
 #: pressure have their own checks (:func:`_gps_ned`, step 8), the rangefinder its ``valid`` flag.
+MAX_SPEED_MPS = 1000.0
 PHYSICAL_LIMITS: dict[str, tuple[tuple[str, float, float], ...]] = {
     "imu": (("gyr_*_radps", -100.0, 100.0), ("acc_*_mps2", -2000.0, 2000.0), ("temp_degC", -100.0, 200.0)),
-    "gps": (("alt_*_m", -2000.0, 100_000.0), ("vel_*_mps", -1000.0, 1000.0)),
+    "gps": (("alt_*_m", -2000.0, 100_000.0), ("vel_*_mps", -MAX_SPEED_MPS, MAX_SPEED_MPS)),
     "baro": (("alt_rel_m", -100_000.0, 100_000.0), ("temp_degC", -100.0, 200.0)),
-    "local_position": (("pos_*_m", -1e7, 1e7), ("vel_*_mps", -1000.0, 1000.0)),
+    "local_position": (("pos_*_m", -1e7, 1e7), ("vel_*_mps", -MAX_SPEED_MPS, MAX_SPEED_MPS)),
 }
 
 
 #: Heights and positions checked for spikes (:func:`spikes`), by stream
 SPIKE_COLUMNS: dict[str, str] = {"baro": "alt_rel_m", "gps": "alt_*_m", "local_position": "pos_*_m"}
-#: :func:`spikes`: the fastest a checked height or position may move [m/s] (as PHYSICAL_LIMITS'
-#: velocity) and the margin added for sensor noise [m]
-SPIKE_SPEED_MPS, SPIKE_MARGIN_M = 1000.0, 10.0
+#: :func:`spikes`: the margin added for sensor noise [m] to what :data:`MAX_SPEED_MPS` covers
+SPIKE_MARGIN_M = 10.0
 
 
 def spikes(t_ns: NDArray[np.int64], x: NDArray) -> NDArray[np.bool_]:
     """Samples farther from the median of themselves and their two neighbours on each side than
-    anything flying at :data:`SPIKE_SPEED_MPS` could move in two median sample periods, plus
+    anything flying at :data:`MAX_SPEED_MPS` could move in two median sample periods, plus
     :data:`SPIKE_MARGIN_M`:
 
     .. math:: |x_k - \\operatorname{med}(x_{k-2..k+2})| > v_{max} \\cdot 2\\,\\overline{\\Delta t} + m
@@ -296,7 +296,7 @@ def spikes(t_ns: NDArray[np.int64], x: NDArray) -> NDArray[np.bool_]:
     if not np.isfinite(per):
         return np.zeros(len(x), dtype=bool)
     med = pd.Series(x).rolling(5, center=True, min_periods=3).median().to_numpy()
-    return np.isfinite(x) & np.isfinite(med) & (np.abs(x - med) > SPIKE_SPEED_MPS * 2 * per + SPIKE_MARGIN_M)
+    return np.isfinite(x) & np.isfinite(med) & (np.abs(x - med) > MAX_SPEED_MPS * 2 * per + SPIKE_MARGIN_M)
 
 
 def implausible_to_nan(df: pd.DataFrame, name: str, diag: dict) -> pd.DataFrame:
@@ -714,7 +714,9 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
 
     # 8. BPM calibration (the baro height itself is on the grid since step 4-5)
     gps_t = gps_up = None
-    if cfg.bpm.gps_fallback and _has(P["gps"], ["lat_deg", "lon_deg"]):
+    if cfg.bpm.gps_fallback and pos_src == "gps":   # the fixes in NED are the position source's
+        gps_t, gps_up = pos_df["t_ns"].to_numpy(dtype=np.int64), -pos_df[POS[2]].to_numpy()
+    elif cfg.bpm.gps_fallback and _has(P["gps"], ["lat_deg", "lon_deg"]):
         g, ned, _ = _gps_ned(P["gps"], log.meta or {}, {"notes": []}, cfg.ned_method, cfg.bpm.gps_min_fix)
         if len(g):
             gps_t, gps_up = g["t_ns"].to_numpy(dtype=np.int64), -ned[:, 2]
@@ -742,17 +744,19 @@ def _smoothed_gps(fixes: pd.DataFrame, grid: NDArray[np.int64], pos: NDArray, pv
     """The GPS fixes fused with their measured velocity on the grid (:mod:`.smoother`); the
     rows the interpolation called gaps stay as they were (NaN-free rows only change)."""
     g = cfg.gps_smoother
-    t = fixes["t_ns"].to_numpy(np.int64)
-    z = fixes[POS].to_numpy(dtype=np.float64)
-    v = np.column_stack([fixes[c].to_numpy(dtype=np.float64, na_value=np.nan) if c in fixes.columns
-                         else np.full(len(fixes), np.nan) for c in VEL])
 
-    def sigma(col, default):
-        x = fixes[col].to_numpy(dtype=np.float64, na_value=np.nan) if col in fixes.columns \
+    def col(c):
+        return fixes[c].to_numpy(dtype=np.float64, na_value=np.nan) if c in fixes.columns \
             else np.full(len(fixes), np.nan)
+
+    def sigma(c, default):
+        x = col(c)
         # a fix that reports no accuracy (or zero, a reader's placeholder) gets the config's
         return np.where(np.isfinite(x) & (x > 0), x, default)
 
+    t = fixes["t_ns"].to_numpy(np.int64)
+    z = fixes[POS].to_numpy(dtype=np.float64)
+    v = np.column_stack([col(c) for c in VEL])
     sh, sv = sigma("hacc_m", g.sigma_h_m), sigma("vacc_m", g.sigma_v_m)
     out = smooth_track(t, z, v, np.column_stack([sh, sh, sv]), grid, g,
                        max_gap_ns=bridge_limit_ns(t, grid, cfg.gap_multiple), causal=cfg.causal)

@@ -158,3 +158,70 @@ def effective_sample_size(w: ArrayLike) -> float:
 def copies(indices: ArrayLike, n: int) -> I64:
     """How many times each of ``n`` particles was drawn (``bincount`` of the ancestor indices)."""
     return np.bincount(np.asarray(indices, dtype=np.int64), minlength=n)
+
+
+def regularisation_bandwidth(n: int, d: int) -> float:
+    """The Gaussian kernel's optimal bandwidth of the regularised particle filter.
+
+    .. math::
+
+        h_{\\text{opt}} = A\\,N^{-1/(d+4)}, \\qquad A = \\left(\\frac{4}{d+2}\\right)^{1/(d+4)}
+
+    (Musso, Oudjane & Le Gland 2001; Arulampalam, Maskell, Gordon & Clapp 2002, eq. 77): the
+    bandwidth that minimises the mean integrated squared error between the kernel density of
+    ``N`` equally weighted samples and a Gaussian density in ``d`` dimensions. N = 50, d = 4: 0.583.
+    """
+    if n < 1 or d < 1:
+        raise ValueError(f"regularisation_bandwidth: need n >= 1 and d >= 1, got n={n}, d={d}")
+    return float((4.0 / (d + 2.0)) ** (1.0 / (d + 4.0)) * n ** (-1.0 / (d + 4.0)))
+
+
+def regularise(x: ArrayLike, cov: ArrayLike, rng: np.random.Generator, index: ArrayLike | None = None) -> F64:
+    """The regularised particle filter's move after resampling (Arulampalam et al. 2002, Alg. 6).
+
+    Each resampled particle is drawn from the Gaussian kernel about it,
+
+    .. math::
+
+        x^i \\leftarrow x^i + h_{\\text{opt}}\\, D\\, \\varepsilon^i, \\qquad
+        D D^\\top = S, \\quad \\varepsilon^i \\sim \\mathcal N(0, I_d),
+
+    with ``S`` the weighted empirical covariance of the particles *before* resampling (``cov``,
+    the filter's own estimate of the posterior spread) over the components ``index``, and ``d``
+    the number of those components that vary (a component held constant, e.g. the ground plane's
+    D, is no dimension of the kernel). Resampled copies of one particle separate again with the
+    posterior's own shape and scale, so a small cloud keeps the spread the weights gave it
+    instead of shrinking at every resampling (sample impoverishment). ``D`` is the symmetric
+    square root (eigenvalues clipped at 0), which exists for a singular ``S`` too.
+
+    Parameters
+    ----------
+    x : (N, n) array
+        Resampled particles (equal weights); not modified.
+    cov : (n, n) array
+        Weighted covariance of the particles before resampling.
+    rng : numpy.random.Generator
+    index : sequence of int, optional
+        The components to move (default all).
+
+    Returns
+    -------
+    (N, n) array
+        The moved particles.
+    """
+    out = np.array(x, dtype=np.float64, copy=True)
+    idx = np.arange(out.shape[1]) if index is None else np.asarray(index, dtype=np.int64)
+    S = np.asarray(cov, dtype=np.float64)[np.ix_(idx, idx)]
+    if not np.all(np.isfinite(S)):
+        raise ValueError("regularise: the covariance has non-finite entries")
+    S = 0.5 * (S + S.T)
+    lam, V = np.linalg.eigh(S)
+    lam = np.clip(lam, 0.0, None)
+    # the kernel's dimension: the components that vary (a constant one adds nothing)
+    d = int(np.count_nonzero(np.diag(S) > 0))
+    if d == 0:
+        return out
+    h = regularisation_bandwidth(out.shape[0], d)
+    D = V * np.sqrt(lam)[None, :]
+    out[:, idx] += h * rng.standard_normal((out.shape[0], len(idx))) @ D.T
+    return out

@@ -111,3 +111,43 @@ def test_a_zero_weight_particle_is_never_drawn_even_by_a_uniform_of_exactly_zero
 
     idx = getattr(rs, scheme)(np.array([0.0, 0.5, 0.5]), _ZeroRng())
     assert 0 not in idx.tolist()
+
+
+def test_the_regularisation_bandwidth_is_musso_s_gaussian_optimum():
+    # Arulampalam et al. (2002) eq. 77: A = (4/(d+2))^(1/(d+4)), h = A N^(-1/(d+4))
+    assert np.isclose(R.regularisation_bandwidth(50, 4), (4 / 6) ** (1 / 8) * 50 ** (-1 / 8))
+    assert np.isclose(R.regularisation_bandwidth(50, 4), 0.583, atol=5e-4)
+    assert np.isclose(R.regularisation_bandwidth(1, 2), (4 / 4) ** (1 / 6))
+    assert R.regularisation_bandwidth(10 ** 6, 4) < R.regularisation_bandwidth(100, 4)
+    with pytest.raises(ValueError, match="n >= 1 and d >= 1"):
+        R.regularisation_bandwidth(0, 4)
+
+
+def test_the_kernel_move_adds_h_squared_times_the_given_covariance_and_leaves_other_components_alone():
+    rng = np.random.default_rng(11)
+    n = 200_000
+    S = np.array([[4.0, 1.2, 0.0], [1.2, 1.0, 0.3], [0.0, 0.3, 0.25]])
+    x = np.zeros((n, 5))
+    x[:, 4] = 7.0
+    y = R.regularise(x, np.pad(S, ((0, 2), (0, 2))), rng, index=[0, 1, 2])
+    h = R.regularisation_bandwidth(n, 3)
+    # the jitter's covariance is h² S (5 standard errors of a sample covariance at this n)
+    assert np.allclose(np.cov(y[:, :3], rowvar=False), h * h * S, atol=5 * h * h * 4.0 * np.sqrt(2 / n))
+    assert np.all(y[:, 3] == 0.0) and np.all(y[:, 4] == 7.0)
+    assert np.all(x == np.where(np.arange(5) == 4, 7.0, 0.0))        # the input is not modified
+
+
+def test_a_constant_component_is_no_dimension_of_the_kernel_and_a_singular_covariance_still_moves():
+    rng = np.random.default_rng(12)
+    x = np.zeros((20_000, 3))
+    S = np.diag([1.0, 1.0, 0.0])            # e.g. D on the ground plane
+    y = R.regularise(x, S, rng)
+    assert np.all(y[:, 2] == 0.0)
+    # d = 2 varying components (h 0.192), not 3 (h 0.235)
+    assert np.allclose(y[:, :2].std(axis=0), R.regularisation_bandwidth(20_000, 2), rtol=0.03)
+    # rank one: the cloud moves along the one direction that has spread
+    y1 = R.regularise(x, np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 0.0]]), rng)
+    assert np.allclose(y1[:, 0], y1[:, 1]) and y1[:, 0].std() > 0.1
+    assert np.all(R.regularise(x, np.zeros((3, 3)), rng) == 0.0)
+    with pytest.raises(ValueError, match="non-finite"):
+        R.regularise(x, np.full((3, 3), np.nan), rng)

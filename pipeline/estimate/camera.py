@@ -33,6 +33,7 @@ The weighting is a numba kernel, parallel over particles, linear in particles ×
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numba
@@ -456,6 +457,68 @@ def camera_loglik_per_observer(x: ArrayLike, row: ArrayLike, camera: PinholeCame
     return out
 
 
+class CollapseWindow:
+    """A χ² test of the best particle's pixel residuals over the last ``steps`` steps with
+    detections (digest 001 §13 item 7, "re-init … when the max log-likelihood collapses").
+
+    Each step with detections pushes the best particle's squared normalised residual sum
+    ``Σ_o r_o²`` and its degrees of freedom ``2m`` (m detecting observers). Once the window is
+    full the test fires when
+
+    .. math::
+
+        \sum_{k \in W} \sum_o r_{k,o}^2 > \chi^2_{1-\alpha}\Big(\sum_{k \in W} 2 m_k\Big),
+
+    the upper-α quantile of the χ² law the sum would follow if the cloud held the target (the
+    best particle's residual is at most the truth's, so α bounds the false alarms per window).
+    Why a window: with σ_ψ = 0.3 rad one detection's σ_px (247 px at f = 800) is so large that a
+    per-step test cannot fire while the target is in the image (5 σ_px is wider than it), but a
+    bias of 0.7 σ kept over one second of 3 cameras at 40 Hz is far outside the χ² spread. The
+    window empties when it fires, so the re-initialised cloud gets a full window before the next
+    test. This is the one stateful part of the likelihood: one window per filter.
+    """
+
+    def __init__(self, steps: int, alpha: float) -> None:
+        if int(steps) < 1 or not 0.0 < float(alpha) < 1.0:
+            raise ValueError(f"CollapseWindow: need steps >= 1 and 0 < alpha < 1, got {steps}, {alpha}")
+        self.steps, self.alpha = int(steps), float(alpha)
+        self._buf: deque[tuple[float, int]] = deque()
+        self._sq, self._dof = 0.0, 0
+        self._limit: dict[int, float] = {}
+        #: how many times the test fired
+        self.fired = 0
+
+    def push(self, sq: float, dof: int) -> bool:
+        """Add one step's residual sum; whether the full window now rejects (then it empties)."""
+        from scipy.stats import chi2
+
+        self._buf.append((float(sq), int(dof)))
+        self._sq += float(sq)
+        self._dof += int(dof)
+        if len(self._buf) > self.steps:
+            old_sq, old_dof = self._buf.popleft()
+            self._sq -= old_sq
+            self._dof -= old_dof
+        if len(self._buf) < self.steps:
+            return False
+        lim = self._limit.get(self._dof)
+        if lim is None:
+            lim = self._limit[self._dof] = float(chi2.isf(self.alpha, self._dof))
+        if self._sq > lim:
+            self.clear()
+            self.fired += 1
+            return True
+        return False
+
+    def __len__(self) -> int:
+        """The steps the window holds now."""
+        return len(self._buf)
+
+    def clear(self) -> None:
+        self._buf.clear()
+        self._sq, self._dof = 0.0, 0
+
+
 @dataclass(frozen=True)
 class CameraLikelihood:
     """The PF core's ``Likelihood`` for packed camera rows (module docstring), product over observers.
@@ -476,6 +539,9 @@ class CameraLikelihood:
         intersection when the max log-likelihood collapses"): the step collapses when even the
         best particle's RMS normalised pixel residual exceeds this many σ_px. None: only the
         all-zero-weight guard re-initialises.
+    window : CollapseWindow or None
+        The same collapse judged over a window of steps (:class:`CollapseWindow`); either test
+        firing re-initialises.
     """
 
     camera: PinholeCamera
@@ -484,6 +550,7 @@ class CameraLikelihood:
     ground_d: float = 0.0
     reinit_sigma_m: float = 10.0
     collapse_sigma: float | None = None
+    window: CollapseWindow | None = None
 
     def __call__(self, x: F64, z: F64) -> F64:
         return camera_loglik(x, z, self.camera, pos_index=self.pos_index, d_index=self.d_index,
@@ -497,10 +564,10 @@ class CameraLikelihood:
         so the best particle's mean squared residual per image coordinate is
         ``ρ² = −2 (max ℓ − Σ_o [−2 log σ_o − log 2π]) / (2m)``. The step collapses when
         ``ρ > collapse_sigma``: no particle explains the detections (the cloud has lost the
-        target; with σ-sized noise ``ρ`` is near 1). Without detections or without a threshold
-        it never collapses.
+        target; with σ-sized noise ``ρ`` is near 1), or when the :attr:`window` test fires on
+        the step's ``2m ρ²``. Without detections or without either test it never collapses.
         """
-        if self.collapse_sigma is None:
+        if self.collapse_sigma is None and self.window is None:
             return False
         obs = np.asarray(z, dtype=np.float64).reshape(-1, OBS_FIELDS)
         ok = obs[:, 0] > 0.5
@@ -509,10 +576,16 @@ class CameraLikelihood:
             return False
         best = float(np.max(np.asarray(ll, dtype=np.float64)))
         if not np.isfinite(best):
+            if self.window is not None:
+                self.window.clear()
             return True
         const = float(np.sum(-2.0 * np.log(obs[ok, 3]) - np.log(2.0 * np.pi)))
-        rho2 = -2.0 * (best - const) / (2.0 * m)
-        return bool(rho2 > float(self.collapse_sigma) ** 2)
+        sq = -2.0 * (best - const)
+        step = self.collapse_sigma is not None and sq / (2.0 * m) > float(self.collapse_sigma) ** 2
+        if step and self.window is not None:
+            self.window.clear()
+        windowed = self.window is not None and not step and self.window.push(sq, 2 * m)
+        return bool(step or windowed)
 
     def ground_fix(self, z: ArrayLike) -> F64:
         """Mean ground-plane intersection of the step's valid rays (N, E, D); NaN if none points down."""
@@ -534,7 +607,10 @@ class CameraLikelihood:
     def reinit(self, x: F64, z: F64, rng: np.random.Generator) -> F64:
         """Particles re-drawn from the step's detections (:meth:`sample_positions`) plus
         ``N(0, reinit_sigma_m²)`` per horizontal axis; draws without a fix take the mean ground
-        intersection (:meth:`ground_fix`); velocity etc. are kept (digest §13 item 7)."""
+        intersection (:meth:`ground_fix`); velocity etc. are kept (digest §13 item 7). The
+        :attr:`window` empties: its residuals were the old cloud's."""
+        if self.window is not None:
+            self.window.clear()
         out = np.array(x, dtype=np.float64, copy=True)
         p = self.sample_positions(z, len(out), rng)
         g = self.ground_fix(z)

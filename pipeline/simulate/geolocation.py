@@ -38,7 +38,9 @@ Filter: :class:`~pipeline.estimate.pf.ParticleFilter` with the D4 mode models
 :data:`PI_P`), systematic resampling at N_eff < N/3, and the multi-observer
 :class:`~pipeline.estimate.camera.CameraLikelihood`; §6.1 runs CV (COAST) only. After each
 resampling the copies are moved by the regularised PF's Gaussian kernel (digest §13 item 7 asks
-for roughening; ``jitter``, :func:`move_after_resampling`).
+for roughening; ``jitter``, :func:`move_after_resampling`). Optionally (``init.collapse_window_s``,
+off by default) the cloud is re-initialised from the step's rays when the best particle's
+residuals over a window reject it (:class:`~pipeline.estimate.camera.CollapseWindow`).
 
 Metrics (digest §11, D11): ``ε_k = ‖p_k − p̄_k‖`` (3-D), ``η_k = ε_k / mean_u ‖p_k − p^U_{u,k}‖``;
 the summaries drop the first second (the thesis's near-zero-error artifact) and pool time and runs.
@@ -55,7 +57,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..estimate.camera import CameraLikelihood, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
+from ..estimate.camera import CameraLikelihood, CollapseWindow, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
 from ..estimate.markov import retime
 from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfBlocked, PfConstantVelocity, PfDownRandomWalk,
                                driving_mode_models, wrap_angle)
@@ -120,7 +122,8 @@ class GeolocationConfig:
         "stop_sigma_a": 0.05, "accel_sigma_j": 0.5, "coast_sigma_a": 0.3, "turn_sigma_a": 0.3,
         "turn_sigma_omega": 0.05, "down_sigma": 0.2})
     init: Mapping[str, float] = field(default_factory=lambda: {
-        "sigma_pos_m": 10.0, "sigma_vel_mps": 3.0, "sigma_down_m": 5.0, "collapse_sigma": 5.0})
+        "sigma_pos_m": 10.0, "sigma_vel_mps": 3.0, "sigma_down_m": 5.0, "collapse_sigma": 5.0,
+        "collapse_window_s": None, "collapse_alpha": 1e-6})
     observers: Mapping[str, float] = field(default_factory=lambda: {
         "accel_max_mps2": 3.0, "speed_max_mps": 15.0, "orbit_radius_m": 50.0, "orbit_speed_mps": 8.0,
         "stationary_box_m": 100.0, "stationary_height_m": 40.0, "mobile_heights_m": 30.0})
@@ -349,9 +352,12 @@ def make_filter(cfg: GeolocationConfig, *, cv_only: bool, n_particles: int | Non
     nz = dict(cfg.noise)
     down = bool(cfg.estimate_down)
     collapse = cfg.init.get("collapse_sigma")
+    win_s = cfg.init.get("collapse_window_s")
+    window = (CollapseWindow(max(1, int(round(float(win_s) * cfg.rate_hz))), float(cfg.init["collapse_alpha"]))
+              if win_s else None)
     lik = CameraLikelihood(cfg.camera, d_index=GEO_IX_DOWN if down else None,
                            reinit_sigma_m=float(cfg.init["sigma_pos_m"]),
-                           collapse_sigma=None if collapse is None else float(collapse))
+                           collapse_sigma=None if collapse is None else float(collapse), window=window)
     if cv_only:
         cv = PfConstantVelocity(nz["coast_sigma_a"])
         models = [PfDownRandomWalk(cv, nz["down_sigma"]) if down else cv]

@@ -237,6 +237,57 @@ def test_the_filter_reinitialises_from_the_rays_when_the_best_particle_has_lost_
             assert np.allclose(pf.x[:, :2].mean(axis=0), [20.0, 10.0], atol=0.3)
 
 
+def test_the_window_fires_where_the_residual_sum_crosses_the_chi_square_quantile_and_then_empties():
+    from scipy.stats import chi2
+
+    from pipeline.estimate.camera import CollapseWindow
+
+    w = CollapseWindow(4, 1e-3)
+    lim = chi2.isf(1e-3, 4 * 6)                          # four steps of three detections, 6 dof each
+    for _ in range(3):
+        assert not w.push(lim / 4 * 1.01, 6)              # the window is not full yet
+    assert w.push(lim / 4 * 1.01, 6) and w.fired == 1     # full and just above the quantile
+    for _ in range(4):
+        assert not w.push(lim / 4 * 0.99, 6)              # emptied on firing; refilled, just below
+    assert not w.push(lim / 4 * 0.99, 6)                  # the oldest step leaves as one enters
+    # the degrees of freedom follow the detections: one camera for a step lowers the quantile
+    w2 = CollapseWindow(2, 1e-3)
+    assert not w2.push(0.0, 2) and w2.push(chi2.isf(1e-3, 4) * 1.01, 2)
+    with pytest.raises(ValueError, match="steps >= 1 and 0 < alpha < 1"):
+        CollapseWindow(0, 1e-3)
+    # a re-initialisation, whichever test called it, empties the window: those were the old cloud's
+    rng = np.random.default_rng(3)
+    Ts, uv = _scene(rng, 3, sigma=0.0)
+    lik = CameraLikelihood(CAM, window=CollapseWindow(4, 1e-3))
+    lik.window.push(1.0, 6)
+    assert len(lik.window) == 1
+    lik.reinit(np.zeros((10, 7)), pack_detections(uv, 5.0, Ts), rng)
+    assert len(lik.window) == 0
+
+
+def test_a_cloud_a_fraction_of_a_sigma_off_trips_the_window_though_no_single_step_can():
+    from pipeline.estimate.camera import CollapseWindow
+
+    rng = np.random.default_rng(21)
+    sigma = 40.0                                        # px: wide, like the seed-001 bearing noise
+    Ts, uv = _scene(rng, 3, sigma=0.0)                  # noise-free projections of the target
+    x_true = np.array([[20.0, 10.0, 0, 0, 0, 0, 0]])
+    x_off = np.array([[26.0, 10.0, 0, 0, 0, 0, 0]])     # the cloud 6 m north of the target
+    bias = np.abs(CAM.project(x_off[:, [0, 1, 2]] * [1, 1, 0], Ts)[:, 0] - uv) / sigma
+    assert 0.2 < np.sqrt(np.mean(bias ** 2)) < 1.0      # well under a sigma per image coordinate
+    step_only = CameraLikelihood(CAM, collapse_sigma=5.0)
+    fired = {}
+    for name, x in (("true", x_true), ("off", x_off)):
+        lik = CameraLikelihood(CAM, collapse_sigma=5.0, window=CollapseWindow(40, 1e-6))
+        fired[name] = 0
+        for _ in range(400):
+            row = pack_detections(uv + sigma * rng.standard_normal(uv.shape), sigma, Ts)
+            ll = lik(x, row)
+            assert not step_only.collapsed(ll, row)      # the per-step test never trips
+            fired[name] += lik.collapsed(ll, row)
+    assert fired["true"] == 0 and fired["off"] >= 3
+
+
 def test_a_camera_det_observer_without_a_pose_fails_naming_it():
     det = pd.DataFrame({"t_ns": [0, 0], "instance": [1, 2], "u_px": [640.0, 600.0], "v_px": [480.0, 500.0],
                         "sigma_px": [5.0, 5.0], "gimbal_yaw_rad": [0.0, 0.1], "gimbal_pitch_rad": [-0.5, -0.6]})

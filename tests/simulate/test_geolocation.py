@@ -260,7 +260,7 @@ def test_the_regularised_move_spreads_resampled_copies_by_h_squared_times_the_we
 
 
 @pytest.mark.slow
-def test_the_base_run_that_roughening_loses_stays_on_the_target_with_the_regularised_kernel():
+def test_the_base_run_that_roughening_loses_stays_on_the_target_with_the_kernel_or_the_windowed_collapse_test():
     # run 16 of the §6.1 study (seed 20261123): under roughening the 50-particle cloud shrank to
     # ~1 m while moving at -3.4 m/s north against the truth's +1 m/s, the gimbals aimed at the
     # estimate lost the target after 14 s and the run ended 450 m off (README "Particle filters")
@@ -269,12 +269,29 @@ def test_the_base_run_that_roughening_loses_stays_on_the_target_with_the_regular
 
     from pipeline.simulate.geolocation import lost_for_good
 
-    def run(jitter):
-        cfg = dataclasses.replace(CFG, jitter=jitter)
+    def run(jitter, window_s):
+        cfg = dataclasses.replace(CFG, jitter=jitter, init={**CFG.init, "collapse_window_s": window_s})
         return run_once("base", cfg, np.random.default_rng([20261123, zlib.crc32(b"base"), 16]), duration_s=120.0)
 
-    rough, kern = run("roughening"), run("regularised")
+    # the kernel alone (the windowed collapse test off)
+    rough, kern = run("roughening", 0), run("regularised", 0)
     keep = rough.t_s >= 1.0
     assert lost_for_good(rough) and np.nanmean(rough.eta[keep]) > 1.0
-    assert not lost_for_good(kern) and np.all(kern.n_detect == 3)
+    assert not lost_for_good(kern) and np.all(kern.n_detect == 3) and kern.n_reinit == 0
     assert np.nanmean(kern.eta[keep]) < 0.10
+    # the windowed collapse test alone re-initialises the roughened cloud before the cameras lose it
+    caught = run("roughening", 1.0)
+    assert caught.n_reinit >= 1 and not lost_for_good(caught)
+
+
+def test_the_windowed_collapse_test_is_off_by_default_and_one_second_is_forty_steps_when_on():
+    assert make_filter(CFG, cv_only=True, rng=np.random.default_rng(0)).likelihood.window is None
+    on = GeolocationConfig.from_config({"init": {"collapse_window_s": 1.0}})
+    lik = make_filter(on, cv_only=True, rng=np.random.default_rng(0)).likelihood
+    assert lik.window is not None and lik.window.steps == 40 and lik.window.alpha == 1e-6
+    assert lik.collapse_sigma == 5.0
+    off = GeolocationConfig.from_config({"init": {"collapse_window_s": 0}})
+    assert make_filter(off, cv_only=True, rng=np.random.default_rng(0)).likelihood.window is None
+    # a window per filter: two filters never share their running sums
+    other = make_filter(on, cv_only=True, rng=np.random.default_rng(0)).likelihood
+    assert other.window is not lik.window

@@ -458,7 +458,7 @@ def camera_loglik_per_observer(x: ArrayLike, row: ArrayLike, camera: PinholeCame
 
 
 class CollapseWindow:
-    """A χ² test of the best particle's pixel residuals over the last ``steps`` steps with
+    r"""A χ² test of the best particle's pixel residuals over the last ``steps`` steps with
     detections (digest 001 §13 item 7, "re-init … when the max log-likelihood collapses").
 
     Each step with detections pushes the best particle's squared normalised residual sum

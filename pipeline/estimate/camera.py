@@ -470,10 +470,13 @@ class CollapseWindow:
         \sum_{k \in W} \sum_o r_{k,o}^2 > \chi^2_{1-\alpha}\Big(\sum_{k \in W} 2 m_k\Big),
 
     the upper-α quantile of the χ² law the sum would follow if the cloud held the target (the
-    best particle's residual is at most the truth's, so α bounds the false alarms per window).
+    best particle's residual is at most the truth's). α is the false-alarm probability of one
+    test; once the window is full it is tested at every step, over overlapping windows, so the
+    false alarms over one window's length can reach about ``steps·α``.
     Why a window: with σ_ψ = 0.3 rad one detection's σ_px (247 px at f = 800) is so large that a
     per-step test cannot fire while the target is in the image (5 σ_px is wider than it), but a
-    bias of 0.7 σ kept over one second of 3 cameras at 40 Hz is far outside the χ² spread. The
+    bias of one σ per image coordinate kept over one second of 3 cameras at 40 Hz (240 degrees
+    of freedom: a sum near 480 against the α = 1e-6 quantile 359) always fires. The
     window empties when it fires, so the re-initialised cloud gets a full window before the next
     test. This is the one stateful part of the likelihood: one window per filter.
     """

@@ -191,8 +191,8 @@ def regularise(x: ArrayLike, cov: ArrayLike, rng: np.random.Generator, index: Ar
     the number of those components that vary (a component held constant, e.g. the ground plane's
     D, is no dimension of the kernel). Resampled copies of one particle separate again with the
     posterior's own shape and scale, so a small cloud keeps the spread the weights gave it
-    instead of shrinking at every resampling (sample impoverishment). ``D`` is the symmetric
-    square root (eigenvalues clipped at 0), which exists for a singular ``S`` too.
+    instead of shrinking at every resampling (sample impoverishment). ``D = V Λ^{1/2}`` from
+    ``S = V Λ Vᵀ`` (eigenvalues clipped at 0), a square root that exists for a singular ``S`` too.
 
     Parameters
     ----------

@@ -151,7 +151,13 @@ class GeolocationConfig:
                 raise ValueError(f"estimate.pf.geolocation.jitter: {v!r} is not one of {', '.join(JITTERS)}")
             else:
                 kw[k] = v
-        return cls(**{**{k: getattr(d, k) for k in known}, **kw})
+        out = cls(**{**{k: getattr(d, k) for k in known}, **kw})
+        win, alpha = out.init.get("collapse_window_s"), out.init.get("collapse_alpha")
+        if win is not None and not (isinstance(win, (int, float)) and not isinstance(win, bool) and win >= 0):
+            raise ValueError(f"estimate.pf.geolocation.init.collapse_window_s: {win!r} is not null or a number >= 0")
+        if not (isinstance(alpha, (int, float)) and not isinstance(alpha, bool) and 0.0 < alpha < 1.0):
+            raise ValueError(f"estimate.pf.geolocation.init.collapse_alpha: {alpha!r} is not a number in (0, 1)")
+        return out
 
     @property
     def camera(self) -> PinholeCamera:
@@ -409,13 +415,21 @@ def move_after_resampling(pf: ParticleFilter, jitter: str, cov: F64, roughening:
     ~2 m and ~0.6 m/s of a Kalman filter with the same CV noise and detections), and a cloud that
     narrow cannot follow the evidence; roughening scales with that shrunken range. The kernel
     keeps the spread the weights gave the cloud.
+
+    Particles in STOP (the five-mode filter) keep v = 0: the mode holds them at rest (digest D4),
+    and a jittered velocity would overwrite the heading they stopped with, along which a later
+    ACCEL leaves (digest §7).
     """
+    if jitter not in JITTERS:
+        raise ValueError(f"geolocation: unknown jitter {jitter!r}; expected one of {', '.join(JITTERS)}")
+    v_stop = pf.x[:, 2:4].copy() if pf.K == len(DRIVING_MODES) else None
     if jitter == "regularised":
         pf.x = regularise(pf.x, cov, pf.rng, ROUGHEN_INDEX)
     elif jitter == "roughening":
         roughen(pf, roughening)
-    elif jitter != "none":
-        raise ValueError(f"geolocation: unknown jitter {jitter!r}; expected one of {', '.join(JITTERS)}")
+    if v_stop is not None:
+        rest = pf.mode == STOP
+        pf.x[rest, 2:4] = v_stop[rest]
 
 
 def init_filter(pf: ParticleFilter, row: F64, cfg: GeolocationConfig, fallback: F64) -> None:

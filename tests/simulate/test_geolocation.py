@@ -253,8 +253,10 @@ def test_the_regularised_move_spreads_resampled_copies_by_h_squared_times_the_we
     pf.init(np.zeros((n, 9)))
     move_after_resampling(pf, "roughening", cov, 0.2)
     assert np.all(pf.x == 0.0)
+    spread = np.random.default_rng(6).normal(size=(n, 9)) * (np.arange(9) < 4)
+    pf.init(spread)
     move_after_resampling(pf, "none", cov, 0.2)
-    assert np.all(pf.x == 0.0)
+    assert np.array_equal(pf.x, spread)
     with pytest.raises(ValueError, match="unknown jitter"):
         move_after_resampling(pf, "kernel", cov, 0.2)
 
@@ -292,6 +294,36 @@ def test_the_windowed_collapse_test_is_off_by_default_and_one_second_is_forty_st
     assert lik.collapse_sigma == 5.0
     off = GeolocationConfig.from_config({"init": {"collapse_window_s": 0}})
     assert make_filter(off, cv_only=True, rng=np.random.default_rng(0)).likelihood.window is None
+    for bad, key in (({"collapse_window_s": -1}, "collapse_window_s"), ({"collapse_alpha": None}, "collapse_alpha"),
+                     ({"collapse_alpha": 2}, "collapse_alpha")):
+        with pytest.raises(ValueError, match=f"geolocation.init.{key}: "):
+            GeolocationConfig.from_config({"init": bad})
     # a window per filter: two filters never share their running sums
     other = make_filter(on, cv_only=True, rng=np.random.default_rng(0)).likelihood
     assert other.window is not lik.window
+
+
+def test_stopped_particles_keep_their_rest_and_heading_through_the_kernel_move():
+    from pipeline.simulate.geolocation import move_after_resampling
+
+    n = 2000
+    pf = make_filter(CFG, cv_only=False, n_particles=n, rng=np.random.default_rng(8))
+    x0 = np.zeros((n, 9))
+    x0[:, 2] = 5.0                                            # moving north...
+    x0[:, 8] = 1.2                                            # ...and a remembered rest heading
+    pf.init(x0)
+    pf.mode[:] = COAST
+    pf.mode[: n // 2] = STOP
+    x0[: n // 2, 2] = 0.0                                     # STOP holds v = 0 (digest D4)
+    pf.x = x0.copy()
+    cov = np.zeros((9, 9))
+    cov[:4, :4] = np.eye(4)
+    move_after_resampling(pf, "regularised", cov, 0.2)
+    rest = pf.mode == STOP
+    assert np.all(pf.x[rest, 2:4] == 0.0) and np.all(pf.x[:, 8] == 1.2)
+    assert pf.x[~rest, 2:4].std(axis=0).min() > 0.3 and pf.x[rest, 0:2].std(axis=0).min() > 0.3
+    # the CV-only filter has no STOP: its one mode (index 0) is COAST and moves
+    cv = make_filter(CFG, cv_only=True, n_particles=n, rng=np.random.default_rng(9))
+    cv.init(np.zeros((n, 9)))
+    move_after_resampling(cv, "regularised", cov, 0.2)
+    assert cv.x[:, 2:4].std(axis=0).min() > 0.3

@@ -578,17 +578,16 @@ class CameraLikelihood:
         if m == 0:
             return False
         best = float(np.max(np.asarray(ll, dtype=np.float64)))
-        if not np.isfinite(best):
-            if self.window is not None:
-                self.window.clear()
-            return True
-        const = float(np.sum(-2.0 * np.log(obs[ok, 3]) - np.log(2.0 * np.pi)))
-        sq = -2.0 * (best - const)
-        step = self.collapse_sigma is not None and sq / (2.0 * m) > float(self.collapse_sigma) ** 2
-        if step and self.window is not None:
-            self.window.clear()
-        windowed = self.window is not None and not step and self.window.push(sq, 2 * m)
-        return bool(step or windowed)
+        if np.isfinite(best):
+            const = float(np.sum(-2.0 * np.log(obs[ok, 3]) - np.log(2.0 * np.pi)))
+            sq = -2.0 * (best - const)
+            fired = ((self.collapse_sigma is not None and sq / (2.0 * m) > float(self.collapse_sigma) ** 2)
+                     or (self.window is not None and self.window.push(sq, 2 * m)))
+        else:
+            fired = True
+        if fired and self.window is not None:
+            self.window.clear()     # its residuals were the lost cloud's
+        return bool(fired)
 
     def ground_fix(self, z: ArrayLike) -> F64:
         """Mean ground-plane intersection of the step's valid rays (N, E, D); NaN if none points down."""

@@ -527,9 +527,9 @@ def _scan_ros1(path: Path, why: str, cfg: rc.RosConfig, progress: Progress | Non
     if n_msgs == 0:
         raise IngestError(path, f"unreadable ROS 1 bag ({why}); no messages in it")
     warnings.insert(0, f"{why}; read sequentially without the index")
-    rc.warn_configured_topics_absent([(t, typ, 0) for t, typ, _d in conns.values()], cfg, warnings)
-    routes, unmapped = rc.plan_topics([(t, typ, counts.get(c, 0)) for c, (t, typ, _d) in conns.items()],
-                                      cfg, path, rc.defined_fields((typ, "msg", d) for t, typ, d in conns.values()))
+    listed = [(t, typ, counts.get(c, 0)) for c, (t, typ, _d) in conns.items()]
+    rc.warn_configured_topics_absent(listed, cfg, warnings)
+    routes, unmapped = rc.plan_topics(listed, cfg, path, rc.defined_fields((typ, "msg", d) for t, typ, d in conns.values()))
     defs = [(typ, "msg", d) for c, (t, typ, d) in conns.items() if t in routes]
     store, errs = rc.make_typestore(defs, "ROS1_NOETIC", {r.msgtype for r in routes.values()})
     for t, e in errs.items():

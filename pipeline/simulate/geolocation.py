@@ -57,6 +57,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from ..config import validate_section
 from ..estimate.camera import CameraLikelihood, CollapseWindow, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
 from ..estimate.markov import retime
 from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfBlocked, PfConstantVelocity, PfDownRandomWalk,
@@ -130,34 +131,18 @@ class GeolocationConfig:
 
     @classmethod
     def from_config(cls, sec: Mapping[str, Any] | None) -> "GeolocationConfig":
-        sec = dict(sec or {})
-        d = cls()
-        known = set(cls.__dataclass_fields__)
-        bad = sorted(set(sec) - known)
-        if bad:
-            raise ValueError(f"estimate.pf.geolocation: unknown key(s) {bad}")
+        """The section validated and defaulted by the config schema (``estimate.pf.geolocation``:
+        an unknown key or a bad value fails with one line naming it)."""
+        sec = validate_section("estimate.pf.geolocation", sec)
         kw: dict[str, Any] = {}
         for k, v in sec.items():
             if k in ("noise", "init", "observers"):
-                base = dict(getattr(d, k))
-                extra = sorted(set(v or {}) - set(base))
-                if extra:
-                    raise ValueError(f"estimate.pf.geolocation.{k}: unknown key(s) {extra}")
-                base.update(v or {})
-                kw[k] = base
+                kw[k] = dict(v)
             elif k in ("image_px", "accel_mps2", "omega_radps"):
                 kw[k] = tuple(v)
-            elif k == "jitter" and v not in JITTERS:
-                raise ValueError(f"estimate.pf.geolocation.jitter: {v!r} is not one of {', '.join(JITTERS)}")
             else:
                 kw[k] = v
-        out = cls(**{**{k: getattr(d, k) for k in known}, **kw})
-        win, alpha = out.init.get("collapse_window_s"), out.init.get("collapse_alpha")
-        if win is not None and not (isinstance(win, (int, float)) and not isinstance(win, bool) and win >= 0):
-            raise ValueError(f"estimate.pf.geolocation.init.collapse_window_s: {win!r} is not null or a number >= 0")
-        if not (isinstance(alpha, (int, float)) and not isinstance(alpha, bool) and 0.0 < alpha < 1.0):
-            raise ValueError(f"estimate.pf.geolocation.init.collapse_alpha: {alpha!r} is not a number in (0, 1)")
-        return out
+        return cls(**kw)
 
     @property
     def camera(self) -> PinholeCamera:

@@ -34,7 +34,7 @@ def test_the_sigma_px_comes_from_the_bearing_error_and_the_metadata_holds_every_
                 "threshold", "roughening"):
         assert key in meta
     assert np.isclose(meta["threshold"], 1 / 3) and meta["observers"]["accel_max_mps2"] == 3.0
-    with pytest.raises(ValueError, match="geolocation.noise: unknown key"):
+    with pytest.raises(ValueError, match="geolocation.noise.sigma: unknown key"):
         GeolocationConfig.from_config({"noise": {"sigma": 1.0}})
 
 

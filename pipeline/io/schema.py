@@ -36,7 +36,10 @@ import pyarrow as pa
 #: table changed.
 #: 1.6.0 (minor): ``local_position`` gains ``reset_count`` (the estimator's reset counters, so a
 #: reset's step is not read as motion); every 1.5.0 column is unchanged.
-SCHEMA_VERSION = "1.6.0"
+#: 1.7.0 (minor): study table ``pf_geo_summary`` gains the observer-distance shares
+#: ``dist_lt_50_pct``, ``dist_60_80_pct``, ``dist_gt_80_pct`` (thesis 001 Fig. 6.11); every
+#: 1.6.0 column is unchanged.
+SCHEMA_VERSION = "1.7.0"
 
 #: Number of RC input / servo output channels carried by the ``control`` stream.
 N_RC = 18
@@ -1712,6 +1715,9 @@ _STUDY_TABLES_B: dict[str, tuple[Column, ...]] = {
         _f("eta_pct", "%", "", "mean percent error 100 eps_k / mean observer distance"),
         _f("median_eps_m", "m", "", "median 3-D error pooled over time and runs"),
         _f("mean_dist_m", "m", "", "mean observer-target distance"),
+        _f("dist_lt_50_pct", "%", "", "share of time the mean observer-target distance is below 50 m"),
+        _f("dist_60_80_pct", "%", "", "share of time the mean observer-target distance is within 60-80 m"),
+        _f("dist_gt_80_pct", "%", "", "share of time the mean observer-target distance is above 80 m"),
         Column("n_runs", "int64", "1", "", "runs"),
         Column("n_reinit", "int64", "1", "", "filter re-initialisations summed over runs"),
         _f("median_run_eta_pct", "%", "", "median over runs of each run's mean eta%"),

@@ -126,6 +126,11 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
                      f"eta% of the {name} setup over the runs not lost (diagnosis; the target is geo_eta_pct_{name})"))
         rows.append((f"geo_eta_pct_{name}_run_median", round(s["median_run_eta_pct"], 2),
                      f"median over runs of each run's mean eta%, {name} (diagnosis)"))
+    rows.append(("geo_mobile_dist_60_80_pct", round(mob["dist_60_80_pct"], 1),
+                 "§6.3 setup: share of time (%) the mean observer-target distance is within 60-80 m (thesis "
+                 "Fig. 6.11: 'For the majority of the runs, the UAVs maintain a distance to the target between "
+                 f"60-80 meters'); below 50 m {mob['dist_lt_50_pct']:.1f} %, above 80 m {mob['dist_gt_80_pct']:.1f} % "
+                 "(thesis: above 80 m while approaching at the start, very little below 50 m)"))
     for name, s in (("base", base), ("maneuvering", man)):
         rows.append((f"geo_eta_{name}_met", int(s["eta_pct"] <= ETA_LIMIT_PCT), f"eta% <= {ETA_LIMIT_PCT:g} % in the {name} setup"))
     for n, e in eps_n.items():

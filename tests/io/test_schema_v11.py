@@ -12,8 +12,9 @@ from pipeline.io.base import FlightLog
 def test_schema_version_is_a_minor_bump_of_1_0():
     major, minor, _ = (int(x) for x in schema.SCHEMA_VERSION.split("."))
     # 1.1: these streams; 1.2.0: bearing (issue 16); 1.3.0: estimator_status; 1.4.0: study tables;
-    # 1.5.0: seed000_ekf study columns renamed with their unit; 1.6.0: local_position reset_count
-    assert (major, minor) == (1, 6)
+    # 1.5.0: seed000_ekf study columns renamed with their unit; 1.6.0: local_position reset_count;
+    # 1.7.0: pf_geo_summary observer-distance shares
+    assert (major, minor) == (1, 7)
 
 
 def test_new_streams_are_canonical_streams_with_common_columns_first():

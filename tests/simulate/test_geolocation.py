@@ -112,6 +112,25 @@ def test_stationary_observers_follow_the_thesis_setup_and_mobile_ones_hold_heigh
     assert np.allclose(r, 50.0, atol=5.0) and np.allclose(mob.pos[:, 2], [-30.0, -40.0, -50.0])
 
 
+def test_mobile_observers_keep_orbit_range_of_a_target_at_the_80_kmh_cap_and_trail_it_without_feedforward():
+    # thesis §6.3 (Fig. 6.11): "the UAVs maintain a distance to the target between 60-80 meters";
+    # the reference rides on the target, whose estimated velocity the thesis assumes known (§4.4.2)
+    def horizontal_range_after(cfg: GeolocationConfig) -> np.ndarray:
+        mob = mobile_observers(3, np.zeros(3), cfg, np.random.default_rng(5))
+        v = np.array([22.2, 0.0, 0.0])
+        tgt = np.zeros(3)
+        dt = 0.025
+        for _ in range(int(120 / dt)):
+            tgt = tgt + v * dt
+            observers_step(mob, tgt, dt, cfg, v[:2])
+        return np.hypot(*(mob.pos[:, :2] - tgt[None, :2]).T)
+
+    held = horizontal_range_after(CFG)
+    assert np.all(held < 50.0 + 15.0), held
+    slack = GeolocationConfig.from_config({"observers": {"feedforward": False, "speed_max_mps": 15.0}})
+    assert np.all(horizontal_range_after(slack) > 500.0)     # 7.2 m/s slower for 2 minutes
+
+
 def test_detections_need_the_target_in_the_image():
     rng = np.random.default_rng(4)
     ob = stationary_observers(2, CFG, rng)

@@ -1,4 +1,6 @@
-"""Particle resampling: systematic, stratified, multinomial and residual; the effective sample size.
+"""Particle resampling: systematic, stratified, multinomial and residual; the effective sample
+size; the moves after resampling that separate the copies again (:func:`regularise`, the
+regularised PF's kernel, and :func:`roughen`, Gordon's roughening).
 
 Every scheme maps normalised weights ``w`` (shape (N,)) to ``N`` ancestor indices drawn so that
 the expected number of copies of particle ``i`` is ``N w_i`` (unbiased resampling). They differ
@@ -158,6 +160,44 @@ def effective_sample_size(w: ArrayLike) -> float:
 def copies(indices: ArrayLike, n: int) -> I64:
     """How many times each of ``n`` particles was drawn (``bincount`` of the ancestor indices)."""
     return np.bincount(np.asarray(indices, dtype=np.int64), minlength=n)
+
+
+def roughen(x: ArrayLike, K: float, rng: np.random.Generator, index: ArrayLike | None = None) -> F64:
+    """Roughening after resampling (Gordon, Salmond & Smith 1993; digest 001 §13 item 7).
+
+    .. math::
+
+        x^i_j \\leftarrow x^i_j + \\sigma_j \\varepsilon^i_j, \\qquad
+        \\sigma_j = K E_j N^{-1/d}, \\quad \\varepsilon^i_j \\sim \\mathcal N(0, 1),
+
+    ``E_j`` the particles' range in component ``j`` of ``index`` and ``d`` the number of those
+    components that vary (``E_j > 0``): resampled copies of one particle separate again. A
+    component held constant (the ground plane's D) is no dimension of the state being roughened
+    (the first version counted it, d = 5 instead of 4). ``K <= 0`` or no varying component: a copy
+    of ``x``.
+
+    Parameters
+    ----------
+    x : (N, n) array
+        Resampled particles; not modified.
+    K : float
+        Gordon's tuning constant (0.2 in their paper).
+    rng : numpy.random.Generator
+    index : sequence of int, optional
+        The components to roughen (default all).
+    """
+    out = np.array(x, dtype=np.float64, copy=True)
+    if K <= 0:
+        return out
+    idx = np.arange(out.shape[1]) if index is None else np.asarray(index, dtype=np.int64)
+    X = out[:, idx]
+    E = X.max(axis=0) - X.min(axis=0)
+    d = int(np.count_nonzero(E > 0))
+    if d == 0:
+        return out
+    sig = K * E * out.shape[0] ** (-1.0 / d)
+    out[:, idx] = X + sig[None, :] * rng.standard_normal(X.shape)
+    return out
 
 
 def regularisation_bandwidth(n: int, d: int) -> float:

@@ -67,7 +67,7 @@ from ..estimate.markov import retime
 from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfBlocked, PfConstantVelocity, PfDownRandomWalk,
                                driving_mode_models, wrap_angle)
 from ..estimate.pf import ParticleFilter
-from ..estimate.resample import regularise
+from ..estimate.resample import regularise, roughen
 
 F64 = NDArray[np.float64]
 
@@ -386,32 +386,11 @@ def make_filter(cfg: GeolocationConfig, *, cv_only: bool, n_particles: int | Non
 ROUGHEN_INDEX = (0, 1, 2, 3, GEO_IX_DOWN)
 
 
-def roughen(pf: ParticleFilter, K: float) -> None:
-    """Roughening after resampling (Gordon, Salmond & Smith 1993; digest 001 §13 item 7).
-
-    Each component ``j`` of :data:`ROUGHEN_INDEX` gets ``N(0, (K E_j N^{−1/d})²)`` jitter, ``E_j``
-    the particles' range in it and ``d`` the number of roughened components: resampled copies
-    of one particle separate again, which the small 40 Hz process noise alone does not do.
-    ``d`` counts the components that vary (``E_j > 0``): D on the ground plane (not estimated,
-    digest D7) is constant and is not a dimension of the state being roughened (the first
-    version counted it, d = 5 instead of 4).
-    """
-    if K <= 0:
-        return
-    idx = list(ROUGHEN_INDEX)
-    X = pf.x[:, idx]
-    E = X.max(axis=0) - X.min(axis=0)
-    d = int(np.count_nonzero(E > 0))
-    if d == 0:
-        return
-    sig = K * E * pf.N ** (-1.0 / d)
-    pf.x[:, idx] = X + sig[None, :] * pf.rng.standard_normal(X.shape)
-
-
 def move_after_resampling(pf: ParticleFilter, jitter: str, cov: F64, roughening: float) -> None:
     """Separate the resampled copies again (digest 001 §13 item 7): ``jitter`` is ``regularised``
     (:func:`~pipeline.estimate.resample.regularise` over :data:`ROUGHEN_INDEX` with ``cov``, the
-    weighted covariance before resampling), ``roughening`` (:func:`roughen` with K =
+    weighted covariance before resampling), ``roughening``
+    (:func:`~pipeline.estimate.resample.roughen` over the same components with K =
     ``roughening``) or ``none``.
 
     Why the kernel is the default: with N = 50 at 40 Hz the resampled cloud shrank far below the
@@ -431,7 +410,7 @@ def move_after_resampling(pf: ParticleFilter, jitter: str, cov: F64, roughening:
     if jitter == "regularised":
         pf.x = regularise(pf.x, cov, pf.rng, ROUGHEN_INDEX)
     elif jitter == "roughening":
-        roughen(pf, roughening)
+        pf.x = roughen(pf.x, roughening, pf.rng, ROUGHEN_INDEX)
     if v_stop is not None:
         rest = pf.mode == STOP
         pf.x[rest, 2:4] = v_stop[rest]

@@ -233,18 +233,21 @@ def test_a_stopped_particle_accelerates_along_the_heading_it_stopped_with():
 
 
 def test_roughening_counts_only_the_components_that_vary_as_its_dimension():
-    from pipeline.simulate.geolocation import roughen
+    from pipeline.estimate.resample import roughen
+    from pipeline.simulate.geolocation import ROUGHEN_INDEX, move_after_resampling
 
     pf = make_filter(CFG, cv_only=True, n_particles=10000, rng=np.random.default_rng(3))
     x0 = np.zeros((10000, 9))
     x0[:, :4] = np.random.default_rng(4).uniform(0, 1, (10000, 4))      # D stays 0 (ground plane)
     pf.init(x0)
     E = x0[:, :4].max(axis=0) - x0[:, :4].min(axis=0)
-    roughen(pf, 0.2)
+    move_after_resampling(pf, "roughening", np.eye(9), 0.2)
     jitter = (pf.x[:, :4] - x0[:, :4]).std(axis=0)
     # Gordon, Salmond & Smith (1993): σ_j = K E_j N^(−1/d), d = 4 varying components here
     assert np.allclose(jitter, 0.2 * E * 10000 ** (-1 / 4), rtol=0.03)
     assert np.all(pf.x[:, 7] == 0.0)
+    # the function leaves its input alone, and K = 0 moves nothing
+    assert np.array_equal(roughen(x0, 0.0, np.random.default_rng(0), ROUGHEN_INDEX), x0)
 
 
 def test_the_jitter_after_resampling_is_a_checked_config_choice_written_to_the_metadata():

@@ -131,6 +131,21 @@ def test_mobile_observers_keep_orbit_range_of_a_target_at_the_80_kmh_cap_and_tra
     assert np.all(horizontal_range_after(slack) > 500.0)     # 7.2 m/s slower for 2 minutes
 
 
+def test_summarise_gives_the_shares_of_time_by_observer_distance_of_thesis_fig_6_11():
+    from pipeline.simulate.geolocation import RunResult, summarise
+
+    def run(dist):
+        T = len(dist)
+        z = np.zeros(T)
+        return RunResult(np.arange(T) * 1.0, np.zeros((T, 3)), np.zeros((T, 3)), z + 1.0, np.asarray(dist, float),
+                         z + 0.01, z + 50.0, np.ones((T, 1)), np.zeros(T, np.int64), z, z, np.ones(T, np.int64), 0)
+
+    # the first second is skipped; then 40 | 55 | 60, 70, 80 | 81, 200 (m) over two runs
+    s = summarise([run([999.0, 40.0, 55.0, 60.0, 70.0]), run([999.0, 80.0, 81.0, 200.0, np.nan])])
+    assert np.isclose(s["dist_lt_50_pct"], 100 * 1 / 7) and np.isclose(s["dist_60_80_pct"], 100 * 3 / 7)
+    assert np.isclose(s["dist_gt_80_pct"], 100 * 2 / 7)
+
+
 def test_detections_need_the_target_in_the_image():
     rng = np.random.default_rng(4)
     ob = stationary_observers(2, CFG, rng)

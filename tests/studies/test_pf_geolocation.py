@@ -21,7 +21,7 @@ def test_the_tiny_geolocation_study_returns_its_tables_rows_and_panels():
     assert np.all(np.isfinite(summ["eps_m"])) and np.all(summ["eps_m"] >= 0)
     names = [r[0] for r in rows]
     for n in ("geo_eta_pct_base", "geo_eta_pct_maneuvering", "geo_eta_base_met", "geo_obs_1_to_2_met",
-              "geo_particles_10_vs_80_met", "geo_bound_pct", "geo_sigma_px"):
+              "geo_particles_10_vs_80_met", "geo_bound_pct", "geo_sigma_px", "geo_mobile_dist_60_80_pct"):
         assert n in names
     assert all(isinstance(d, str) and d for _, _, d in rows)
     assert all(v in (0, 1) for n, v, _ in rows if n.endswith("_met"))

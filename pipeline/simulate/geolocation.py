@@ -129,7 +129,7 @@ class GeolocationConfig:
     init: Mapping[str, float] = field(default_factory=lambda: {
         "sigma_pos_m": 10.0, "sigma_vel_mps": 3.0, "sigma_down_m": 5.0, "collapse_sigma": 5.0,
         "collapse_window_s": None, "collapse_alpha": 1e-6})
-    observers: Mapping[str, float] = field(default_factory=lambda: {
+    observers: Mapping[str, Any] = field(default_factory=lambda: {
         "accel_max_mps2": 3.0, "speed_max_mps": None, "feedforward": True, "orbit_radius_m": 50.0,
         "orbit_speed_mps": 8.0,
         "stationary_box_m": 100.0, "stationary_height_m": 40.0, "mobile_heights_m": 30.0})
@@ -302,8 +302,10 @@ def observers_step(ob: Observers, target_est: F64, dt: float, cfg: GeolocationCo
     tracks that moving reference. Here the commanded velocity is the reference's velocity plus an
     approach along the remaining offset at the speed that can still brake to it,
     ``√(2 a_m ‖e_p‖)`` (4.54's braking distance ``r_d = ‖v‖²/(2a_m)``), and the change of velocity
-    per step is limited by ``a_m``. The thesis limits only the acceleration; ``speed_max_mps``
-    (default none) optionally caps the commanded speed.
+    per step is limited by ``a_m``. With ``observers.feedforward`` false ``target_vel`` is
+    ignored (the first version: the reference approached as if it stood still). The thesis
+    limits only the acceleration; ``speed_max_mps`` (default none) optionally caps the commanded
+    speed.
     """
     if not ob.mobile:
         return
@@ -319,7 +321,7 @@ def observers_step(ob: Observers, target_est: F64, dt: float, cfg: GeolocationCo
     approach = np.sqrt(2.0 * am * dist)
     with np.errstate(invalid="ignore", divide="ignore"):
         vd = np.where(dist[:, None] > 1e-9, d / np.maximum(dist, 1e-9)[:, None] * approach[:, None], 0.0)
-    if target_vel is not None and np.all(np.isfinite(np.asarray(target_vel)[:2])):
+    if c["feedforward"] and target_vel is not None and np.all(np.isfinite(np.asarray(target_vel)[:2])):
         vd = vd + np.asarray(target_vel, dtype=np.float64)[None, :2]
     if vmax is not None:
         sp = np.hypot(vd[:, 0], vd[:, 1])
@@ -494,7 +496,7 @@ def run_once(scenario: str, cfg: GeolocationConfig, rng: np.random.Generator, *,
     for k in range(T):
         if k > 0:
             target_step(tgt, dt, Pi_d, cfg, g_target)
-            observers_step(ob, aim, dt, cfg, aim_vel if cfg.observers["feedforward"] else None)
+            observers_step(ob, aim, dt, cfg, aim_vel)
         Twc = observer_poses(ob, aim)
         uv = detect(tgt.pos, Twc, cfg, g_pix)
         row = pack_detections(uv, cfg.sigma_px, Twc)
@@ -520,7 +522,8 @@ def run_once(scenario: str, cfg: GeolocationConfig, rng: np.random.Generator, *,
         out["dist"][k] = float(np.mean(np.linalg.norm(ob.pos - tgt.pos[None, :], axis=1)))
         out["neff"][k] = s.neff
         aim = np.array([p[0], p[1], 0.0]) if np.all(np.isfinite(p)) else tgt.pos.copy()
-        aim_vel = np.asarray(s.mean[2:4], dtype=np.float64) if np.all(np.isfinite(s.mean[2:4])) else np.zeros(2)
+        aim_vel = (np.asarray(s.mean[2:4], dtype=np.float64) if np.all(np.isfinite(s.mean[2:4]))
+                   else tgt.vel[:2].copy())
     return RunResult(np.arange(T) * dt, truth, est, out["err"], out["dist"], out["err"] / out["dist"], out["neff"],
                      mode_p, tmode, out["step"], out["wt"], ndet, int(pf.n_reinit))
 

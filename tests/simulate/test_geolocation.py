@@ -115,7 +115,8 @@ def test_stationary_observers_follow_the_thesis_setup_and_mobile_ones_hold_heigh
 def test_mobile_observers_keep_orbit_range_of_a_target_at_the_80_kmh_cap_and_trail_it_without_feedforward():
     # thesis §6.3 (Fig. 6.11): "the UAVs maintain a distance to the target between 60-80 meters";
     # the reference rides on the target, whose estimated velocity the thesis assumes known (§4.4.2)
-    def horizontal_range_after(cfg: GeolocationConfig) -> np.ndarray:
+    def horizontal_range_after(observers: dict) -> np.ndarray:
+        cfg = GeolocationConfig.from_config({"observers": observers})
         mob = mobile_observers(3, np.zeros(3), cfg, np.random.default_rng(5))
         v = np.array([22.2, 0.0, 0.0])
         tgt = np.zeros(3)
@@ -125,10 +126,19 @@ def test_mobile_observers_keep_orbit_range_of_a_target_at_the_80_kmh_cap_and_tra
             observers_step(mob, tgt, dt, cfg, v[:2])
         return np.hypot(*(mob.pos[:, :2] - tgt[None, :2]).T)
 
-    held = horizontal_range_after(CFG)
+    held = horizontal_range_after({})
     assert np.all(held < 50.0 + 15.0), held
-    slack = GeolocationConfig.from_config({"observers": {"feedforward": False, "speed_max_mps": 15.0}})
-    assert np.all(horizontal_range_after(slack) > 500.0)     # 7.2 m/s slower for 2 minutes
+    # without the velocity the observer settles where √(2 a_m r) = 22.2 m/s: ~82 m behind its reference
+    trailing = horizontal_range_after({"feedforward": False})
+    assert np.all(trailing > 100.0), trailing
+    # the first version also capped the speed at 15 m/s: 7.2 m/s slower for 2 minutes
+    assert np.all(horizontal_range_after({"feedforward": False, "speed_max_mps": 15.0}) > 500.0)
+    # a cap on the commanded speed holds with feed-forward too
+    mob = mobile_observers(3, np.zeros(3), CFG, np.random.default_rng(5))
+    capped = GeolocationConfig.from_config({"observers": {"speed_max_mps": 15.0}})
+    for _ in range(400):
+        observers_step(mob, np.array([500.0, 0.0, 0.0]), 0.025, capped, np.array([22.2, 0.0]))
+    assert np.all(np.hypot(mob.vel[:, 0], mob.vel[:, 1]) <= 15.0 + 1e-9)
 
 
 def test_summarise_gives_the_shares_of_time_by_observer_distance_of_thesis_fig_6_11():
@@ -263,6 +273,9 @@ def test_roughening_counts_only_the_components_that_vary_as_its_dimension():
     assert np.all(pf.x[:, 7] == 0.0)
     # the function leaves its input alone, and K = 0 moves nothing
     assert np.array_equal(roughen(x0, 0.0, np.random.default_rng(0), ROUGHEN_INDEX), x0)
+    kept = x0.copy()
+    moved = roughen(x0, 0.2, np.random.default_rng(0), ROUGHEN_INDEX)
+    assert np.array_equal(x0, kept) and not np.array_equal(moved, x0)
 
 
 def test_the_jitter_after_resampling_is_a_checked_config_choice_written_to_the_metadata():

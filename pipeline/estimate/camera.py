@@ -493,8 +493,6 @@ class CollapseWindow:
 
     def push(self, sq: float, dof: int) -> bool:
         """Add one step's residual sum; whether the full window now rejects (then it empties)."""
-        from scipy.stats import chi2
-
         self._buf.append((float(sq), int(dof)))
         self._sq += float(sq)
         self._dof += int(dof)
@@ -506,6 +504,8 @@ class CollapseWindow:
             return False
         lim = self._limit.get(self._dof)
         if lim is None:
+            from scipy.stats import chi2     # once per degrees-of-freedom count, not per step
+
             lim = self._limit[self._dof] = float(chi2.isf(self.alpha, self._dof))
         if self._sq > lim:
             self.clear()

@@ -52,6 +52,7 @@ the summaries drop the first second (the thesis's near-zero-error artifact) and 
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -61,7 +62,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from ..config import validate_section
+from ..config import build, cfield, validate_section
 from ..estimate.camera import CameraLikelihood, CollapseWindow, PinholeCamera, camera_to_world, look_at_angles, pack_detections, rot_zyx
 from ..estimate.markov import retime
 from ..estimate.models import (DRIVING_MODES, GEO_IX_DOWN, GEO_IX_HEADING, GEO_STATE, PfBlocked, PfConstantVelocity, PfDownRandomWalk,
@@ -70,6 +71,8 @@ from ..estimate.pf import ParticleFilter
 from ..estimate.resample import regularise, roughen
 
 F64 = NDArray[np.float64]
+
+_g = functools.partial(cfield, "estimate.pf.geolocation")
 
 #: Π_d, the target's mode matrix as printed (Table 3.2; rows 2, 3, 5 sum to 0.999)
 PI_D_PRINTED: F64 = np.array([[0.995, 0.005, 0.000, 0.000, 0.000],
@@ -108,46 +111,31 @@ JITTERS: tuple[str, ...] = ("regularised", "roughening", "none")
 
 @dataclass(frozen=True)
 class GeolocationConfig:
-    """``estimate.pf.geolocation`` (rules/schemas/config.schema.yaml), the values we chose."""
+    """``estimate.pf.geolocation`` (rules/schemas/config.schema.yaml), the values we chose; every
+    default is the schema's (:func:`~pipeline.config.cfield`)."""
 
-    rate_hz: float = 40.0
-    focal_px: float = 800.0
-    image_px: tuple[int, int] = (1280, 960)
-    sigma_psi_rad: float = 0.3
-    n_particles: int = 50
-    threshold: float = 1.0 / 3.0
-    speed_max_mps: float = 80.0 / 3.6
-    accel_mps2: tuple[float, float] = (0.5, 2.0)
-    omega_radps: tuple[float, float] = (0.05, 0.3)
-    min_turn_radius_m: float = 10.0
-    jitter: str = "regularised"
-    roughening: float = 0.2
-    estimate_down: bool = False
-    noise: Mapping[str, float] = field(default_factory=lambda: {
-        "stop_sigma_a": 0.05, "accel_sigma_j": 0.5, "coast_sigma_a": 0.3, "turn_sigma_a": 0.3,
-        "turn_sigma_omega": 0.05, "down_sigma": 0.2})
-    init: Mapping[str, float] = field(default_factory=lambda: {
-        "sigma_pos_m": 10.0, "sigma_vel_mps": 3.0, "sigma_down_m": 5.0, "collapse_sigma": 5.0,
-        "collapse_window_s": None, "collapse_alpha": 1e-6})
-    observers: Mapping[str, Any] = field(default_factory=lambda: {
-        "accel_max_mps2": 3.0, "speed_max_mps": None, "feedforward": True, "orbit_radius_m": 50.0,
-        "orbit_speed_mps": 8.0,
-        "stationary_box_m": 100.0, "stationary_height_m": 40.0, "mobile_heights_m": 30.0})
+    rate_hz: float = _g("rate_hz")
+    focal_px: float = _g("focal_px")
+    image_px: tuple[int, int] = _g("image_px")
+    sigma_psi_rad: float = _g("sigma_psi_rad")
+    n_particles: int = _g("n_particles")
+    threshold: float = _g("threshold")
+    speed_max_mps: float = _g("speed_max_mps")
+    accel_mps2: tuple[float, float] = _g("accel_mps2")
+    omega_radps: tuple[float, float] = _g("omega_radps")
+    min_turn_radius_m: float = _g("min_turn_radius_m")
+    jitter: str = _g("jitter")
+    roughening: float = _g("roughening")
+    estimate_down: bool = _g("estimate_down")
+    noise: Mapping[str, float] = _g("noise")
+    init: Mapping[str, float | None] = _g("init")
+    observers: Mapping[str, Any] = _g("observers")
 
     @classmethod
     def from_config(cls, sec: Mapping[str, Any] | None) -> "GeolocationConfig":
         """The section validated and defaulted by the config schema (``estimate.pf.geolocation``:
         an unknown key or a bad value fails with one line naming it)."""
-        sec = validate_section("estimate.pf.geolocation", sec)
-        kw: dict[str, Any] = {}
-        for k, v in sec.items():
-            if k in ("noise", "init", "observers"):
-                kw[k] = dict(v)
-            elif k in ("image_px", "accel_mps2", "omega_radps"):
-                kw[k] = tuple(v)
-            else:
-                kw[k] = v
-        return cls(**kw)
+        return build(cls, validate_section("estimate.pf.geolocation", sec))
 
     @property
     def camera(self) -> PinholeCamera:

@@ -38,11 +38,13 @@ include: "rules/studies.smk"
 # the end of every run, success or not: flights ok/partial/failed with the reason, skipped
 # manifest rows, model sets, where the report is (pipeline/report/summary.py)
 onsuccess:
-    print(run_summary(FLIGHTS, MODEL_SETS, "results", skipped=SKIPPED), file=sys.stderr)
+    print(run_summary(FLIGHTS, MODEL_SETS, "results", skipped=SKIPPED,
+                      model_inputs=model_set_inputs()), file=sys.stderr)
 
 
 onerror:
-    print(run_summary(FLIGHTS, MODEL_SETS, "results", skipped=SKIPPED), file=sys.stderr)
+    print(run_summary(FLIGHTS, MODEL_SETS, "results", skipped=SKIPPED,
+                      model_inputs=model_set_inputs()), file=sys.stderr)
 
 
 rule all:

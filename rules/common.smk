@@ -1,6 +1,7 @@
 # Helpers shared by all rules: config + manifest validation, flight selection, wildcards, the
 # declared inputs and outputs of every stage.
 import sys
+import types
 
 import numpy as np
 import pandas as pd
@@ -203,6 +204,13 @@ def train_inputs(wildcards):
         "states": [f"results/state/{f}.parquet" for f in fl],
         "segments": [f"results/segments/{f}.parquet" for f in fl],
     }
+
+
+def model_set_inputs():
+    """Model set -> the files its training reads (the end-of-run summary calls a set trained
+    before one of them was rewritten stale)."""
+    return {m: [p for v in train_inputs(types.SimpleNamespace(model_set=m)).values() for p in v]
+            for m in MODEL_SETS}
 
 
 def q2_inputs(wildcards):

@@ -14,7 +14,9 @@ A flight is ``failed`` when its ingest or preprocess failed (the reason of the f
 did) or its preprocess did not finish (its job log but no ``state/<flight>.json``: a crash or
 a kill, which writes no placeholder; a flight not yet preprocessed is judged by its ingest),
 ``partial`` when the ingest decoded only part of the log (bytes skipped, records dropped), ``ok``
-otherwise, and ``not run`` when the run stopped before its ingest wrote ``meta.json``. An
+otherwise, and ``not run`` when the run stopped before its ingest wrote ``meta.json``. A model
+set is ``stale`` when its training data was rewritten after it was trained (a run stopped before
+training again), so the ``ok`` in its ``meta.json`` is an earlier run's. An
 unreadable status file is reported as the flight's reason, never raised: the summary is printed
 after an error too. The report line says whether ``results/index.html`` is current (:func:`index_state`): ``(not written)``, or ``(stale:
 older than <newest input>)`` when an output it is built from was rewritten after it.
@@ -83,20 +85,40 @@ def flight_status(flight: str, results_dir: str | os.PathLike = "results") -> tu
     return "ok", ""
 
 
-def model_set_status(model_set: str, results_dir: str | os.PathLike = "results") -> tuple[str, str]:
-    """``(status, reason)`` of one model set from ``models/<set>/meta.json`` (``not run`` if absent)."""
-    meta, bad = _read_json(Path(results_dir) / "models" / model_set / "meta.json")
+def model_set_status(model_set: str, results_dir: str | os.PathLike = "results",
+                     inputs: Iterable[str | os.PathLike] = ()) -> tuple[str, str]:
+    """``(status, reason)`` of one model set from ``models/<set>/meta.json``.
+
+    ``not run`` when the file is absent; ``stale`` when one of ``inputs`` (the training data the
+    ``train_model`` rule reads: bulk sets, or the training flights' state and segments) was
+    rewritten after it, or is missing: the run changed the data and stopped before training
+    again, so the status in the file is an earlier run's and the models do not describe this
+    run's data. Otherwise the file's ``status`` (``ok``, ``failed``) and its ``error``.
+    """
+    path = Path(results_dir) / "models" / model_set / "meta.json"
+    meta, bad = _read_json(path)
     if bad:
         return "failed", bad
     if meta is None:
         return "not run", ""
+    try:
+        t_meta = path.stat().st_mtime_ns
+    except OSError as exc:                          # removed between the read and the stat
+        return "failed", f"{path}: cannot read: {exc.strerror or exc}"
+    for p in map(Path, inputs):
+        try:
+            if p.stat().st_mtime_ns > t_meta:
+                return "stale", f"trained before {p} was rewritten"
+        except OSError:
+            return "stale", f"{p} missing"
     status = str(meta.get("status", "ok"))
     return status, str(meta.get("error") or "") if status != "ok" else ""
 
 
 def run_summary(flights: Iterable[str], model_sets: Iterable[str],
                 results_dir: str | os.PathLike = "results", *,
-                skipped: Mapping[str, str] | None = None) -> str:
+                skipped: Mapping[str, str] | None = None,
+                model_inputs: Mapping[str, Iterable[str | os.PathLike]] | None = None) -> str:
     """The end-of-run summary (several lines, no trailing newline).
 
     Parameters
@@ -109,6 +131,9 @@ def run_summary(flights: Iterable[str], model_sets: Iterable[str],
         The workflow's ``results/`` folder.
     skipped : mapping, optional
         Manifest rows left out at start-up: flight id -> reason (e.g. ``"/x.bin not found"``).
+    model_inputs : mapping, optional
+        Model set -> the files its training reads; a model set trained before one of them was
+        rewritten is reported ``stale`` (:func:`model_set_status`).
     """
     res = Path(results_dir)
     flights, model_sets = list(flights), list(model_sets)
@@ -123,7 +148,7 @@ def run_summary(flights: Iterable[str], model_sets: Iterable[str],
     lines += [f"  skipped  {f}: {why}" for f, why in skipped.items()]
     sets = []
     for m in model_sets:
-        st, why = model_set_status(m, res)
+        st, why = model_set_status(m, res, (model_inputs or {}).get(m, ()))
         sets.append(f"{m} {st}" + (f" ({why})" if why else ""))
     lines.append(f"  model sets: {', '.join(sets) if sets else 'none'}")
     lines.append(f"  report: {index_state(flights, model_sets, res)}")

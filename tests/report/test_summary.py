@@ -68,3 +68,23 @@ def test_an_interrupted_run_says_what_did_not_run_and_that_the_report_is_missing
     assert "  not run  never: no ingest output" in text
     assert "model sets: sim not run" in text
     assert text.endswith("index.html (not written)")
+
+
+def test_a_model_set_trained_before_its_data_was_rewritten_is_reported_stale(tmp_path):
+    import os
+    res = _tree(tmp_path)
+    data = res / "sim" / "sets" / "M1_train.parquet"
+    data.parent.mkdir(parents=True)
+    data.write_text("")
+    meta = res / "models" / "sim" / "meta.json"
+    t = meta.stat().st_mtime_ns
+    os.utime(data, ns=(t - 10**9, t - 10**9))          # trained after its data: ok
+    inputs = {"sim": [data]}
+    assert "  model sets: sim ok, f3a failed (no training flights)" in \
+        run_summary(["good"], ["sim", "f3a"], res, model_inputs=inputs).splitlines()
+    os.utime(data, ns=(t + 10**9, t + 10**9))          # the sets rebuilt, the run stopped before training
+    assert f"  model sets: sim stale (trained before {data} was rewritten), f3a failed (no training flights)" \
+        in run_summary(["good"], ["sim", "f3a"], res, model_inputs=inputs).splitlines()
+    data.unlink()
+    assert f"  model sets: sim stale ({data} missing), f3a failed (no training flights)" \
+        in run_summary(["good"], ["sim", "f3a"], res, model_inputs=inputs).splitlines()

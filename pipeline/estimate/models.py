@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..config import build, cfield, validate_section
+from ..preprocess.smoother import white_jerk_q1
 
 F64 = NDArray[np.float64]
 
@@ -230,10 +231,8 @@ def white_jerk_q(dt: float, q: float, n_axes: int = 3) -> F64:
     -------
     ndarray, shape (3 n_axes, 3 n_axes)
     """
-    q1 = q * np.array([[dt ** 5 / 20, dt ** 4 / 8, dt ** 3 / 6],
-                       [dt ** 4 / 8, dt ** 3 / 3, dt ** 2 / 2],
-                       [dt ** 3 / 6, dt ** 2 / 2, dt]])
-    return np.kron(q1, np.eye(n_axes))
+    # the one copy of Q₁ is preprocessing's (its GPS smoother runs the same model, compiled)
+    return np.kron(white_jerk_q1.py_func(float(dt), float(q)), np.eye(n_axes))
 
 
 def hmm_transition(dt: float, n_axes: int = 3) -> F64:

@@ -70,6 +70,27 @@ class GpsSmoother:
 
 
 @numba.njit(cache=True)
+def white_jerk_q1(dt, q):  # pragma: no cover - compiled (its py_func is tested and used by estimate)
+    """One axis of the white-jerk CA process noise (seed 000 §3 eq. 2.16, §13.7):
+    ``Q₁ = q [[dt⁵/20, dt⁴/8, dt³/6], [dt⁴/8, dt³/3, dt²/2], [dt³/6, dt²/2, dt]]``.
+
+    The one copy of the formula: the smoother's kernel calls it compiled, and
+    ``pipeline.estimate.models.white_jerk_q`` calls its ``py_func`` (the estimators sit above
+    preprocessing in the import graph, so the formula lives here).
+    """
+    d2 = dt * dt
+    d3 = d2 * dt
+    Q = np.empty((3, 3))
+    Q[0, 0] = q * d3 * d2 / 20.0
+    Q[0, 1] = Q[1, 0] = q * d2 * d2 / 8.0
+    Q[0, 2] = Q[2, 0] = q * d3 / 6.0
+    Q[1, 1] = q * d3 / 3.0
+    Q[1, 2] = Q[2, 1] = q * d2 / 2.0
+    Q[2, 2] = q * dt
+    return Q
+
+
+@numba.njit(cache=True)
 def _rts_axis(t_s, zp, sp, zv, sv, q, smooth):  # pragma: no cover - compiled
     """One axis: forward Kalman filter over the sorted event times ``t_s`` (NaN ``zp``/``zv``:
     no measurement at that event), started at the first position fix ``k0`` (its state and
@@ -102,15 +123,7 @@ def _rts_axis(t_s, zp, sp, zv, sv, q, smooth):  # pragma: no cover - compiled
             F[0, 2] = 0.5 * dt * dt
             F[1, 2] = dt
             x = F @ x
-            d2, d3 = dt * dt, dt * dt * dt
-            Q = np.empty((3, 3))
-            Q[0, 0] = q * d3 * d2 / 20.0
-            Q[0, 1] = Q[1, 0] = q * d2 * d2 / 8.0
-            Q[0, 2] = Q[2, 0] = q * d3 / 6.0
-            Q[1, 1] = q * d3 / 3.0
-            Q[1, 2] = Q[2, 1] = q * d2 / 2.0
-            Q[2, 2] = q * dt
-            P = F @ P @ F.T + Q
+            P = F @ P @ F.T + white_jerk_q1(dt, q)
         xp[k] = x
         Pp[k] = P
         if k > k0:

@@ -117,3 +117,10 @@ def test_the_first_fix_is_the_prior_once_and_an_axis_without_fixes_is_nan():
     out = smooth_track(ns(t), pos, np.full((len(t), 3), np.nan), np.ones((len(t), 3)), ns(np.arange(0, 4.9, 0.04)),
                        GpsSmoother(), max_gap_ns=1e9)
     assert np.isnan(out[:, 2]).all() and np.isfinite(out[:, :2]).all()
+
+
+def test_the_kernels_compiled_white_jerk_q_equals_the_one_the_estimators_use():
+    from pipeline.estimate.models import white_jerk_q
+    from pipeline.preprocess.smoother import white_jerk_q1
+    for dt, q in [(0.2, 10.0), (0.013, 3.0), (1.7, 0.5)]:
+        np.testing.assert_allclose(white_jerk_q1(dt, q), white_jerk_q(dt, q, 1), rtol=1e-14)

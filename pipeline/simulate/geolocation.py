@@ -517,18 +517,22 @@ def run_once(scenario: str, cfg: GeolocationConfig, rng: np.random.Generator, *,
 
 
 def run_scenario(scenario: str, cfg: GeolocationConfig, *, n_runs: int, seed: int, n_observers: int = 3,
-                 n_particles: int | None = None, duration_s: float = 120.0, tag: str = "") -> list[RunResult]:
+                 n_particles: int | None = None, duration_s: float = 120.0, tag: str = "",
+                 first_run: int = 0) -> list[RunResult]:
     """``n_runs`` independent runs, run ``r`` seeded by ``SeedSequence([seed, crc32(scenario), r])``.
 
     ``tag`` labels a sweep point and is deliberately not in the seed: run ``r`` of every point
     has the same target, observer start and pixel noise streams (common random numbers).
+    ``first_run`` numbers the runs from there (runs ``first_run … first_run + n_runs − 1``), so
+    a scenario split across processes gives the same runs as one call.
     """
     import zlib
 
     # the tag (sweep point) is not part of the seed: every sweep point replays the same runs
     key = zlib.crc32(f"{scenario}".encode())
     return [run_once(scenario, cfg, np.random.default_rng([int(seed), key, r]), n_observers=n_observers,
-                     n_particles=n_particles, duration_s=duration_s) for r in range(int(n_runs))]
+                     n_particles=n_particles, duration_s=duration_s)
+            for r in range(int(first_run), int(first_run) + int(n_runs))]
 
 
 def lost_for_good(run: RunResult) -> bool:

@@ -34,12 +34,16 @@ from ..simulate.geolocation import GeolocationConfig, per_step_frame, run_scenar
 #: own), §6.5 "Each test case is run ten times" (the observer sweep).
 GEO_SIZES: dict[str, dict[str, Any]] = {
     "tiny": {"runs": 1, "particle_runs": 1, "observer_runs": 1, "base_s": 3.0, "maneuvering_s": 3.0,
-             "mobile_s": 3.0, "sweep_s": 2.0, "particles": [10, 80], "observers": [1, 2]},
+             "mobile_s": 3.0, "sweep_s": 2.0, "particles": [10, 80], "observers": [1, 2], "workers": 1},
     "small": {"runs": 10, "particle_runs": 6, "observer_runs": 6, "base_s": 120.0, "maneuvering_s": 180.0,
-              "mobile_s": 180.0, "sweep_s": 90.0, "particles": [10, 20, 40, 80, 160], "observers": [1, 2, 4, 8, 16]},
+              "mobile_s": 180.0, "sweep_s": 90.0, "particles": [10, 20, 40, 80, 160], "observers": [1, 2, 4, 8, 16],
+              "workers": 1},
     "thesis": {"runs": 50, "particle_runs": 50, "observer_runs": 10, "base_s": 120.0, "maneuvering_s": 180.0,
-               "mobile_s": 180.0, "sweep_s": 180.0, "particles": [10, 20, 40, 80, 160], "observers": [1, 2, 4, 8, 16]},
+               "mobile_s": 180.0, "sweep_s": 180.0, "particles": [10, 20, 40, 80, 160], "observers": [1, 2, 4, 8, 16],
+               "workers": 2},
 }
+#: ``workers``: processes the runs are spread over (each run is seeded on its own, so the tables
+#: are the same for any count; only the step times of ``geo_timing`` feel the sharing)
 #: the thesis's percent-error anchors (digest §12)
 THESIS_ETA = {"base": "6-9 %", "maneuvering": "5-8 %", "mobile": "~7 % at ~70 m"}
 ETA_LIMIT_PCT = 15.0
@@ -86,30 +90,52 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
     cfg = _cfg(settings)
     summary, series, timing = [], [], []
 
-    def one(name: str, scenario: str, *, n_runs: int, duration: float, n_obs: int = 3,
-            n_particles: int | None = None, tag: str = "") -> dict[str, float]:
-        say(f"seed 001: {name} ({n_runs} runs x {duration:g} s, {n_obs} observers, "
-            f"N = {n_particles or cfg.n_particles})")
-        runs = run_scenario(scenario, cfg, n_runs=n_runs, seed=seed, n_observers=n_obs,
-                            n_particles=n_particles, duration_s=duration, tag=tag)
-        s = summarise(runs)
-        say(f"seed 001: {name}: eps {s['eps_m']:.2f} m, eta {s['eta_pct']:.2f} %, mean distance "
-            f"{s['mean_dist_m']:.1f} m, {s['step_us']:.0f} us/step")
-        key = {"case": name, "scenario": scenario, "n_observers": n_obs, "n_particles": int(n_particles or cfg.n_particles)}
-        # step times apart from the results: the results are the same bytes for the same
-        # seed, the times are the machine's (digest 001 §13 item 5 asks for both)
-        summary.append({**key, "duration_s": duration, **{k: v for k, v in s.items() if k != "step_us"}})
-        timing.append({**key, "step_us": s["step_us"]})
-        series.append(per_step_frame(runs, case=name))
-        return s
+    # every case planned first: (name, scenario, runs, duration, observers, particles, tag)
+    cases = [("base", "base", run["runs"], run["base_s"], 3, None, ""),
+             ("maneuvering", "maneuvering", run["runs"], run["maneuvering_s"], 3, None, ""),
+             ("mobile", "mobile", run["runs"], run["mobile_s"], 3, None, "")]
+    cases += [(f"particles_{n}", "mobile", run["particle_runs"], run["sweep_s"], 3, int(n), f"N{n}")
+              for n in run["particles"]]
+    cases += [(f"observers_{o}", "mobile", run["observer_runs"], run["sweep_s"], int(o), None, f"O{o}")
+              for o in run["observers"]]
+    workers = max(1, int(run.get("workers", 1)))
+    pool = None
+    if workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
 
-    base = one("base", "base", n_runs=run["runs"], duration=run["base_s"])
-    man = one("maneuvering", "maneuvering", n_runs=run["runs"], duration=run["maneuvering_s"])
-    mob = one("mobile", "mobile", n_runs=run["runs"], duration=run["mobile_s"])
-    sw_n = {n: one(f"particles_{n}", "mobile", n_runs=run["particle_runs"], duration=run["sweep_s"],
-                   n_particles=int(n), tag=f"N{n}") for n in run["particles"]}
-    sw_o = {o: one(f"observers_{o}", "mobile", n_runs=run["observer_runs"], duration=run["sweep_s"],
-                   n_obs=int(o), tag=f"O{o}") for o in run["observers"]}
+        pool = ProcessPoolExecutor(max_workers=workers)
+        say(f"seed 001: {sum(int(c[2]) for c in cases)} runs on {workers} worker processes")
+    try:
+        # one future per run, all submitted up front so the workers never wait for the next case
+        pending = {c[0]: [pool.submit(run_scenario, c[1], cfg, n_runs=1, seed=seed, n_observers=c[4],
+                                      n_particles=c[5], duration_s=float(c[3]), tag=c[6], first_run=r)
+                          for r in range(int(c[2]))] if pool is not None else None for c in cases}
+        done: dict[str, dict[str, float]] = {}
+        for name, scenario, n_runs, duration, n_obs, n_particles, tag in cases:
+            say(f"seed 001: {name} ({n_runs} runs x {duration:g} s, {n_obs} observers, "
+                f"N = {n_particles or cfg.n_particles})")
+            if pending[name] is None:
+                runs = run_scenario(scenario, cfg, n_runs=int(n_runs), seed=seed, n_observers=n_obs,
+                                    n_particles=n_particles, duration_s=float(duration), tag=tag)
+            else:
+                runs = [r for f in pending[name] for r in f.result()]
+            s = summarise(runs)
+            say(f"seed 001: {name}: eps {s['eps_m']:.2f} m, eta {s['eta_pct']:.2f} %, mean distance "
+                f"{s['mean_dist_m']:.1f} m, {s['step_us']:.0f} us/step")
+            key = {"case": name, "scenario": scenario, "n_observers": n_obs,
+                   "n_particles": int(n_particles or cfg.n_particles)}
+            # step times apart from the results: the results are the same bytes for the same
+            # seed, the times are the machine's (digest 001 §13 item 5 asks for both)
+            summary.append({**key, "duration_s": float(duration), **{k: v for k, v in s.items() if k != "step_us"}})
+            timing.append({**key, "step_us": s["step_us"]})
+            series.append(per_step_frame(runs, case=name))
+            done[name] = s
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+    base, man, mob = done["base"], done["maneuvering"], done["mobile"]
+    sw_n = {n: done[f"particles_{n}"] for n in run["particles"]}
+    sw_o = {o: done[f"observers_{o}"] for o in run["observers"]}
     eps_n = {n: s["eps_m"] for n, s in sw_n.items()}
     eps_o = {o: s["eps_m"] for o, s in sw_o.items()}
 
@@ -161,7 +187,8 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
         rows.append(("geo_particles_160_vs_80_met", int(eps_n[160] >= 0.8 * eps_n[80]), "eps(N=160) >= 0.8 eps(N=80)"))
     rows.append(("geo_step_us_maneuvering", round(man["step_us"], 1), "mean filter step (us) at N = 50, 3 observers, 5 modes (pure Python/numpy core + numba weighting)"))
 
-    meta = {**cfg.meta(), "size": size, "seed": int(seed), "runs": run}
+    # the worker count is how the runs were spread, not what they are: left out of the tables
+    meta = {**cfg.meta(), "size": size, "seed": int(seed), "runs": {k: v for k, v in run.items() if k != "workers"}}
     tables = {"geo_summary": pd.DataFrame(summary),
               "geo_series": pd.concat(series, ignore_index=True),
               "geo_timing": pd.DataFrame(timing),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from pipeline.io.parquet import write_table
@@ -46,3 +47,14 @@ def test_the_geolocation_study_is_seeded_and_rejects_an_unknown_size(tmp_path):
     assert [r for r in ra if "step_us" not in r[0]] == [r for r in rb if "step_us" not in r[0]]
     with pytest.raises(ValueError, match="unknown size 'huge'"):
         geolocation_study({}, seed=5, size="huge")
+
+
+def test_the_geolocation_study_spread_over_worker_processes_gives_the_same_tables():
+    sizes = {"particles": [10], "observers": [2], "base_s": 1.0, "maneuvering_s": 1.0, "mobile_s": 1.0,
+             "sweep_s": 1.0, "runs": 2, "particle_runs": 2, "observer_runs": 1}
+    one, r1 = geolocation_study({"geo_sizes": {"tiny": {**sizes, "workers": 1}}}, seed=7, size="tiny")
+    two, r2 = geolocation_study({"geo_sizes": {"tiny": {**sizes, "workers": 2}}}, seed=7, size="tiny")
+    for t in ("geo_summary", "geo_series", "geo_config"):
+        pd.testing.assert_frame_equal(one[t], two[t], check_exact=True, obj=t)
+    assert [(n, v) for n, v, _ in r1 if "step_us" not in n] == [(n, v) for n, v, _ in r2 if "step_us" not in n]
+    assert one["geo_summary"]["n_runs"].tolist() == [2, 2, 2, 2, 1]

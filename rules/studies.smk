@@ -2,6 +2,10 @@
 # (tiny | small | thesis) writes results/studies/<name>/ and results/report/studies/<name>.html.
 from pipeline.studies.base import FLIGHTCOACH_EKF_HMM_FILES, flightcoach_inputs, study_outputs
 
+# the studies that spread their runs over 2 worker processes at thesis size (bearing_only's and
+# the seed-001 part of pf's `workers`) claim the 2 cores they use; Snakemake caps this at --cores
+STUDY_THREADS = 2 if config["studies"]["size"] == "thesis" else 1
+
 
 rule study_seed000_classification:
     input:
@@ -134,7 +138,7 @@ rule study_pf:
         "results/logs/study_pf/study.log",
     benchmark:
         "results/benchmarks/study_pf/study.tsv"
-    threads: 1
+    threads: STUDY_THREADS
     resources:
         mem_mb=4000,
         runtime=30,
@@ -192,7 +196,7 @@ rule study_bearing_only:
         "results/logs/study_bearing_only/study.log",
     benchmark:
         "results/benchmarks/study_bearing_only/study.tsv"
-    threads: 1
+    threads: STUDY_THREADS
     resources:
         mem_mb=8000,
         runtime=240,

@@ -2,8 +2,9 @@
 # (tiny | small | thesis) writes results/studies/<name>/ and results/report/studies/<name>.html.
 from pipeline.studies.base import FLIGHTCOACH_EKF_HMM_FILES, flightcoach_inputs, study_outputs
 
-# the studies that spread their runs over 2 worker processes at thesis size (bearing_only's and
-# the seed-001 part of pf's `workers`) claim the 2 cores they use; Snakemake caps this at --cores
+# the studies whose thesis size spreads its runs over 2 worker processes by default (bearing_only's
+# `workers`, the seed-001 part of pf) claim 2 cores there. Snakemake caps the claim at --cores; the
+# study still starts its configured workers
 STUDY_THREADS = 2 if config["studies"]["size"] == "thesis" else 1
 
 

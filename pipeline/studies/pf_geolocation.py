@@ -43,7 +43,8 @@ GEO_SIZES: dict[str, dict[str, Any]] = {
                "workers": 2},
 }
 #: ``workers``: processes the runs are spread over (each run is seeded on its own, so the tables
-#: are the same for any count; only the step times of ``geo_timing`` feel the sharing)
+#: are the same for any count; only the step times of ``geo_timing`` differ: each worker loads
+#: the compiled kernels on its first run, and the workers share the machine)
 #: the thesis's percent-error anchors (digest §12)
 THESIS_ETA = {"base": "6-9 %", "maneuvering": "5-8 %", "mobile": "~7 % at ~70 m"}
 ETA_LIMIT_PCT = 15.0
@@ -119,6 +120,7 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
                                     n_particles=n_particles, duration_s=float(duration), tag=tag)
             else:
                 runs = [r for f in pending[name] for r in f.result()]
+                pending[name] = None      # ~1 MB a run at 180 s: free each case once read
             s = summarise(runs)
             say(f"seed 001: {name}: eps {s['eps_m']:.2f} m, eta {s['eta_pct']:.2f} %, mean distance "
                 f"{s['mean_dist_m']:.1f} m, {s['step_us']:.0f} us/step")

@@ -229,7 +229,8 @@ def tiny_run(tmp_path_factory):
                         [DEMO, SIM, "broken\tlogs/broken.bin\tgeneric\ttest\tnone\t\tcorrupt"], extra_tiny=SECOND_SET)
     (wd / "logs").mkdir()
     (wd / "logs" / "broken.bin").write_bytes(b"\xa3\x95" + bytes(range(256)) * 3)
-    _smk(wd)
+    p = _smk(wd)
+    (wd / "first_run.stderr").write_text(p.stderr)   # the end-of-run summary, for the tests
     return wd
 
 
@@ -258,6 +259,15 @@ def _frames_equal(a: Path, b: Path) -> None:
     import pandas as pd
 
     pd.testing.assert_frame_equal(pd.read_parquet(a), pd.read_parquet(b), obj=f"{a} vs {b}")
+
+
+@pytest.mark.slow
+def test_after_a_full_run_the_summary_reads_each_trained_model_set_ok_not_stale(tiny_run):
+    # the Snakefile hands each set's train_model inputs to the summary: a wrong or missing path
+    # there would read "stale (<path> missing)" here
+    lines = [ln for ln in (tiny_run / "first_run.stderr").read_text().splitlines() if ln.startswith("  model sets: ")]
+    assert len(lines) == 1, lines
+    assert "stale" not in lines[0] and "sim ok" in lines[0] and "sim2 ok" in lines[0], lines[0]
 
 
 @pytest.mark.slow

@@ -6,6 +6,10 @@ from pipeline.studies.base import FLIGHTCOACH_EKF_HMM_FILES, flightcoach_inputs,
 # `workers`, the seed-001 part of pf) claim 2 cores there. Snakemake caps the claim at --cores; the
 # study still starts its configured workers
 STUDY_THREADS = 2 if config["studies"]["size"] == "thesis" else 1
+# `runtime` (minutes) is each study's time limit on a cluster (profiles/slurm, profiles/generic),
+# written for the default small size; thesis size runs several times more (seed 000 ~3x, the
+# seed-001 part 50 runs a setup): its limit is 10x, a limit and not a measurement
+STUDY_RUNTIME_SCALE = 10 if config["studies"]["size"] == "thesis" else 1
 
 
 rule study_seed000_classification:
@@ -28,7 +32,7 @@ rule study_seed000_classification:
     threads: 1
     resources:
         mem_mb=8000,
-        runtime=120,
+        runtime=120 * STUDY_RUNTIME_SCALE,
     conda:
         "envs/pipeline.yaml"
     script:
@@ -57,7 +61,7 @@ rule study_flightcoach_classification:
     threads: 1
     resources:
         mem_mb=4000,
-        runtime=30,
+        runtime=30 * STUDY_RUNTIME_SCALE,
     conda:
         "envs/pipeline.yaml"
     script:
@@ -88,7 +92,7 @@ rule study_flightcoach_ekf_hmm:
     threads: 1
     resources:
         mem_mb=4000,
-        runtime=30,
+        runtime=30 * STUDY_RUNTIME_SCALE,
     conda:
         "envs/pipeline.yaml"
     script:
@@ -115,7 +119,7 @@ rule study_seed000_ekf:
     threads: 1
     resources:
         mem_mb=8000,
-        runtime=120,
+        runtime=120 * STUDY_RUNTIME_SCALE,
     conda:
         "envs/pipeline.yaml"
     script:
@@ -142,7 +146,7 @@ rule study_pf:
     threads: STUDY_THREADS
     resources:
         mem_mb=4000,
-        runtime=30,
+        runtime=30 * STUDY_RUNTIME_SCALE,
     conda:
         "envs/pipeline.yaml"
     script:
@@ -173,7 +177,7 @@ rule study_trajectory_learning:
     threads: 1
     resources:
         mem_mb=4000,
-        runtime=60,
+        runtime=60 * STUDY_RUNTIME_SCALE,
     conda:
         "envs/pipeline.yaml"
     script:
@@ -200,7 +204,7 @@ rule study_bearing_only:
     threads: STUDY_THREADS
     resources:
         mem_mb=8000,
-        runtime=240,
+        runtime=240 * STUDY_RUNTIME_SCALE,
     conda:
         "envs/pipeline.yaml"
     script:

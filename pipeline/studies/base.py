@@ -1,4 +1,5 @@
-"""Shared plumbing of the studies: sizes, output paths, ``results.txt``, markdown tables, the page.
+"""Shared plumbing of the studies: sizes, output paths, ``results.txt``, markdown tables, the page,
+and :func:`run_calls` (independent runs on worker processes).
 
 A study is a stage like the others (entry point ``run_<study>(inputs, outputs, config, *, seed,
 ...)``), run by its own Snakemake target (``rules/studies.smk``), never by ``all``. Each one
@@ -25,7 +26,7 @@ import dataclasses
 import os
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -88,6 +89,35 @@ class StudyResult:
     status: str
     results: dict[str, str] = field(default_factory=dict)
     diagnostics: dict[str, Any] = field(default_factory=dict)
+
+
+def run_calls(fn: Callable[..., Any], calls: Sequence[Mapping[str, Any]], workers: int = 1, *,
+              cost: Callable[[int], float] | None = None) -> Iterator[Any]:
+    """Yield ``fn(**kw)`` for each ``kw`` of ``calls``, in their order.
+
+    With ``workers`` > 1 (and more than one call) the calls run on that many worker processes,
+    all submitted at once (the largest ``cost(i)`` first, so a long call does not start last and
+    finish alone), and each result is yielded in the planned order once it is ready, then
+    dropped: a caller that keeps only what it needs holds little. Otherwise they run here, one
+    at a time, as they are asked for. Each call must depend on its arguments alone (its own
+    seed), so the results are the same for any worker count. Calls not yet started are cancelled
+    when the caller stops early or a call raises (use ``contextlib.closing`` to stop at once).
+    """
+    calls = list(calls)
+    if workers <= 1 or len(calls) <= 1:
+        for kw in calls:
+            yield fn(**kw)
+        return
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(max_workers=int(workers))
+    try:
+        order = sorted(range(len(calls)), key=lambda i: -cost(i)) if cost else range(len(calls))
+        futs = {i: pool.submit(fn, **calls[i]) for i in order}
+        for i in range(len(calls)):
+            yield futs.pop(i).result()
+    finally:
+        pool.shutdown(cancel_futures=True)
 
 
 def study_settings(config: Mapping | None, name: str, defaults: Mapping[str, Any],

@@ -45,6 +45,7 @@ Nothing is tuned on these outcomes: a trend that fails is reported with its numb
 from __future__ import annotations
 
 from collections.abc import Mapping
+from contextlib import closing
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -60,7 +61,8 @@ from ..estimate.models import wrap_angle
 from ..io.parquet import write_table
 from ..report.study import build_study_page, layout
 from ..simulate.encounter import Encounter, ScenarioSettings, simulate_encounters
-from .base import Progress, Results, StudyResult, input_path, md_table, output_path, say, study_settings, write_text
+from .base import (Progress, Results, StudyResult, input_path, md_table, output_path, run_calls, say,
+                   study_settings, write_text)
 
 NAME = "bearing_only"
 OUTPUT_TABLES = ("curves", "runs", "trends", "crlb", "study3")
@@ -252,21 +254,13 @@ class Runner:
 
     def execute(self, workers: int = 1) -> None:
         todo = [j for n, j in self.jobs.items() if n not in self.results]
-        if workers <= 1 or len(todo) <= 1:
+        if workers > 1 and len(todo) > 1:
+            self.progress(f"{len(todo)} configurations on {workers} worker processes")
+        calls = [dict(job=j, st=self.st, seed=self.seed, scen=self.scen, cfg=self.cfg) for j in todo]
+        with closing(run_calls(execute_job, calls, workers, cost=lambda i: todo[i].cost)) as results:
             for j in todo:
                 self.progress(f"{j.part}: {j.name} ({j.estimator} {j.preset}, {j.kind}, {j.n_runs} runs)")
-                self.results[j.name] = execute_job(j, self.st, self.seed, self.scen, self.cfg)
-        else:
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-
-            self.progress(f"{len(todo)} configurations on {workers} worker processes")
-            with ProcessPoolExecutor(max_workers=int(workers)) as pool:
-                futs = {pool.submit(execute_job, j, self.st, self.seed, self.scen, self.cfg): j
-                        for j in sorted(todo, key=lambda j: -j.cost)}
-                for fu in as_completed(futs):
-                    j = futs[fu]
-                    self.results[j.name] = fu.result()
-                    self.progress(f"done {j.part}: {j.name}")
+                self.results[j.name] = next(results)
         # keep the planned order (tables, report)
         self.results = {n: self.results[n] for n in self.jobs if n in self.results}
 

@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping
+from contextlib import closing
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from ..simulate.geolocation import GeolocationConfig, per_step_frame, run_scenario, summarise
+from .base import run_calls
 
 #: per-size run settings (durations in s); ``small`` is what the RESULT lines in the report use.
 #: Thesis size follows the thesis's counts: §6 "Each test run is performed a number of times,
@@ -100,27 +102,18 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
     cases += [(f"observers_{o}", "mobile", run["observer_runs"], run["sweep_s"], int(o), None, f"O{o}")
               for o in run["observers"]]
     workers = max(1, int(run.get("workers", 1)))
-    pool = None
     if workers > 1:
-        from concurrent.futures import ProcessPoolExecutor
-
-        pool = ProcessPoolExecutor(max_workers=workers)
         say(f"seed 001: {sum(int(c[2]) for c in cases)} runs on {workers} worker processes")
-    try:
-        # one future per run, all submitted up front so the workers never wait for the next case
-        pending = {c[0]: [pool.submit(run_scenario, c[1], cfg, n_runs=1, seed=seed, n_observers=c[4],
-                                      n_particles=c[5], duration_s=float(c[3]), tag=c[6], first_run=r)
-                          for r in range(int(c[2]))] if pool is not None else None for c in cases}
-        done: dict[str, dict[str, float]] = {}
+    # one call per run, so the worker processes share every case; results come back in order
+    calls = [dict(scenario=scenario, cfg=cfg, n_runs=1, seed=seed, n_observers=n_obs, n_particles=n_particles,
+                  duration_s=float(duration), tag=tag, first_run=r)
+             for _, scenario, n_runs, duration, n_obs, n_particles, tag in cases for r in range(int(n_runs))]
+    done: dict[str, dict[str, float]] = {}
+    with closing(run_calls(run_scenario, calls, workers)) as results:
         for name, scenario, n_runs, duration, n_obs, n_particles, tag in cases:
             say(f"seed 001: {name} ({n_runs} runs x {duration:g} s, {n_obs} observers, "
                 f"N = {n_particles or cfg.n_particles})")
-            if pending[name] is None:
-                runs = run_scenario(scenario, cfg, n_runs=int(n_runs), seed=seed, n_observers=n_obs,
-                                    n_particles=n_particles, duration_s=float(duration), tag=tag)
-            else:
-                runs = [r for f in pending[name] for r in f.result()]
-                pending[name] = None      # ~1 MB a run at 180 s: free each case once read
+            runs = [r for _ in range(int(n_runs)) for r in next(results)]
             s = summarise(runs)
             say(f"seed 001: {name}: eps {s['eps_m']:.2f} m, eta {s['eta_pct']:.2f} %, mean distance "
                 f"{s['mean_dist_m']:.1f} m, {s['step_us']:.0f} us/step")
@@ -132,9 +125,6 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
             timing.append({**key, "step_us": s["step_us"]})
             series.append(per_step_frame(runs, case=name))
             done[name] = s
-    finally:
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
     base, man, mob = done["base"], done["maneuvering"], done["mobile"]
     sw_n = {n: done[f"particles_{n}"] for n in run["particles"]}
     sw_o = {o: done[f"observers_{o}"] for o in run["observers"]}

@@ -229,7 +229,9 @@ def execute_job(job: Job, st: dict, seed: int, scen: ScenarioSettings, cfg: dict
     if mus:
         res["mu_cv"] = np.concatenate(mus)
     if job.keep:
-        res["mean"] = np.concatenate(means)
+        # C order whatever the bank returned: a worker's result comes back C-ordered through
+        # pickling, and the reductions over runs (crlb_check) round differently on another layout
+        res["mean"] = np.ascontiguousarray(np.concatenate(means))
     return res
 
 

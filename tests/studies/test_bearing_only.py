@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.stats import binomtest
 
@@ -111,6 +112,15 @@ def test_the_crlb_part_reruns_the_same_orbit_with_the_other_q_form_as_a_diagnost
     assert "faithful B_θω block" in Path(tiny.outputs["report"]).read_text()
     # the arm is a configuration of its own, beside the setting's crlb_cppv_25_1_6
     assert {"crlb_cppv_25_1_6", "crlb_cppv_25_1_6_other_q"} <= set(tiny.result.diagnostics["configs"])
+
+
+@pytest.mark.slow
+def test_the_crlb_table_is_the_same_bytes_on_two_worker_processes_as_in_one_process(tiny, ran, tmp_path):
+    # a worker's estimates come back C-ordered through pickling, the bank's are not: the
+    # sample std over runs rounded differently (96 values, last digits, at tiny size) until execute_job
+    # made them C-ordered in both cases
+    two = ran(NAME, tmp_path, {"size": "tiny", NAME: {"workers": 2, "parts": ["crlb"]}}, estimate={})
+    pd.testing.assert_frame_equal(two.table("crlb"), tiny.table("crlb"), check_exact=True)
 
 
 def test_the_case_5_removal_drops_the_mpc_diverged_scenarios_from_both_sides():

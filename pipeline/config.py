@@ -403,9 +403,31 @@ def read_config_file(path: str | os.PathLike) -> Any:
     p = Path(path)
     text = read_text_file(p, "config")
     try:
-        return yaml.load(text, Loader=_UniqueKeyLoader)
+        doc = yaml.load(text, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}:{_yaml_where(exc)} invalid YAML: {_yaml_problem(exc)}") from None
+    loop = _self_reference(doc)
+    if loop is not None:
+        # an alias inside its own anchor (`a: &x [*x]`) loads as a list that holds itself:
+        # every later walk of the config would recurse without end
+        raise ConfigError(f"{p}: {loop or 'top level'}: a YAML alias refers to the value that contains it "
+                          "(a recursive anchor)")
+    return doc
+
+
+def _self_reference(x: Any, where: str = "", inside: tuple[int, ...] = ()) -> str | None:
+    """The dotted key of the first mapping or list that contains itself, or None."""
+    if not isinstance(x, (dict, list)):
+        return None
+    if id(x) in inside:
+        return where
+    inside = inside + (id(x),)
+    items = x.items() if isinstance(x, dict) else enumerate(x)
+    for k, v in items:
+        found = _self_reference(v, f"{where}.{k}" if where else str(k), inside)
+        if found is not None:
+            return found
+    return None
 
 
 def _yaml_where(exc: Exception) -> str:

@@ -326,6 +326,18 @@ def test_a_key_given_twice_in_one_mapping_is_an_error_naming_both_lines(tmp_path
     assert read_config_file(p) == {"a": {"k": 1}, "b": {"k": 1, "j": 2}, "c": {"k": 3}}
 
 
+def test_an_alias_inside_its_own_anchor_is_one_line_naming_the_key_not_a_recursion_error(tmp_path):
+    # `a: &x [*x]` loads as a list that holds itself; validating it recursed without end
+    p = tmp_path / "loop.yaml"
+    p.write_text("seed: 1\nestimate:\n  vehicles: &v [quad, *v]\n")
+    with pytest.raises(ConfigError, match=r"loop\.yaml: estimate\.vehicles\.1: a YAML alias refers to the value "
+                                          r"that contains it"):
+        load_config(p)
+    # the same anchor used twice side by side (no loop) is fine
+    p.write_text("a: &x [1]\nb: *x\n")
+    assert read_config_file(p) == {"a": [1], "b": [1]}
+
+
 # --- the schema agrees with the code's vocabularies ----------------------------------------------
 
 def test_the_schema_enums_are_the_codes_vocabularies():

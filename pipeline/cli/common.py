@@ -62,11 +62,17 @@ def nonnegative_int(text: str) -> int:
     return value
 
 
+#: columns a table kind must have whatever else it lacks: every reader of the kind indexes them
+_REQUIRED_COLUMNS = {"segments": ("segment_id", "t_start_ns", "t_end_ns", "label"), "state": ("t_ns",)}
+
+
 def table_problem(path: str | os.PathLike, expected: tuple[str, ...], what: str) -> str | None:
     """``None`` if ``path`` is a Parquet table written as one of ``expected`` (its ``uavpipe``
-    metadata ``table``, e.g. ``state`` or ``simulate_set``), else why not, in a few words.
+    metadata ``table``, e.g. ``state`` or ``simulate_set``) with the columns every reader of
+    that kind indexes (:data:`_REQUIRED_COLUMNS`), else why not, in a few words.
     """
     import pyarrow as pa
+    import pyarrow.parquet as pq
 
     from ..io.parquet import read_table_meta
 
@@ -80,7 +86,18 @@ def table_problem(path: str | os.PathLike, expected: tuple[str, ...], what: str)
     except (pa.ArrowInvalid, OSError, ValueError) as exc:
         return f"not a readable Parquet table ({describe(exc)})"
     if table is None or table in expected:
-        return None  # a table without uavpipe metadata gets the benefit of the doubt
+        # a table without uavpipe metadata gets the benefit of the doubt on its kind, not on
+        # the columns every reader of that kind indexes (an edited segments table without
+        # t_end_ns failed deep inside as "'Pandas' object has no attribute 't_end_ns'")
+        need = _REQUIRED_COLUMNS.get(table or expected[0], ())
+        try:
+            names = set(pq.read_schema(p).names) if need else set()
+        except (pa.ArrowInvalid, OSError, ValueError) as exc:
+            return f"not a readable Parquet table ({describe(exc)})"
+        missing = [c for c in need if c not in names]
+        if missing:
+            return f"{what} without column(s) {', '.join(missing)}"
+        return None
     if "simulate_set" in expected and _older_set(p, table):
         return (f"a simulated set written by an older uavpipe (its metadata names the table '{table}', "
                 f"not 'simulate_set'): rerun `snakemake -R simulate_sets` to rebuild the sets")

@@ -224,3 +224,24 @@ def test_estimate_refuses_a_model_set_without_a_gmr_up_front(two_flights, model_
     assert _err_lines(capsys) == [f"uavpipe estimate: --model {model_dir}: has no GMR (feature set state9h; "
                                   f"the EKF+HMM needs one of state9, state9box)"]
     assert not (tmp_path / "o").exists()
+
+
+def test_a_segments_table_without_its_end_times_is_refused_up_front_by_every_command_naming_the_column(
+        two_flights, tmp_path, capsys):
+    # an edited table kept its 'segments' metadata; the readers failed deep inside with
+    # "'Pandas' object has no attribute 't_end_ns'"
+    import pyarrow.parquet as pq
+
+    a, b = two_flights["a"], two_flights["b"]
+    seg = b["segments"]
+    pq.write_table(pq.read_table(seg).drop(["t_end_ns"]), seg)
+    want = f"{seg}: a segments table without column(s) t_end_ns"
+    rc = main(["align", "--state", str(a["state"]), str(b["state"]), "--segments", str(a["segments"]), str(seg),
+               "--set", "p23", "-o", str(tmp_path / "al")])
+    assert rc == 2 and _err_lines(capsys) == [f"uavpipe align: {want}"]
+    rc = main(["train", str(b["state"]), "--segments", str(seg), "-o", str(tmp_path / "m")])
+    assert rc == 2 and _err_lines(capsys) == [f"uavpipe train: {want}"]
+    rc = main(["estimate", str(b["ingest"]), "--state", str(b["state"]), "--segments", str(seg),
+               "-o", str(tmp_path / "e")])
+    assert rc == 2 and _err_lines(capsys) == [f"uavpipe estimate: --segments {want}"]
+    assert not any((tmp_path / d).exists() for d in ("al", "m", "e"))

@@ -44,6 +44,7 @@ import json
 import os
 import zipfile
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +72,23 @@ def _pad(seqs: list[F64]) -> F64:
     for i, s in enumerate(seqs):
         out[i, :len(s)] = s
     return out
+
+
+def unusable_features(run: pd.DataFrame, needs: Sequence[str]) -> str | None:
+    """Why a training run's feature columns ``needs`` cannot be used, or ``None``: a column
+    missing, not numeric, or holding NaN/inf (hmmlearn would stop the whole model set on them
+    with "Input X contains NaN", naming no file, column or run)."""
+    for c in needs:
+        if c not in run.columns:
+            return f"no column {c}"
+        try:
+            x = run[c].to_numpy(dtype=np.float64, na_value=np.nan)
+        except (TypeError, ValueError):
+            return f"column {c} is not numeric"
+        n = int((~np.isfinite(x)).sum())
+        if n:
+            return f"column {c}: {n} of {len(x)} value(s) NaN or infinite"
+    return None
 
 
 class ManeuverModelSet:
@@ -127,13 +145,23 @@ class ManeuverModelSet:
         if label_col not in data.columns:
             raise ModelError(f"training table has no {label_col!r} column")
         recs: dict[str, list[list[F64]]] = {}
+        self.dropped_runs_ = {}
+        needs = self.feature_set.needs
         for rid, run in run_sequences(data, run_col=run_col):
             labs = run[label_col].dropna().unique()
             if len(labs) != 1:
                 raise ModelError(f"training run {rid!r} has {len(labs)} labels; need exactly one")
+            bad = unusable_features(run, needs)
+            if bad:    # one bad run is left out with its reason; it must not stop the others
+                self.dropped_runs_[str(rid)] = bad
+                continue
             seqs = self.phase_sequences(run, box_heading_rad=box_heading_rad)
             if seqs:
                 recs.setdefault(str(labs[0]), []).append(seqs)
+        if not recs and self.dropped_runs_:
+            first = next(iter(self.dropped_runs_.items()))
+            raise ModelError(f"no usable training run: all {len(self.dropped_runs_)} dropped "
+                             f"(first: run {first[0]}: {first[1]})")
         return self.fit_recordings(recs)
 
     def fit_recordings(self, recordings: dict[str, list[list[F64]]]) -> "ManeuverModelSet":

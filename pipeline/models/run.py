@@ -248,8 +248,17 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
             _say(f"{model_set}: {len(skipped)} of {len(states)} training flight(s) gave no labelled sample: "
                  + "; ".join(f"{f} ({why})" for f, why in skipped.items()))
         if not len(df) or "label" not in df.columns:
-            why = "; ".join(f"{f}: {r}" for f, r in skipped.items()) or "no training flights with segments?"
+            if spec.get("data", "simulated") == "simulated":
+                why = (f"no 'label' column in {', '.join(map(str, sets))}" if len(df)
+                       else f"no rows in {', '.join(map(str, sets))}" if sets else "no sets given")
+            else:
+                why = "; ".join(f"{f}: {r}" for f, r in skipped.items()) or "no training flights with segments?"
             raise ModelError(f"no labelled training data ({why})")
+        unlabelled = int(df["label"].isna().sum())
+        if unlabelled and spec.get("data", "simulated") == "simulated":
+            # every row of a simulated set has its run's label: a gap here is damage, not the
+            # unlabelled flight time between a flight's segments
+            _say(f"{model_set}: {unlabelled} of {len(df)} set row(s) without a label left out")
         keep = df["label"].notna() & ~df["label"].isin(list(spec.get("exclude") or []))
         if spec.get("labels"):
             keep &= df["label"].isin(list(spec["labels"]))
@@ -259,6 +268,11 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
                              f"the model set takes {list(spec.get('labels') or []) or 'all'} "
                              f"and excludes {list(spec.get('exclude') or []) or 'none'}")
         ms = ManeuverModelSet(config=cfg).fit(df[keep].reset_index(drop=True))
+        dropped = dict(ms.dropped_runs_)
+        if dropped:
+            _say(f"{model_set}: {len(dropped)} training run(s) dropped: "
+                 + "; ".join(f"{r} ({why})" for r, why in list(dropped.items())[:5])
+                 + (f"; … {len(dropped) - 5} more (meta.json training_dropped)" if len(dropped) > 5 else ""))
     except ValueError as exc:  # ModelError, numpy LinAlgError, bad tables: a placeholder model
         reason = f"training failed: {type(exc).__name__}: {exc}"
         _say(f"{model_set}: {reason}")
@@ -267,7 +281,8 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
     ms.save(out)
     meta = json.loads(meta_path.read_text())
     meta.update({"status": "ok", "name": model_set, "spec": spec,
-                 "training_inputs": [str(p) for p in (*sets, *states)], "training_skipped": skipped})
+                 "training_inputs": [str(p) for p in (*sets, *states)], "training_skipped": skipped,
+                 "training_dropped": dropped})
     write_json(meta, meta_path)
     _say(f"{model_set}: trained {len(ms.labels_)} maneuver models {ms.labels_}", restated=True)
     return ModelStageResult(model_set, "ok", "", meta)

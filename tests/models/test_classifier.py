@@ -307,6 +307,41 @@ def test_a_model_sets_hmm_block_overrides_the_hmm_section_for_that_set_only(synt
         model_set_config(cfg, "nope")
 
 
+def test_a_training_run_with_nan_inf_or_text_features_is_dropped_by_name_and_counted_not_a_hmmlearn_error(
+        synth, rng, tmp_path, capsys):
+    # hmmlearn stopped the whole model set with "Input X contains NaN", naming no file,
+    # column or run; one damaged run must not stop the others
+    from pipeline.models.run import model_set_config, run_train
+
+    _, bulk = synth
+    df = bulk(["M1"], 4, rng)
+    df.loc[df["run_id"] == "M1-1", "vel_e_mps"] = np.nan
+    df.loc[df.index[df["run_id"] == "M1-2"][3], "acc_d_mps2"] = np.inf
+    p = tmp_path / "M1_train.parquet"
+    df.to_parquet(p)
+    cfg = {"hmm": {"n_states": 3, "n_iter": 5}, "model_sets": {"m": {"data": "simulated", "vehicles": ["x"]}}}
+
+    def train(name, path):
+        d = tmp_path / name
+        return run_train({"sets": [path]}, {"params": d / "params.npz", "meta": d / "meta.json"},
+                         model_set_config(cfg, "m"), model_set="m", seed=3).diagnostics
+
+    meta = train("ok", p)
+    assert meta["status"] == "ok" and meta["training"]["M1"]["n_recordings"] == 2
+    assert meta["training_dropped"] == {"M1_train:M1-1": "column vel_e_mps: 126 of 126 value(s) NaN or infinite",
+                                        "M1_train:M1-2": "column acc_d_mps2: 1 of 126 value(s) NaN or infinite"}
+    assert "m: 2 training run(s) dropped: M1_train:M1-1 (column vel_e_mps" in capsys.readouterr().err
+    df["vel_e_mps"] = "x"
+    df.to_parquet(p)
+    meta = train("text", p)
+    assert meta["status"] == "failed"
+    assert meta["error"].endswith("no usable training run: all 4 dropped (first: run M1_train:M1-0: "
+                                  "column vel_e_mps is not numeric)")
+    empty = tmp_path / "E_train.parquet"
+    df.iloc[:0].to_parquet(empty)
+    assert train("empty", empty)["error"].endswith(f"no labelled training data (no rows in {empty})")
+
+
 def test_window_auto_is_half_the_median_training_run(synth, rng, tmp_path):
     _, bulk = synth
     data = pd.concat([bulk(["M1"], 3, rng, duration_s=20.0), bulk(["M2"], 3, rng, duration_s=30.0),

@@ -374,7 +374,10 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
 
     if meta.get("status") == "failed":
         return fail(f"ingest failed: {meta.get('error') or 'unknown reason'}")
-    log = read_flightlog(meta_path.parent, streams=["radar", "truth", "attitude"])
+    try:
+        log = read_flightlog(meta_path.parent, streams=["radar", "truth", "attitude"])
+    except (ValueError, OSError) as exc:     # a damaged or swapped stream file, named
+        return fail(f"cannot read the ingested streams: {exc}")
     # --- the radar and its model
     if synth is not None:
         if state is None or not len(state) or not state["pos_n_m"].notna().any():

@@ -178,12 +178,25 @@ def write_flightlog(log: FlightLog, out_dir: str | os.PathLike | None = None, *,
 def read_flightlog(in_dir: str | os.PathLike, streams: list[str] | None = None) -> FlightLog:
     """Read a FlightLog written by :func:`write_flightlog` (all streams, or ``streams``).
 
-    Streams are held as the Arrow tables read; ``log[name]`` converts one to pandas on first use."""
+    Streams are held as the Arrow tables read; ``log[name]`` converts one to pandas on first use.
+    A stream file whose metadata names another table (a copied or renamed file) is a
+    ``ValueError`` naming the file; a missing stream file reads as empty, and its name is listed
+    in ``log.meta["missing_streams"]`` (ingest writes every stream, empty ones too, so a missing
+    file is damage the caller should report)."""
     d = Path(in_dir)
     meta = json.loads((d / "meta.json").read_text())
-    out = {}
+    out, missing = {}, []
     for name in streams or schema.STREAM_NAMES:
         p = d / f"{name}.parquet"
-        out[name] = pq.read_table(p).replace_schema_metadata(None) if p.exists() \
-            else schema.empty_arrow(name)
+        if not p.exists():
+            out[name] = schema.empty_arrow(name)
+            missing.append(name)
+            continue
+        table = pq.read_table(p)
+        kind = json.loads((table.schema.metadata or {}).get(META_KEY, b"{}")).get("table")
+        if kind not in (None, name):
+            raise ValueError(f"{p}: not the {name} stream (it holds the '{kind}' table)")
+        out[name] = table.replace_schema_metadata(None)
+    if missing:
+        meta = {**meta, "missing_streams": missing}
     return FlightLog(meta=meta, streams=out)

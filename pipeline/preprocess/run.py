@@ -72,12 +72,21 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
     if meta.get("status") == "failed":
         return _placeholder(paths, fid, f"ingest failed: {meta.get('error') or 'unknown reason'}")
     try:
-        res = preprocess_log(read_flightlog(meta_path.parent), config, vehicle=vehicle or None)
+        log = read_flightlog(meta_path.parent)
+    except (ValueError, OSError) as exc:     # a damaged or swapped stream file, named
+        return _placeholder(paths, fid, f"cannot read the ingested streams: {' '.join(str(exc).split())}")
+    missing = log.meta.get("missing_streams") or []
+    if missing:
+        # ingest writes every stream, empty ones too: a missing file is damage, read as empty
+        say("uavpipe preprocess", f"{fid}: {', '.join(f'{s}.parquet' for s in missing)} missing from "
+                                  f"{meta_path.parent}; read as empty")
+    try:
+        res = preprocess_log(log, config, vehicle=vehicle or None)
     except ConfigError:
         raise
     except Exception as exc:  # one bad flight never stops the others: its placeholder says why
         return _placeholder(paths, fid, f"preprocessing failed: {_one_line(exc)}")
-    diag = {**res.diagnostics, "status": "ok"}
+    diag = {**res.diagnostics, "status": "ok", **({"missing_streams": missing} if missing else {})}
     res = PreprocessResult(state=res.state, segments=res.segments, calibration=res.calibration,
                            diagnostics=diag)
     write_outputs(res, state_path=paths["state"], segments_path=paths["segments"],

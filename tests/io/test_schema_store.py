@@ -113,6 +113,22 @@ def test_parquet_round_trip_is_exact(tmp_path_factory, seed):
         pd.testing.assert_frame_equal(log[name], back[name], check_exact=True)
 
 
+def test_a_stream_file_holding_another_table_is_named_and_a_missing_one_is_listed(tmp_path):
+    # a copied gps.parquet in imu's place failed deep in preprocessing as
+    # "KeyError: 'Field "gyr_x_radps" does not exist in schema'"; a deleted one passed in silence
+    import shutil
+
+    write_flightlog(_random_log(np.random.default_rng(2)), tmp_path)
+    assert "missing_streams" not in read_flightlog(tmp_path).meta
+    (tmp_path / "rangefinder.parquet").unlink()
+    back = read_flightlog(tmp_path)
+    assert back.meta["missing_streams"] == ["rangefinder"] and len(back["rangefinder"]) == 0
+    shutil.copy(tmp_path / "gps.parquet", tmp_path / "imu.parquet")
+    with pytest.raises(ValueError, match=r"imu\.parquet: not the imu stream \(it holds the 'gps' table\)$"):
+        read_flightlog(tmp_path)
+    assert len(read_flightlog(tmp_path, streams=["mode"])["mode"]) == 3
+
+
 def test_parquet_metadata_has_units_frames_and_schema_version(tmp_path):
     log = _random_log(np.random.default_rng(1))
     write_flightlog(log, tmp_path)

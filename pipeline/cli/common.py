@@ -198,13 +198,14 @@ def folder_problem(opt: str, path: str | os.PathLike) -> str | None:
     return None
 
 
-def q2_problem(path: str | os.PathLike) -> str | None:
-    """``None`` if ``path`` is a usable ``run_q2`` output, else why not, in a few words: the
-    EKF+HMM's own reading (:func:`pipeline.estimate.run.read_q2`), made before any flight."""
+def q2_problem(path: str | os.PathLike, model_set: str | None = None) -> str | None:
+    """``None`` if ``path`` is a usable ``run_q2`` output (of ``model_set`` when given), else
+    why not, in a few words: the EKF+HMM's own reading
+    (:func:`pipeline.estimate.run.read_q2`), made before any flight."""
     from ..estimate.run import read_q2
 
     bad = json_object_problem(path)
-    return bad or read_q2(path)[0] or None
+    return bad or read_q2(path, model_set)[0] or None
 
 
 def model_problem(path: str | os.PathLike) -> str | None:

@@ -17,6 +17,7 @@ flight). Inputs paired by position must hold the same flight when they say which
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -81,7 +82,7 @@ def run(args) -> int:
     if args.model is not None:  # loaded once here, not once per flight
         checks.append((f"--model {args.model}", model_problem(args.model)))
     if args.q2 is not None:
-        checks.append((f"--q2 {args.q2}", q2_problem(args.q2)))
+        checks.append((f"--q2 {args.q2}", q2_problem(args.q2, _model_set_name(args.model))))
     # inputs pair by position: a flight given another flight's state is refused, not estimated
     checks.append(("", pairing_problem([("", args.ingest_dirs), ("--state", args.state),
                                         ("--segments", args.segments)])))
@@ -91,14 +92,16 @@ def run(args) -> int:
             return 2
     q2 = args.q2
     if args.model is not None and q2 is None and args.train_sets:
-        q2 = args.out / "q2" / f"{args.model.name}.json"
-        res = run_q2({"params": args.model / "params.npz", "sets": args.train_sets}, {"q2": q2},
-                     sec["ekf_hmm"], model_set=args.model.name)
-        if res.status != "ok":
-            print(f"uavpipe estimate: Q2: {res.error}", file=sys.stderr)
+        q2 = args.out / "q2" / f"{_model_set_name(args.model)}.json"
+        with caller_restates():  # its line is said below, once
+            res = run_q2({"params": args.model / "params.npz", "sets": args.train_sets}, {"q2": q2},
+                         sec["ekf_hmm"], model_set=_model_set_name(args.model))
+        print(f"uavpipe estimate: Q2 of {_model_set_name(args.model)}: "
+              + (res.error if res.status != "ok" else f"{res.diagnostics['n_runs']} training runs -> {q2}"),
+              file=sys.stderr)
     config = job_config(sec, args.vehicle)
     if args.model is not None:
-        config["ekf_hmm"]["model"] = args.model.name
+        config["ekf_hmm"]["model"] = _model_set_name(args.model)
     failed = 0
     claims = Claims()
     for k, d in enumerate(args.ingest_dirs):
@@ -133,3 +136,15 @@ def run(args) -> int:
               f"({dg['n_predict_only']} predict-only), radar {dg['radar']}, reference {dg['reference']}"
               + (f"; ekf_hmm placeholder: {res.error}" if res.status == "partial" else ""))
     return 1 if failed else 0
+
+
+def _model_set_name(model: Path | None) -> str | None:
+    """The name a model folder was trained under (its ``meta.json`` ``name``; the folder name
+    when it has none), which its Q2 file records."""
+    if model is None:
+        return None
+    try:
+        name = json.loads((model / "meta.json").read_text(encoding="utf-8")).get("name")
+    except (OSError, ValueError, AttributeError):
+        name = None
+    return str(name) if name else model.name

@@ -276,18 +276,21 @@ def _ekf_hmm_blocker(inputs, config: Mapping) -> tuple[str, Any, F64 | None]:
                 f"{', '.join(GMR_FEATURE_SETS)})"), None, None
     if not q2_path or not Path(q2_path).exists():
         return f"no Q2 for model set {model}", None, None
-    problem, Q2 = read_q2(q2_path)
+    problem, Q2 = read_q2(q2_path, meta.get("name") or model)
     if problem:
         return f"{q2_path}: {problem}", None, None
     return "", ms, Q2
 
 
-def read_q2(path: str | Path) -> tuple[str, F64 | None]:
+def read_q2(path: str | Path, model_set: str | None = None) -> tuple[str, F64 | None]:
     """``("", Q2)`` from a :func:`run_q2` output, or ``(why not, None)`` in a few words.
 
-    Usable: a JSON object with ``status`` ``ok`` and ``Q2`` a finite 9 × 9 numeric matrix
-    (state order pos/vel/acc NED). A Q₂ that :func:`run_q2` recorded as failed gives its
-    recorded reason. The ``uavpipe estimate --q2`` check calls this before any flight."""
+    Usable: a JSON object with ``status`` ``ok`` and ``Q2`` a finite, symmetric, positive
+    semidefinite 9 × 9 numeric matrix (state order pos/vel/acc NED; it is a covariance, and a
+    negative one ends every flight's EKF+HMM in a non-positive-definite innovation), recorded
+    for ``model_set`` when one is given (another set's Q₂ was taken in silence). A Q₂ that
+    :func:`run_q2` recorded as failed gives its recorded reason. The ``uavpipe estimate --q2``
+    check calls this before any flight."""
     try:
         q2 = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -304,6 +307,15 @@ def read_q2(path: str | Path) -> tuple[str, F64 | None]:
         return f"Q2 is not a numeric matrix ({type(exc).__name__}: {exc})", None
     if Q2.shape != (9, 9) or not np.isfinite(Q2).all():
         return f"Q2 is not a finite 9 x 9 matrix (shape {Q2.shape})", None
+    size = max(float(np.abs(Q2).max()), np.finfo(float).tiny)
+    if np.abs(Q2 - Q2.T).max() > 1e-9 * size:
+        return "Q2 is not symmetric (a covariance is)", None
+    low = float(np.linalg.eigvalsh(Q2).min())
+    if low < -1e-9 * size:
+        return f"Q2 is not positive semidefinite (smallest eigenvalue {low:.3g}; a covariance is)", None
+    owner = q2.get("model_set")
+    if model_set is not None and owner is not None and str(owner) != str(model_set):
+        return f"is the Q2 of model set {owner}, not {model_set}", None
     return "", Q2
 
 
@@ -534,16 +546,17 @@ def run_q2(inputs, outputs, config: Mapping, *, model_set: str) -> Q2Result:
             truth_sets = declared_list(inputs, "truth_sets")
             # a model set trained on EKF estimates: the GMR sees those, the errors are the truth's
             truth = _training_runs({"sets": truth_sets}) if truth_sets else runs
+            given = ", ".join(map(str, [*declared_list(inputs, "sets"), *declared_list(inputs, "states")])) or "none"
             if not len(runs):
-                reason = "no training runs"
+                reason = f"no training runs (in {given})"
             else:
                 try:
                     Q2 = q2_from_runs(ms, truth, scale=scale, input_state=runs if truth_sets else None)
                 except ValueError as exc:
-                    reason = f"Q2 failed: {type(exc).__name__}: {exc}"
+                    reason = f"Q2 failed on {given}: {type(exc).__name__}: {exc}"
                 else:
                     rec.update(Q2=np.asarray(Q2, dtype=np.float64).tolist(), n_runs=int(runs["run_id"].nunique()))
     rec.update(status="failed" if reason else "ok", error=reason or None)
     write_json(rec, out)
-    _say(f"Q2 of {model_set}: " + (reason or f"{rec['n_runs']} training runs, scale {scale:g}"))
+    _say(f"Q2 of {model_set}: " + (reason or f"{rec['n_runs']} training runs, scale {scale:g}"), restated=True)
     return Q2Result(model_set, rec["status"], reason, {"n_runs": rec["n_runs"]})

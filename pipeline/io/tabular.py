@@ -33,7 +33,8 @@ Rows without a finite time (or one beyond the int64 ns range, ±292 years) are d
 cells of numeric columns become NaN and are counted (``records_dropped['bad_value:<column>']``).
 CSV lines holding NUL bytes (a block of the file zeroed or lost on the card: text never has
 them) are dropped before parsing, their bytes counted in ``bytes_skipped`` and the rows they
-held in ``records_dropped['unparseable_row']`` (:func:`drop_nul_lines`); columns
+held in ``records_dropped['unparseable_row']`` (:func:`drop_nul_lines`), as are lines with
+fewer fields than the header, a record cut short (:func:`drop_short_lines`); columns
 constant over the file, unmapped columns and absent optional ones are listed in
 ``meta['columnmap']`` and the warnings.
 
@@ -404,6 +405,54 @@ def drop_undecodable_lines(data: bytes) -> tuple[bytes, LostLines | None]:
                        "the header line is not UTF-8 text")
 
 
+def drop_short_lines(data: bytes, sep: str) -> tuple[bytes, LostLines | None]:
+    """``data`` without the data lines that have fewer ``sep``-separated fields than the header
+    (a record cut short: the card lost its tail, or the file ends mid-line), counted as
+    :func:`drop_nul_lines` counts its lines. The CSV parser would fill the missing cells with
+    NaN and keep the row, so its other columns passed as good data with nothing counted.
+
+    Fields are counted by separators, so the check is skipped when the header holds a quote
+    (a quoted separator would miscount every line); a quoted separator in a data line only
+    adds fields, so it never makes a good line short.
+    """
+    if len(sep) != 1 or not data:
+        return data, None
+    buf = np.frombuffer(data, dtype=np.uint8)
+    nl = np.flatnonzero(buf == 0x0A)
+    header_end = int(nl[0]) if len(nl) else len(buf)
+    if b'"' in bytes(buf[:header_end]):
+        return data, None
+    line_of_sep = np.searchsorted(nl, np.flatnonzero(buf == ord(sep)))
+    fields = np.bincount(line_of_sep, minlength=len(nl) + 1) + 1
+    starts = np.concatenate([[0], nl + 1])
+    ends = np.concatenate([nl, [len(buf)]])
+    content = ends - starts - (buf[np.maximum(ends - 1, 0)] == 0x0D)     # without '\r\n'
+    short = np.flatnonzero((fields < fields[0]) & (content > 0))
+    short = short[short > 0]
+
+    def text(i: int) -> bool:
+        try:
+            bytes(buf[starts[i]:ends[i]]).decode("utf-8")
+            return True
+        except UnicodeDecodeError:    # garbled bytes: drop_undecodable_lines names those
+            return False
+
+    short = np.array([i for i in short.tolist() if text(i)], dtype=np.int64)
+    if not len(short):
+        return data, None
+    i = int(short[0])
+    return _drop_lines(data, starts[short], f"with fewer fields than the header ({int(fields[0])})",
+                       f"first line {i + 1} with {int(fields[i])} field(s)", "")
+
+
+def _merge_lost(a: LostLines | None, b: LostLines | None) -> LostLines | None:
+    """Two :class:`LostLines` as one (either may be None)."""
+    if a is None or b is None:
+        return a or b
+    return LostLines(lines=a.lines + b.lines, bytes=a.bytes + b.bytes, rows=a.rows + b.rows,
+                     text=f"{a.text}; {b.text}")
+
+
 def _drop_lines(data: bytes, positions: np.ndarray, what: str, where: str,
                 header_error: str) -> tuple[bytes, LostLines]:
     """``data`` without every line holding one of the byte ``positions``; the rows lost are
@@ -458,6 +507,10 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, str, LostLines | None]:
             if m.find(b"\0") >= 0:  # the rare damaged file: parse a cleaned copy
                 cleaned, lost = drop_nul_lines(m[:])
                 src = io.BytesIO(cleaned)
+            whole = src.getvalue() if isinstance(src, io.BytesIO) else m
+            kept, short = drop_short_lines(whole, sep)
+            if short is not None:
+                src, lost = io.BytesIO(kept), _merge_lost(lost, short)
     except OSError as exc:
         raise IngestError(path, f"cannot read: {exc.strerror or exc}") from None
     except ValueError as exc:
@@ -472,9 +525,7 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, str, LostLines | None]:
                 cleaned, more = drop_undecodable_lines(raw)
             except ValueError as exc:
                 raise IngestError(path, f"CSV is not UTF-8 text: {exc}") from None
-            lost = more if lost is None else LostLines(
-                lines=lost.lines + more.lines, bytes=lost.bytes + more.bytes, rows=lost.rows + more.rows,
-                text=f"{lost.text}; {more.text}")
+            lost = _merge_lost(lost, more)
             df = pd.read_csv(io.BytesIO(cleaned), sep=sep)
     except pd.errors.EmptyDataError:
         raise IngestError(path, "empty CSV (no header line)") from None

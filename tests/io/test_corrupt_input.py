@@ -230,6 +230,30 @@ def test_a_csv_with_garbled_non_utf8_lines_keeps_the_others_and_counts_the_lost_
         registry.read_log(p, fmt="tabular", config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
 
 
+def test_a_csv_row_cut_short_is_dropped_and_counted_not_kept_with_its_missing_cells_as_nan(tmp_path):
+    # before: pandas filled the missing cells with NaN and the row's other columns passed as
+    # good data, with status ok and nothing counted
+    rng = np.random.default_rng(9)
+    n = 100
+    df = helpers_tabular.table(rng, n)
+    lines = df.to_csv(index=False).encode().split(b"\n")
+    lines[30] = b",".join(lines[30].split(b",")[:3])      # a record that lost its tail
+    p = tmp_path / "short.csv"
+    p.write_bytes(b"\n".join(lines).rstrip(b"\n")[:-7])  # and the file ends mid-line
+    log = registry.read_log(p, config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
+    d = log.meta["diagnostics"]
+    assert log.meta["status"] == "partial" and len(log["gps"]) == n - 2
+    assert d["records_dropped"]["unparseable_row"] == 2
+    fields = len(lines[0].split(b","))
+    assert any(w.startswith(f"2 line(s) with fewer fields than the header ({fields}) dropped") and
+               "first line 31 with 3 field(s)" in w for w in d["warnings"]), d["warnings"]
+    # trailing empty cells are fields too: such a row is whole, and blank lines are no rows
+    lines[30] = b",".join([lines[31].split(b",")[0]] + [b""] * (fields - 1))
+    p.write_bytes(b"\n".join(lines) + b"\n\n")
+    log = registry.read_log(p, config={"columnmaps": {"m": helpers_tabular.column_map("m")}})
+    assert "unparseable_row" not in log.meta["diagnostics"]["records_dropped"]
+
+
 def test_the_many_kinds_of_one_drop_reason_fold_into_one_phrase():
     from pipeline.io.base import grouped_drops, losses_text
 

@@ -449,7 +449,8 @@ class ManeuverModelSet:
         Returns
         -------
         DataFrame, one row per model-rate sample that has an observation: ``run_id``, ``t_ns``,
-        ``truth`` (if ``label`` given), ``pred`` (label or ``unknown``), ``best``, ``V_best``,
+        ``truth`` (if ``label`` given), ``pred`` (label or ``unknown``; ``unknown`` with NaN
+        scores where a feature is NaN, e.g. in a gap of the flight), ``best``, ``V_best``,
         ``oneclass_ok``, ``ll_<label>`` per model, ``state`` (online Viterbi state of ``best``),
         ``change``, ``change_t_ns`` and, with GMR, ``acc_hmm_{n,e,d}_mps2``,
         ``jerk_hmm_{n,e,d}_mps3``, ``acc_hmm_gated_{n,e,d}``.
@@ -492,8 +493,10 @@ class ManeuverModelSet:
             d = {run_col: np.full(n, rid, dtype=object), "t_ns": tks[r]}
             if truths[r] is not None:
                 d["truth"] = np.asarray(truths[r]).astype(str)
-            d["pred"] = labels[lab].astype(str)
-            d["best"] = labels[best].astype(str)
+            # -2: no observation at this sample (a NaN feature, a gap in the flight): no decision
+            # is made, so it is unknown; indexed plainly, -2 read as "background"
+            d["pred"] = np.where(lab == -2, UNKNOWN, labels[lab]).astype(str)
+            d["best"] = np.where(best == -2, UNKNOWN, labels[best]).astype(str)
             d["V_best"] = np.take_along_axis(res["V"][r, :n], best[:, None], axis=1)[:, 0]
             d["oneclass_ok"] = res["oneclass_ok"][r, :n]
             for m, name in enumerate(self.labels_):

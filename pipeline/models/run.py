@@ -361,8 +361,14 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
             write_table(res, out_path, cols, name="classification",
                         extra={**extra, "status": "ok", "labels": ms.labels_, "mode": mode or ms.config.mode})
             _say(f"{extra['flight_id']}: {len(res)} samples classified with {model_set}", restated=True)
+            nodata = int(res["V_best"].isna().sum())     # samples with a NaN feature: no decision
+            if nodata:
+                who = extra["flight_id"] or Path(state_path).name
+                _say(f"{who}: {nodata} of {len(res)} samples have a NaN or infinite feature "
+                     f"(gaps in the state): unknown, not classified")
             return ModelStageResult(model_set, "ok", "", {"n_samples": len(res),
-                                                          "n_unknown": int((res["pred"] == "unknown").sum())})
+                                                          "n_unknown": int((res["pred"] == "unknown").sum()),
+                                                          "n_no_features": nodata})
     _say(f"{extra['flight_id']}: placeholder classification ({reason})", restated=True)
     empty = _empty_classification()
     write_table(empty, out_path, schema.layout("classification", empty.columns), name="classification",

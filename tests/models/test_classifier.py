@@ -342,6 +342,19 @@ def test_a_training_run_with_nan_inf_or_text_features_is_dropped_by_name_and_cou
     assert train("empty", empty)["error"].endswith(f"no labelled training data (no rows in {empty})")
 
 
+def test_a_sample_with_a_nan_feature_is_unknown_with_nan_scores_never_background(trained3):
+    # an inactive sample (-2) indexed the label list from its end and read "background"
+    ms, data = trained3
+    run = data[data["run_id"] == data["run_id"].iloc[0]].copy()
+    run.iloc[40:55, run.columns.get_loc("vel_e_mps")] = np.nan
+    out = ms.classify(run)
+    gap = out["V_best"].isna().to_numpy()
+    assert gap.sum() >= 10 and not gap[:30].any()
+    assert set(out.loc[gap, "pred"]) == {"unknown"} and set(out.loc[gap, "best"]) == {"unknown"}
+    assert "background" not in set(out["pred"])
+    assert out.loc[~gap, "pred"].ne("unknown").any()
+
+
 def test_window_auto_is_half_the_median_training_run(synth, rng, tmp_path):
     _, bulk = synth
     data = pd.concat([bulk(["M1"], 3, rng, duration_s=20.0), bulk(["M2"], 3, rng, duration_s=30.0),

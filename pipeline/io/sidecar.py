@@ -87,7 +87,9 @@ def attach_sidecar(log: FlightLog, path: str | os.PathLike) -> FlightLog:
     """Put a side-car's ``truth`` and ``labels`` into ``log`` (in place; also returned).
 
     The truth is shifted by ``sidecar t0_utc_ns − log t0_utc_ns`` when both are known, so it
-    shares the log's ``t_ns`` base. ``meta['labels_path']`` records the side-car.
+    shares the log's ``t_ns`` base. ``meta['labels_path']`` records the side-car. A side-car
+    whose truth then shares no time with the log's sensor streams is an :class:`IngestError`
+    naming it (another flight's side-car).
     """
     truth, labels, meta = read_sidecar(path)
     t0_sc, t0_log = meta.get("t0_utc_ns"), log.meta.get("t0_utc_ns")
@@ -97,6 +99,17 @@ def attach_sidecar(log: FlightLog, path: str | os.PathLike) -> FlightLog:
         labels = labels.assign(t_start_ns=labels["t_start_ns"] + shift, t_end_ns=labels["t_end_ns"] + shift)
         log.meta.setdefault("diagnostics", schema.new_diagnostics())["warnings"].append(
             f"truth side-car shifted by {shift * 1e-9:+.6f} s onto the log's UTC start")
+    # another flight's side-car: after the shift its truth must share some time with the log
+    # (a ULog given a simulated flight's truth reported a 6.6-year flight)
+    own = [s for s in schema.SENSOR_STREAMS if s != "truth"]
+    lo, hi = log.span_ns(own)
+    if lo is not None and len(truth):
+        t = truth["t_ns"].to_numpy()
+        t_lo, t_hi = int(t.min()), int(t.max())
+        if t_hi < lo or t_lo > hi:
+            raise IngestError(path, f"truth side-car spans {t_lo * 1e-9:.1f} to {t_hi * 1e-9:.1f} s on the log's "
+                                    f"time base, the log {lo * 1e-9:.1f} to {hi * 1e-9:.1f} s: no overlap "
+                                    "(the side-car of another flight?)")
     log.streams["truth"] = schema.conform("truth", truth)
     log.streams["labels"] = labels
     log.meta["labels_path"] = str(path)

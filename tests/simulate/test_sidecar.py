@@ -68,3 +68,18 @@ def test_bad_sidecars(tmp_path):
     write_table(schema.empty("imu"), other, schema.columns("imu"), name="imu")
     with pytest.raises(IngestError, match="not a truth side-car"):
         read_sidecar(other)
+
+
+def test_a_side_car_that_shares_no_time_with_the_log_is_refused_naming_it(tmp_path):
+    # a ULog given a simulated flight's truth was a 6.6-year flight with one warning
+    p = write_sidecar(tmp_path / "a.truth.parquet", _truth(), _labels(), t0_utc_ns=1_000_000_000)
+    imu = pd.DataFrame({"t_ns": np.arange(3, dtype=np.int64) * 10_000_000, "src": "IMU", "acc_x_mps2": 0.0})
+    # the log starts 1 h later on the UTC clock: shifted, the 40 ms of truth end before it
+    late = FlightLog.from_streams({"t0_utc_ns": 1_000_000_000 + 3600 * 10**9}, {"imu": imu})
+    with pytest.raises(IngestError, match=r"a\.truth\.parquet: truth side-car spans -3600\.0 to -3600\.0 s on the log's "
+                                          r"time base, the log 0\.0 to 0\.0 s: no overlap"):
+        attach_sidecar(late, p)
+    # the same log 5 ms later overlaps, and a log without sensor samples takes it as before
+    ok = FlightLog.from_streams({"t0_utc_ns": 1_005_000_000}, {"imu": imu})
+    assert len(attach_sidecar(ok, p)["truth"]) == 5
+    assert len(attach_sidecar(FlightLog.from_streams({"t0_utc_ns": 5}, {}), p)["truth"]) == 5

@@ -361,6 +361,20 @@ def test_the_schema_enums_are_the_codes_vocabularies():
     assert C.default_at("preprocess.vehicles.*.controls") == DEFAULT_CONTROLS
 
 
+def test_a_control_channel_is_exactly_a_column_of_the_control_stream():
+    import re
+
+    from pipeline.io import schema
+
+    pat = re.compile(C.schema()["$defs"]["control_channel"]["pattern"])
+    cols = {c for c in schema.column_names("control") if c.endswith("_us")}
+    assert cols and all(pat.match(c) for c in cols)
+    near = {f"{k}_{i}_us" for k in ("rc", "servo") for i in range(0, 100)} | {"rc_1", "RC_1_us", "rc_01_us"}
+    assert {c for c in near if pat.match(c)} == cols
+    with pytest.raises(ConfigError, match=r"controls\.ail\.channel: 'rc_99_us' is not a control column"):
+        validate_config({"preprocess": {"vehicles": {"v": {"controls": {"ail": {"channel": "rc_99_us"}}}}}})
+
+
 def test_the_hmm_section_and_its_overrides_have_the_same_keys_and_overrides_no_defaults():
     sch = C.schema()
     over = sch["$defs"]["hmm_override"]["properties"]

@@ -234,7 +234,9 @@ def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
         inside = (t >= int(row.t_start_ns)) & (t < int(row.t_end_ns))
         idx = np.flatnonzero(inside)
         reason = ""
-        if gap[idx].any():
+        if int(row.t_end_ns) <= int(row.t_start_ns):
+            reason = "the segment ends before it starts (t_end_ns <= t_start_ns)"
+        elif gap[idx].any():
             reason = f"{int(gap[idx].sum())} gap rows inside the segment"
         idx = idx[::stride]
         if not reason and len(idx) < 2:

@@ -19,6 +19,7 @@ numerically skips the maneuver with the error. The workflow (``rules/align.smk``
 
 from __future__ import annotations
 
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -336,6 +337,12 @@ def _frame(cols: tuple[schema.Column, ...], parts: list[pd.DataFrame]) -> pd.Dat
 
 # --- entry point -----------------------------------------------------------------------------------
 
+def _reason_kind(reason: str) -> str:
+    """A drop reason without its counts (``12 gap rows inside the segment`` → ``gap rows inside
+    the segment``), so one flight's drops are said in a few kinds."""
+    return re.sub(r"^\d+ ", "", reason)
+
+
 def run_align(inputs, outputs, config: Mapping[str, Any], *, set_name: str) -> AlignResult:
     """Learn the intended trajectory of every maneuver of one demo set and write its tables.
 
@@ -364,6 +371,15 @@ def run_align(inputs, outputs, config: Mapping[str, Any], *, set_name: str) -> A
         return frames.get(f, ("", np.nan))
 
     parts: dict[str, list[pd.DataFrame]] = {k: [] for k in ALIGN_OUTPUTS}
+    by_flight: dict[str, list] = {}
+    for d in ds.dropped:
+        by_flight.setdefault(d.flight_id, []).append(d)
+    for f, ds_f in by_flight.items():
+        # said per flight: a maneuver "skipped (1 usable demo(s))" below does not say whose
+        # demos went missing or why (the alignment table keeps every one)
+        kinds = len({_reason_kind(d.reason) for d in ds_f})
+        _say(f"set {set_name}: {f}: {len(ds_f)} demo(s) dropped, first {ds_f[0].name}: {ds_f[0].reason}"
+             + (f" ({kinds} kinds of reason, each in the alignment table)" if kinds > 1 else ""))
     for d in ds.dropped:
         fr, psi = meta_of(d.flight_id)
         parts["alignment"].append(_not_used(d.label, d.name, d.flight_id, d.segment_id, "dropped", d.reason,

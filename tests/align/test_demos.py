@@ -65,6 +65,15 @@ def test_excluded_labels_and_non_finite_segments_give_no_demo():
     assert fd.dropped[0].label == "b" and "non-finite pos_n_m" in fd.dropped[0].reason
 
 
+def test_a_segment_that_ends_before_it_starts_is_dropped_saying_so():
+    st = synthetic_state(500)
+    seg = synthetic_segments([(0, 2, "a"), (2, 4, "b")])
+    seg.loc[1, ["t_start_ns", "t_end_ns"]] = seg.loc[1, ["t_end_ns", "t_start_ns"]].to_numpy()
+    fd = flight_demos(st, seg, flight_id="f")
+    assert [d.name for d in fd.demos] == ["f:a#1"]
+    assert fd.dropped[0].reason == "the segment ends before it starts (t_end_ns <= t_start_ns)"
+
+
 def test_the_rigid_fit_recovers_a_known_heading_and_translation(rng):
     t = np.linspace(0, 60, 301)
     ref = np.column_stack([100 * np.sin(0.1 * t), 30 * t - 0.2 * t ** 2, -50 - 20 * np.sin(0.3 * t)])

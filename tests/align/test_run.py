@@ -123,13 +123,15 @@ def test_a_maneuver_with_fewer_than_two_demos_is_skipped_with_the_reason(tmp_pat
     assert list(al[al["maneuver"] == "solo"]["status"]) == ["skipped"]
 
 
-def test_a_demo_with_gap_rows_is_dropped_and_its_maneuver_learned_without_it(tmp_path, stand_in):
+def test_a_demo_with_gap_rows_is_dropped_and_its_maneuver_learned_without_it(tmp_path, stand_in, capsys):
     out = _outputs(tmp_path)
     align_run.run_align(_inputs(_two_flights(tmp_path, gap=True)), out,
                         _config({"s": {"flights": ["f1", "f2"]}}), set_name="s")
     al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
     row = al[al["demo"] == "f2:b#1"]
     assert list(row["status"]) == ["dropped"] and row["reason"].iloc[0] == "2 gap rows inside the segment"
+    # said per flight, naming it: the maneuver's "skipped (1 usable demo(s))" does not
+    assert "set s: f2: 1 demo(s) dropped, first f2:b#1: 2 gap rows inside the segment" in capsys.readouterr().err
     it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
     assert it[it["maneuver"] == "b"]["status"].iloc[0] == "skipped"  # one demo of b left
 

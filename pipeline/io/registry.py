@@ -95,6 +95,8 @@ def detect(path: str | os.PathLike) -> tuple[type[LogReader], str]:
             return r, reason
     if p.is_dir():
         raise IngestError(p, _folder_problem(p))
+    if not p.is_file():   # a device, a FIFO, a socket: nothing was read from it
+        raise IngestError(p, "not a regular file (a device, pipe or socket); give a log file")
     raise IngestError(p, f"unrecognised log format (file starting {head[:8].hex(' ')}); known formats: "
                       f"{', '.join(r.name for r in readers())}")
 

@@ -560,6 +560,8 @@ class ManeuverModelSet:
             if not isinstance(meta, dict):
                 raise ModelError(f"{d}: unreadable model files: meta.json holds a JSON "
                                  f"{type(meta).__name__}, not an object")
+            if meta.get("status") == "failed":   # a placeholder of a failed training: its reason
+                raise ModelError(f"{d}: the model set failed to train ({meta.get('error') or 'no reason given'})")
             if "format_version" not in meta:
                 raise ModelError(f"{d}: meta.json has no format_version: not the meta.json of a trained "
                                  f"model set (uavpipe train writes format {FORMAT_VERSION})")

@@ -151,6 +151,9 @@ def test_registry_errors_name_the_file(tmp_path):
     junk.write_bytes(b"this is not a flight log\n" * 10)
     with pytest.raises(IngestError, match=r"junk\.bin: unrecognised log format"):
         read_log(junk)
+    # a device reads as nothing: said as such, not "unrecognised log format (file starting )"
+    with pytest.raises(IngestError, match=r"/dev/null: not a regular file"):
+        detect("/dev/null")
 
 
 def test_flight_id_alphabet():

@@ -114,6 +114,10 @@ def test_a_meta_json_of_no_or_another_format_version_is_named_in_words(synth, rn
         (tmp_path / "m" / "meta.json").write_text(json.dumps(m))
         with pytest.raises(ModelError, match=match):
             ManeuverModelSet.load(tmp_path / "m")
+    # the placeholder of a failed training passes its reason on
+    (tmp_path / "m" / "meta.json").write_text(json.dumps({"status": "failed", "error": "no rows in x.parquet"}))
+    with pytest.raises(ModelError, match=r"m: the model set failed to train \(no rows in x\.parquet\)$"):
+        ManeuverModelSet.load(tmp_path / "m")
 
 
 def test_training_deterministic(synth, rng, tmp_path):

@@ -134,6 +134,16 @@ def check_manifest(path: str | os.PathLike, config: Mapping[str, Any], *,
                     if len(cells) == 1 and raw.count(",") >= len(COLUMNS) - 2 else ""
                 raise ConfigError(f"{src}:{lineno}: header lacks column(s) {', '.join(missing)} "
                                   f"(expected: {', '.join(COLUMNS)}){hint}")
+            # as the config refuses an unknown key: a column no stage reads is a typo or a
+            # misunderstanding, and free text has its own column
+            unknown = [c for c in header if c not in COLUMNS]
+            twice = sorted({c for c in header if header.count(c) > 1})
+            if unknown or twice:
+                raise ConfigError(f"{src}:{lineno}: header has "
+                                  + (f"unknown column(s) {', '.join(map(repr, unknown))}" if unknown else "")
+                                  + (" and " if unknown and twice else "")
+                                  + (f"column(s) {', '.join(twice)} twice" if twice else "")
+                                  + f" (expected: {', '.join(COLUMNS)}; free text goes in notes)")
             continue
         if len(cells) > len(header):
             problems.append(f"{src}:{lineno}: {len(cells)} tab-separated fields, the header has {len(header)}")

@@ -96,6 +96,14 @@ def test_a_missing_column_or_manifest_is_one_line(tmp_path):
         check_manifest(p, CONFIG)
     with pytest.raises(ConfigError, match=r"nope\.tsv: manifest file not found$"):
         check_manifest(tmp_path / "nope.tsv", CONFIG)
+    # a column no stage reads (a typo, or a note) is refused, as an unknown config key is
+    p.write_text("flight_id\tpath\tvehicle\trole\tlabels\tformat\tnotes\tpilot\n")
+    with pytest.raises(ConfigError, match=r"f\.tsv:1: header has unknown column\(s\) 'pilot' \(expected: "
+                                          r"flight_id, .*; free text goes in notes\)$"):
+        check_manifest(p, CONFIG)
+    p.write_text("flight_id\tpath\tvehicle\trole\tlabels\tformat\tnotes\tpath\n")
+    with pytest.raises(ConfigError, match=r"f\.tsv:1: header has column\(s\) path twice"):
+        check_manifest(p, CONFIG)
 
 
 def test_a_leading_tilde_is_the_home_folder_and_realdata_expands_first(monkeypatch):

@@ -190,11 +190,17 @@ def pairing_problem(columns: list[tuple[str, list]]) -> str | None:
 
 def folder_problem(opt: str, path: str | os.PathLike) -> str | None:
     """``'<opt> <path>: exists and is not a folder'`` when an output folder is already a file
-    (``opt`` ``""`` for a positional argument), else ``None``. Said once, before any work: an
+    (or ``'... <parent> is a file, not a folder'`` for a folder above it; ``opt`` ``""`` for a
+    positional argument), else ``None``. Said once, before any work: an
     output written under it fails with ``Not a directory`` for every input."""
     p = Path(path)
     if p.exists() and not p.is_dir():
         return f"{opt + ' ' if opt else ''}{p}: exists and is not a folder"
+    for up in p.parents:      # a file where a folder above it must go
+        if up.exists():
+            if not up.is_dir():
+                return f"{opt + ' ' if opt else ''}{p}: {up} is a file, not a folder"
+            break
     return None
 
 

@@ -493,6 +493,14 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, str, LostLines | None]:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
+        from .parquet import read_table_meta
+
+        try:
+            kind = read_table_meta(path).get("table")
+        except (pa.ArrowException, OSError, ValueError):
+            kind = None                     # pq.read_table below names what is wrong
+        if kind:   # written by uavpipe (a state or classification table): an output, not a log
+            raise IngestError(path, f"a uavpipe '{kind}' table (a pipeline output), not a flight log")
         try:
             return pq.read_table(path).to_pandas(), "parquet", None
         except (pa.ArrowException, OSError, ValueError) as exc:

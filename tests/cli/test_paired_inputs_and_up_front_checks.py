@@ -152,6 +152,10 @@ def test_an_output_folder_that_is_a_file_is_refused_once_before_any_work(two_fli
     for command, args in runs.items():
         assert main(args) == 2, command
         assert _err_lines(capsys) == [f"uavpipe {command}: -o {f}: exists and is not a folder"]
+        # a file where a folder above it must go: once, not a 'Not a directory' per flight
+        sub = f / "out"
+        assert main([str(sub) if x == str(f) else x for x in args]) == 2, command
+        assert _err_lines(capsys) == [f"uavpipe {command}: -o {sub}: {f} is a file, not a folder"]
     assert f.read_text() == "x"
 
 

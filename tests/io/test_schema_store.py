@@ -151,6 +151,13 @@ def test_registry_errors_name_the_file(tmp_path):
     junk.write_bytes(b"this is not a flight log\n" * 10)
     with pytest.raises(IngestError, match=r"junk\.bin: unrecognised log format"):
         read_log(junk)
+    # a pipeline output given as a log: named as such, not "no column map matches this parquet header"
+    from pipeline.io.parquet import write_table
+
+    out = tmp_path / "state.parquet"
+    write_table(schema.empty("state"), out, schema.columns("state"), name="state")
+    with pytest.raises(IngestError, match=r"state\.parquet: a uavpipe 'state' table \(a pipeline output\), not a flight log"):
+        read_log(out)
     # a device reads as nothing: said as such, not "unrecognised log format (file starting )"
     with pytest.raises(IngestError, match=r"/dev/null: not a regular file"):
         detect("/dev/null")

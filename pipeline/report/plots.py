@@ -358,34 +358,46 @@ def accel_rms(imu: pd.DataFrame | None, window_s: float = 1.0) -> pd.DataFrame |
 
 def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.Figure | None:
     """Vibration: the autopilot's metric (``vibration`` stream: VIBE x/y/z, PX4's one-number
-    metrics, clipping counts on the right axis) where logged, else the accelerometer RMS in
-    1 s windows (:func:`accel_rms`); ``None`` when neither exists."""
+    metrics, clipping counts) where logged, else the accelerometer RMS in 1 s windows
+    (:func:`accel_rms`); ``None`` when neither exists.
+
+    Each unit has an axis of its own (:func:`unit_axes`): the accelerometer metrics in m/s² on
+    the left, PX4's gyro metric in rad/s and the clipping counts on the right, each axis titled
+    with its unit. A gyro metric of 0.05 rad/s beside an accelerometer metric of 5 m/s² on one
+    m/s² axis read as a flat line in the wrong unit.
+    """
     v = _first(vib)
     fig = go.Figure()
     if v is not None:
-        for c in ("vibe_x_mps2", "vibe_y_mps2", "vibe_z_mps2", "acc_vibration_mps2", "gyr_vibration_radps"):
-            if c in v and v[c].notna().any():
+        # (axis title, columns, line style) per unit: left axis first, then the right ones
+        groups = (("vibration [m/s²]", ("vibe_x_mps2", "vibe_y_mps2", "vibe_z_mps2", "acc_vibration_mps2"), None),
+                  ("gyro vibration [rad/s]", ("gyr_vibration_radps",), "dash"),
+                  ("clipping events", ("clip_0", "clip_1", "clip_2"), "dot"))
+        titles = []
+        for title, cols, dash in groups:
+            cols = [c for c in cols if c in v and v[c].notna().any()]
+            if not cols:
+                continue
+            axis = "y" if not titles else f"y{len(titles) + 1}"
+            titles.append(title)
+            for c in cols:
                 d = decimate(v[["t_ns", c]].dropna(), cols=[c])
-                fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
-        clips = [c for c in ("clip_0", "clip_1", "clip_2") if c in v and v[c].notna().any()]
-        for c in clips:
-            d = decimate(v[["t_ns", c]].dropna(), cols=[c])
-            fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis="y2",
-                                     line=dict(dash="dot")))
-        if clips:
-            fig.update_layout(yaxis2=right_axis("clipping events"))
-        title, ylab = "Vibration (autopilot's metric)", "vibration [m/s²]"
-    if not fig.data:
-        r = accel_rms(imu)
-        if r is None:
-            return None
-        for c in ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2"):
-            fig.add_trace(go.Scatter(x=_t(r), y=r[c], mode="lines", name=label(c).replace(" [", " RMS ["),
-                                     line=dict(color=colour(c))))
-        title, ylab = "Vibration (accelerometer RMS about the mean, 1 s windows; raw, sensor frame)", "RMS [m/s²]"
+                fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis=axis,
+                                         # a clipping count is no component: the default cycle, as before
+                                         line=dict(color=None if c.startswith("clip") else colour(c), dash=dash)))
+        if fig.data:
+            extra = unit_axes(fig, titles)
+            fig.update_xaxes(title="t [s]")
+            return layout(fig, "Vibration (autopilot's metric)", **extra)
+    r = accel_rms(imu)
+    if r is None:
+        return None
+    for c in ("acc_x_mps2", "acc_y_mps2", "acc_z_mps2"):
+        fig.add_trace(go.Scatter(x=_t(r), y=r[c], mode="lines", name=label(c).replace(" [", " RMS ["),
+                                 line=dict(color=colour(c))))
     fig.update_xaxes(title="t [s]")
-    fig.layout.yaxis.title = ylab
-    return layout(fig, title)
+    fig.layout.yaxis.title = "RMS [m/s²]"
+    return layout(fig, "Vibration (accelerometer RMS about the mean, 1 s windows; raw, sensor frame)")
 
 
 #: below this IMU rate a spectrogram shows nothing of the vibration (Nyquist under 10 Hz): a

@@ -54,6 +54,26 @@ def test_the_vibration_panel_prefers_the_autopilots_metric():
     assert fig.layout.title.text.startswith("Vibration (autopilot")
 
 
+def test_the_px4_gyro_vibration_is_drawn_on_a_rad_per_s_axis_of_its_own_never_on_the_m_per_s2_axis():
+    n = 40
+    vib = _stream("vibration", n, 10.0, acc_vibration_mps2=np.full(n, 5.0), gyr_vibration_radps=np.full(n, 0.05))
+    fig = plots.vibration(vib, None)
+
+    def axis_title(tr) -> str:
+        return (fig.layout.yaxis if tr.yaxis in (None, "y") else getattr(fig.layout, f"yaxis{tr.yaxis[1:]}")).title.text
+
+    axes = {tr.name: axis_title(tr) for tr in fig.data}
+    assert axes == {"accelerometer vibration [m/s²]": "vibration [m/s²]",
+                    "gyro vibration [rad/s]": "gyro vibration [rad/s]"}
+    assert fig.layout.yaxis2.overlaying == "y" and fig.layout.yaxis2.side == "right"
+    # with clipping counts as well: three units, three axes, the plot narrowed for the third
+    fig = plots.vibration(vib.assign(clip_0=np.arange(n, dtype=float)), None)
+    assert [axis_title(tr) for tr in fig.data] == ["vibration [m/s²]", "gyro vibration [rad/s]", "clipping events"]
+    # the gyro alone: its own unit on the left axis, no m/s² anywhere
+    fig = plots.vibration(vib.assign(acc_vibration_mps2=np.nan), None)
+    assert [axis_title(tr) for tr in fig.data] == ["gyro vibration [rad/s]"]
+
+
 def test_the_vibration_panel_falls_back_to_the_accelerometer_rms_in_one_second_windows():
     rng = np.random.default_rng(5)
     n, rate = 500, 50.0                                 # 10 s at 50 Hz

@@ -28,7 +28,7 @@ from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_table, read_table_meta
 from ..io.stage import declared
-from .pages import figure_divs, relative_href, render, write_page
+from .pages import figure_divs, relative_href, render, table_html, write_page
 from .plots import colour, label, label_colours, layout
 
 _AXES = (("pos", "position", ("pos_n_m", "pos_e_m", "pos_d_m")),
@@ -216,16 +216,15 @@ def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *,
         at = anchor_table(learned, demos, band_deg)
         tables.append((f"Anchors (digest §10 item 7): peak pitch, longest time within {band_deg[0]:g}–{band_deg[1]:g}°, "
                        "cross-track RMS about the track's own straight line; RMS distance of each demo to the learned path",
-                       at.rename(columns=HEADERS).to_html(index=False, border=0, float_format="%.2f")))
+                       table_html(at.rename(columns=HEADERS), float_format="%.2f")))
     summary = iterations.groupby("maneuver", sort=False).agg(
         status=("status", "first"), reason=("reason", "first"), demos=("n_demos", "first"),
         iterations=("iteration", "max"), converged=("converged", "first"),
         loglik_first=("loglik", "first"), loglik_last=("loglik", "last")).reset_index()
-    tables.append(("Maneuvers", summary.rename(columns=HEADERS).to_html(index=False, border=0, float_format="%.1f",
-                                                                         na_rep="–")))
+    tables.append(("Maneuvers", table_html(summary.rename(columns=HEADERS), float_format="%.1f")))
     left = alignment[alignment["status"] != "used"][["maneuver", "demo", "flight_id", "status", "reason"]]
     if len(left):
-        tables.append(("Left out", left.rename(columns=HEADERS).to_html(index=False, border=0)))
+        tables.append(("Left out", table_html(left.rename(columns=HEADERS))))
     page = render(template, set_name=set_name, facts=facts, plots=figure_divs(figs), tables=tables,
                   plotly_js=plotly_js, index_href=index_href, failed=meta.get("status") == "failed",
                   error=meta.get("error"))

@@ -20,7 +20,7 @@ from plotly.subplots import make_subplots
 
 from ..io.parquet import read_table, read_table_meta
 from .glossary import glossary_rows
-from .pages import figure_divs, render, write_page
+from .pages import figure_divs, render, table_html, write_page
 from .plots import label_colours, layout
 
 
@@ -68,8 +68,7 @@ _EVAL_COLUMNS = {"n_runs": "runs", "FA_pct": "FA [%]", "MAoT_pct": "MAoT [%]",
 def _table_html(df: pd.DataFrame) -> str:
     fmt = {_EVAL_COLUMNS.get(c, c): (lambda v: "–" if pd.isna(v) else f"{v:.2f}")
            for c in df.columns if c.endswith("_pct")}
-    return df.rename(columns=_EVAL_COLUMNS).to_html(index=False, classes="eval", na_rep="–", formatters=fmt,
-                                                    border=0)
+    return table_html(df.rename(columns=_EVAL_COLUMNS), classes="eval", formatters=fmt)
 
 
 def build_model_report(model_dir: str | os.PathLike, evaluation: str | os.PathLike,
@@ -119,7 +118,7 @@ def build_model_report(model_dir: str | os.PathLike, evaluation: str | os.PathLi
                  "sequences": t.get("n_sequences"), "samples": t.get("n_samples"),
                  "final LL": (t.get("history") or [float("nan")])[-1], "threshold": t.get("threshold")}
                 for lab, t in training.items()]
-        tables.append(("Training", pd.DataFrame(rows).to_html(index=False, border=0, float_format="%.1f")))
+        tables.append(("Training", table_html(pd.DataFrame(rows), float_format="%.1f")))
     ev = read_table(evaluation) if Path(evaluation).exists() else pd.DataFrame()
     if len(ev):
         for (table, split, decision), g in ev.groupby(["table", "split", "decision"], sort=False):

@@ -13,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import jinja2
+import numpy as np
+import pandas as pd
 
 from ..io.atomic import write_text_atomic
 
@@ -108,3 +110,23 @@ def vector_text(v: Any, unit: str, decimals: int = 1) -> str:
     except TypeError:
         return "–"
     return f"({', '.join(parts)}) {unit}".rstrip()
+
+
+def cell_text(v: Any) -> Any:
+    """A table cell for reading: a boolean as ``yes`` or ``no`` (never Python's ``True`` or
+    ``False``), any other value as it is."""
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    return v
+
+
+def table_html(df: pd.DataFrame, **kw: Any) -> str:
+    """``df`` as an HTML table for a report page: no index, no border, a missing value as ``–``
+    and every boolean cell as ``yes``/``no`` (:func:`cell_text`); ``kw`` are further options of
+    :meth:`pandas.DataFrame.to_html` (``float_format``, ``formatters``, ``classes``)."""
+    out = df.copy()
+    for c in out.columns:
+        # bool, nullable boolean, or object columns (flags read from JSON may hold None too)
+        if pd.api.types.is_bool_dtype(out[c]) or out[c].dtype == object:
+            out[c] = out[c].astype(object).map(cell_text)
+    return out.to_html(**{"index": False, "border": 0, "na_rep": "–", **kw})

@@ -1,0 +1,82 @@
+"""The tables of the model and trajectory-learning pages read as words (report audit): a flag is
+``yes``/``no``, never Python's ``True``/``False``, through one cell formatter
+(:func:`pipeline.report.pages.table_html`)."""
+
+from __future__ import annotations
+
+import html
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _cells(page: str, title: str) -> list[list[str]]:
+    """The body cells of the table under the ``<h2>`` that starts with ``title``."""
+    text = page[page.index(f"<h2>{title}"):]
+    table = text[text.index("<table"):text.index("</table>")]
+    body = table[table.index("<tbody>"):] if "<tbody>" in table else table
+    return [[html.unescape(c).strip() for c in re.findall(r"<td[^>]*>(.*?)</td>", row, re.S)]
+            for row in re.findall(r"<tr[^>]*>(.*?)</tr>", body, re.S)]
+
+
+def test_a_boolean_table_cell_reads_yes_or_no_and_a_missing_one_a_dash():
+    from pipeline.report.pages import cell_text, table_html
+
+    df = pd.DataFrame({"converged": [True, False, True], "flag": pd.array([True, None, False], dtype="boolean"),
+                       "json": [np.True_, None, False], "n": [1, 2, 3], "x": [0.5, np.nan, 2.0]})
+    out = table_html(df, float_format="%.1f")
+    assert "True" not in out and "False" not in out and "None" not in out and "NaN" not in out
+    rows = [[c for c in re.findall(r"<td>(.*?)</td>", r)] for r in re.findall(r"<tr>(.*?)</tr>", out, re.S)]
+    assert rows == [["yes", "yes", "yes", "1", "0.5"], ["no", "–", "–", "2", "–"], ["yes", "no", "no", "3", "2.0"]]
+    assert cell_text(np.False_) == "no" and cell_text(1) == 1 and cell_text("True") == "True"
+
+
+def test_the_model_pages_training_table_says_whether_each_maneuver_converged_in_words(tmp_path):
+    from pipeline.report.model import build_model_report
+
+    d = tmp_path / "m"
+    d.mkdir()
+    n = 2
+    np.savez(d / "params.npz", m0_startprob=np.full(n, 0.5), m0_transmat=np.full((n, n), 0.5),
+             m0_means=np.zeros((n, 1, 3)), m1_startprob=np.full(n, 0.5), m1_transmat=np.full((n, n), 0.5),
+             m1_means=np.zeros((n, 1, 3)))
+    training = {lab: {"n_states": n, "n_iter": 4, "converged": conv, "n_recordings": 3, "n_sequences": 3,
+                      "n_samples": 300, "history": [-900.0, -800.0], "threshold": -5.0}
+                for lab, conv in (("loop", True), ("roll", False))}
+    (d / "meta.json").write_text(json.dumps({"name": "m", "status": "ok", "labels": ["loop", "roll"],
+                                             "training": training, "feature_names": ["a", "b", "c"],
+                                             "config": {"rate_hz": 10}, "spec": {"data": "simulated"}}))
+    build_model_report(d, d / "evaluation.parquet", tmp_path / "m.html",
+                       template=ROOT / "reports" / "templates" / "model.html.j2", plotly_js="plotly.min.js")
+    rows = _cells((tmp_path / "m.html").read_text(), "Training")
+    assert [(r[0], r[3]) for r in rows] == [("loop", "yes"), ("roll", "no")]
+
+
+def test_the_align_pages_maneuver_table_says_whether_each_maneuver_converged_in_words(tmp_path):
+    from helpers_align import synthetic_segments, synthetic_state, write_flight
+
+    from pipeline.align.run import ALIGN_OUTPUTS, run_align
+    from pipeline.config import load_config
+    from pipeline.report.align import build_align_report
+
+    seg = synthetic_segments([(0, 8, "a"), (8, 16, "b")])
+    fl = [write_flight(tmp_path / "in", f"f{k}", synthetic_state(500, heading_rad=0.4 * k, seed=k), seg, 0.4 * k)
+          for k in range(2)]
+    out = {k: tmp_path / "align" / f"{k}.parquet" for k in ALIGN_OUTPUTS}
+    run_align({"states": [p[0] for p in fl], "segments": [p[1] for p in fl]}, out,
+              {**load_config()["align"], "max_iter": 2, "sets": {"s": {"flights": ["f0", "f1"], "reference": None}}},
+              set_name="s")
+    build_align_report(out, tmp_path / "s.html", set_name="s",
+                       template=ROOT / "reports" / "templates" / "align.html.j2", plotly_js="plotly.min.js")
+    page = (tmp_path / "s.html").read_text()
+    head = [html.unescape(h) for h in re.findall(r"<th>(.*?)</th>", page[page.index("<h2>Maneuvers"):])]
+    k = head.index("converged")
+    rows = _cells(page, "Maneuvers")
+    assert rows and all(r[k] in ("yes", "no") for r in rows), rows
+    assert ">True<" not in page and ">False<" not in page

@@ -28,7 +28,7 @@ from ..frames.rotations import quat_to_euler
 from ..io import schema
 from ..io.parquet import read_table, read_table_meta
 from ..io.stage import declared
-from .pages import figure_divs, relative_href, render, table_html, write_page
+from .pages import count_text, figure_divs, relative_href, render, table_html, write_page
 from .plots import colour, label, label_colours, layout
 
 _AXES = (("pos", "position", ("pos_n_m", "pos_e_m", "pos_d_m")),
@@ -154,7 +154,7 @@ def loglik_figure(iterations: pd.DataFrame, tol: float | None = None) -> go.Figu
                            showarrow=False, xanchor="right", yanchor="bottom")
     fig.update_xaxes(title="EM iteration")
     fig.update_yaxes(title="|Δ log L| / |log L| (per iteration)", type="log")
-    layout(fig, f"EM convergence ({n_conv} of {n_all} maneuvers converged)", height=380)
+    layout(fig, f"EM convergence ({n_conv} of {count_text(n_all, 'maneuver')} converged)", height=380)
     return fig.update_yaxes(exponentformat="power")   # 10⁻⁶, not 0.000001 (layout's plain numbers)
 
 
@@ -194,7 +194,7 @@ def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *,
     diag = meta.get("align") or {}
     facts = [("status", meta.get("status", "?") + (f": {meta['error']}" if meta.get("error") else ""))]
     for f, info in (diag.get("flights") or {}).items():
-        s = f"{info.get('frame')} frame, heading {np.degrees(info.get('heading_rad') or 0.0):.1f}°, {info.get('n_demos')} demos"
+        s = f"{info.get('frame')} frame, heading {np.degrees(info.get('heading_rad') or 0.0):.1f}°, {count_text(info.get('n_demos'), 'demo')}"
         if info.get("fit_rms_m") is not None:
             s += (f"; rigid fit to the reference: translation ({', '.join(f'{v:.1f}' for v in info.get('translation_m') or [])}) m, "
                   f"matched-pair RMS {info['fit_rms_m']:.1f} m")

@@ -24,7 +24,7 @@ from ..io.base import last_params
 from ..io.parquet import read_table, read_table_meta
 from . import plots
 from .flight_summary import utc_date
-from .pages import figure_divs, render, write_page
+from .pages import count_text, figure_divs, render, write_page
 
 #: takeoff: this far above the start height [m] ...
 TAKEOFF_HEIGHT_M = 2.0
@@ -173,7 +173,7 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
             ("Pitch", _overlay(tracks, "pitch_deg", "Pitch (state: body FRD, mount-corrected)", "pitch [°]"))]
     if len(per_flight) >= 2:
         p_headers, p_rows = differing_params(per_flight)
-        p_note = (f"{len(p_rows)} of {len(set().union(*(set(v) for v in per_flight.values())))} parameters "
+        p_note = (f"{len(p_rows)} of {count_text(len(set().union(*(set(v) for v in per_flight.values()))), 'parameter')} "
                   f"differ between the {len(per_flight)} flights that log parameters") if p_rows else None
     else:
         p_headers, p_rows = [], []

@@ -20,7 +20,7 @@ from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta
 from .flight_summary import (PATH_BIN_S, PATH_NOISE_K, diagnostics_text, first_instance, flight_numbers,
                              ned_track, numbers_script, plain_text, summary_rows, velocity_track, without_edges)
-from .pages import figure_divs, render, vector_text, write_page
+from .pages import count_text, figure_divs, render, vector_text, write_page
 from . import plots
 
 #: the 9 CA state columns (pos, vel, acc NED) of the state table and the truth stream
@@ -131,7 +131,7 @@ def calibration_table(preprocess: Mapping | None) -> tuple[str, list[str], list[
            "uncalibrated": "not calibrated", "none": "no barometer"}.get(c.get("method"), str(c.get("method")))
     parts = [how]
     if c.get("n_candidates"):
-        parts.append(f"{c.get('n_used', 0)} of {c['n_candidates']} candidate points used")
+        parts.append(f"{c.get('n_used', 0)} of {count_text(c['n_candidates'], 'candidate point')} used")
     parts += [t for t in (plain_text(n) for n in c.get("notes") or []) if t != how]   # "no barometer" once
     return f"Barometric calibration ({'; '.join(parts)})", headers, rows
 
@@ -187,7 +187,7 @@ def estimate_panels(estimates: Mapping[str, str | os.PathLike], *, truth: pd.Dat
         if m.get("status") == "failed":
             facts.append((label, f"placeholder: {m.get('error')}"))
         else:
-            facts.append((label, f"{m.get('n_steps')} steps ({m.get('n_predict_only')} predict-only), radar "
+            facts.append((label, f"{count_text(m.get('n_steps'), 'step')} ({m.get('n_predict_only')} predict-only), radar "
                                  f"{m.get('radar')} (site {vector_text(m.get('radar_site_ned_m'), 'm NED')} from {m.get('radar_site_from')}), "
                                  f"q {m.get('q')}, reference {m.get('reference')}"))
     ok = {e: t for e, t in tables.items() if len(t)}
@@ -241,7 +241,7 @@ def pf_panels(estimates: Mapping[str, str | os.PathLike],
             figs.append((f"{label} mode fractions (placeholder: {m.get('error')})", None))
             continue
         fr = m.get("mode_fraction_mean") or {}
-        facts.append((label, f"{m.get('n_steps')} steps, N = {m.get('n_particles')}, {m.get('n_resampled')} resampled "
+        facts.append((label, f"{count_text(m.get('n_steps'), 'step')}, N = {m.get('n_particles')}, {m.get('n_resampled')} resampled "
                              f"({m.get('resample')}, N_eff < {float(m.get('threshold', 0)):.2f} N), "
                              f"{m.get('n_predict_only')} predict-only, {m.get('n_reinit')} re-initialised; "
                              f"mean fractions " + ", ".join(f"{k} {v:.2f}" for k, v in fr.items())
@@ -278,7 +278,7 @@ def weave_panels(path: str | os.PathLike) -> tuple[list, list]:
         return [(f"Weave classifier (no estimate: {meta.get('reason')})", None)], \
             [("hmpf", f"placeholder: {meta.get('reason')}")]
     first = meta.get("first_detection_t_ns")
-    fact = (f"{meta.get('n_steps')} steps of {meta.get('dt_s')} s, δ_max {meta.get('delta_max_m', 0):.0f} m, "
+    fact = (f"{count_text(meta.get('n_steps'), 'step')} of {meta.get('dt_s')} s, δ_max {meta.get('delta_max_m', 0):.0f} m, "
             f"θ_max {meta.get('theta_max_rad', 0):.2f} rad ({meta.get('maxima_source')}), first weave "
             + (f"at {first / 1e9:.0f} s" if first is not None else "never") +
             f", flagged {100 * meta.get('fraction_flagged', 0):.0f} % of steps; "
@@ -551,7 +551,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     if st is not None:
         src = pre.get("sources") or {}
         cinfo = pre.get("calibration") or {}
-        facts.append(("preprocess", f"{pre.get('n_samples', 0)} samples @ {known(pre.get('rate_hz'))} Hz; position "
+        facts.append(("preprocess", f"{count_text(pre.get('n_samples', 0), 'sample')} @ {known(pre.get('rate_hz'))} Hz; position "
                                     f"{known(src.get('position'))}; body rates {known(src.get('body_rates'))}; BPM "
                                     f"{known(cinfo.get('method'))}" if pre else known(state_meta.get("error"))))
     for m, p in classified.items():

@@ -46,6 +46,7 @@ import pandas as pd
 from ..io import schema
 from ..io.base import grouped_drops
 from ..io.parquet import json_safe
+from .pages import count_text
 
 #: MAV_AUTOPILOT enum values that name an autopilot (MAVLink common.xml)
 MAV_AUTOPILOT = {0: "generic", 3: "ArduPilot", 4: "OpenPilot", 8: "none (not a flight controller)",
@@ -195,9 +196,9 @@ def worst_warning(meta: Mapping, preprocess: Mapping | None = None) -> str:
     if meta.get("status") == "failed":
         ranked.append((5, f"ingest failed: {meta.get('error') or 'unknown reason'}"))
     if diag.get("bytes_skipped"):
-        ranked.append((4, f"ingest: {diag['bytes_skipped']} bytes skipped"))
+        ranked.append((4, f"ingest: {count_text(diag['bytes_skipped'], 'byte')} skipped"))
     for reason, n in grouped_drops(diag.get("records_dropped")):
-        ranked.append((4, f"ingest: {n} records dropped ({reason})"))
+        ranked.append((4, f"ingest: {count_text(n, 'record')} dropped ({reason})"))
     ranked += [(3, f"ingest: {w}") for w in diag.get("warnings") or []]
     ranked += [(2, f"ingest: {w}") for w in timestamp_anomalies(diag)]
     pre = preprocess or {}
@@ -219,10 +220,10 @@ def gps_fix_share(gps: pd.DataFrame | None) -> str:
     g = gps[gps["instance"] == gps["instance"].min()] if "instance" in gps else gps
     if "fix_type" in g and g["fix_type"].notna().any():
         ok = (g["fix_type"].to_numpy(np.float64) >= 3).mean()
-        return f"{100 * ok:.1f} % of {len(g)} records (3-D fix or better)"
+        return f"{100 * ok:.1f} % of {count_text(len(g), 'record')} (3-D fix or better)"
     lat, lon = g["lat_deg"].to_numpy(np.float64), g["lon_deg"].to_numpy(np.float64)
     ok = (np.isfinite(lat) & np.isfinite(lon) & ((np.abs(lat) > 1e-6) | (np.abs(lon) > 1e-6))).mean()
-    return f"{100 * ok:.1f} % of {len(g)} records (finite position; no fix type logged)"
+    return f"{100 * ok:.1f} % of {count_text(len(g), 'record')} (finite position; no fix type logged)"
 
 
 # --- the headline numbers: one function for the flight page and the index ----------------------

@@ -16,7 +16,7 @@ import pandas as pd
 from ..io.parquet import read_flightlog
 from ..io import schema
 from .flight_summary import flight_numbers, loss_parts, number_texts, read_page_numbers, utc_date
-from .pages import write_page
+from .pages import count_text, write_page
 
 
 def flight_summary(flight_id: str, meta_path: str | os.PathLike, page: str | os.PathLike | None = None) -> dict:
@@ -187,7 +187,7 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     page = f"""<!doctype html><html lang="en"><head><meta charset="utf-8"><title>uavpipe flights</title>
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>
-<p>{len(rows)} flights, {n_failed} failed{f", {len(skipped)} manifest rows skipped" if skipped else ""}.</p>
+<p>{count_text(len(rows), "flight")}, {n_failed} failed{f", {count_text(len(skipped), 'manifest row')} skipped" if skipped else ""}.</p>
 <table><thead><tr><th>flight</th><th>date (UTC)</th><th>vehicle</th><th>status</th><th>format</th><th>duration</th><th>distance (horizontal path)</th>
 <th>max horizontal speed</th><th>maneuvers</th><th>ingest warnings</th></tr></thead>
 <tbody>{''.join(body)}</tbody></table>{skipped_html}{models_html}</body></html>"""

@@ -20,7 +20,7 @@ from plotly.subplots import make_subplots
 
 from ..io.parquet import read_table, read_table_meta
 from .glossary import glossary_rows
-from .pages import figure_divs, render, table_html, write_page
+from .pages import count_text, figure_divs, render, table_html, write_page
 from .plots import label_colours, layout
 
 
@@ -57,7 +57,7 @@ def hmm_figure(label: str, startprob: np.ndarray, transmat: np.ndarray, means: n
                   row=1, col=2)
     fig.update_yaxes(autorange="reversed", row=1, col=1)
     fig.update_yaxes(autorange="reversed", row=1, col=2)
-    return layout(fig, f"HMM of {label}: {n} states", height=340 + 12 * n, margin=dict(l=60, r=20, t=90, b=80))
+    return layout(fig, f"HMM of {label}: {count_text(n, 'state')}", height=340 + 12 * n, margin=dict(l=60, r=20, t=90, b=80))
 
 
 #: display names of the evaluation table's columns (the seed's values cited by section)

@@ -103,6 +103,26 @@ def number_text(x: Any, decimals: int = 1) -> str:
     return f"{v:.{decimals}f}".rstrip("0").rstrip(".")
 
 
+def count_text(n: Any, noun: str, plural: str | None = None) -> str:
+    """``n`` and ``noun`` agreeing in number: ``1 sample``, ``0 samples``, ``2 samples``
+    (``plural``: an irregular plural, default ``noun + "s"``); a count that is not a number
+    (``None`` from an old table's metadata) reads ``– samples``.
+
+    Examples
+    --------
+    >>> count_text(1, "demo"), count_text(3, "demo"), count_text(None, "step")
+    ('1 demo', '3 demos', '– steps')
+    """
+    try:
+        k = float(n)
+    except (TypeError, ValueError):
+        k = float("nan")
+    many = plural or noun + "s"
+    if not math.isfinite(k):
+        return f"– {many}"
+    return f"{int(k) if k == int(k) else k} {noun if k == 1 else many}"
+
+
 def vector_text(v: Any, unit: str, decimals: int = 1) -> str:
     """``[3000.0, 0.0]`` -> ``(3000, 0) m``."""
     try:

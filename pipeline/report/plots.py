@@ -12,6 +12,8 @@ import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
 
+from .pages import count_text
+
 MAX_POINTS = 4000
 
 
@@ -446,7 +448,7 @@ def spectrogram_absent(imu: pd.DataFrame | None, cols: list[str]) -> str | None:
     n = spectrogram_nperseg(fs)
     i = _first(imu).dropna(subset=[c for c in cols if c in imu])
     if len(i) < n:
-        return f"{len(i)} IMU samples, fewer than one {n}-sample window"
+        return f"{count_text(len(i), 'IMU sample')}, fewer than one {n}-sample window"
     return None
 
 
@@ -878,7 +880,7 @@ def mode_timeline(df: pd.DataFrame | None) -> go.Figure | None:
         fig.update_layout(yaxis2=right_axis("V [log10]"))
     fig.update_xaxes(title="t [s]")
     n = int(df["mode"].astype(bool).sum())
-    return layout(fig, f"EKF+HMM mode ({n} of {len(df)} steps with HMM inputs)", height=280)
+    return layout(fig, f"EKF+HMM mode ({n} of {count_text(len(df), 'step')} with HMM inputs)", height=280)
 
 
 #: colours of the particle-filter motion modes (issue 17)

@@ -94,7 +94,7 @@ def test_the_comparison_page_and_the_index_columns(tmp_path):
     assert "<th>date (UTC)</th><th>vehicle</th>" in t
     assert '<td>2015-05-21</td><td><a href="report/compare/copter.html">copter</a></td>' in t
     assert "Skipped manifest rows" in t and "<td>lost</td><td class=\"reason\">logs/lost.bin not found</td>" in t
-    assert "1 manifest rows skipped" in t
+    assert "1 manifest row skipped" in t
 
 
 def test_a_parameter_is_listed_whenever_its_values_differ_and_integers_read_as_integers():

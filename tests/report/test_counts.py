@@ -1,0 +1,77 @@
+"""Counts on the report pages agree with their noun (report audit): ``1 sample``, ``1 demo``,
+``1 flight``, never ``1 samples`` (:func:`pipeline.report.pages.count_text`)."""
+
+from __future__ import annotations
+
+import html
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_a_count_of_one_takes_the_singular_and_every_other_count_the_plural():
+    from pipeline.report.pages import count_text
+
+    assert [count_text(n, "sample") for n in (0, 1, 2, 1.0, np.int64(1))] == \
+        ["0 samples", "1 sample", "2 samples", "1 sample", "1 sample"]
+    assert count_text(1, "maneuver run") == "1 maneuver run" and count_text(None, "step") == "– steps"
+    assert count_text(2, "fix", "fixes") == "2 fixes"
+
+
+def test_one_lost_record_or_byte_and_one_gps_record_read_in_the_singular():
+    from pipeline.report import flight_summary as fs
+
+    assert fs.worst_warning({"diagnostics": {"records_dropped": {"truncated": 1}}}) == \
+        "ingest: 1 record dropped (truncated)"
+    assert fs.worst_warning({"diagnostics": {"bytes_skipped": 1}}) == "ingest: 1 byte skipped"
+    gps = pd.DataFrame({"t_ns": [0], "instance": 0, "fix_type": [3.0], "lat_deg": [1.0], "lon_deg": [1.0]})
+    assert fs.gps_fix_share(gps) == "100.0 % of 1 record (3-D fix or better)"
+
+
+def test_a_one_step_estimate_and_a_one_state_hmm_are_titled_in_the_singular():
+    from pipeline.report import plots
+    from pipeline.report.model import hmm_figure
+
+    df = pd.DataFrame({"t_ns": [0], "mode": [True], "pred": ["loop"], "V_best": [0.5]})
+    assert plots.mode_timeline(df).layout.title.text == "EKF+HMM mode (1 of 1 step with HMM inputs)"
+    fig = hmm_figure("loop", np.ones(1), np.ones((1, 1)), np.zeros((1, 2)), ["a", "b"])
+    assert fig.layout.title.text == "HMM of loop: 1 state"
+
+
+def test_the_index_of_one_flight_says_1_flight(tmp_path):
+    from pipeline.io.ingest import outputs_for, run_ingest
+    from pipeline.report.index import build_index
+
+    bad = tmp_path / "bad.bin"
+    bad.write_bytes(b"garbage" * 50)
+    run_ingest({"log": bad}, outputs_for(tmp_path / "ingest"), None, flight_id="bad")
+    build_index(["bad"], [tmp_path / "ingest" / "meta.json"], tmp_path / "index.html",
+                skipped={"gone": "log not found"})
+    text = html.unescape((tmp_path / "index.html").read_text())
+    assert "<p>1 flight, 1 failed, 1 manifest row skipped.</p>" in text
+
+
+def test_the_align_page_says_1_demo_for_a_flight_that_gave_one(tmp_path):
+    from helpers_align import synthetic_segments, synthetic_state, write_flight
+
+    from pipeline.align.run import ALIGN_OUTPUTS, run_align
+    from pipeline.config import load_config
+    from pipeline.report.align import build_align_report
+
+    seg = synthetic_segments([(0, 8, "a")])
+    fl = [write_flight(tmp_path / "in", f"f{k}", synthetic_state(300, heading_rad=0.4 * k, seed=k), seg, 0.4 * k)
+          for k in range(2)]
+    out = {k: tmp_path / "align" / f"{k}.parquet" for k in ALIGN_OUTPUTS}
+    run_align({"states": [p[0] for p in fl], "segments": [p[1] for p in fl]}, out,
+              {**load_config()["align"], "max_iter": 2, "sets": {"s": {"flights": ["f0", "f1"], "reference": None}}},
+              set_name="s")
+    build_align_report(out, tmp_path / "s.html", set_name="s",
+                       template=ROOT / "reports" / "templates" / "align.html.j2", plotly_js="plotly.min.js")
+    text = html.unescape((tmp_path / "s.html").read_text())
+    facts = re.findall(r"<th>flight f\d</th><td>(.*?)</td>", text)
+    assert len(facts) == 2 and all(", 1 demo" in f and "1 demos" not in f for f in facts), facts
+    assert "EM convergence (" in text and "of 1 maneuvers" not in text

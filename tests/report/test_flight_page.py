@@ -90,6 +90,14 @@ def test_a_missing_barometer_is_said_once_in_the_calibration_heading(tmp_path):
     assert title == "Barometric calibration (no barometer)" and rows == []
 
 
+def test_the_barometric_calibration_heading_of_a_flight_without_a_barometer_is_not_repeated_under_itself(tmp_path):
+    import re
+
+    text = html.unescape(re.sub(r"<script.*?</script>", "", _small_flight(tmp_path).read_text(), flags=re.S))
+    assert text.count("Barometric calibration (no barometer)") == 1
+    assert '<h2>Barometric calibration (no barometer)</h2>\n<p class="absent">no data in this flight</p>' in text
+
+
 def test_the_facts_read_as_text_without_python_reprs_and_every_page_is_marked_english(tmp_path):
     import re
 

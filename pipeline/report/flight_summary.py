@@ -186,11 +186,14 @@ def loss_parts(diag: Mapping | None) -> list[str]:
 
 
 def worst_warning(meta: Mapping, preprocess: Mapping | None = None) -> str:
-    """The most severe warning of ingest and preprocess, with how many others there are.
+    """The most severe warning of ingest and preprocess, with how many other warnings there are.
 
-    Severity, highest first: the ingest failed (its error); data were lost (bytes skipped,
-    records dropped, logger dropouts); the reader's warnings; timestamp anomalies; the
-    preprocess notes. ``"none"`` when there is nothing to say."""
+    Severity, highest first: the ingest or the preprocess failed (its error); data were lost
+    (bytes skipped, records dropped, logger dropouts); the reader's warnings
+    (``diagnostics.warnings`` of the ingest ``meta.json``); timestamp anomalies. The preprocess
+    ``notes`` are information, not warnings (which source was used, how positions were smoothed,
+    the datum: ``baro altitude from pressure``), and are never ranked here. ``"none"`` when
+    there is no warning, notes or not."""
     diag = meta.get("diagnostics") or {}
     ranked: list[tuple[int, str]] = []
     if meta.get("status") == "failed":
@@ -204,7 +207,8 @@ def worst_warning(meta: Mapping, preprocess: Mapping | None = None) -> str:
     pre = preprocess or {}
     if pre.get("status") == "failed":
         ranked.append((5, f"preprocess failed: {pre.get('error') or 'unknown reason'}"))
-    ranked += [(1, f"preprocess: {n}") for n in pre.get("notes") or []]
+    # the preprocess info JSON keeps one list, "notes", of what it did: none of it is a warning
+    # (a flight whose only note was "baro altitude from pressure" showed it as its worst warning)
     if not ranked:
         return "none"
     top = max(r for r, _ in ranked)
@@ -463,7 +467,8 @@ def summary_rows(meta: Mapping, *, duration_s: float | None = None, vehicle: str
     euler : (roll, pitch, yaw), optional
         ZYX angles [rad]: tilt ``arccos(cos φ cos θ)`` (the body z axis from the vertical).
     preprocess : mapping, optional
-        The preprocess diagnostics (``notes``, ``status``).
+        The preprocess diagnostics (``status``, ``error``; its ``notes`` are information, not
+        warnings).
     numbers : mapping, optional
         :func:`flight_numbers` of the flight: duration, distance, altitude and speeds as the
         index shows them (:func:`number_texts`).

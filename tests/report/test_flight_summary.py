@@ -67,12 +67,21 @@ def test_the_gps_fix_share_counts_3d_fixes_else_finite_positions():
     assert fs.gps_fix_share(None) == "– (no GPS)"
 
 
-def test_the_worst_warning_ranks_lost_data_above_reader_notes_above_preprocess_notes():
+def test_the_worst_warning_ranks_lost_data_above_reader_warnings_and_counts_only_warnings():
     meta = {"diagnostics": {"warnings": ["RAW_IMU ignored"], "records_dropped": {"truncated": 3}}}
-    assert fs.worst_warning(meta, {"notes": ["no barometer"]}) == "ingest: 3 records dropped (truncated) (+2 more)"
-    assert fs.worst_warning({}, {"notes": ["no barometer"]}) == "preprocess: no barometer"
+    assert fs.worst_warning(meta, {"notes": ["no barometer"]}) == "ingest: 3 records dropped (truncated) (+1 more)"
+    assert fs.worst_warning({"diagnostics": {"warnings": ["RAW_IMU ignored"]}}) == "ingest: RAW_IMU ignored"
     assert fs.worst_warning({"status": "failed", "error": "bad magic"}).startswith("ingest failed: bad magic")
+    assert fs.worst_warning({}, {"status": "failed", "error": "no state"}) == "preprocess failed: no state"
     assert fs.worst_warning({}) == "none"
+
+
+def test_preprocess_notes_are_information_so_a_flight_with_only_notes_has_no_worst_warning():
+    # the notes of the simulated tlog flight's preprocess info JSON: what was done, not what went wrong
+    notes = ["baro altitude from pressure (international barometric formula)",
+             "gps positions smoothed (white-jerk RTS, q 10 m²/s⁵): 0.307 m RMS from the interpolated fixes"]
+    assert fs.worst_warning({"diagnostics": {"warnings": []}}, {"status": "ok", "notes": notes}) == "none"
+    assert dict(fs.summary_rows({}, preprocess={"notes": notes}))["worst warning"] == "none"
 
 
 def test_timestamp_anomalies_name_only_the_nonzero_counts_of_the_streams_that_have_any():

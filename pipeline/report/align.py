@@ -46,8 +46,9 @@ def _euler_deg(q: np.ndarray) -> np.ndarray:
 def learned_figure(man: str, learned: pd.DataFrame, demos: pd.DataFrame) -> go.Figure:
     """Learned μ_t ±2σ over the demos on the hidden time axis (Figs 5.22–5.31 analogue)."""
     fig = make_subplots(rows=4, cols=3, shared_xaxes=True, vertical_spacing=0.05, horizontal_spacing=0.07,
-                        subplot_titles=[*(label(c).replace("[", "(").replace("]", ")") for _, _, cs in _AXES for c in cs),
-                                        "roll (deg)", "pitch (deg)", "yaw (deg)"])
+                        # 'quantity [unit]', as every other label of the reports (was 'position north (m)')
+                        subplot_titles=[*(label(c) for _, _, cs in _AXES for c in cs),
+                                        "roll [°]", "pitch [°]", "yaw [°]"])
     t = learned["t_s"].to_numpy()
     for r, (_, _, cols) in enumerate(_AXES, start=1):
         for c, col in enumerate(cols, start=1):
@@ -83,8 +84,9 @@ _CYC = ("#1f77b4", "#ff7f0e", "#2ca02c")
 def alignment_figure(man: str, demos: pd.DataFrame, alignment: pd.DataFrame, learned: pd.DataFrame) -> go.Figure:
     """τ curves, north velocity before/after alignment (Figs 5.20–5.21) and the MPE (5.32–5.35)."""
     fig = make_subplots(rows=1, cols=4, horizontal_spacing=0.06,
-                        subplot_titles=("τ_j (hidden step of demo sample j)", "north velocity, linear stretch",
-                                        "north velocity, aligned", "model prediction error (acc)"))
+                        subplot_titles=("τ_j (hidden step of demo sample j)", "north velocity [m/s], linear stretch",
+                                        "north velocity [m/s], aligned",
+                                        "model prediction error, acceleration [m/s²]"))
     T = len(learned)
     for name, g in demos.groupby("demo", sort=False):
         c = colour(name)

@@ -1,11 +1,13 @@
-"""The trajectory-learning page's EM convergence plot (pipeline/report/align.py)."""
+"""The trajectory-learning page's plots (pipeline/report/align.py): EM convergence, the units of
+the panel titles."""
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 
-from pipeline.report.align import loglik_figure
+from pipeline.align.demos import DEMO_COLUMNS
+from pipeline.report.align import alignment_figure, learned_figure, loglik_figure
 
 
 def test_the_convergence_plot_shows_the_relative_change_against_the_tolerance_and_counts_the_converged():
@@ -25,3 +27,19 @@ def test_the_convergence_plot_shows_the_relative_change_against_the_tolerance_an
     assert tr["tHat"][-1] > 1e-4 and tr["iSp"][-1] < 1e-6   # above the line: not converged, visibly
     assert fig.data[0].line.color != fig.data[1].line.color
     assert loglik_figure(it.assign(status="failed")) is None
+
+
+def test_the_align_panels_name_their_units_in_brackets_as_every_other_report_label():
+    n = 5
+    learned = pd.DataFrame({"maneuver": "loop", "t": np.arange(n), "t_s": np.arange(n) * 0.1,
+                            **{f"{k}_{c}": np.ones(n) for c in DEMO_COLUMNS for k in ("mu", "var", "mpe")}})
+    demos = pd.DataFrame({"demo": "f0/0", "j": np.arange(n), "t_s": np.arange(n) * 0.1, "tau": np.arange(n) * 1.0,
+                          **{c: np.ones(n) for c in DEMO_COLUMNS}})
+    titles = [a.text for fig in (learned_figure("loop", learned, demos), alignment_figure("loop", demos, None, learned))
+              for a in fig.layout.annotations]
+    assert titles[:3] == ["position north [m]", "position east [m]", "position down [m]"]
+    assert "velocity north [m/s]" in titles and "acceleration down [m/s²]" in titles
+    assert titles[9:12] == ["roll [°]", "pitch [°]", "yaw [°]"]
+    assert "model prediction error, acceleration [m/s²]" in titles
+    # no unit in parentheses: '(m)', '(deg)', '(m/s)'
+    assert not [t for t in titles if any(f"({u})" in t for u in ("m", "deg", "m/s", "m/s²", "°", "acc"))], titles

@@ -484,9 +484,11 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         ("Altitude", plots.altitude(alt_series, calib_pts)),
         ("3-D path", plots.path_3d(ned)),
         ("Attitude", plots.attitude(att, euler, log["setpoint"], frame=att_frame)),
+        # in °/s, as flight-test engineers read body rates and as the summary's max body rate
         (rates_title, plots.with_setpoint(
             rates, ["p_radps", "q_radps", "r_radps"], log["setpoint"],
-            ["p_radps", "q_radps", "r_radps"], f"{rates_title} ({rates_frame})", "body rate [rad/s]")),
+            ["p_radps", "q_radps", "r_radps"], f"{rates_title} ({rates_frame})", "body rate [°/s]",
+            scale=180.0 / np.pi, unit="°/s")),
         ("Velocity", plots.with_setpoint(
             velocity, [f"vel_{a}_mps" for a in "ned"], log["setpoint"],
             [f"vel_{a}_mps" for a in "ned"], "Velocity (NED) and setpoint where logged", "velocity [m/s]")),

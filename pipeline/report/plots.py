@@ -284,9 +284,14 @@ def _first(df: pd.DataFrame | None) -> pd.DataFrame | None:
 
 
 def with_setpoint(df: pd.DataFrame | None, cols: list[str], setpoint: pd.DataFrame | None,
-                  sp_cols: list[str], title: str, ylabel: str) -> go.Figure | None:
+                  sp_cols: list[str], title: str, ylabel: str, *, scale: float = 1.0,
+                  unit: str | None = None) -> go.Figure | None:
     """Measured ``cols`` of ``df`` (solid) and the matching ``sp_cols`` of ``setpoint`` (dashed,
-    same colour per component) against time; ``None`` when neither has data."""
+    same colour per component) against time; ``None`` when neither has data.
+
+    ``scale`` multiplies every value drawn (measured and setpoint alike) and ``unit`` replaces
+    the unit in the trace names: the SI columns shown in a display unit, such as body rates in
+    rad/s drawn in °/s (``scale=180/π, unit="°/s"``). ``ylabel`` names the displayed unit."""
     fig = go.Figure()
     for frame, cs, dash, suffix in ((_first(df), cols, None, ""), (_first(setpoint), sp_cols, "dash", " setpoint")):
         if frame is None:
@@ -296,8 +301,10 @@ def with_setpoint(df: pd.DataFrame | None, cols: list[str], setpoint: pd.DataFra
                 continue
             d = decimate(frame[["t_ns", c]].dropna(), cols=[c])
             lab = label(c)
+            if unit is not None and " [" in lab:
+                lab = f"{lab[:lab.index(' [')]} [{unit}]"
             name = lab.replace(" [", f"{suffix} [") if "[" in lab else lab + suffix
-            fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=name,
+            fig.add_trace(go.Scatter(x=_t(d), y=d[c] * scale, mode="lines", name=name,
                                      line=dict(color=colour(c), dash=dash)))
     if not fig.data:
         return None

@@ -130,3 +130,18 @@ def test_a_kilohertz_imu_spectrogram_uses_half_second_windows_at_its_own_rate():
     z = np.asarray(fig.data[0].z, float)
     assert f[np.argmax(z.mean(axis=1))] == pytest.approx(123.0, abs=2.0)
     assert "fs = 1000 Hz" in fig.layout.title.text
+
+
+def test_the_body_rate_panel_and_its_setpoint_are_drawn_in_degrees_per_second_as_the_summary_states_them(tmp_path, monkeypatch):
+    t = np.arange(0, 10, 0.1)
+    p = 0.5 * np.sin(t)                                                  # rad/s
+    figs = _page_figures(tmp_path, monkeypatch, {
+        "imu": _stream("imu", t, gyr_x_radps=p, gyr_y_radps=0 * t, gyr_z_radps=0 * t, acc_z_mps2=-9.81 + 0 * t),
+        "setpoint": _stream("setpoint", t, p_radps=0.4 * np.sin(t))})
+    _, fig = _one(figs, "Body rates")
+    assert fig.layout.yaxis.title.text == "body rate [°/s]"
+    tr = {x.name: x for x in fig.data}
+    assert set(tr) == {"roll rate [°/s]", "pitch rate [°/s]", "yaw rate [°/s]", "roll rate setpoint [°/s]"}
+    np.testing.assert_allclose(np.asarray(tr["roll rate [°/s]"].y, float), np.degrees(p), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(tr["roll rate setpoint [°/s]"].y, float), np.degrees(0.4 * np.sin(t)),
+                               rtol=1e-12)

@@ -237,10 +237,11 @@ def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
         if int(row.t_end_ns) <= int(row.t_start_ns):
             reason = "the segment ends before it starts (t_end_ns <= t_start_ns)"
         elif gap[idx].any():
-            reason = f"{int(gap[idx].sum())} gap rows inside the segment"
+            n_gap = int(gap[idx].sum())
+            reason = f"{n_gap} gap row{'s' * (n_gap != 1)} inside the segment"   # the align page shows it
         idx = idx[::stride]
         if not reason and len(idx) < 2:
-            reason = f"{len(idx)} samples in the segment at {sample_hz:g} Hz"
+            reason = f"{len(idx)} sample{'s' * (len(idx) != 1)} in the segment at {sample_hz:g} Hz"
         if not reason and not np.isfinite(x_all[idx]).all():
             bad = sorted({DEMO_COLUMNS[j] for j in np.flatnonzero(~np.isfinite(x_all[idx]).all(axis=0))})
             reason = f"non-finite {', '.join(bad)} inside the segment"

@@ -75,3 +75,15 @@ def test_the_align_page_says_1_demo_for_a_flight_that_gave_one(tmp_path):
     facts = re.findall(r"<th>flight f\d</th><td>(.*?)</td>", text)
     assert len(facts) == 2 and all(", 1 demo" in f and "1 demos" not in f for f in facts), facts
     assert "EM convergence (" in text and "of 1 maneuvers" not in text
+
+
+def test_the_align_pages_left_out_reasons_say_1_sample_and_1_gap_row():
+    from helpers_align import synthetic_segments, synthetic_state
+
+    from pipeline.align.demos import flight_demos
+
+    st = synthetic_state(500)
+    st.loc[60, "gap"] = True                                  # one gap row at t 2.4 s
+    # 0 to 0.1 s holds 3 grid rows (25 Hz), 1 of them at the 3 Hz demo rate
+    fd = flight_demos(st, synthetic_segments([(0, 0.1, "a"), (2, 4, "b")]), flight_id="f", sample_hz=3.0)
+    assert [d.reason for d in fd.dropped] == ["1 sample in the segment at 3 Hz", "1 gap row inside the segment"]

@@ -332,6 +332,11 @@ class ExtendedKalmanFilter:
             A = P - K @ _c(_T(PHT))  # (I − KH)P = P − K (HP)
             cov = np.add(A, _T(A), out=out)
             cov *= 0.5
+        # optional hook: a model that cannot tell a state from its mirror image picks the
+        # physical one (RadarModel.fold: the target above the radar's horizontal plane)
+        fold = getattr(self.measurement, "fold", None)
+        if fold is not None:
+            mean, cov = fold(mean, cov)
         dof = np.full(b, M * n_z, dtype=np.int64) if valid is None else valid.sum(axis=-1) * n_z
         return GaussianState(mean, cov, pred.t_ns), UpdateStats(nis, dof, logdet)
 

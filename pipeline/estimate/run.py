@@ -117,11 +117,13 @@ def radar_rng(seed: int, flight_id: str) -> np.random.Generator:
 
 
 def radar_model(site_ned_m: Sequence[float], *, tau_rd_s: float = 0.0, sigma_range_m: float = 1.5,
-                sigma_dcos: float = 4.5e-5, sigma_range_rate_mps: float = 0.2) -> RadarModel:
-    """The seed-000 radar at ``site_ned_m`` with the given noise (defaults: Table 2.1)."""
+                sigma_dcos: float = 4.5e-5, sigma_range_rate_mps: float = 0.2,
+                above_site: bool = False) -> RadarModel:
+    """The seed-000 radar at ``site_ned_m`` with the given noise (defaults: Table 2.1);
+    ``above_site``: the EKF takes the target above the site's plane (:meth:`RadarModel.fold`)."""
     return RadarModel(site_ned_m=tuple(float(v) for v in site_ned_m), tau_rd_s=float(tau_rd_s),
                       sigma=(float(sigma_range_m), float(sigma_dcos), float(sigma_dcos),
-                             float(sigma_range_rate_mps)))
+                             float(sigma_range_rate_mps)), above_site=bool(above_site))
 
 
 def _grid(t0: int, t1: int, period_ns: int) -> NDArray[np.int64]:
@@ -368,7 +370,8 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     meta = json.loads(meta_path.read_text())
     fid = flight_id or meta.get("flight_id")
     ekf_cfg = {"q": 1.0, "p0_sigma": [1.0, 0.1, 0.01], "joseph": True, "init": "reference",
-               **dict(config.get("ekf") or {})}
+               "above_site": True, **dict(config.get("ekf") or {})}
+    above = bool(ekf_cfg["above_site"])
     hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, "increments": "prior",
                **dict(config.get("ekf_hmm") or {})}
     synth = config.get("synthetic_radar")
@@ -397,7 +400,7 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
             return fail(f"no state track to synthesise the radar from ({why})")
         model = radar_model(synth.get("site_ned_m", (0.0, 0.0, 0.0)), tau_rd_s=synth.get("tau_rd_s", 0.0),
                             sigma_range_m=synth.get("sigma_range_m", 1.5), sigma_dcos=synth.get("sigma_dcos", 4.5e-5),
-                            sigma_range_rate_mps=synth.get("sigma_range_rate_mps", 0.2))
+                            sigma_range_rate_mps=synth.get("sigma_range_rate_mps", 0.2), above_site=above)
         radar = synthesise_radar(state, model, float(synth.get("rate_hz", 5.0)), radar_rng(seed, fid))
         source, site_from = "synthetic", "estimate.synthetic_radar"
     else:
@@ -411,7 +414,7 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
         else:
             site, tau = (config.get("radar") or {}).get("site_ned_m", (0.0, 0.0, 0.0)), 0.0
             site_from = "estimate.radar.site_ned_m"
-        model = radar_model(site, tau_rd_s=tau)
+        model = radar_model(site, tau_rd_s=tau, above_site=above)
         source = "stream"
     t, z, period = radar_steps(radar)
     if len(t) < 2:
@@ -436,7 +439,8 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     smooth = rts_smooth(track)
     n_po = int(track.n_predict_only[0])
     diag = {"n_steps": int(len(t)), "n_predict_only": n_po, "radar": source, "radar_site_ned_m": list(model.site_ned_m),
-            "radar_site_from": site_from, "radar_period_s": period * 1e-9, "reference": ref_name, "init": init}
+            "radar_site_from": site_from, "radar_period_s": period * 1e-9, "reference": ref_name, "init": init,
+            "above_site": above}
     extra = {**base, **diag, "status": "ok", "error": None}
     err = {}
     for name, mean, cov in (("ekf", track.mean[0], track.cov[0]), ("ekf_rts", smooth.mean[0], smooth.cov[0])):

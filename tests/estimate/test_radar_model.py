@@ -108,3 +108,57 @@ def test_h_and_jacobian_at_once_equal_h_and_jacobian_on_a_batch(rng, n_x, tau, i
     np.testing.assert_allclose(H, model.jacobian(x), rtol=1e-12, atol=1e-15)
     hx1, H1 = model.h_and_jacobian(x[1, 3])
     np.testing.assert_allclose(H1, model.jacobian(x[1, 3]), rtol=1e-12, atol=1e-15)
+
+
+def test_fold_mirrors_a_state_below_the_site_plane_and_the_measurement_cannot_tell_them_apart(rng):
+    m = RadarModel(site_ned_m=(10.0, -20.0, -5.0), tau_rd_s=0.01, above_site=True)
+    x = _states(rng, 6)
+    x[:3, 2] = -5.0 + rng.uniform(1.0, 50.0, 3)          # three below the site's plane
+    A = rng.standard_normal((6, 9, 9))
+    P = A @ np.swapaxes(A, -1, -2) + np.eye(9)
+    mean, cov = m.fold(x.copy(), P.copy())
+    S = np.diag([1, 1, -1] * 3).astype(float)
+    mirrored = x[:3] @ S
+    mirrored[:, 2] += 2 * -5.0
+    np.testing.assert_allclose(mean[:3], mirrored)
+    np.testing.assert_allclose(cov[:3], S @ P[:3] @ S)
+    np.testing.assert_allclose(m.h(mean[:3]), m.h(x[:3]), rtol=1e-12, atol=1e-12)
+    assert (mean[:3, 2] < -5.0).all()
+    np.testing.assert_array_equal(mean[3:], x[3:])           # those above: untouched
+    np.testing.assert_array_equal(cov[3:], P[3:])
+    # off (the default, the thesis's EKF), nothing moves
+    off = RadarModel(site_ned_m=(10.0, -20.0, -5.0))
+    mean, cov = off.fold(x.copy(), P.copy())
+    np.testing.assert_array_equal(mean, x)
+
+
+def test_an_ekf_started_in_the_site_plane_follows_the_climb_the_direction_cosines_show():
+    """A vehicle on the ground 835 m from a ground radar (the simulated calibration flight's
+    geometry) climbs 25 m: the Jacobian's down column vanishes in the site's plane, and an EKF
+    initialised there stayed at the site's height (12.1 m down RMS on that flight)."""
+    from pipeline.estimate.base import ConstantAcceleration, GaussianState
+    from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
+    from pipeline.estimate.models import initial_cov
+
+    dt, n = 0.2, 300
+    t = np.arange(n) * dt
+    # on the ground for 10 s, a smooth 25 m climb over 10 s, then a hover
+    s = np.clip((t - 10.0) / 10.0, 0.0, 1.0)
+    d = -25.0 * (3 * s ** 2 - 2 * s ** 3)
+    vd = -25.0 * (6 * s - 6 * s ** 2) / 10.0 * ((t > 10) & (t < 20))
+    truth = np.zeros((n, 9))
+    truth[:, 0], truth[:, 1], truth[:, 2], truth[:, 5] = -610.0, -572.0, d, vd
+    results = {}
+    for above in (True, False):
+        radar = RadarModel(site_ned_m=(0.0, 0.0, 0.0), above_site=above)
+        z = radar.measure(truth, np.random.default_rng(7))
+        ekf = ExtendedKalmanFilter(ConstantAcceleration(3.0), radar)
+        track = run_filter(ekf, GaussianState(truth[0].copy(), initial_cov(), 0),
+                           np.round(t * 1e9).astype(np.int64), z[:, None, :], store="filtered")
+        hover = t > 25.0
+        err = track.mean[0][hover, 2] - d[hover]
+        results[above] = (float(np.sqrt(np.mean(err ** 2))), float(np.mean(track.nis[0][hover])))
+    err, nis = results[True]
+    assert err < 1.5 and nis < 6.0
+    stuck_err, stuck_nis = results[False]          # the unfolded filter: the flaw this guards
+    assert stuck_err > 20.0 and stuck_nis > 50.0

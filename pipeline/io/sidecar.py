@@ -8,6 +8,14 @@ relative to the flight start; when the log's own ``meta['t0_utc_ns']`` is known 
 :func:`attach_sidecar` shifts the truth onto the log's time base (and says so in the
 diagnostics).
 
+A simulated flight's side-car also records the frame of its truth: ``ned_origin`` (the origin
+its positions are about) and the ``radar`` site. :func:`attach_sidecar` makes that origin the
+flight's when the log has none or one more than :data:`ORIGIN_TOLERANCE_M` away (a ROS bag or
+MCAP file carries no navigation origin, so its reader takes the first fix: the state was 440 m
+north and 354 m east of the truth on the simulated M1 flight), so the preprocessed state and
+the truth share one frame; a log with the same origin (DataFlash ``ORGN``, MAVLink
+``GPS_GLOBAL_ORIGIN``) keeps its own. The radar site fills a log that has none.
+
 Naming: for ``flight.bin`` the side-car is ``flight.bin.truth.parquet`` (the full file or bag
 directory name plus ``.truth.parquet``); :func:`find_sidecar` also accepts
 ``flight.truth.parquet``. The workflow passes the side-car to ingest explicitly (the
@@ -27,6 +35,35 @@ from .base import FlightLog, IngestError
 from .parquet import read_table, read_table_meta, write_table
 
 SUFFIX = ".truth.parquet"
+
+#: a log's own NED origin this close (m, horizontal) to its side-car's is kept
+ORIGIN_TOLERANCE_M = 1.0
+
+
+def _origin_gap_m(a: dict, b: dict) -> float:
+    """Horizontal distance between two origins (m; equirectangular, ample at this scale)."""
+    lat = np.radians(0.5 * (float(a["lat_deg"]) + float(b["lat_deg"])))
+    dn = np.radians(float(a["lat_deg"]) - float(b["lat_deg"])) * 6378137.0
+    de = np.radians(float(a["lon_deg"]) - float(b["lon_deg"])) * 6378137.0 * np.cos(lat)
+    return float(np.hypot(dn, de))
+
+
+def _adopt_frame(log: FlightLog, meta: dict) -> None:
+    """The side-car's ``ned_origin`` and ``radar`` into ``log.meta`` (module docstring)."""
+    org = meta.get("ned_origin")
+    if isinstance(org, dict) and org.get("lat_deg") is not None and org.get("lon_deg") is not None:
+        own = log.meta.get("ned_origin")
+        gap = _origin_gap_m(own, org) if own and own.get("lat_deg") is not None else None
+        if gap is None or gap > ORIGIN_TOLERANCE_M:
+            log.meta["ned_origin"] = {**org, "source": "truth side-car"}
+            log.meta["ned_origin_reason"] = None
+            log.meta.setdefault("diagnostics", schema.new_diagnostics())["warnings"].append(
+                "NED origin from the truth side-car (the frame of its positions)"
+                + ("" if gap is None else f"; the log's own, {gap:.0f} m away, is not used"))
+    radar = meta.get("radar")
+    if isinstance(radar, dict) and radar.get("site_ned_m") is not None and not log.meta.get("radar"):
+        log.meta["radar"] = {"site_ned_m": [float(v) for v in radar["site_ned_m"]],
+                             "tau_rd_s": float(radar.get("tau_rd_s") or 0.0)}
 
 
 def sidecar_path(log_path: str | os.PathLike) -> Path:
@@ -89,7 +126,8 @@ def attach_sidecar(log: FlightLog, path: str | os.PathLike) -> FlightLog:
     The truth is shifted by ``sidecar t0_utc_ns − log t0_utc_ns`` when both are known, so it
     shares the log's ``t_ns`` base. ``meta['labels_path']`` records the side-car. A side-car
     whose truth then shares no time with the log's sensor streams is an :class:`IngestError`
-    naming it (another flight's side-car).
+    naming it (another flight's side-car). The side-car's ``ned_origin`` and ``radar`` fill
+    or replace the log's as the module docstring says.
     """
     truth, labels, meta = read_sidecar(path)
     t0_sc, t0_log = meta.get("t0_utc_ns"), log.meta.get("t0_utc_ns")
@@ -113,4 +151,5 @@ def attach_sidecar(log: FlightLog, path: str | os.PathLike) -> FlightLog:
     log.streams["truth"] = schema.conform("truth", truth)
     log.streams["labels"] = labels
     log.meta["labels_path"] = str(path)
+    _adopt_frame(log, meta)
     return log

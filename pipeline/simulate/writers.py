@@ -56,6 +56,12 @@ def write_flight(out_dir: Path, stem: str, truth, sensors, params, rate_hz: floa
     streams = all_streams(truth, sensors, params, rate_hz, rng)
     tdf, lab = truth_stream(truth), labels_table(truth)
     o = sensors.origin
+    # the frame the truth's positions are in, for formats that cannot carry it (a ROS bag has
+    # no navigation origin: its reader takes the first fix, 560 m from this one on sim-M1)
+    frame = {"ned_origin": {"lat_deg": float(o[0]), "lon_deg": float(o[1]), "alt_wgs84_m": float(o[2]),
+                            "alt_msl_m": float(o[2]) - float(sensors.geoid_undulation_m)},
+             "radar": {"site_ned_m": [float(v) for v in sensors.radar.site_ned_m],
+                       "tau_rd_s": float(sensors.radar.tau_rd_s)}}
     paths = {}
     for fmt in formats:
         p = out_dir / LOG_NAMES[fmt](stem)
@@ -77,7 +83,7 @@ def write_flight(out_dir: Path, stem: str, truth, sensors, params, rate_hz: floa
         else:
             raise ValueError(f"unknown log format {fmt!r}")
         write_sidecar(sidecar_path(p), tdf, lab, t0_utc_ns=t0_utc_ns,
-                      extra={"scenario": truth.meta.get("scenario"), "format": fmt})
+                      extra={"scenario": truth.meta.get("scenario"), "format": fmt, **frame})
         paths[fmt] = p
     return paths, streams
 

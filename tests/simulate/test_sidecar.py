@@ -83,3 +83,26 @@ def test_a_side_car_that_shares_no_time_with_the_log_is_refused_naming_it(tmp_pa
     ok = FlightLog.from_streams({"t0_utc_ns": 1_005_000_000}, {"imu": imu})
     assert len(attach_sidecar(ok, p)["truth"]) == 5
     assert len(attach_sidecar(FlightLog.from_streams({"t0_utc_ns": 5}, {}), p)["truth"]) == 5
+
+
+def test_the_side_cars_origin_and_radar_put_a_first_fix_logs_state_in_the_truths_frame(tmp_path):
+    # a ROS bag has no navigation origin: its reader takes the first fix, which put the
+    # simulated M1 flight's state 440 m north and 354 m east of its truth
+    frame = {"ned_origin": {"lat_deg": 32.5994, "lon_deg": -85.4897, "alt_wgs84_m": 200.0, "alt_msl_m": 229.0},
+             "radar": {"site_ned_m": [1.0, 2.0, -3.0], "tau_rd_s": 0.0}}
+    p = write_sidecar(tmp_path / "a.truth.parquet", _truth(), _labels(), t0_utc_ns=1_000_000_000, extra=frame)
+    first_fix = {"lat_deg": 32.5954, "lon_deg": -85.4859, "alt_wgs84_m": 219.3}
+    bag = attach_sidecar(FlightLog.from_streams({"t0_utc_ns": 1_000_000_000, "ned_origin": first_fix}, {}), p)
+    assert bag.meta["ned_origin"] == {**frame["ned_origin"], "source": "truth side-car"}
+    assert bag.meta["radar"] == frame["radar"]
+    assert "the log's own, 570 m away, is not used" in bag.meta["diagnostics"]["warnings"][0]
+    # a log without an origin takes it too
+    none = attach_sidecar(FlightLog.from_streams({"t0_utc_ns": 1_000_000_000, "ned_origin": None}, {}), p)
+    assert none.meta["ned_origin"]["source"] == "truth side-car"
+    # a log whose own origin is the same place (DataFlash ORGN) keeps its own, and its radar
+    orgn = {"lat_deg": 32.5994, "lon_deg": -85.4897000001, "alt_msl_m": 229.0, "alt_wgs84_m": None, "source": "ORGN"}
+    own_radar = {"site_ned_m": [0.0, 0.0, 0.0], "tau_rd_s": 0.0}
+    df = attach_sidecar(FlightLog.from_streams({"t0_utc_ns": 1_000_000_000, "ned_origin": dict(orgn),
+                                                "radar": own_radar}, {}), p)
+    assert df.meta["ned_origin"] == orgn and df.meta["radar"] == own_radar
+    assert not df.meta["diagnostics"]["warnings"]

@@ -64,8 +64,9 @@ def replay_tracks(t_s: F64, bearing: F64, ownship_vel: F64, sigma_rad: float, cf
 
     out: dict[str, Any] = {}
     for name, coords in (("bank_cppv", "cppv"), ("bank_mpc", "mpc")):
-        s = (bank_settings(cfg, preset=preset) if coords == "cppv"
-             else bank_settings(cfg, preset=mpc_preset, sigma_v2=settings_for(preset or "cppv_25_1_6").sigma_v2))
+        # the MPC model's process noise is its preset's q_mpc·I₅ alone (MpcModel.noise): the
+        # CPPV preset's speed noise would not reach it, so none is passed to claim otherwise
+        s = bank_settings(cfg, preset=preset if coords == "cppv" else mpc_preset)
         tr = run_bank(s, t_s, bearing, sigma_rad, ownship_vel, store_cov=True, store_weights=True)
         div = np.zeros(len(t_s), np.int64)
         steps = tr.diverged_step[0]

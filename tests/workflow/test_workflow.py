@@ -78,7 +78,8 @@ def test_dry_run_default_config_plans_every_stage():
     ("preprocess", {"demo_log", "simulate_logs", "ingest_flight", "preprocess_flight", "preprocess"}),
     # ekf_sets: the EKF estimates of the sets the shipped simekf model set (input: ekf) trains on
     ("train", {"simulate_sets", "ekf_sets", "train_model", "evaluate_model", "train"}),
-    ("classify", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
+    # classify: no ekf_sets, simekf (input: ekf) classifies no state track
+    ("classify", {"simulate_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
                   "train_model", "classify_flight", "classify"}),
     # the EKF+HMM's model is simekf (input: ekf): its Q2 needs the EKF sets and the truth sets
     ("estimate", {"simulate_sets", "ekf_sets", "simulate_logs", "demo_log", "ingest_flight", "preprocess_flight",
@@ -315,7 +316,9 @@ def test_simekf_trains_and_evaluates_on_the_ekf_sets_the_ekf_sets_rule_writes(ti
     ev = read_table(res / "models" / "simekf" / "evaluation.parquet")
     assert set(ev["table"]) == {"3.5", "3.6", "3.7", "3.8"}
     assert set(read_table(res / "models" / "sim" / "evaluation.parquet")["table"]) == {"3.1", "3.2", "3.3", "3.4"}
-    assert len(read_table(res / "classify" / "simekf" / "sim-M1-000-bin.parquet")) > 10
+    # it classifies EKF increments (the EKF+HMM), not the flights' preprocessed GPS state
+    assert not (res / "classify" / "simekf").exists()
+    assert len(read_table(res / "estimate" / "ekf_hmm" / "sim-M1-000-bin.parquet")["pred"]) > 10
 
 
 @pytest.mark.slow
@@ -450,9 +453,9 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     with open(wd / "datasets" / "flights.tsv", "a") as fh:
         fh.write("extra\tlogs/extra.bin\tsim-quad\ttest\tnone\t\tadded\n")
     jobs = _planned_jobs(wd)
-    # classified by every model set of its vehicle (sim, sim2, simekf), estimated once
-    # and the comparison page of its vehicle
-    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 3, "estimate_flight": 1,
+    # classified by every state-input model set of its vehicle (sim, sim2; not simekf, input: ekf),
+    # estimated once and the comparison page of its vehicle
+    assert jobs == {"ingest_flight": 1, "preprocess_flight": 1, "classify_flight": 2, "estimate_flight": 1,
                     "estimate_pf_jm": 1, "flight_report": 1, "compare_report": 1, "report_index": 1, "all": 1}, jobs
     _smk(wd)
     assert "extra" in (res / "index.html").read_text()
@@ -463,10 +466,10 @@ def test_run_incremental_and_corrupt_flight(tiny_run):
     assert "preprocess:" not in text
     cfg.write_text(text + "preprocess: {rate_hz: 20}\n")
     jobs = _planned_jobs(wd)
-    # 3 sim-quad flights x 3 model sets (sim, sim2, simekf); estimated: the three sim-quad flights
+    # 3 sim-quad flights x 2 state-input model sets (sim, sim2); estimated: the three sim-quad flights
     # (the broken flight's vehicle is generic)
     # and the comparison pages of both vehicles (sim-quad, generic)
-    assert jobs == {"preprocess_flight": 4, "classify_flight": 9, "estimate_flight": 3, "estimate_pf_jm": 3,
+    assert jobs == {"preprocess_flight": 4, "classify_flight": 6, "estimate_flight": 3, "estimate_pf_jm": 3,
                     "flight_report": 4, "compare_report": 2, "report_index": 1, "all": 1}, jobs
 
     # snakemake --report over the finished run

@@ -416,6 +416,8 @@ def hmpf_inputs(wildcards):
     tr = hmpf_train_flights(wildcards.flight)
     return {
         "state": f"results/state/{wildcards.flight}.parquet",
+        # its own segments: the process noise of a train flight with no other one (weave_run)
+        "segments": f"results/segments/{wildcards.flight}.parquet",
         "train_states": [f"results/state/{f}.parquet" for f in tr],
         "train_segments": [f"results/segments/{f}.parquet" for f in tr],
     }

@@ -21,7 +21,11 @@ tight for UAVs"): with ``noise_from_train`` (default) σ_aT, σ_aN and σ_xy com
 training segments by moments (:func:`weave_noise`). On the shipped F3A flights the ship values
 left every particle's likelihood below the smallest double on 85–124 of 442–569 steps, each a
 re-initialisation that resets the mode fractions; the F3A levels from fc-p23-036 (along-track
-RMS 4.3 m/s² on straights, 6.3 on curves) re-initialise on none of them.
+RMS 4.3 m/s² on straights, 6.3 on curves) re-initialise on none of them. A role-train flight
+with no *other* training flight (fc-p23-036 itself) takes the noise from its own labelled
+segments (``segments``): noise levels are the airframe's, not its labels', so this is no
+in-sample fit of what the classifier decides (δ_max and θ_max stay out-of-sample: config); with
+the ship values it re-initialised on 92 of its 496 steps, 9.5 / 12.7 m N/E RMS from its state.
 
 Failures are placeholders with the reason (no positions, fewer than two samples), never crashes.
 """
@@ -240,7 +244,9 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
     ----------
     inputs : mapping
         ``state`` (the flight's ``state`` table); optional ``train_states`` and
-        ``train_segments`` (lists, the vehicle's *other* role-train flights, in the same order).
+        ``train_segments`` (lists, the vehicle's *other* role-train flights, in the same order);
+        optional ``segments`` (the flight's own, for the noise when there is no other training
+        flight).
     outputs : mapping
         ``hmpf``: the output Parquet path.
     config : mapping or None
@@ -299,6 +305,17 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
             noise_source = "config (too few straight or curve steps in the training flights' segments)"
     elif sec["noise_from_train"]:
         noise_source = "config (no other role-train flight of the vehicle)"
+        own_seg = _paths_of(inputs, "segments")
+        if own_seg and Path(own_seg[0]).exists():
+            # the airframe's noise from the flight's own segments (module docstring)
+            sig, noise_diag = weave_noise([state], [read_table(own_seg[0])], cfg.dt_s,
+                                          float(sec["turn_threshold_radps"]))
+            raised = {k: v for k, v in sig.items() if v > getattr(cfg, k)}
+            if raised:
+                cfg = cfg.with_(**raised)
+                noise_source = ("own segments" if len(raised) == 3 else
+                                f"own segments ({', '.join(sorted(raised))}), config (the others)") + \
+                    " (no other role-train flight of the vehicle)"
     rng = np.random.default_rng([int(seed), zlib.crc32(fid.encode())])
     track = hmpf_filter(z, GpsSensor(cfg.gps_sigma_m), cfg, rng)
     df = hmpf_frame(tk, track)

@@ -152,3 +152,23 @@ def test_a_flight_is_filtered_with_the_noise_of_the_training_flights_unless_swit
     assert d["noise_source"].startswith("train (sigma_an_mps2, sigma_at_mps2)")
     assert off.diagnostics["sigma_at_mps2"] == 2.0 and off.diagnostics["noise_source"] == "config"
     assert read_table_meta(tmp_path / "on.parquet")["noise"]["sigma_at_mps2"]["n"] > 200
+
+
+def test_a_training_flight_without_another_takes_its_noise_from_its_own_segments(tmp_path):
+    # fc-p23-036, the one role-train F3A flight: the ship values re-initialised it on 92 of 496
+    # steps; its own segments give the airframe's noise, the maxima stay the config's
+    st, seg = cm_track(3.0, 0.3, n_seg=10)
+    p_state, p_seg = tmp_path / "s.parquet", tmp_path / "g.parquet"
+    write_table(st, p_state, schema.STATE, name="state")
+    write_table(seg, p_seg, schema.SEGMENTS, name="segments")
+    res = run_hmpf({"state": str(p_state), "segments": str(p_seg)}, {"hmpf": str(tmp_path / "f.parquet")},
+                   {"n_particles": 100}, flight_id="f")
+    d = res.diagnostics
+    assert d["sigma_at_mps2"] == pytest.approx(3.0, rel=0.2) and d["sigma_an_mps2"] == pytest.approx(0.3, rel=0.2)
+    assert d["noise_source"] == ("own segments (sigma_an_mps2, sigma_at_mps2), config (the others) "
+                                 "(no other role-train flight of the vehicle)")
+    assert d["delta_max_m"] == 500.0 and "no other role-train flight" in d["maxima_source"]
+    # switched off, the config's
+    off = run_hmpf({"state": str(p_state), "segments": str(p_seg)}, {"hmpf": str(tmp_path / "o.parquet")},
+                   {"n_particles": 100, "noise_from_train": False}, flight_id="f")
+    assert off.diagnostics["sigma_at_mps2"] == 2.0 and off.diagnostics["noise_source"] == "config"

@@ -58,3 +58,25 @@ def write_flight(root, flight: str, state: pd.DataFrame, segments: pd.DataFrame,
     write_table(state, sp, schema.STATE, name="state", extra=extra)
     write_table(segments, gp, schema.SEGMENTS, name="segments", extra={"flight_id": flight})
     return str(sp), str(gp)
+
+
+def synthetic_align_page(tmp, spans: list[tuple[float, float, str]], n_samples: int, *, max_iter: int = 2) -> str:
+    """Two synthetic flights (headings 0 and 0.4 rad) with the segments ``spans``, aligned as set
+    ``s`` and drawn as its align page; returns the page's HTML."""
+    from pathlib import Path
+
+    from pipeline.align.run import ALIGN_OUTPUTS, run_align
+    from pipeline.config import load_config
+    from pipeline.report.align import build_align_report
+
+    root = Path(__file__).resolve().parents[1]
+    seg = synthetic_segments(spans)
+    fl = [write_flight(tmp / "in", f"f{k}", synthetic_state(n_samples, heading_rad=0.4 * k, seed=k), seg, 0.4 * k)
+          for k in range(2)]
+    out = {k: tmp / "align" / f"{k}.parquet" for k in ALIGN_OUTPUTS}
+    run_align({"states": [p[0] for p in fl], "segments": [p[1] for p in fl]}, out,
+              {**load_config()["align"], "max_iter": max_iter, "sets": {"s": {"flights": ["f0", "f1"], "reference": None}}},
+              set_name="s")
+    build_align_report(out, tmp / "s.html", set_name="s",
+                       template=root / "reports" / "templates" / "align.html.j2", plotly_js="plotly.min.js")
+    return (tmp / "s.html").read_text()

@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import html
 import re
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_a_count_of_one_takes_the_singular_and_every_other_count_the_plural():
@@ -56,22 +53,9 @@ def test_the_index_of_one_flight_says_1_flight(tmp_path):
 
 
 def test_the_align_page_says_1_demo_for_a_flight_that_gave_one(tmp_path):
-    from helpers_align import synthetic_segments, synthetic_state, write_flight
+    from helpers_align import synthetic_align_page
 
-    from pipeline.align.run import ALIGN_OUTPUTS, run_align
-    from pipeline.config import load_config
-    from pipeline.report.align import build_align_report
-
-    seg = synthetic_segments([(0, 8, "a")])
-    fl = [write_flight(tmp_path / "in", f"f{k}", synthetic_state(300, heading_rad=0.4 * k, seed=k), seg, 0.4 * k)
-          for k in range(2)]
-    out = {k: tmp_path / "align" / f"{k}.parquet" for k in ALIGN_OUTPUTS}
-    run_align({"states": [p[0] for p in fl], "segments": [p[1] for p in fl]}, out,
-              {**load_config()["align"], "max_iter": 2, "sets": {"s": {"flights": ["f0", "f1"], "reference": None}}},
-              set_name="s")
-    build_align_report(out, tmp_path / "s.html", set_name="s",
-                       template=ROOT / "reports" / "templates" / "align.html.j2", plotly_js="plotly.min.js")
-    text = html.unescape((tmp_path / "s.html").read_text())
+    text = html.unescape(synthetic_align_page(tmp_path, [(0, 8, "a")], 300))
     facts = re.findall(r"<th>flight f\d</th><td>(.*?)</td>", text)
     assert len(facts) == 2 and all(", 1 demo" in f and "1 demos" not in f for f in facts), facts
     assert "EM convergence (" in text and "of 1 maneuvers" not in text

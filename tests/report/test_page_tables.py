@@ -59,22 +59,9 @@ def test_the_model_pages_training_table_says_whether_each_maneuver_converged_in_
 
 
 def test_the_align_pages_maneuver_table_says_whether_each_maneuver_converged_in_words(tmp_path):
-    from helpers_align import synthetic_segments, synthetic_state, write_flight
+    from helpers_align import synthetic_align_page
 
-    from pipeline.align.run import ALIGN_OUTPUTS, run_align
-    from pipeline.config import load_config
-    from pipeline.report.align import build_align_report
-
-    seg = synthetic_segments([(0, 8, "a"), (8, 16, "b")])
-    fl = [write_flight(tmp_path / "in", f"f{k}", synthetic_state(500, heading_rad=0.4 * k, seed=k), seg, 0.4 * k)
-          for k in range(2)]
-    out = {k: tmp_path / "align" / f"{k}.parquet" for k in ALIGN_OUTPUTS}
-    run_align({"states": [p[0] for p in fl], "segments": [p[1] for p in fl]}, out,
-              {**load_config()["align"], "max_iter": 2, "sets": {"s": {"flights": ["f0", "f1"], "reference": None}}},
-              set_name="s")
-    build_align_report(out, tmp_path / "s.html", set_name="s",
-                       template=ROOT / "reports" / "templates" / "align.html.j2", plotly_js="plotly.min.js")
-    page = (tmp_path / "s.html").read_text()
+    page = synthetic_align_page(tmp_path, [(0, 8, "a"), (8, 16, "b")], 500)
     head = [html.unescape(h) for h in re.findall(r"<th>(.*?)</th>", page[page.index("<h2>Maneuvers"):])]
     k = head.index("converged")
     rows = _cells(page, "Maneuvers")

@@ -238,6 +238,7 @@ def test_a_ulog_whose_data_loop_pyulog_ends_mid_file_decodes_the_rest_and_counts
 # --- the audit's damage on the real logs ---------------------------------------------------------
 
 @pytest.mark.realdata
+@pytest.mark.slow  # ~3 s: the fast lane keeps the synthetic damage tests
 def test_the_damaged_real_husky_mcap_keeps_all_but_the_messages_hit_alone_and_in_its_bag(tmp_path):
     src = realdata_file("ros2mcap_husky_imu_gps/husky_mcap.mcap")
     bag = tmp_path / "bag"

@@ -172,6 +172,7 @@ def test_cli_train_and_classify(synth, rng, tmp_path, capsys):
     assert "not a model directory" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # ~2 s of leave-one-out fits
 def test_threshold_slack_auto_is_leave_one_recording_out(synth, rng):
     run, _ = synth
     parts = [run("M1", rng, duration_s=8.0, rate_hz=25.0).assign(run_id=f"a{k}") for k in range(2)]

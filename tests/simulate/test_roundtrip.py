@@ -140,6 +140,21 @@ def test_the_bin_and_the_tlog_give_the_same_ned_origin_so_their_states_share_the
     assert ot["alt_msl_m"] == pytest.approx(se.origin[2] - se.geoid_undulation_m, abs=1e-3)
 
 
+@pytest.mark.parametrize("fmt", ["bag", "mcap"])
+def test_a_ros_flight_takes_its_side_cars_origin_so_its_state_shares_the_truths_frame(written, fmt):
+    # a ROS bag carries no navigation origin: its reader's first fix sat ~560 m from the truth's
+    # origin; the side-car records that origin (and the radar site) and ingest adopts it
+    (paths, _), _, _ = written
+    se = SensorSettings.from_config(CFG)
+    meta = read_log(paths[fmt]).meta
+    o = meta["ned_origin"]
+    assert o["source"] == "truth side-car"
+    assert (o["lat_deg"], o["lon_deg"], o["alt_wgs84_m"]) == pytest.approx(se.origin, abs=1e-9)
+    assert o["alt_msl_m"] == pytest.approx(se.origin[2] - se.geoid_undulation_m, abs=1e-9)
+    assert meta["radar"]["site_ned_m"] == list(se.radar.site_ned_m)
+    assert any("NED origin from the truth side-car" in w for w in meta["diagnostics"]["warnings"])
+
+
 def test_gps_dropout_gap(written):
     (paths, sim), _, _ = written
     t = sim["gps"]["t_ns"].to_numpy() * 1e-9
@@ -235,6 +250,7 @@ def cal_written(tmp_path_factory):
                         t0_utc_ns=T0_UTC_NS)
 
 
+@pytest.mark.slow  # a second simulated flight (~3 s); the M3 flight's round trips stay in the fast lane
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_calibration_flight_rangefinder_roundtrip(cal_written, fmt):
     paths, sim = cal_written

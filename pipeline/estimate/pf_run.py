@@ -66,7 +66,7 @@ PF_JM_MODES: tuple[str, ...] = ("cv", "ca", "ct")
 
 #: ``estimate.pf`` defaults (rules/schemas/config.schema.yaml holds the same, described)
 DEFAULTS: dict[str, Any] = {
-    "n_particles": 500,
+    "n_particles": 2000,
     "rate_hz": 10.0,
     "measurement_sigma_m": 1.0,
     "resample": "systematic",
@@ -74,9 +74,9 @@ DEFAULTS: dict[str, Any] = {
     "gate_sigma": 10.0,
     "init_sigma": [3.0, 1.0],
     "dwell_s": {"cv": 10.0, "ca": 3.0, "ct": 5.0},
-    "noise": {"cv": {"sigma_a": 0.5},
-              "ca": {"sigma_j": 2.0, "acc_init_sigma": 2.0},
-              "ct": {"sigma_a": 0.5, "sigma_omega": 0.1, "omega_init_sigma": 0.3}},
+    "noise": {"cv": {"sigma_a": 2.0},
+              "ca": {"sigma_j": 5.0, "acc_init_sigma": 2.0},
+              "ct": {"sigma_a": 2.0, "sigma_omega": 0.1, "omega_init_sigma": 0.3}},
 }
 
 

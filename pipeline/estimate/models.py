@@ -190,7 +190,7 @@ class RadarModel:
         return hx, H
 
     def fold(self, mean: F64, cov: F64) -> tuple[F64, F64]:
-        """Put updated states below or in the site's horizontal plane above it (the EKF's hook).
+        """Move an updated state at or below the site's horizontal plane above it (the EKF's hook).
 
         ``h`` sees the down offset ρ₃ only through ρ, so a state and its mirror image in the
         site's horizontal plane, :math:`S x` with :math:`S` negating the down components of
@@ -207,7 +207,7 @@ class RadarModel:
         Jacobian no longer vanishes and the direction cosines move it (a Newton-like step:
         the same track from a 1 cm or a 1 m start). A target far above the site (every
         seed-000 set: ρ₃ ≤ −5.8 m) is never touched; a white-jerk random walk that wanders
-        below the site (the filter tests' truth) is, hence off by default.
+        below the site (the filter tests' truth) would be, so it is off by default.
 
         Parameters
         ----------

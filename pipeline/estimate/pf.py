@@ -87,7 +87,7 @@ from numba import njit
 
 from .base import check_times
 from .markov import check_stochastic, retime
-from .resample import SCHEMES, get_resampler
+from .resample import SCHEMES, get_resampler, regularise
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -271,13 +271,20 @@ class ParticleFilter:
         Every draw's generator, or a seed for one (required: no unseeded default).
     reinit : callable, optional
         ``(x, z, rng) -> x`` for the all-zero-weight guard; default ``likelihood.reinit``.
+    regularise_index : sequence of int, optional
+        After each resampling in :meth:`step`, move these state components by the regularised
+        particle filter's kernel (:func:`~pipeline.estimate.resample.regularise`, with the
+        step's weighted covariance before resampling), so resampled copies separate with the
+        posterior's own spread instead of narrowing the cloud at every resampling. ``None``
+        (default): the plain bootstrap filter.
     """
 
     def __init__(self, models: Sequence[ModeModel], Pi: ArrayLike | Callable | None,
                  likelihood: Likelihood, *, n_particles: int = 1000, resample: str = "systematic",
                  threshold: float = 1.0 / 3.0, every_step: bool = False,
                  dt_ref: float | None = None, rng: np.random.Generator | int,
-                 reinit: Callable[[F64, F64, np.random.Generator], F64] | None = None) -> None:
+                 reinit: Callable[[F64, F64, np.random.Generator], F64] | None = None,
+                 regularise_index: Sequence[int] | None = None) -> None:
         self.models = list(models)
         if not self.models:
             raise ValueError("ParticleFilter: need at least one mode model")
@@ -323,6 +330,7 @@ class ParticleFilter:
         #: per-particle side arrays (leading axis N) resampled with the particles, e.g. the
         #: weave classifier's submode and segment counters δ, θ
         self.aux: dict[str, np.ndarray] = {}
+        self.regularise_index = None if regularise_index is None else tuple(int(i) for i in regularise_index)
 
     # --- set-up -------------------------------------------------------------------------------
     def init(self, x0: ArrayLike | None = None, *, mean: ArrayLike | None = None,
@@ -492,6 +500,8 @@ class ParticleFilter:
         mean, cov, mode_p = self.estimate()
         neff = self.neff
         resampled = False if predict_only or reinit else self.resample_if_needed()
+        if resampled and self.regularise_index is not None:
+            self.x = regularise(self.x, cov, self.rng, self.regularise_index)
         return StepStats(mean, cov, mode_p, neff, resampled, predict_only, reinit, ll)
 
 

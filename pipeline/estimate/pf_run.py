@@ -67,6 +67,7 @@ PF_JM_MODES: tuple[str, ...] = ("cv", "ca", "ct")
 #: ``estimate.pf`` defaults (rules/schemas/config.schema.yaml holds the same, described)
 DEFAULTS: dict[str, Any] = {
     "n_particles": 2000,
+    "jitter": "regularised",
     "rate_hz": 10.0,
     "measurement_sigma_m": 1.0,
     "resample": "systematic",
@@ -120,8 +121,12 @@ def jm_filter(cfg: Mapping[str, Any], dt_ref: float, rng: np.random.Generator) -
     Pi = dwell_transition([float(cfg["dwell_s"][m]) for m in PF_JM_MODES], dt_ref)
     lik = GaussianPositionLikelihood(float(cfg["measurement_sigma_m"]), (0, 1),
                                      gate=None if cfg.get("gate_sigma") is None else float(cfg["gate_sigma"]))
+    # the regularised PF's kernel over N, E, v_N, v_E after each resampling (jitter): a weave
+    # far off CV/CT puts the fixes in the cloud's tail, the few particles there take the weight,
+    # and the plain filter's cloud narrowed and fell behind (simulated M3: 5 re-initialisations)
+    reg = (0, 1, 2, 3) if cfg.get("jitter", "regularised") == "regularised" else None
     return ParticleFilter(models, Pi, lik, n_particles=int(cfg["n_particles"]), resample=str(cfg["resample"]),
-                          threshold=float(cfg["threshold"]), dt_ref=dt_ref, rng=rng)
+                          threshold=float(cfg["threshold"]), dt_ref=dt_ref, rng=rng, regularise_index=reg)
 
 
 def pf_rng(seed: int, flight_id: str) -> np.random.Generator:

@@ -278,3 +278,18 @@ def test_an_empty_track_gives_an_empty_result():
     tr = run_pf(pf, np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
     assert tr.mean.shape == (0, 4) and tr.cov.shape == (0, 4, 4) and tr.mode_p.shape == (0, 1)
     assert tr.n_reinit == 0 and track_meta(tr)["n_predict_only"] == 0
+
+
+def test_the_regularising_kernel_separates_resampled_copies_on_the_chosen_components_only():
+    # the plain bootstrap filter leaves duplicates after resampling; with regularise_index the
+    # copies move by the kernel on those components (N, E here) and keep the others
+    z = np.array([0.3, -0.2])
+    plain = _cv_pf(400, 5, every_step=True).init(mean=np.zeros(4), cov=4 * np.eye(4))
+    kern = _cv_pf(400, 5, every_step=True, regularise_index=(0, 1)).init(mean=np.zeros(4), cov=4 * np.eye(4))
+    s_plain, s_kern = plain.step(0.0, z), kern.step(0.0, z)
+    assert s_plain.resampled and s_kern.resampled
+    assert len(np.unique(plain.x[:, 0])) < 300                        # duplicates
+    assert len(np.unique(kern.x[:, 0])) == 400                        # every copy moved
+    assert len(np.unique(kern.x[:, 2])) == len(np.unique(plain.x[:, 2])) < 300   # velocity untouched
+    # the kernel's spread is the posterior's, scaled by the bandwidth: the mean stays put
+    assert abs(kern.x[:, 0].mean() - s_kern.mean[0]) < 0.2

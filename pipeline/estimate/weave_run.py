@@ -21,11 +21,12 @@ tight for UAVs"): with ``noise_from_train`` (default) σ_aT, σ_aN and σ_xy com
 training segments by moments (:func:`weave_noise`). On the shipped F3A flights the ship values
 left every particle's likelihood below the smallest double on 85–124 of 442–569 steps, each a
 re-initialisation that resets the mode fractions; the F3A levels from fc-p23-036 (along-track
-RMS 4.3 m/s² on straights, 6.3 on curves) re-initialise on none of them. A role-train flight
-with no *other* training flight (fc-p23-036 itself) takes the noise from its own labelled
-segments (``segments``): noise levels are the airframe's, not its labels', so this is no
-in-sample fit of what the classifier decides (δ_max and θ_max stay out-of-sample: config); with
-the ship values it re-initialised on 92 of its 496 steps, 9.5 / 12.7 m N/E RMS from its state.
+RMS 4.3 m/s² on straights, 6.3 on curves) re-initialise on none of them. A flight with no
+*other* role-train flight of its vehicle (fc-p23-036 itself, the one F3A training flight, or
+any flight of a vehicle without one) takes the noise from its own labelled segments
+(``segments``): noise levels are the airframe's, not its labels', so this is no in-sample fit of
+what the classifier decides (δ_max and θ_max stay out-of-sample: config); with the ship values
+fc-p23-036 re-initialised on 92 of its 496 steps, 9.5 / 12.7 m N/E RMS from its state.
 
 Failures are placeholders with the reason (no positions, fewer than two samples), never crashes.
 """

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 from .lazy import pandas as pd  # imported on first use (see lazy.py)
 
+from ..frames.geodesy import geodetic_to_ned
 from . import schema
 from .base import FlightLog, IngestError
 from .parquet import read_table, read_table_meta, write_table
@@ -41,11 +42,11 @@ ORIGIN_TOLERANCE_M = 1.0
 
 
 def _origin_gap_m(a: dict, b: dict) -> float:
-    """Horizontal distance between two origins (m; equirectangular, ample at this scale)."""
-    lat = np.radians(0.5 * (float(a["lat_deg"]) + float(b["lat_deg"])))
-    dn = np.radians(float(a["lat_deg"]) - float(b["lat_deg"])) * 6378137.0
-    de = np.radians(float(a["lon_deg"]) - float(b["lon_deg"])) * 6378137.0 * np.cos(lat)
-    return float(np.hypot(dn, de))
+    """Horizontal distance (m) of origin ``a`` from origin ``b``: north and east of ``a`` in the
+    NED frame about ``b`` (:func:`pipeline.frames.geodesy.geodetic_to_ned`, both at height 0)."""
+    n, e, _ = geodetic_to_ned(float(a["lat_deg"]), float(a["lon_deg"]), 0.0,
+                              float(b["lat_deg"]), float(b["lon_deg"]), 0.0)
+    return float(np.hypot(n, e))
 
 
 def _adopt_frame(log: FlightLog, meta: dict) -> None:

@@ -95,7 +95,7 @@ def test_the_side_cars_origin_and_radar_put_a_first_fix_logs_state_in_the_truths
     bag = attach_sidecar(FlightLog.from_streams({"t0_utc_ns": 1_000_000_000, "ned_origin": first_fix}, {}), p)
     assert bag.meta["ned_origin"] == {**frame["ned_origin"], "source": "truth side-car"}
     assert bag.meta["radar"] == frame["radar"]
-    assert "the log's own, 570 m away, is not used" in bag.meta["diagnostics"]["warnings"][0]
+    assert "the log's own, 569 m away, is not used" in bag.meta["diagnostics"]["warnings"][0]
     # a log without an origin takes it too
     none = attach_sidecar(FlightLog.from_streams({"t0_utc_ns": 1_000_000_000, "ned_origin": None}, {}), p)
     assert none.meta["ned_origin"]["source"] == "truth side-car"

@@ -124,7 +124,7 @@ def jm_filter(cfg: Mapping[str, Any], dt_ref: float, rng: np.random.Generator) -
     # the regularised PF's kernel over N, E, v_N, v_E after each resampling (jitter): a weave
     # far off CV/CT puts the fixes in the cloud's tail, the few particles there take the weight,
     # and the plain filter's cloud narrowed and fell behind (simulated M3: 5 re-initialisations)
-    reg = (0, 1, 2, 3) if cfg.get("jitter", "regularised") == "regularised" else None
+    reg = (0, 1, 2, 3) if cfg["jitter"] == "regularised" else None
     return ParticleFilter(models, Pi, lik, n_particles=int(cfg["n_particles"]), resample=str(cfg["resample"]),
                           threshold=float(cfg["threshold"]), dt_ref=dt_ref, rng=rng, regularise_index=reg)
 

@@ -237,6 +237,18 @@ def _paths_of(inputs: Mapping, key: str) -> list[str]:
     return [str(v)] if isinstance(v, (str, Path)) else [str(x) for x in v]
 
 
+def _raise_noise(cfg: HmpfConfig, sig: Mapping[str, float], source: str) -> tuple[HmpfConfig, str | None]:
+    """``cfg`` with each noise level of ``sig`` (:func:`weave_noise`) that exceeds the configured
+    one, and the source text (``source``, naming the raised levels unless all three are), or
+    ``None`` when none does: never below the config, since a track smoother than the model (a
+    noise-free simulation, a heavily fused position) would otherwise starve the cloud."""
+    raised = {k: v for k, v in sig.items() if v > getattr(cfg, k)}
+    if not raised:
+        return cfg, None
+    text = source if len(raised) == 3 else f"{source} ({', '.join(sorted(raised))}), config (the others)"
+    return cfg.with_(**raised), text
+
+
 def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, flight_id: str | None = None,
              seed: int = 0, **_job) -> HmpfResult:
     """Run the weave classifier over one flight and write ``outputs['hmpf']``.
@@ -294,12 +306,9 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
     noise_source, noise_diag = "config", {}
     if sec["noise_from_train"] and tr_states:
         sig, noise_diag = weave_noise(*train, cfg.dt_s, float(sec["turn_threshold_radps"]))
-        # never below the config: a track smoother than the model (a noise-free simulation, a
-        # heavily fused position) would otherwise starve the cloud
-        raised = {k: v for k, v in sig.items() if v > getattr(cfg, k)}
+        cfg, raised = _raise_noise(cfg, sig, "train")
         if raised:
-            cfg = cfg.with_(**raised)
-            noise_source = "train" if len(raised) == 3 else f"train ({', '.join(sorted(raised))}), config (the others)"
+            noise_source = raised
         elif sig:
             noise_source = "config (the training flights' segments are no noisier)"
         else:
@@ -311,12 +320,9 @@ def run_hmpf(inputs: Mapping, outputs: Mapping, config: Mapping | None, *, fligh
             # the airframe's noise from the flight's own segments (module docstring)
             sig, noise_diag = weave_noise([state], [read_table(own_seg[0])], cfg.dt_s,
                                           float(sec["turn_threshold_radps"]))
-            raised = {k: v for k, v in sig.items() if v > getattr(cfg, k)}
+            cfg, raised = _raise_noise(cfg, sig, "own segments")
             if raised:
-                cfg = cfg.with_(**raised)
-                noise_source = ("own segments" if len(raised) == 3 else
-                                f"own segments ({', '.join(sorted(raised))}), config (the others)") + \
-                    " (no other role-train flight of the vehicle)"
+                noise_source = f"{raised} (no other role-train flight of the vehicle)"
     rng = np.random.default_rng([int(seed), zlib.crc32(fid.encode())])
     track = hmpf_filter(z, GpsSensor(cfg.gps_sigma_m), cfg, rng)
     df = hmpf_frame(tk, track)

@@ -113,7 +113,7 @@ def _overlay(tracks: Mapping[str, pd.DataFrame], col: str, title: str, ylabel: s
     for i, (f, d) in enumerate(tracks.items()):
         if d is None or col not in d or not d[col].notna().any():
             continue
-        dd = plots.decimate(d[["t_s", col]].dropna(), POINTS_PER_TRACE, cols=[col])
+        dd = plots.decimate(d[["t_s", col]], POINTS_PER_TRACE, cols=[col], breaks=True)
         # one colour per flight, by its place on the page (the same on every panel)
         fig.add_trace(go.Scatter(x=dd["t_s"], y=dd[col], mode="lines", name=f,
                                  line=dict(color=FLIGHT_COLOURS[i % len(FLIGHT_COLOURS)])))
@@ -178,6 +178,10 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
     else:
         p_headers, p_rows = [], []
         p_note = None
+    # a value changed between flights is what an engineer looks for; a parameter that only
+    # some flights log (another firmware version, another feature enabled) comes second
+    p_changed = [r for r in p_rows if "–" not in r[1:]]
+    p_partial = [r for r in p_rows if "–" in r[1:]]
     p_absent = ("fewer than two of these flights log parameters" if len(per_flight) < 2
                 else "every logged parameter has the same value in every flight")
     links = flight_links or {}
@@ -185,6 +189,7 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
     page = render(template, vehicle=vehicle, flights=rows, links=links, plots=figure_divs(figs),
                   linked=[f"plot-{i}" for i, (_, f) in enumerate(figs) if f is not None],
                   takeoff_rule=TAKEOFF_RULE, param_headers=p_headers, param_rows=p_rows,
+                  param_changed=p_changed, param_partial=p_partial,
                   param_note=p_note, param_absent=p_absent, plotly_js=plotly_js, index_href=index_href)
     write_page(page, out_html)
     return table

@@ -17,7 +17,40 @@ from .pages import count_text
 MAX_POINTS = 4000
 
 
-def decimate(df: pd.DataFrame, max_points: int = MAX_POINTS, cols: list[str] | None = None) -> pd.DataFrame:
+#: a display line is broken where two consecutive samples lie more than this many times the
+#: trace's median step apart (or the rows between them hold no value): a telemetry outage or a
+#: state ``gap`` is drawn as a hole, never as a straight line across it
+GAP_FACTOR = 5.0
+
+
+def _value_cols(df: pd.DataFrame) -> list[str]:
+    return [c for c in df.columns if c not in ("t_ns", "t_s", "instance", "t_boot_ns")
+            and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
+
+
+def _extreme_rows(df: pd.DataFrame, max_points: int, cols: list[str]) -> np.ndarray:
+    """Positions of the rows :func:`decimate` keeps (all of them when ``df`` is short enough)."""
+    n = len(df)
+    if n <= max_points:
+        return np.arange(n)
+    if not cols:  # nothing to keep extremes of: evenly spaced rows
+        return np.unique(np.r_[np.linspace(0, n - 1, max_points).astype(np.int64), n - 1])
+    n_b = max(1, max_points // (2 * len(cols)))
+    bucket = np.arange(n, dtype=np.int64) * n_b // n
+    starts = np.searchsorted(bucket, np.arange(n_b))
+    keep = [np.array([0, n - 1])]
+    for c in cols:
+        v = pd.to_numeric(df[c], errors="coerce").to_numpy(np.float64)
+        # lexsort: by bucket, then value; NaN sorts last, so a bucket's first row is its minimum
+        # (of -v: its maximum) whenever the bucket has a finite value
+        for w in (v, -v):
+            order = np.lexsort((w, bucket))
+            keep.append(order[starts])
+    return np.unique(np.concatenate(keep))
+
+
+def decimate(df: pd.DataFrame, max_points: int = MAX_POINTS, cols: list[str] | None = None, *,
+             breaks: bool = False) -> pd.DataFrame:
     """Rows of ``df`` for display: the minimum and maximum of every numeric column per bucket.
 
     The rows are cut into ``B`` consecutive buckets of equal row count; per bucket and column
@@ -34,28 +67,35 @@ def decimate(df: pd.DataFrame, max_points: int = MAX_POINTS, cols: list[str] | N
         Upper bound of the rows kept (plus the first and last).
     cols : list of str, optional
         The columns whose extremes are kept; default every numeric column except ``t_ns``,
-        ``instance`` and ``t_boot_ns``.
+        ``t_s``, ``instance`` and ``t_boot_ns``.
+    breaks : bool
+        For a line trace: drop the rows where every one of ``cols`` is NaN, keep both rows
+        around every gap of the time column (``t_ns``, else ``t_s``) longer than
+        :data:`GAP_FACTOR` times its median step, and put a row with only the time (its
+        midpoint) in each such gap, so that plotly, which breaks a line at a missing value,
+        draws the gap as a hole. Nothing is computed on the result but the picture: the
+        inserted rows are NaN.
     """
-    n = len(df)
-    if n <= max_points:
-        return df
     if cols is None:
-        cols = [c for c in df.columns if c not in ("t_ns", "instance", "t_boot_ns")
-                and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
-    if not cols:  # nothing to keep extremes of: evenly spaced rows
-        return df.iloc[np.unique(np.r_[np.linspace(0, n - 1, max_points).astype(np.int64), n - 1])]
-    n_b = max(1, max_points // (2 * len(cols)))
-    bucket = np.arange(n, dtype=np.int64) * n_b // n
-    starts = np.searchsorted(bucket, np.arange(n_b))
-    keep = [np.array([0, n - 1])]
-    for c in cols:
-        v = pd.to_numeric(df[c], errors="coerce").to_numpy(np.float64)
-        # lexsort: by bucket, then value; NaN sorts last, so a bucket's first row is its minimum
-        # (of -v: its maximum) whenever the bucket has a finite value
-        for w in (v, -v):
-            order = np.lexsort((w, bucket))
-            keep.append(order[starts])
-    return df.iloc[np.unique(np.concatenate(keep))]
+        cols = _value_cols(df)
+    if not breaks:
+        n = len(df)
+        return df if n <= max_points else df.iloc[_extreme_rows(df, max_points, cols)]
+    t_col = "t_ns" if "t_ns" in df else "t_s"
+    if cols:
+        df = df[df[cols].notna().any(axis=1).to_numpy()]
+    t = df[t_col].to_numpy(np.float64)
+    dt = np.diff(t)
+    step = dt[dt > 0]
+    gaps = (np.flatnonzero(dt > GAP_FACTOR * float(np.median(step))) if len(step)
+            else np.zeros(0, np.int64))
+    out = df.iloc[np.union1d(_extreme_rows(df, max_points, cols), np.r_[gaps, gaps + 1])]
+    if not len(gaps):
+        return out
+    mid = t[gaps] + 0.5 * dt[gaps]
+    holes = pd.DataFrame({t_col: mid.astype(df[t_col].dtype) if t_col == "t_ns" else mid})
+    both = pd.concat([out, holes], ignore_index=True)
+    return both.iloc[np.argsort(both[t_col].to_numpy(np.float64), kind="stable")].reset_index(drop=True)
 
 
 #: unit suffix of a canonical column name -> the unit as displayed ("" dimensionless)
@@ -183,7 +223,7 @@ def path_3d(ned: pd.DataFrame) -> go.Figure | None:
     """3-D flight path from columns ``pos_n_m``, ``pos_e_m``, ``pos_d_m`` (plotted as up = −d)."""
     if ned is None or not len(ned) or not ned["pos_n_m"].notna().any():
         return None
-    d = decimate(ned.dropna(subset=["pos_n_m", "pos_e_m", "pos_d_m"]))
+    d = decimate(ned.dropna(subset=["pos_n_m", "pos_e_m", "pos_d_m"]), breaks=True)
     fig = go.Figure(go.Scatter3d(x=d["pos_e_m"], y=d["pos_n_m"], z=-d["pos_d_m"], mode="lines",
                                  line=dict(width=3, color=_t(d), colorscale="Viridis", showscale=True,
                                            colorbar=dict(title="t [s]")), name="path"))
@@ -205,14 +245,15 @@ def ground_track(ned: pd.DataFrame) -> go.Figure | None:
     """Ground track north vs east in metres, equal axes, with a scale bar."""
     if ned is None or not len(ned) or not ned["pos_n_m"].notna().any():
         return None
-    d = decimate(ned.dropna(subset=["pos_n_m", "pos_e_m"]))
+    d = decimate(ned.dropna(subset=["pos_n_m", "pos_e_m"]), breaks=True)
     e, n = d["pos_e_m"].to_numpy(), d["pos_n_m"].to_numpy()
     fig = go.Figure(go.Scatter(x=e, y=n, mode="lines", name="track"))
     fig.add_trace(go.Scatter(x=e[:1], y=n[:1], mode="markers", marker=dict(size=9, color="green"), name="start"))
     fig.add_trace(go.Scatter(x=e[-1:], y=n[-1:], mode="markers", marker=dict(size=9, color="red"), name="end"))
-    span = max(np.ptp(e), np.ptp(n), 1.0)
+    # the gap rows decimate puts in the line are NaN
+    span = max(np.nanmax(e) - np.nanmin(e), np.nanmax(n) - np.nanmin(n), 1.0)
     bar = _nice_length(span)
-    x0, y0 = e.min(), n.min() - 0.08 * span
+    x0, y0 = np.nanmin(e), np.nanmin(n) - 0.08 * span
     fig.add_shape(type="line", x0=x0, x1=x0 + bar, y0=y0, y1=y0, line=dict(width=4, color="black"))
     fig.add_annotation(x=x0 + bar / 2, y=y0, text=f"{bar:g} m", showarrow=False, yshift=12)
     fig.update_yaxes(scaleanchor="x", scaleratio=1, title="north [m]")
@@ -225,7 +266,7 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
     fig = go.Figure()
     for name, df in series.items():
         if df is not None and len(df) and df["alt_m"].notna().any():
-            d = decimate(df[["t_ns", "alt_m"]], cols=["alt_m"])
+            d = decimate(df[["t_ns", "alt_m"]], cols=["alt_m"], breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d["alt_m"], mode="lines", name=name, line=dict(color=colour(name))))
     if calib_points is not None and len(calib_points):
         fig.add_trace(go.Scatter(x=_t(calib_points), y=calib_points["alt_m"], mode="markers",
@@ -250,7 +291,7 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
         v = np.degrees(np.unwrap(a) if name == "yaw" else a)
         if name == "yaw":
             yaw_deg = v
-        d = decimate(pd.DataFrame({"t_ns": att["t_ns"].to_numpy(), "v": v}))
+        d = decimate(pd.DataFrame({"t_ns": att["t_ns"].to_numpy(), "v": v}), breaks=True)
         fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} [°]",
                                  line=dict(color=colour(name))))
     sp = _first(setpoint)
@@ -262,11 +303,14 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
                 continue
             a = ok[c].to_numpy(np.float64)
             v = np.degrees(np.unwrap(a) if name == "yaw" else a)
-            if name == "yaw" and yaw_deg is not None and len(yaw_deg) and np.isfinite(yaw_deg).any():
-                # both unwrapped on their own: start the setpoint on the measured yaw's turn
-                y0 = np.interp(ok["t_ns"].iloc[0], att["t_ns"].to_numpy(), yaw_deg)
-                v = v + 360.0 * np.round((y0 - v[0]) / 360.0)
-            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(), "v": v}))
+            fin = np.isfinite(yaw_deg) if name == "yaw" and yaw_deg is not None else np.zeros(0, bool)
+            if fin.any():
+                # each setpoint sample on the measured yaw's turn (within ±180° of it): unwrapped
+                # on their own, the two drift whole turns apart across a telemetry outage or a
+                # fast spin, and a 1000° offset hides a 10° tracking error
+                y = np.interp(ok["t_ns"].to_numpy(np.float64), att["t_ns"].to_numpy(np.float64)[fin], yaw_deg[fin])
+                v = y + (np.degrees(a) - y + 180.0) % 360.0 - 180.0
+            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(), "v": v}), breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} setpoint [°]",
                                      line=dict(color=colour(name), dash="dash")))
     fig.update_xaxes(title="t [s]")
@@ -299,7 +343,7 @@ def with_setpoint(df: pd.DataFrame | None, cols: list[str], setpoint: pd.DataFra
         for c in cs:
             if c not in frame or not frame[c].notna().any():
                 continue
-            d = decimate(frame[["t_ns", c]].dropna(), cols=[c])
+            d = decimate(frame[["t_ns", c]].dropna(), cols=[c], breaks=True)
             lab = label(c)
             if unit is not None and " [" in lab:
                 lab = f"{lab[:lab.index(' [')]} [{unit}]"
@@ -322,12 +366,12 @@ def gps_quality(gps: pd.DataFrame | None) -> go.Figure | None:
     fig = go.Figure()
     for c in ("fix_type", "n_sats", "hdop", "vdop"):
         if c in g and g[c].notna().any():
-            d = decimate(g[["t_ns", c]].dropna(), cols=[c])
+            d = decimate(g[["t_ns", c]].dropna(), cols=[c], breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
     right = False
     for c in ("hacc_m", "vacc_m"):
         if c in g and g[c].notna().any():
-            d = decimate(g[["t_ns", c]].dropna(), cols=[c])
+            d = decimate(g[["t_ns", c]].dropna(), cols=[c], breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis="y2",
                                      line=dict(color=colour(c), dash="dot")))
             right = True
@@ -390,7 +434,7 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
             axis = "y" if not titles else f"y{len(titles) + 1}"
             titles.append(title)
             for c in cols:
-                d = decimate(v[["t_ns", c]].dropna(), cols=[c])
+                d = decimate(v[["t_ns", c]].dropna(), cols=[c], breaks=True)
                 fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis=axis,
                                          # a clipping count is no component: the default cycle, as before
                                          line=dict(color=None if c.startswith("clip") else colour(c), dash=dash)))
@@ -548,7 +592,7 @@ def battery(bat: pd.DataFrame | None) -> go.Figure | None:
     for c, scale, name in (("voltage_V", 1.0, label("voltage_V")), ("current_A", 1.0, label("current_A")),
                            ("remaining_frac", 100.0, "remaining capacity [%]")):
         if c in b and b[c].notna().any():
-            d = decimate(b[["t_ns", c]].dropna(), cols=[c])
+            d = decimate(b[["t_ns", c]].dropna(), cols=[c], breaks=True)
             k = len(titles)
             fig.add_trace(go.Scatter(x=_t(d), y=d[c] * scale, mode="lines", name=name,
                                      yaxis="y" if k == 0 else f"y{k + 1}", line=dict(color=colour(c))))
@@ -627,7 +671,7 @@ def actuator_outputs(control: pd.DataFrame | None, cols: list[str], title: str =
              for inst, _, _, _ in chans}
     for inst, c, rows, k in chans:
         k = k or group[inst]
-        d = decimate(rows, mp, cols=[c])
+        d = decimate(rows, mp, cols=[c], breaks=True)
         words = label(c).split(" [")[0] + (f" (instance {int(inst)})" if many else "")
         unit = OUTPUT_KINDS[k][1] if k else "as logged"
         ax = order.index(k)
@@ -727,7 +771,7 @@ def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> g
     mp = max(1000, 3 * MAX_POINTS // len(cols))
     fig = go.Figure()
     for c in cols:
-        d = decimate(df[["t_ns", c]].dropna(), mp, cols=[c])
+        d = decimate(df[["t_ns", c]].dropna(), mp, cols=[c], breaks=True)
         fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title=ylabel)
@@ -855,7 +899,7 @@ def estimate_error(errors: dict[str, pd.DataFrame], group: str, reference: str =
     for est, df in errors.items():
         if df is None or not len(df) or not df[group].notna().any():
             continue
-        d = decimate(df)
+        d = decimate(df, breaks=True)
         rms = float(np.sqrt(np.nanmean(df[group].to_numpy() ** 2)))
         fig.add_trace(go.Scatter(x=_t(d), y=d[group], mode="lines",
                                  name=f"{ESTIMATOR_LABELS.get(est, est)} (RMSE {rms:.3g} {unit})"))

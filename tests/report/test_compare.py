@@ -60,7 +60,8 @@ def test_the_comparison_page_and_the_index_columns(tmp_path):
 
     flights, metas, states, params = ["f1", "f2", "bad"], [], [], []
     for f, climb, vals in (("f1", 30, {"ATC_RAT_RLL_P": 0.135, "BATT_CAPACITY": 5000.0}),
-                           ("f2", 50, {"ATC_RAT_RLL_P": 0.150, "BATT_CAPACITY": 5000.0}), ("bad", 0, {})):
+                           ("f2", 50, {"ATC_RAT_RLL_P": 0.150, "BATT_CAPACITY": 5000.0, "AVOID_MARGIN": 2.0}),
+                           ("bad", 0, {})):
         d = tmp_path / f
         d.mkdir()
         failed = f == "bad"
@@ -80,7 +81,11 @@ def test_the_comparison_page_and_the_index_columns(tmp_path):
     assert list(table["takeoff [s]"]) == ["3.5", "5.5", "–"]
     text = html.unescape(page.read_text())
     assert "<td>ATC_RAT_RLL_P</td><td>0.135</td><td>0.15</td>" in text and "BATT_CAPACITY" not in text
-    assert "1 of 2 parameters differ between the 2 flights" in text
+    assert "2 of 3 parameters differ between the 2 flights" in text
+    # a changed value first, a parameter only one flight logs after it; the plots above both
+    changed, partial = text.index("<h3>Different values</h3>"), text.index("<h3>Logged by only some")
+    assert text.index("<h2>Overlays</h2>") < changed < text.index("<td>ATC_RAT_RLL_P</td>") < partial
+    assert partial < text.index("<td>AVOID_MARGIN</td><td>–</td><td>2</td>")
     assert compare.TAKEOFF_RULE in text and "failed: bad magic" in text
     for title in ("Altitude above start", "Horizontal speed", "Roll (state", "Pitch (state"):
         assert title in text, title

@@ -229,6 +229,24 @@ def test_an_unwrapped_yaw_setpoint_starts_on_the_measured_yaws_turn():
     np.testing.assert_allclose(fig.data[-1].y, np.degrees(yaw), atol=1e-9)
 
 
+def test_a_yaw_setpoint_stays_on_the_measured_yaws_turn_after_the_two_drift_whole_turns_apart():
+    from pipeline.frames.rotations import quat_to_euler
+
+    # the vehicle spins three times while its (1 Hz) setpoint holds 10°; afterwards the measured
+    # yaw, unwrapped, sits at 1090°: the setpoint must be drawn 10° off it, not 1080°
+    n = 200
+    t = np.arange(n) / 10.0
+    yaw = np.where(t < 5, 0.0, np.minimum(t - 5, 3.0) * 2 * np.pi) + np.radians(10.0) * (t >= 8)
+    q = np.c_[np.cos(yaw / 2), np.zeros(n), np.zeros(n), np.sin(yaw / 2)]
+    att = _stream("attitude", n, 10.0, q_w=q[:, 0], q_x=q[:, 1], q_y=q[:, 2], q_z=q[:, 3])
+    sp = _stream("setpoint", 20, 1.0, yaw_rad=np.full(20, np.radians(10.0)))
+    fig = plots.attitude(att, quat_to_euler(q), sp)
+    measured, setpoint = fig.data[2], fig.data[-1]
+    after = np.asarray(setpoint.x) >= 9.0
+    np.testing.assert_allclose(np.asarray(setpoint.y)[after], 1090.0, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(measured.y)[-1], 1090.0, atol=1e-6)
+
+
 def test_time_arrays_are_float32_for_display_and_values_keep_every_digit():
     n = 5000
     df = _stream("imu", n, 100.0, acc_x_mps2=np.linspace(0.0, 1.0, n) + 1e-9)

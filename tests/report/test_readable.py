@@ -95,6 +95,39 @@ def test_decimation_keeps_the_minimum_and_maximum_of_every_bucket():
     assert plots.decimate(small, max_points) is small  # short series untouched
 
 
+def test_a_line_trace_is_broken_across_a_telemetry_outage_and_across_rows_without_a_value():
+    # 25 Hz for 10 s, nothing for 30 s, then 25 Hz again; and a run of NaN values inside
+    t = np.r_[np.arange(250), np.arange(1000, 1250)].astype(np.int64) * 40_000_000
+    v = np.sin(np.arange(500) / 20.0)
+    v[300:340] = np.nan                              # 1.6 s of a state gap (rows, no value)
+    d = plots.decimate(pd.DataFrame({"t_ns": t, "v": v}), 100, cols=["v"], breaks=True)
+    hole = d["v"].isna().to_numpy()
+    assert hole.sum() == 2                           # one row in each gap, only the time
+    tt = d["t_ns"].to_numpy()
+    assert np.all(np.diff(tt) > 0)
+    # each hole lies between the two samples around its gap, which are both kept
+    for k in np.flatnonzero(hole):
+        before, after = tt[k - 1], tt[k + 1]
+        assert (before, after) in {(249 * 40_000_000, 1000 * 40_000_000),
+                                   (1049 * 40_000_000, 1090 * 40_000_000)}
+        assert before < tt[k] < after
+    # a trace without a gap gets no hole, and without ``breaks`` nothing changes
+    even = pd.DataFrame({"t_ns": np.arange(500, dtype=np.int64) * 40_000_000, "v": np.cos(np.arange(500.0))})
+    assert not plots.decimate(even, 100, cols=["v"], breaks=True)["v"].isna().any()
+    assert len(plots.decimate(pd.DataFrame({"t_ns": t, "v": v}), 100, cols=["v"])) <= 102
+
+
+def test_the_ground_track_of_a_flight_with_an_outage_draws_a_hole_and_a_finite_scale_bar():
+    t = np.r_[np.arange(200), np.arange(900, 1100)].astype(np.int64) * 10**8
+    ned = pd.DataFrame({"t_ns": t, "pos_n_m": np.linspace(0, 400, 400), "pos_e_m": np.linspace(0, 100, 400),
+                        "pos_d_m": np.zeros(400)})
+    fig = plots.ground_track(ned)
+    x = np.asarray(fig.data[0].x, dtype=float)
+    assert np.isnan(x).sum() == 1
+    bar = fig.layout.shapes[0]
+    assert np.isfinite([bar.x0, bar.x1, bar.y0]).all() and bar.x1 - bar.x0 == 100
+
+
 @pytest.mark.slow  # renders a whole long-flight page (about 3 s); the full suite keeps it
 def test_a_long_flight_page_stays_under_3_mb_with_every_panel_drawn_or_said_absent(tmp_path):
     from pipeline.io.ingest import outputs_for, run_ingest

@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from ..config import ConfigError, build, cfield, validate_section
 from ..frames.geodesy import geodetic_to_ned
-from ..frames.rotations import quat_continuity, quat_to_euler
+from ..frames.rotations import quat_continuity, quat_rotate, quat_to_euler
 from ..io import schema
 from ..io.base import FlightLog
 from ..io.parquet import write_json, write_table
@@ -76,6 +76,9 @@ POS = [f"pos_{a}_m" for a in _NED]
 VEL = [f"vel_{a}_mps" for a in _NED]
 QUAT = ["q_w", "q_x", "q_y", "q_z"]
 GYR = ["gyr_x_radps", "gyr_y_radps", "gyr_z_radps"]
+ACC = ["acc_x_mps2", "acc_y_mps2", "acc_z_mps2"]
+#: standard gravity, m/s² (the accelerometer's specific force ``f = R⁻¹(a − g e₃)``)
+G0 = 9.80665
 POSITION_SOURCES = ("auto", "local_position", "gps", "truth")
 
 _pre = functools.partial(cfield, "preprocess")
@@ -587,6 +590,19 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
 
     baro_f = _baro_height(P["baro"], grid, cfg, diag) if has_baro else None
 
+    # 6a. attitude on the grid first: the GPS smoother rotates the accelerometer with it
+    q = np.full((n, 4), np.nan)
+    qvalid = np.zeros(n, dtype=bool)
+    if att_src:
+        r, qvalid = _resample_stream(P[att_src], att_src, QUAT, grid, cfg, diag)
+        q = r[QUAT].to_numpy().copy()
+        # a zero or NaN quaternion (NaN after normalising) is no attitude: a gap
+        qvalid = qvalid & np.isfinite(q).all(axis=1) & (np.abs(q).sum(axis=1) > 0)
+        gap |= ~qvalid
+        ok = np.all(np.isfinite(q), axis=1)
+        if ok.any():
+            q[ok] = quat_continuity(q[ok])
+
     # 4-5. position and derivatives
     if pos_src:
         cols = POS + [v for v in VEL if v in pos_df.columns]
@@ -597,8 +613,10 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         pvalid = pvalid & np.isfinite(pos).all(axis=1)
         pvalid &= ~_reset_steps(pos_df, grid, diag, pos_src)
         gap |= ~pvalid
+        fused = None
         if pos_src == "gps" and cfg.gps_smoother.enabled and pvalid.any():
-            pos = _smoothed_gps(pos_df, grid, pos, pvalid, cfg, diag)
+            acc_ned = _imu_acc_ned(P["imu"], q, qvalid, grid, cfg, diag) if cfg.gps_smoother.imu else None
+            pos, fused = _smoothed_gps(pos_df, grid, pos, pvalid, cfg, diag, acc_ned)
         vel_meas = np.column_stack([r[v].to_numpy() if v in r.columns else np.full(n, np.nan) for v in VEL])
         # per axis: a GPS_RAW_INT fix carries ground speed and course but no climb rate, and its
         # measured horizontal velocity (0.05 m/s RMS on the simulated tlog) beats the
@@ -652,6 +670,17 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
             vel[:, d] = differentiate(pos[:, d], dt, 1, der, valid=pvalid)
             acc[:, d] = differentiate(pos[:, d], dt, 2, der, valid=pvalid)
             jerk[:, d] = differentiate(pos[:, d], dt, 3, der, valid=pvalid)
+        if fused is not None:
+            # the smoother's own velocity and acceleration where it read the accelerometer: its
+            # acceleration is measured, not a second difference of 0.3 m fixes (simulated ROS
+            # bag: velocity RMS 0.21 -> see datasets/README.md#preprocess)
+            ok = pvalid[:, None] & np.isfinite(fused[:, :, 1])
+            for i in range(3):
+                if ok[:, i].any():
+                    vel[:, i] = np.where(ok[:, i], fused[:, i, 1], np.nan)
+                    acc[:, i] = np.where(ok[:, i], fused[:, i, 2], np.nan)
+                    jerk[:, i] = differentiate(acc[:, i:i + 1], dt, 1, der, valid=ok[:, i])[:, 0]
+                    how[i] = "GPS + accelerometer smoother"
         diag["sources"]["velocity"] = velocity_source_text(how)
     else:
         pos = vel = acc = jerk = np.full((n, 3), np.nan)
@@ -662,17 +691,6 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
         st[f"jerk_{a}_mps3"] = jerk[:, i]
 
     # 6. attitude and body rates
-    q = np.full((n, 4), np.nan)
-    qvalid = np.zeros(n, dtype=bool)
-    if att_src:
-        r, qvalid = _resample_stream(P[att_src], att_src, QUAT, grid, cfg, diag)
-        q = r[QUAT].to_numpy().copy()
-        # a zero or NaN quaternion (NaN after normalising) is no attitude: a gap, as above
-        qvalid = qvalid & np.isfinite(q).all(axis=1) & (np.abs(q).sum(axis=1) > 0)
-        gap |= ~qvalid
-        ok = np.all(np.isfinite(q), axis=1)
-        if ok.any():
-            q[ok] = quat_continuity(q[ok])
     for i, c in enumerate(QUAT):
         st[c] = q[:, i]
     roll, pitch, yaw = quat_to_euler(np.where(np.isfinite(q), q, 1.0))
@@ -739,10 +757,31 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     return PreprocessResult(state=state, segments=seg, calibration=cal.points, diagnostics=diag)
 
 
+def _imu_acc_ned(imu: pd.DataFrame, q: NDArray, qvalid: NDArray[np.bool_], grid: NDArray[np.int64],
+                 cfg: PreprocessConfig, diag: dict) -> NDArray | None:
+    """The accelerometer as an NED acceleration on the grid, ``a = R(q) f + g e₃`` (``f`` the
+    mount-corrected specific force, FRD; ``R`` body to NED; ``g`` = 9.80665 m/s², NED down);
+    ``None`` where the log has no accelerometer or no attitude, NaN on rows without either.
+    At rest ``f = −g e₃`` in the body's level frame, so ``a = 0``. The specific force is
+    averaged over each grid cell (resample method ``mean``)."""
+    if not (_has(imu, ACC) and qvalid.any()):
+        return None
+    # the cell mean (a boxcar anti-alias filter): a 100-400 Hz accelerometer's vibration would
+    # alias onto the grid through point samples
+    r, valid = resample(imu, grid, {c: "mean" for c in ACC}, gap_multiple=cfg.gap_multiple)
+    f = r[ACC].to_numpy(dtype=np.float64)
+    ok = valid & qvalid & np.isfinite(f).all(axis=1)
+    out = np.full((len(grid), 3), np.nan)
+    out[ok] = quat_rotate(q[ok], f[ok]) + np.array([0.0, 0.0, G0])
+    return out
+
+
 def _smoothed_gps(fixes: pd.DataFrame, grid: NDArray[np.int64], pos: NDArray, pvalid: NDArray[np.bool_],
-                  cfg: PreprocessConfig, diag: dict) -> NDArray:
-    """The GPS fixes fused with their measured velocity on the grid (:mod:`.smoother`); the
-    rows the interpolation called gaps stay as they were (NaN-free rows only change)."""
+                  cfg: PreprocessConfig, diag: dict, acc_ned: NDArray | None = None) -> tuple[NDArray, NDArray | None]:
+    """The GPS fixes fused with their measured velocity on the grid (:mod:`.smoother`), and with
+    the accelerometer's NED acceleration ``acc_ned`` when given; the rows the interpolation
+    called gaps stay as they were (NaN-free rows only change). Returns the positions and, with
+    ``acc_ned``, the smoother's (n, 3, 3) position, velocity and acceleration (else ``None``)."""
     g = cfg.gps_smoother
 
     def col(c):
@@ -758,20 +797,39 @@ def _smoothed_gps(fixes: pd.DataFrame, grid: NDArray[np.int64], pos: NDArray, pv
     z = fixes[POS].to_numpy(dtype=np.float64)
     v = np.column_stack([col(c) for c in VEL])
     sh, sv = sigma("hacc_m", g.sigma_h_m), sigma("vacc_m", g.sigma_v_m)
-    out = smooth_track(t, z, v, np.column_stack([sh, sh, sv]), grid, g,
-                       max_gap_ns=bridge_limit_ns(t, grid, cfg.gap_multiple), causal=cfg.causal)
+    sig_acc = None
+    if acc_ned is not None:
+        # the config's sigma is a floor: where the accelerometer is noisier on the grid it is
+        # weighted by its own local noise, the RMS of its first differences / sqrt 2 over a
+        # centred second (a vehicle's true acceleration hardly moves in one grid period;
+        # vibration does: husky-ros1 on rough ground swings +-5 m/s^2 between 30 Hz samples)
+        d2 = np.diff(acc_ned, axis=0) ** 2 / 2.0
+        d2 = np.vstack([d2[:1], d2]) if len(d2) else np.full_like(acc_ned, np.nan)
+        win = max(3, int(round(cfg.rate_hz)))
+        local = pd.DataFrame(d2).rolling(win, center=True, min_periods=1).mean().to_numpy()
+        sig_acc = np.maximum(g.sigma_acc_mps2, np.sqrt(np.where(np.isfinite(local), local, 0.0)))
+    full = smooth_track(t, z, v, np.column_stack([sh, sh, sv]), grid, g,
+                        max_gap_ns=bridge_limit_ns(t, grid, cfg.gap_multiple), causal=cfg.causal,
+                        acc=acc_ned, sigma_acc=sig_acc, full=True)
+    out = full[:, :, 0]
     ok = pvalid & np.isfinite(out).all(axis=1)
     res = pos.copy()
     res[ok] = out[ok]
     with_vel = [a for i, a in enumerate(_NED) if np.isfinite(v[:, i]).any()]
+    n_acc = int(np.isfinite(acc_ned).all(axis=1).sum()) if acc_ned is not None else 0
     diag["gps_smoother"] = {"jerk_psd": g.jerk_psd, "causal": cfg.causal, "velocity_axes": with_vel,
+                            "accelerometer_samples": n_acc,
+                            "sigma_acc_median_mps2": [round(float(np.median(x)), 4) for x in sig_acc.T] if n_acc else None,
+                            "sigma_acc_max_mps2": [round(float(np.max(x)), 4) for x in sig_acc.T] if n_acc else None,
                             "median_sigma_h_m": float(np.median(sh)), "median_sigma_v_m": float(np.median(sv)),
                             "rms_change_m": float(np.sqrt(np.mean((res[ok] - pos[ok]) ** 2))) if ok.any() else 0.0}
     diag["notes"].append(f"gps positions smoothed (white-jerk RTS{' forward only' if cfg.causal else ''}, "
                          f"q {g.jerk_psd:g} m²/s⁵, with the fixes' velocity on "
-                         f"{', '.join(with_vel) or 'no axis'}): {diag['gps_smoother']['rms_change_m']:.3f} m RMS "
+                         f"{', '.join(with_vel) or 'no axis'}"
+                         + (f", and the accelerometer on {n_acc} of {len(grid)} grid samples" if n_acc else "")
+                         + f"): {diag['gps_smoother']['rms_change_m']:.3f} m RMS "
                          "from the interpolated fixes (preprocess.gps_smoother)")
-    return res
+    return res, (full if n_acc else None)
 
 
 def _baro_height(b: pd.DataFrame, grid: NDArray[np.int64], cfg: PreprocessConfig, diag: dict) -> NDArray:

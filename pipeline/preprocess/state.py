@@ -79,6 +79,10 @@ GYR = ["gyr_x_radps", "gyr_y_radps", "gyr_z_radps"]
 ACC = ["acc_x_mps2", "acc_y_mps2", "acc_z_mps2"]
 #: standard gravity, m/s² (the accelerometer's specific force ``f = R⁻¹(a − g e₃)``)
 G0 = 9.80665
+#: the largest median NED acceleration (m/s², per axis) of an accelerometer the GPS smoother
+#: fuses: a whole flight's median acceleration is near 0 (at most 0.07 on the simulated flights, 0.024
+#: on husky-ros1 and -ros2)
+ACC_CONSISTENCY_MPS2 = 1.0
 POSITION_SOURCES = ("auto", "local_position", "gps", "truth")
 
 _pre = functools.partial(cfield, "preprocess")
@@ -773,6 +777,17 @@ def _imu_acc_ned(imu: pd.DataFrame, q: NDArray, qvalid: NDArray[np.bool_], grid:
     ok = valid & qvalid & np.isfinite(f).all(axis=1)
     out = np.full((len(grid), 3), np.nan)
     out[ok] = quat_rotate(q[ok], f[ok]) + np.array([0.0, 0.0, G0])
+    if ok.any():
+        # a flight's mean acceleration is ~0 (it starts and ends at rest, or near it); an
+        # accelerometer whose mount, axes or time base disagree with the attitude leaves a
+        # part of g (a 90° mount error: the whole 9.8 m/s²) and would steer the track
+        med = np.median(out[ok], axis=0)
+        if np.abs(med).max() > ACC_CONSISTENCY_MPS2:
+            diag["notes"].append(f"accelerometer not fused into the GPS track: its NED acceleration "
+                                 f"R(q) f + g has a median of ({', '.join(f'{x:.2f}' for x in med)}) m/s² "
+                                 f"(more than {ACC_CONSISTENCY_MPS2:g} on an axis): mount, axes or "
+                                 "attitude disagree")
+            return None
     return out
 
 

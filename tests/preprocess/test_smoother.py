@@ -221,3 +221,14 @@ def test_a_gps_flight_with_an_accelerometer_gets_its_velocity_and_acceleration_f
     # the fixes alone: a second difference of 0.3 m noise; with the accelerometer: measured
     assert rms[False][0] > 0.1 and rms[False][1] > 0.2
     assert rms[True][0] < 0.5 * rms[False][0] and rms[True][1] < 0.1
+
+
+def test_an_accelerometer_that_disagrees_with_the_attitude_is_not_fused_and_the_notes_say_why(rng):
+    log, _, _ = _level_circle_flight(rng, True)
+    imu = log["imu"].copy()
+    # a mount the config does not know: x and z swapped, so g lies along the body x axis
+    imu["acc_x_mps2"], imu["acc_z_mps2"] = imu["acc_z_mps2"].to_numpy(), imu["acc_x_mps2"].to_numpy()
+    bad = FlightLog.from_streams(log.meta, {"gps": log["gps"], "attitude": log["attitude"], "imu": imu})
+    res = preprocess_log(bad, {"vertical_from_baro": False})
+    assert res.diagnostics["sources"]["velocity"] == "differentiated position"
+    assert any(x.startswith("accelerometer not fused into the GPS track") for x in res.diagnostics["notes"])

@@ -129,7 +129,7 @@ def loglik_figure(iterations: pd.DataFrame, tol: float | None = None) -> go.Figu
 
     The change, not the log-likelihood itself: divided by its first value every curve jumped to
     ≈ 1 after one iteration and looked converged, while the table said none of the 16 P23
-    maneuvers converged in 29 iterations (their changes end near 3e-4, above the 1e-6 tolerance).
+    maneuvers converged in 30 iterations (their changes end near 3e-4, above the 1e-6 tolerance).
     """
     ok = iterations[iterations["status"] == "ok"]
     if not len(ok):
@@ -180,7 +180,7 @@ def anchor_table(learned: pd.DataFrame, demos: pd.DataFrame, band_deg: Sequence[
 HEADERS = {"peak_pitch_deg": "peak pitch [°]", "time_in_band_s": "longest time in the pitch band [s]",
            "cross_track_rms_m": "cross-track RMS [m]", "rms_to_learned_m": "RMS to the learned path [m]",
            "loglik_first": "log-likelihood, first", "loglik_last": "log-likelihood, last",
-           "flight_id": "flight"}
+           "flight_id": "flight", "iterations": "EM iterations (E-steps)"}
 
 
 def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *, set_name: str,
@@ -221,7 +221,8 @@ def build_align_report(paths: Mapping[str, str], out_html: str | os.PathLike, *,
                        table_html(at.rename(columns=HEADERS), float_format="%.2f")))
     summary = iterations.groupby("maneuver", sort=False).agg(
         status=("status", "first"), reason=("reason", "first"), demos=("n_demos", "first"),
-        iterations=("iteration", "max"), converged=("converged", "first"),
+        # the rows are the E-steps 0..n-1: their count, not the last index (30 read 29)
+        iterations=("iteration", "size"), converged=("converged", "first"),
         loglik_first=("loglik", "first"), loglik_last=("loglik", "last")).reset_index()
     tables.append(("Maneuvers", table_html(summary.rename(columns=HEADERS), float_format="%.1f")))
     left = alignment[alignment["status"] != "used"][["maneuver", "demo", "flight_id", "status", "reason"]]

@@ -66,4 +66,7 @@ def test_the_align_pages_maneuver_table_says_whether_each_maneuver_converged_in_
     k = head.index("converged")
     rows = _cells(page, "Maneuvers")
     assert rows and all(r[k] in ("yes", "no") for r in rows), rows
+    # max_iter 2: two E-steps whether or not the second converged (the table read the last index, 1)
+    n = head.index("EM iterations (E-steps)")
+    assert all(r[n] == "2" for r in rows), rows
     assert ">True<" not in page and ">False<" not in page

@@ -22,7 +22,7 @@ from __future__ import annotations
 import re
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -133,6 +133,33 @@ def _paths_by_flight(inputs) -> dict[str, tuple[str, str]]:
     return {f: (p, segs.get(f)) for f, p in zip(flights, states)}
 
 
+def occurrence(name: str) -> int:
+    """The ``k`` of a demo name ``<flight>:<label>#<k>`` (1 without one)."""
+    return int(str(name).rsplit("#", 1)[1]) if "#" in str(name) else 1
+
+
+def by_occurrence(maneuvers: Mapping[str, list], repeated: set[str] | None = None) -> dict[str, list]:
+    """The maneuvers with a label flown more than once in a flight split by occurrence: the k-th
+    ``hB`` of every flight (demo name ``<flight>:hB#k``) is the maneuver ``hB#k``.
+
+    A schedule that flies a label twice flies two different figures under it (P23's two ``hB``:
+    the first at about 355 m going east, the second at about 60 m going west), so the demos of
+    one intended trajectory are the same occurrence in each flight; pooled, the learned path
+    sat 55–79 m from every demo. Occurrences count dropped segments too
+    (:func:`~pipeline.align.demos.flight_demos`), so the pairing follows the schedule.
+    ``repeated``: the labels to split (default: those with an occurrence above 1 among the demos).
+    """
+    out: dict[str, list] = {}
+    for lab, demos in maneuvers.items():
+        occ = [occurrence(d.name) for d in demos]
+        if (lab not in repeated) if repeated is not None else max(occ, default=1) == 1:
+            out[lab] = list(demos)
+            continue
+        for k in sorted(set(occ)):
+            out[f"{lab}#{k}"] = [d for d, o in zip(demos, occ) if o == k]
+    return out
+
+
 def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     """Read and cut the demos of ``align.sets[set_name]`` from the declared inputs.
 
@@ -208,6 +235,16 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
         if d.label and d.label not in order:
             order.append(d.label)
     maneuvers = {lab: [d for fd in per_flight for d in fd.demos if d.label == lab] for lab in order}
+    if config.get("repeats", "split") == "split":
+        # a label flown twice in a flight is two figures: one maneuver per occurrence, the
+        # dropped demos filed under theirs
+        rep = {d.label for fd in per_flight for d in fd.demos if occurrence(d.name) > 1}
+        rep |= {d.label for d in dropped if d.label and occurrence(d.name) > 1}
+        maneuvers = by_occurrence(maneuvers, rep)
+        dropped = [replace(d, label=f"{d.label}#{occurrence(d.name)}") if d.label in rep else d for d in dropped]
+        for d in dropped:
+            if d.label and d.label not in maneuvers:
+                maneuvers[d.label] = []
     return DemoSet(set_name, maneuvers, dropped, info, notices)
 
 

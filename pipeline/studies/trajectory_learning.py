@@ -10,7 +10,7 @@ average and the smoothed DBA average (tables ``sim_cases``, ``sim_summary``;
 **Real part** (this module): the demo sets ``align.sets`` named by ``sets`` (default P23: the
 two P23 flights, whose ``hB`` is flown twice each; P21: the labelled FlightCoach flight and the
 two kd0aij CSVs rigidly fitted to it), demos in the box frame (:mod:`pipeline.align.demos`). A label flown twice in a flight is two
-maneuvers, one per occurrence (``repeats: split``, :func:`by_occurrence`; ``pool``: one).
+maneuvers, one per occurrence (``repeats: split``, :func:`pipeline.align.run.by_occurrence`; ``pool``: one).
 For every maneuver and every demo *k* (leave one out), the trajectory is learned from the other
 demos (:class:`~pipeline.align.trajectory.TrajectoryLearner` with the ``align`` settings; the
 learned μ on its whole hidden axis) and compared with the left-out demo by the RMS 3-D position
@@ -80,27 +80,6 @@ def _centred(x: np.ndarray) -> np.ndarray:
     return y
 
 
-def by_occurrence(maneuvers: Mapping[str, list]) -> dict[str, list]:
-    """The maneuvers with a label flown more than once in a flight split by occurrence: the k-th
-    ``hB`` of every flight (demo name ``<flight>:hB#k``) is the maneuver ``hB#k``.
-
-    A schedule that flies a label twice flies two different figures under it (P23's two ``hB``
-    are one at the box centre and one at its end, with different shapes and heights), so the
-    demos of one intended trajectory are the same occurrence in each flight; pooled, the
-    leave-one-out learns from the other figure and compares with it. Occurrences count dropped
-    segments too (:func:`~pipeline.align.demos.flight_demos`), so the pairing follows the schedule.
-    """
-    out: dict[str, list] = {}
-    for lab, demos in maneuvers.items():
-        occ = [int(str(d.name).rsplit("#", 1)[1]) if "#" in str(d.name) else 1 for d in demos]
-        if max(occ, default=1) == 1:
-            out[lab] = list(demos)
-            continue
-        for k in sorted(set(occ)):
-            out[f"{lab}#{k}"] = [d for d, o in zip(demos, occ) if o == k]
-    return out
-
-
 def loo_maneuver(set_name: str, label: str, demos, align_cfg: Mapping, *, max_iter: int,
                  frame: str = "box") -> list[dict]:
     """One row per fold (left-out demo) of one maneuver (see the module docstring).
@@ -157,7 +136,10 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
         if s not in (align_cfg.get("sets") or {}):
             raise ConfigError(f"studies.{NAME}.sets: {s!r} is not an align.sets entry "
                               f"({', '.join(align_cfg.get('sets') or {}) or 'none'})")
-        ds = load_demo_set(inputs, align_cfg, s)
+        if st["repeats"] not in ("split", "pool"):
+            raise ConfigError(f"studies.{NAME}.repeats: {st['repeats']!r} is not 'split' or 'pool'")
+        # the study's own choice, which the workflow's align stage takes from align.repeats
+        ds = load_demo_set(inputs, {**align_cfg, "repeats": st["repeats"]}, s)
         notices += ds.notices
         for f, info in ds.flights.items():
             # a box-less flight's fit and the fit-free schedule check, so a poor fit can be told
@@ -167,9 +149,7 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
         if not ds.maneuvers:
             notices.append(f"set {s}: no demos (its flights are not available): skipped")
             continue
-        if st["repeats"] not in ("split", "pool"):
-            raise ConfigError(f"studies.{NAME}.repeats: {st['repeats']!r} is not 'split' or 'pool'")
-        maneuvers = by_occurrence(ds.maneuvers) if st["repeats"] == "split" else dict(ds.maneuvers)
+        maneuvers = dict(ds.maneuvers)
         labels = list(maneuvers)
         if int(st["real_maneuvers"]) > 0:
             labels = labels[: int(st["real_maneuvers"])]

@@ -82,18 +82,26 @@ def test_every_maneuver_becomes_rows_of_the_four_declared_tables(tmp_path, stand
     assert res.status == "partial"  # 'solo' has one demo
     learned = read_table(out["learned"], schema.ALIGN_LEARNED)
     assert list(learned.columns) == [c.name for c in schema.ALIGN_LEARNED]
-    assert set(learned["maneuver"]) == {"a", "b"}
+    # 'a' is flown twice in each flight: two figures, one maneuver per occurrence
+    assert set(learned["maneuver"]) == {"a#1", "a#2", "b"}
     al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
     used = al[al["status"] == "used"]
     assert sorted(used["demo"].unique()) == ["f1:a#1", "f1:a#2", "f1:b#1", "f2:a#1", "f2:a#2", "f2:b#1"]
     assert (used.groupby("demo")["tau"].first() == 0).all()
     it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
     ok = it[it["status"] == "ok"]
-    assert list(ok[ok["maneuver"] == "a"]["iteration"]) == [0, 1, 2]
-    np.testing.assert_allclose(ok[ok["maneuver"] == "a"]["sigma_z_pos_n_m"], [1.0, 2.0, 3.0])
+    assert list(ok[ok["maneuver"] == "a#2"]["iteration"]) == [0, 1, 2]
+    np.testing.assert_allclose(ok[ok["maneuver"] == "a#2"]["sigma_z_pos_n_m"], [1.0, 2.0, 3.0])
+    assert sorted(used[used["maneuver"] == "a#2"]["demo"].unique()) == ["f1:a#2", "f2:a#2"]
     dm = read_table(out["demos"], schema.ALIGN_DEMOS)
     assert len(dm) == len(used)
-    assert read_table_meta(out["learned"])["align"]["maneuvers"]["a"]["n_demos"] == 4
+    assert read_table_meta(out["learned"])["align"]["maneuvers"]["a#1"]["n_demos"] == 2
+    # align.repeats: pool keeps every 'a' in one maneuver
+    pooled = _outputs(tmp_path / "pool")
+    align_run.run_align(_inputs(_two_flights(tmp_path)), pooled,
+                        _config({"s": {"flights": ["f1", "f2"]}}, repeats="pool"), set_name="s")
+    assert set(read_table(pooled["learned"])["maneuver"]) == {"a", "b"}
+    assert read_table_meta(pooled["learned"])["align"]["maneuvers"]["a"]["n_demos"] == 4
 
 
 def test_demos_of_flights_in_differently_rotated_boxes_coincide_in_the_box_frame(tmp_path, stand_in):
@@ -144,7 +152,7 @@ def test_a_missing_flight_is_skipped_with_a_notice(tmp_path, stand_in, capsys):
     assert res.diagnostics["notices"] == ["set s: flight gone missing (no state/segments input): skipped"]
     al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
     assert al[al["flight_id"] == "gone"]["reason"].tolist() == ["flight missing"]
-    assert set(read_table(out["learned"])["maneuver"]) == {"a", "b"}
+    assert set(read_table(out["learned"])["maneuver"]) == {"a#1", "a#2", "b"}
 
 
 def test_an_input_flight_the_set_does_not_list_is_ignored_with_a_notice(tmp_path, stand_in, capsys):
@@ -170,9 +178,9 @@ def test_the_real_learner_fits_a_synthetic_set_and_its_likelihood_rises(tmp_path
     out = _outputs(tmp_path)
     res = align_run.run_align(_inputs(_two_flights(tmp_path)), out,
                               _config({"s": {"flights": ["f1", "f2"]}}, max_iter=3, sample_hz=2.5), set_name="s")
-    assert res.diagnostics["maneuvers"]["a"]["status"] == "ok"
+    assert res.diagnostics["maneuvers"]["a#1"]["status"] == "ok"
     it = read_table(out["iterations"], schema.ALIGN_ITERATIONS)
-    a = it[it["maneuver"] == "a"]["loglik"].to_numpy()
+    a = it[it["maneuver"] == "a#1"]["loglik"].to_numpy()
     assert a[-1] > a[0]
     learned = read_table(out["learned"], schema.ALIGN_LEARNED)
     assert np.isfinite(learned[[f"mu_{c}" for c in DEMO_COLUMNS]].to_numpy()).all()

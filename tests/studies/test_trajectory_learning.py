@@ -172,7 +172,7 @@ def test_each_fold_names_its_closest_other_demo_and_how_far_apart_the_others_are
 
 
 def test_a_label_flown_twice_in_each_flight_is_one_maneuver_per_occurrence():
-    from pipeline.studies.trajectory_learning import by_occurrence
+    from pipeline.align.run import by_occurrence
 
     class D:
         def __init__(self, name):

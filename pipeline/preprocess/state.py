@@ -674,7 +674,8 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
             vel[:, d] = differentiate(pos[:, d], dt, 1, der, valid=pvalid)
             acc[:, d] = differentiate(pos[:, d], dt, 2, der, valid=pvalid)
             jerk[:, d] = differentiate(pos[:, d], dt, 3, der, valid=pvalid)
-        if fused is not None:
+        if fused is not None and cfg.velocity_source == "measured":
+            # (velocity_source: differentiate asks for every axis from the position, and gets it)
             # the smoother's own velocity and acceleration where it read the accelerometer: its
             # acceleration is measured, not a second difference of 0.3 m fixes (simulated ROS
             # bag: velocity RMS 0.21 -> see datasets/README.md#preprocess)

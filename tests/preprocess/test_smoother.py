@@ -232,3 +232,11 @@ def test_an_accelerometer_that_disagrees_with_the_attitude_is_not_fused_and_the_
     res = preprocess_log(bad, {"vertical_from_baro": False})
     assert res.diagnostics["sources"]["velocity"] == "differentiated position"
     assert any(x.startswith("accelerometer not fused into the GPS track") for x in res.diagnostics["notes"])
+
+
+def test_velocity_source_differentiate_still_differentiates_the_fused_track(rng):
+    log, _, _ = _level_circle_flight(rng, True)
+    res = preprocess_log(log, {"velocity_source": "differentiate", "vertical_from_baro": False})
+    assert res.diagnostics["sources"]["velocity"] == "differentiated position"
+    # the positions are still the accelerometer-aided track
+    assert any("and the accelerometer on" in x for x in res.diagnostics["notes"])

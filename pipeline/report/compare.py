@@ -108,7 +108,27 @@ def differing_params(per_flight: Mapping[str, Mapping[str, float]]) -> tuple[lis
     return headers, rows
 
 
-def _overlay(tracks: Mapping[str, pd.DataFrame], col: str, title: str, ylabel: str) -> go.Figure | None:
+#: the overlays open at this many seconds before takeoff: a flight's minutes on the ground before
+#: it (phoenix-mission1: 295 s) would squeeze the flights into a corner; autoscale shows them
+PRE_TAKEOFF_S = 30.0
+
+
+def overlay_range(tracks: Mapping[str, pd.DataFrame], cols: Sequence[str]) -> list[float] | None:
+    """The overlays' opening time range: from :data:`PRE_TAKEOFF_S` before takeoff (or the
+    earliest sample, if later) to the last sample of any flight with a value in ``cols``."""
+    lo, hi = np.inf, -np.inf
+    for d in tracks.values():
+        if d is None or not len(d):
+            continue
+        ok = d[[c for c in cols if c in d]].notna().any(axis=1).to_numpy()
+        if ok.any():
+            t = d["t_s"].to_numpy(np.float64)[ok]
+            lo, hi = min(lo, float(t.min())), max(hi, float(t.max()))
+    return [max(lo, -PRE_TAKEOFF_S), hi] if np.isfinite(lo) and hi > max(lo, -PRE_TAKEOFF_S) else None
+
+
+def _overlay(tracks: Mapping[str, pd.DataFrame], col: str, title: str, ylabel: str,
+             x_range: list[float] | None = None) -> go.Figure | None:
     fig = go.Figure()
     for i, (f, d) in enumerate(tracks.items()):
         if d is None or col not in d or not d[col].notna().any():
@@ -119,7 +139,7 @@ def _overlay(tracks: Mapping[str, pd.DataFrame], col: str, title: str, ylabel: s
                                  line=dict(color=FLIGHT_COLOURS[i % len(FLIGHT_COLOURS)])))
     if not fig.data:
         return None
-    fig.update_xaxes(title="t from takeoff [s]")
+    fig.update_xaxes(title="t from takeoff [s]", **({"range": x_range} if x_range else {}))
     fig.update_yaxes(title=ylabel)
     return plots.layout(fig, title, height=320)
 
@@ -167,10 +187,12 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
             "pitch_deg": np.degrees(st["pitch_rad"].to_numpy(np.float64)),
         })
         rows.append(row)
-    figs = [("Altitude above start", _overlay(tracks, "alt_m", "Altitude above start", "altitude [m, up]")),
-            ("Horizontal speed", _overlay(tracks, "speed_mps", "Horizontal speed", "speed [m/s]")),
-            ("Roll", _overlay(tracks, "roll_deg", "Roll (state: body FRD, mount-corrected)", "roll [°]")),
-            ("Pitch", _overlay(tracks, "pitch_deg", "Pitch (state: body FRD, mount-corrected)", "pitch [°]"))]
+    # one opening range for every panel (their time axes are linked)
+    xr = overlay_range(tracks, ["alt_m", "speed_mps", "roll_deg", "pitch_deg"])
+    figs = [("Altitude above start", _overlay(tracks, "alt_m", "Altitude above start", "altitude [m, up]", xr)),
+            ("Horizontal speed", _overlay(tracks, "speed_mps", "Horizontal speed", "speed [m/s]", xr)),
+            ("Roll", _overlay(tracks, "roll_deg", "Roll (state: body FRD, mount-corrected)", "roll [°]", xr)),
+            ("Pitch", _overlay(tracks, "pitch_deg", "Pitch (state: body FRD, mount-corrected)", "pitch [°]", xr))]
     if len(per_flight) >= 2:
         p_headers, p_rows = differing_params(per_flight)
         p_note = (f"{len(p_rows)} of {count_text(len(set().union(*(set(v) for v in per_flight.values()))), 'parameter')} "
@@ -190,6 +212,6 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
                   linked=[f"plot-{i}" for i, (_, f) in enumerate(figs) if f is not None],
                   takeoff_rule=TAKEOFF_RULE, param_headers=p_headers, param_rows=p_rows,
                   param_changed=p_changed, param_partial=p_partial,
-                  param_note=p_note, param_absent=p_absent, plotly_js=plotly_js, index_href=index_href)
+                  param_note=p_note, param_absent=p_absent, pre_takeoff_s=f"{PRE_TAKEOFF_S:g}", plotly_js=plotly_js, index_href=index_href)
     write_page(page, out_html)
     return table

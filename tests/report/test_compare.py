@@ -133,3 +133,14 @@ def test_a_ground_vehicle_starts_at_its_first_motion_not_at_a_gps_height_swing()
                        "vel_n_mps": np.where(np.arange(n) >= 150, 1.0, 0.0), "vel_e_mps": 0.0})
     assert compare.takeoff_t_ns(st) == (t[50], "height")
     assert compare.takeoff_t_ns(st, ground=True) == (t[150], "speed")
+
+
+def test_the_overlays_open_30_s_before_takeoff_however_long_a_flight_sat_on_the_ground():
+    long_wait = pd.DataFrame({"t_s": np.arange(-295.0, 500.0, 1.0), "alt_m": 1.0, "speed_mps": np.nan,
+                              "roll_deg": 0.0, "pitch_deg": 0.0})
+    short = pd.DataFrame({"t_s": np.arange(-10.0, 120.0, 1.0), "alt_m": 1.0, "speed_mps": 1.0,
+                          "roll_deg": 0.0, "pitch_deg": 0.0})
+    cols = ["alt_m", "speed_mps", "roll_deg", "pitch_deg"]
+    assert compare.overlay_range({"a": long_wait, "b": short}, cols) == [-30.0, 499.0]
+    assert compare.overlay_range({"b": short}, cols) == [-10.0, 119.0]     # nothing earlier to hide
+    assert compare.overlay_range({"x": None}, cols) is None

@@ -286,7 +286,7 @@ class McapReader(LogReader):
         conns = [(ch.topic, msgtype_of(ch), counts.get(cid, 0)) for cid, ch in channels.items()]
         defs = [(msgtype_of(ch), *d) for ch in channels.values()
                 if (d := _definition(schemas.get(ch.schema_id))) is not None]
-        rc.warn_configured_topics_absent(conns, cfg, warnings)
+        absent = rc.warn_configured_topics_absent(conns, cfg, warnings)
         routes, unmapped = rc.plan_topics(conns, cfg, path, rc.defined_fields(defs))
 
         # type stores from the schemas of the routed channels
@@ -343,6 +343,7 @@ class McapReader(LogReader):
                 b.msgs.append(msg)
                 b.rec_ns.append(log_time)
         diag = {"records_dropped": drops, "warnings": warnings, "bytes_skipped": bytes_skipped,
+                "absent_topics": absent,
                 "encodings": sorted({ch.message_encoding for ch in channels.values()})}
         return rc.build_flightlog(buckets, unmapped, cfg, path=path, source_format=self.source_format,
                                   diag=diag)

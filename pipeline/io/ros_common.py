@@ -91,6 +91,8 @@ Per-type mapping (style.md §3.2):
 
 from __future__ import annotations
 
+import difflib
+
 import functools
 import math
 from dataclasses import dataclass, field
@@ -412,18 +414,34 @@ def is_candidate(topic: str, msgtype: str, cfg: RosConfig, definition: tuple[str
 
 
 def warn_configured_topics_absent(connections: Iterable[tuple[str, str, int]], cfg: RosConfig,
-                                  warnings: list[str]) -> None:
-    """One warning naming the ``ingest.ros.topics``/``custom`` topics the source does not hold: a
-    misspelt topic would otherwise change nothing and say nothing."""
+                                  warnings: list[str]) -> list[str]:
+    """Configured ``ingest.ros.topics``/``custom`` topics the source does not hold.
+
+    A topic whose name is close to one the log holds (``difflib`` ratio ≥ 0.75: ``/sonarr``
+    beside ``/sonar``) is most likely misspelt, which would otherwise change nothing and say
+    nothing: one warning names it and the near match. The others are sensors this log does not
+    carry (a dataset's one config lists what some of its bags hold: the simulator's
+    ``/rangefinder`` on the husky bags), returned for ``diagnostics.absent_topics``, not warned.
+    """
     present = {t for t, _, _ in connections}
-    # a topic the config skips (null) may well be absent: a shared config lists what some bags hold
+    # a topic the config skips (null) may well be absent too
     used = [t for t, m in cfg.topics.items() if m is not None]
+    quiet: list[str] = []
     for key, names in (("topics", used), ("custom", list(cfg.custom))):
-        absent = [t for t in names if t not in present]
-        if absent:
+        near = []
+        for t in names:
+            if t in present:
+                continue
+            close = difflib.get_close_matches(t, sorted(present), n=1, cutoff=0.75)
+            if close:
+                near.append(f"{t} (did you mean {close[0]}?)")
+            else:
+                quiet.append(t)
+        if near:
             warnings.append(
-                f"ingest.ros.{key}: topic(s) {', '.join(absent)} not in the log (it has "
+                f"ingest.ros.{key}: topic(s) {', '.join(near)} not in the log (it has "
                 f"{', '.join(sorted(present)[:12])}{', ...' if len(present) > 12 else ''})")
+    return quiet
 
 
 def plan_topics(connections: Iterable[tuple[str, str, int]], cfg: RosConfig,

@@ -238,7 +238,7 @@ class Ros1BagReader(LogReader):
             if not conns or reader.message_count == 0:
                 raise IngestError(path, "ROS 1 bag holds no messages")
             defs = [(c.msgtype, "msg", c.msgdef.data) for c in reader.connections]
-            rc.warn_configured_topics_absent(conns, cfg, diag["warnings"])
+            diag["absent_topics"] = rc.warn_configured_topics_absent(conns, cfg, diag["warnings"])
             routes, unmapped = rc.plan_topics(conns, cfg, path, rc.defined_fields(defs))
             store, errs = rc.make_typestore(defs, "ROS1_NOETIC", {r.msgtype for r in routes.values()})
             for t, e in errs.items():
@@ -328,7 +328,7 @@ class Ros2BagReader(LogReader):
                 fmt = getattr(c.msgdef.format, "name", "NONE")
                 if fmt in ("MSG", "IDL"):
                     defs.append((c.msgtype, fmt.lower(), c.msgdef.data))
-            rc.warn_configured_topics_absent(conns, cfg, diag["warnings"])
+            diag["absent_topics"] = rc.warn_configured_topics_absent(conns, cfg, diag["warnings"])
             routes, unmapped = rc.plan_topics(conns, cfg, path, rc.defined_fields(defs))
             store, errs = rc.make_typestore(defs, "LATEST", {r.msgtype for r in routes.values()})
             for t, e in errs.items():
@@ -528,7 +528,7 @@ def _scan_ros1(path: Path, why: str, cfg: rc.RosConfig, progress: Progress | Non
         raise IngestError(path, f"unreadable ROS 1 bag ({why}); no messages in it")
     warnings.insert(0, f"{why}; read sequentially without the index")
     listed = [(t, typ, counts.get(c, 0)) for c, (t, typ, _d) in conns.items()]
-    rc.warn_configured_topics_absent(listed, cfg, warnings)
+    absent = rc.warn_configured_topics_absent(listed, cfg, warnings)
     routes, unmapped = rc.plan_topics(listed, cfg, path, rc.defined_fields((typ, "msg", d) for t, typ, d in conns.values()))
     defs = [(typ, "msg", d) for c, (t, typ, d) in conns.items() if t in routes]
     store, errs = rc.make_typestore(defs, "ROS1_NOETIC", {r.msgtype for r in routes.values()})
@@ -552,5 +552,6 @@ def _scan_ros1(path: Path, why: str, cfg: rc.RosConfig, progress: Progress | Non
                 continue
             b.msgs.append(msg)
             b.rec_ns.append(t_rec)
-    diag = {"records_dropped": drops, "warnings": warnings, "bytes_skipped": bytes_skipped}
+    diag = {"records_dropped": drops, "warnings": warnings, "bytes_skipped": bytes_skipped,
+            "absent_topics": absent}
     return rc.build_flightlog(buckets, unmapped, cfg, path=path, source_format=source_format, diag=diag)

@@ -493,15 +493,20 @@ def test_custom_mapping_by_topic_and_stamp_from_record_time(msgs, tmp_path):
 
 
 def test_a_configured_topic_the_bag_lacks_is_a_warning_naming_it(msgs, tmp_path):
-    # a misspelt topic in the map changes nothing; it must say so, not pass in silence
-    cfg = {"ros": {"topics": {"/sonarr": {"stream": "rangefinder"}, "/radar": None}}}
+    # a misspelt topic in the map changes nothing; it must say so, not pass in silence. A topic
+    # named like none in the log is a sensor this bag lacks (a dataset's one config lists what
+    # some bags hold): listed in diagnostics.absent_topics, no warning
+    cfg = {"ros": {"topics": {"/sonarr": {"stream": "rangefinder"}, "/radar": None,
+                              "/thermal_camera_left": {"stream": "rangefinder"}}}}
     for path, reader in ((write_ros1bag(tmp_path / "w.bag", msgs), Ros1BagReader()),
                          (write_mcap_ros2(tmp_path / "w.mcap", msgs), McapReader())):
         log = reader.read(path, config=cfg)
         warn = [w for w in log.meta["diagnostics"]["warnings"] if w.startswith("ingest.ros.topics:")]
-        assert len(warn) == 1 and warn[0].startswith("ingest.ros.topics: topic(s) /sonarr not in the log (it has "), \
+        assert len(warn) == 1 and warn[0].startswith(
+            "ingest.ros.topics: topic(s) /sonarr (did you mean /sonar?) not in the log (it has "), \
             log.meta["diagnostics"]["warnings"]
-        assert "/sonar" in warn[0] and "/radar" not in warn[0].split("(")[0]
+        assert "/radar" not in warn[0].split("(it has")[0] and "/thermal" not in warn[0]
+        assert log.meta["diagnostics"]["absent_topics"] == ["/thermal_camera_left"]
     # a topic the config skips (null) may be absent: a shared config lists what some bags hold
     log = Ros1BagReader().read(write_ros1bag(tmp_path / "s.bag", msgs), config={"ros": {"topics": {"/camera": None}}})
     assert not any(w.startswith("ingest.ros.") for w in log.meta["diagnostics"]["warnings"])

@@ -67,10 +67,9 @@ Message -> stream mapping (units converted to SI, NED/FRD)
                              horizontal velocity from ``vel`` (cm/s) and ``cog`` (cdeg):
                              :math:`v_n = v\\cos\\chi,\\ v_e = v\\sin\\chi`, ``vel_d``
                              NaN; ``hacc_m``/``vacc_m`` from ``h_acc``/``v_acc`` (mm) when
-                             non-zero, else ``eph``/``epv`` × 0.01. ``eph``/``epv`` are
-                             HDOP/VDOP × 100 in current MAVLink ("cm" in old
-                             definitions), so that fallback is a dilution, not an accuracy
-                             -- an approximation only; 0 and 65535 mean unknown (NaN).
+                             non-zero, else NaN: ``eph``/``epv`` are HDOP/VDOP × 100 in
+                             current MAVLink ("cm" in old definitions), a dilution, not an
+                             accuracy, kept as ``hdop``/``vdop``.
 ``GLOBAL_POSITION_INT``      ``gps`` instance 1 (the autopilot EKF's fused position):
                              lat/lon, ``alt`` mm MSL, ``vx, vy, vz`` cm/s NED.
                              ``relative_alt`` and ``hdg`` are not kept.
@@ -627,8 +626,10 @@ def _build(res: _Scan) -> FlightLog:
             continue
         vel = _nan_int(tab["vel"], 65535) * 0.01
         cog = np.deg2rad(_nan_int(tab["cog"], 65535) * 0.01)
-        hacc = np.where(tab["h_acc"] > 0, tab["h_acc"] * 1e-3, _nan_int(tab["eph"], 0, 65535) * 0.01)
-        vacc = np.where(tab["v_acc"] > 0, tab["v_acc"] * 1e-3, _nan_int(tab["epv"], 0, 65535) * 0.01)
+        # a receiver that reports no accuracy (h_acc 0: MAVLink 1, or not filled) has none: HDOP
+        # is a dilution, not metres (it stays in hdop), and read as metres it weighted the fixes
+        hacc = np.where(tab["h_acc"] > 0, tab["h_acc"] * 1e-3, np.nan)
+        vacc = np.where(tab["v_acc"] > 0, tab["v_acc"] * 1e-3, np.nan)
         ell = np.where(tab["alt_ellipsoid"] != 0, tab["alt_ellipsoid"] * 1e-3, np.nan)
         streams["gps"].append(dict({
             "t_ns": t_ns(tab), "instance": inst, "src": mtype,

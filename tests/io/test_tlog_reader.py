@@ -128,7 +128,10 @@ def test_real_tlog_gps_equals_pymavlink(real):
     cog = np.radians([x.cog / 100 for x in ms])
     assert_rel(df["vel_n_mps"], spd * np.cos(cog), atol=1e-12)
     assert_rel(df["vel_e_mps"], spd * np.sin(cog), atol=1e-12)
-    assert_rel(df["hacc_m"], _masked(ms, "eph") / 100)
+    # this receiver fills no h_acc: no accuracy (its HDOP is in hdop, a dilution, not metres)
+    h_acc = np.array([getattr(x, "h_acc", 0) for x in ms], dtype=np.float64)
+    assert_rel(df["hacc_m"], np.where(h_acc > 0, h_acc * 1e-3, np.nan))
+    assert_rel(df["hdop"], _masked(ms, "eph") / 100)
     ms = by_type["GLOBAL_POSITION_INT"]
     df = _rows(log, "gps", "GLOBAL_POSITION_INT", 1)
     assert len(df) == len(ms) > 700
@@ -359,8 +362,9 @@ def test_synthetic_gps(synth):
     assert r["vel_n_mps"] == pytest.approx(0.0, abs=1e-12)
     assert r["vel_e_mps"] == pytest.approx(2.5, rel=1e-12)
     assert math.isnan(r["vel_d_mps"])
-    if mavlink1:  # HDOP/VDOP fallback (x 0.01), no ellipsoid height
-        assert (r["hacc_m"], r["vacc_m"]) == (pytest.approx(1.21), pytest.approx(1.80))
+    if mavlink1:  # no h_acc/v_acc: no accuracy (HDOP/VDOP x 0.01 in hdop/vdop), no ellipsoid height
+        assert math.isnan(r["hacc_m"]) and math.isnan(r["vacc_m"])
+        assert (r["hdop"], r["vdop"]) == (pytest.approx(1.21), pytest.approx(1.80))
         assert math.isnan(r["alt_wgs84_m"])
     else:  # h_acc / v_acc in mm
         assert (r["hacc_m"], r["vacc_m"]) == (pytest.approx(0.85), pytest.approx(1.3))

@@ -320,7 +320,7 @@ def hmm_step(axes, A, Q, A_H, B, Q2, acc, jerk) -> tuple[F64, F64, F64]:
 
 def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_set, Q2, *,
                 yaw_rad=None, box_heading_rad: float = 0.0, reset_t_ns=None,
-                store: str = "filtered", increments: str = "prior") -> EkfHmmTrack:
+                store: str = "filtered", increments: str = "prior", decision: str | None = None) -> EkfHmmTrack:
     """Run the baseline EKF, classify its posteriors, and run the EKF+HMM (module docstring).
 
     Parameters
@@ -350,6 +350,10 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
         ``x̂⁻_{k+1} − x̂⁺_k`` (the thesis's printed (4.1), default) or the posterior ones
         ``x̂⁺_{k+1} − x̂⁺_k`` (digest §13.4). Either way the inputs of step ``k`` depend on posteriors up
         to ``k`` and drive the prediction into ``k + 1``.
+    decision : str, optional
+        The classifier's decision rule (``confidence``, ``oneclass``, ``both``,
+        ``confidence_bg``); default the model set's own. With ``both`` a flight the models do not
+        describe (out of class) is mostly ``unknown``, so its steps stay CA.
 
     Returns
     -------
@@ -368,7 +372,7 @@ def run_ekf_hmm(ekf: ExtendedKalmanFilter, prior: GaussianState, t_ns, z, model_
     base = run_filter(ekf, prior, t_ns, z, store=store)
     R, T = base.mean.shape[:2]
     frame = ekf_state_frame(classifier_state(base.mean, t_ns, increments), t_ns, yaw_rad=yaw_rad)
-    cls = model_set.classify(frame, reset_t_ns=reset_t_ns, box_heading_rad=box_heading_rad)
+    cls = model_set.classify(frame, reset_t_ns=reset_t_ns, box_heading_rad=box_heading_rad, decision=decision)
     pred, V, acc, jerk, gated = _classified_arrays(cls, t_ns, R, {i: i for i in range(R)})
     # inputs for the prediction into step k come from step k−1 (causal)
     known = pred != UNKNOWN

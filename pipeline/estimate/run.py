@@ -373,7 +373,7 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
                "above_site": True, **dict(config.get("ekf") or {})}
     above = bool(ekf_cfg["above_site"])
     hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, "increments": "prior",
-               **dict(config.get("ekf_hmm") or {})}
+               "decision": "both", **dict(config.get("ekf_hmm") or {})}
     synth = config.get("synthetic_radar")
     state_path = declared(inputs, "state")
     state = read_table(state_path) if state_path and Path(state_path).exists() else None
@@ -462,7 +462,8 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
         try:
             ht = run_ekf_hmm(ekf, prior, t, zz, ms, Q2, yaw_rad=None if yaw is None else yaw[None],
                              box_heading_rad=box, reset_t_ns=resets, store="filtered",
-                             increments=hmm_cfg["increments"])
+                             increments=hmm_cfg["increments"],
+                             decision=None if hmm_cfg["decision"] == "model" else hmm_cfg["decision"])
         except ValueError as exc:  # ModelError and numerical failures of the classifier
             reason = f"EKF+HMM failed: {type(exc).__name__}: {exc}"
         else:

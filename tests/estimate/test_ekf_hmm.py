@@ -457,3 +457,18 @@ def test_the_hmm_filter_refuses_step_times_that_go_back(change, match):
     ekf, prior, t_ns, z, Q2, axes, acc, jerk = _small_hmm_case()
     with pytest.raises(EkfHmmError, match=match):
         hmm_filter(ekf, prior, change(t_ns), z, Q2, axes, acc, jerk)
+
+
+def test_the_decision_rule_can_be_set_for_the_ekf_hmm_and_an_out_of_class_flight_stays_ca(trained):
+    ms, data = trained
+    # models of M1 and M2 only: M3's runs are out of class for them
+    m12 = ManeuverModelSet(config=ModelsConfig(**FAST)).fit(data[data["label"].isin(["M1", "M2"])])
+    ekf, prior, t_ns, z, _ = _radar_runs(data, ("M3",), np.random.default_rng(4))
+    conf = run_ekf_hmm(ekf, prior, t_ns, z, m12, np.eye(9) * 0.1, decision="confidence")
+    both = run_ekf_hmm(ekf, prior, t_ns, z, m12, np.eye(9) * 0.1, decision="both")
+    default = run_ekf_hmm(ekf, prior, t_ns, z, m12, np.eye(9) * 0.1)
+    assert m12.config.decision == "confidence"
+    np.testing.assert_array_equal(default.mode, conf.mode)           # default: the model set's rule
+    # the confidence rule always names one of the known maneuvers; the one-class test refuses more
+    assert both.mode.sum() < conf.mode.sum()
+    assert (np.asarray(both.pred) == "unknown").sum() > (np.asarray(conf.pred) == "unknown").sum()

@@ -27,6 +27,7 @@ import plotly.graph_objects as go
 
 from ..estimate.bearing_run import (CONVERGED_SIGMA_DEG, BearingPair, BearingReplayResult, BearingTrack,
                                     heading_converged_s, range_error_pct_at, run_bearing_replay)
+from ..estimate.models import wrap_angle
 from ..io.stage import declared
 from .pages import figure_divs, number_text, relative_href, render, vector_text, write_page
 from .plots import layout
@@ -152,6 +153,19 @@ def bearing_figures(bp: BearingPair, tracks: Mapping[str, BearingTrack]) -> list
                                      line=dict(color=c)))
         fig.add_trace(go.Scatter(x=t, y=truth, mode="lines", name="truth", line=dict(color=TRUTH_COLOUR)))
         out.append((title, layout(fig, fig.layout.title.text, height=340)))
+        if title.startswith("Course"):
+            # each estimate and the truth unwrapped on their own drift whole turns apart (a spin
+            # of the aerobatic intruder): the error itself, wrapped, reads without that ambiguity
+            fig = _panel("Course error: estimate − truth, wrapped to ±180°, ±1σ (its covariance)",
+                         "course error [°]", height=300)
+            for e, tr in tracks.items():
+                c = COLOURS.get(e, "#7f7f7f")
+                err = np.degrees(wrap_angle(tr.mean[:, 3] - bp.truth[:, 3]))
+                _band(fig, t, err, np.degrees(np.sqrt(np.maximum(tr.cov[:, 3, 3], 0.0))), _short(e), c)
+                fig.add_trace(go.Scatter(x=t, y=err, mode="lines", name=_short(e), legendgroup=_short(e),
+                                         line=dict(color=c)))
+            fig.update_yaxes(range=[-180, 180], tickvals=[-180, -90, 0, 90, 180])
+            out.append(("Course error", layout(fig, fig.layout.title.text, height=300)))
     imm = {e: tr for e, tr in tracks.items() if tr.mode_p is not None}
     if imm:
         fig = _panel("IMM mode probability P(CV)", "P(CV) [1]")

@@ -81,9 +81,9 @@ def test_the_bearing_page_names_its_estimators_and_writes_the_offset_as_a_vector
 
 
 def test_every_bearing_panel_titles_its_time_axis(replay):
-    assert replay["page"].count('"t since the first bearing [s]"') == 5   # in the page's five figures
+    assert replay["page"].count('"t since the first bearing [s]"') == 6   # in the page's six figures
     drawn = [f for f in replay["figs"].values() if f is not None]
-    assert len(drawn) == 5
+    assert len(drawn) == 6
     for f in drawn:
         assert f.layout.xaxis.title.text == "t since the first bearing [s]"
         assert f.layout.yaxis.title.text
@@ -128,3 +128,17 @@ def test_a_skipped_pair_says_why_on_a_page_that_still_links_back(tmp_path):
     assert "Skipped: flight(s) own (ownship), intr (intruder) not available" in html.unescape(page)
     assert '<html lang="en">' in page and '<a href="../../index.html">' in page
     assert "(1500, -250.5) m" in html.unescape(page)
+
+
+def test_the_course_error_panel_is_each_estimate_minus_the_truth_wrapped_to_180_degrees(replay):
+    def lines(title):
+        fig = replay["figs"][title]
+        return {tr.name: np.asarray(tr.y, float) for tr in fig.data if tr.fill is None and "σ" not in tr.name}
+
+    course = lines(next(t for t in replay["figs"] if t.startswith("Course (")))
+    err = lines("Course error")
+    for e in ("CPPV bank", "MPC bank", "CV/CT IMM"):
+        # whole turns between the two unwrapped lines vanish in the wrapped difference
+        expect = (course[e] - course["truth"] + 180.0) % 360.0 - 180.0
+        np.testing.assert_allclose(err[e], expect, atol=1e-6)
+        assert np.nanmax(np.abs(err[e])) <= 180.0

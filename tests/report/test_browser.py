@@ -245,9 +245,10 @@ def test_a_bearing_replay_page_draws_offline_and_the_index_links_it(report_tree,
                               out, cfg, pair="syn", seed=1).status == "ok"
     r = _open(page, tmp_path / "bearing.png")
     _check_offline(r)
-    # range, course, turn rate (3 estimators ±1σ + truth), IMM P(CV), bearings: one panel each
-    assert len(r["plots"]) == 5 and all(p["drawn"] > 0 for p in r["plots"]), r["plots"]
-    assert [p["traces"] for p in r["plots"]][:3] == [10, 10, 10], r["plots"]
+    # range, course (3 estimators ±1σ + truth), course error (3 ±1σ), turn rate, IMM P(CV),
+    # bearings: one panel each
+    assert len(r["plots"]) == 6 and all(p["drawn"] > 0 for p in r["plots"]), r["plots"]
+    assert [p["traces"] for p in r["plots"]][:4] == [10, 10, 9, 10], r["plots"]
     index = report_tree / "index_bearing.html"
     build_index(["demo-quad"], [report_tree / "ingest" / "demo-quad" / "meta.json"], index,
                 bearing={"syn": "report/bearing/syn.html"})

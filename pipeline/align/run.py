@@ -149,12 +149,14 @@ def by_occurrence(maneuvers: Mapping[str, list], repeated: set[str] | None = Non
     (:func:`~pipeline.align.demos.flight_demos`), so the pairing follows the schedule.
     ``repeated``: the labels to split (default: those with an occurrence above 1 among the demos).
     """
+    if repeated is None:
+        repeated = {lab for lab, demos in maneuvers.items() if any(occurrence(d.name) > 1 for d in demos)}
     out: dict[str, list] = {}
     for lab, demos in maneuvers.items():
-        occ = [occurrence(d.name) for d in demos]
-        if (lab not in repeated) if repeated is not None else max(occ, default=1) == 1:
+        if lab not in repeated:
             out[lab] = list(demos)
             continue
+        occ = [occurrence(d.name) for d in demos]
         for k in sorted(set(occ)):
             out[f"{lab}#{k}"] = [d for d, o in zip(demos, occ) if o == k]
     return out
@@ -238,7 +240,7 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     if config.get("repeats", "split") == "split":
         # a label flown twice in a flight is two figures: one maneuver per occurrence, the
         # dropped demos filed under theirs
-        rep = {d.label for fd in per_flight for d in fd.demos if occurrence(d.name) > 1}
+        rep = {d.label for demos in maneuvers.values() for d in demos if occurrence(d.name) > 1}
         rep |= {d.label for d in dropped if d.label and occurrence(d.name) > 1}
         maneuvers = by_occurrence(maneuvers, rep)
         dropped = [replace(d, label=f"{d.label}#{occurrence(d.name)}") if d.label in rep else d for d in dropped]

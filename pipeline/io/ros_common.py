@@ -92,7 +92,6 @@ Per-type mapping (style.md §3.2):
 from __future__ import annotations
 
 import difflib
-
 import functools
 import math
 from dataclasses import dataclass, field

@@ -376,7 +376,7 @@ def estimator_flag_panels(est: pd.DataFrame | None, meta: dict | None = None) ->
             if not (v.fillna(0) != 0).any():
                 zero.add(words)
                 continue
-            d = plots.decimate(lane[["t_ns", col]].dropna(), max_points=1000, cols=[col], breaks=True)
+            d = plots.decimate(lane[["t_ns", col]], max_points=1000, cols=[col], breaks=True)
             ratios.add_trace(go.Scatter(x=d["t_ns"].to_numpy() * 1e-9, y=d[col], mode="lines",
                                         name=f"{words}{tag}",
                                         line=dict(color=plots.colour(col), dash=("solid", "dot", "dash")[n_lane % 3])))

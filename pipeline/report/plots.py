@@ -343,7 +343,7 @@ def with_setpoint(df: pd.DataFrame | None, cols: list[str], setpoint: pd.DataFra
         for c in cs:
             if c not in frame or not frame[c].notna().any():
                 continue
-            d = decimate(frame[["t_ns", c]].dropna(), cols=[c], breaks=True)
+            d = decimate(frame[["t_ns", c]], cols=[c], breaks=True)
             lab = label(c)
             if unit is not None and " [" in lab:
                 lab = f"{lab[:lab.index(' [')]} [{unit}]"
@@ -366,12 +366,12 @@ def gps_quality(gps: pd.DataFrame | None) -> go.Figure | None:
     fig = go.Figure()
     for c in ("fix_type", "n_sats", "hdop", "vdop"):
         if c in g and g[c].notna().any():
-            d = decimate(g[["t_ns", c]].dropna(), cols=[c], breaks=True)
+            d = decimate(g[["t_ns", c]], cols=[c], breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
     right = False
     for c in ("hacc_m", "vacc_m"):
         if c in g and g[c].notna().any():
-            d = decimate(g[["t_ns", c]].dropna(), cols=[c], breaks=True)
+            d = decimate(g[["t_ns", c]], cols=[c], breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis="y2",
                                      line=dict(color=colour(c), dash="dot")))
             right = True
@@ -434,7 +434,7 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
             axis = "y" if not titles else f"y{len(titles) + 1}"
             titles.append(title)
             for c in cols:
-                d = decimate(v[["t_ns", c]].dropna(), cols=[c], breaks=True)
+                d = decimate(v[["t_ns", c]], cols=[c], breaks=True)
                 fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), yaxis=axis,
                                          # a clipping count is no component: the default cycle, as before
                                          line=dict(color=None if c.startswith("clip") else colour(c), dash=dash)))
@@ -592,7 +592,7 @@ def battery(bat: pd.DataFrame | None) -> go.Figure | None:
     for c, scale, name in (("voltage_V", 1.0, label("voltage_V")), ("current_A", 1.0, label("current_A")),
                            ("remaining_frac", 100.0, "remaining capacity [%]")):
         if c in b and b[c].notna().any():
-            d = decimate(b[["t_ns", c]].dropna(), cols=[c], breaks=True)
+            d = decimate(b[["t_ns", c]], cols=[c], breaks=True)
             k = len(titles)
             fig.add_trace(go.Scatter(x=_t(d), y=d[c] * scale, mode="lines", name=name,
                                      yaxis="y" if k == 0 else f"y{k + 1}", line=dict(color=colour(c))))
@@ -771,7 +771,7 @@ def time_series(df: pd.DataFrame, cols: list[str], title: str, ylabel: str) -> g
     mp = max(1000, 3 * MAX_POINTS // len(cols))
     fig = go.Figure()
     for c in cols:
-        d = decimate(df[["t_ns", c]].dropna(), mp, cols=[c], breaks=True)
+        d = decimate(df[["t_ns", c]], mp, cols=[c], breaks=True)
         fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
     fig.update_xaxes(title="t [s]")
     fig.update_yaxes(title=ylabel)

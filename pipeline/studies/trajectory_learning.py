@@ -149,7 +149,7 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
         if not ds.maneuvers:
             notices.append(f"set {s}: no demos (its flights are not available): skipped")
             continue
-        maneuvers = dict(ds.maneuvers)
+        maneuvers = ds.maneuvers
         labels = list(maneuvers)
         if int(st["real_maneuvers"]) > 0:
             labels = labels[: int(st["real_maneuvers"])]

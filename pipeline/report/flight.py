@@ -76,13 +76,19 @@ def attitude_source(state: pd.DataFrame | None, log) -> tuple[pd.DataFrame | Non
 BARO_DATUM_S = 1.0
 
 
-def baro_relative(baro: pd.DataFrame | None) -> tuple[pd.DataFrame, str] | None:
-    """The barometric altitude of the altitude panel: ``(DataFrame(t_ns, alt_m), legend name)``,
-    the first instance's ``alt_rel_m`` less its start (the median of its first
-    :data:`BARO_DATUM_S` of valid samples), so it shares the panel's axis with the heights about
-    the start (track −d, calibrated, rangefinder). The raw value's datum differs by source: a
-    ULog's is the ISA pressure altitude (1013.25 hPa: hundreds of metres), a DataFlash log's the
-    ground at arming; the name keeps the datum subtracted. ``None`` without a valid sample."""
+def baro_relative(baro: pd.DataFrame | None, track: pd.DataFrame | None = None) -> tuple[pd.DataFrame, str] | None:
+    """The barometric altitude of the altitude panel: ``(DataFrame(t_ns, alt_m), legend name)``.
+
+    The first instance's ``alt_rel_m`` less its start (the median of its first
+    :data:`BARO_DATUM_S` of valid samples), plus the reference height ``track`` (``t_ns``,
+    ``alt_m``: the calibrated height, else the track's −d) over that same second where it has
+    one, so the baro shares the panel's axis with the track, the calibrated height and the
+    calibration points. Without that term a flight whose NED origin is not where it starts (a
+    simulated flight begins in the air, 20 m above its origin) drew its baro 20 m below
+    everything else. The raw value's datum
+    differs by source: a ULog's is the ISA pressure altitude (1013.25 hPa: hundreds of metres), a
+    DataFlash log's the ground at arming; the legend names the shift. ``None`` without a valid
+    sample."""
     b = first_instance(baro)
     if b is None or not len(b) or "alt_rel_m" not in b:
         return None
@@ -92,9 +98,18 @@ def baro_relative(baro: pd.DataFrame | None) -> tuple[pd.DataFrame, str] | None:
         return None
     t = b["t_ns"].to_numpy(np.int64)
     v = b["alt_rel_m"].to_numpy(np.float64)
-    datum = float(np.median(v[t <= t[0] + int(BARO_DATUM_S * 1e9)]))
-    return (pd.DataFrame({"t_ns": t, "alt_m": v - datum}),
-            f"baro (raw, relative to its start: {datum:+.1f} m subtracted)")
+    t_end = t[0] + int(BARO_DATUM_S * 1e9)
+    datum = float(np.median(v[t <= t_end]))
+    start = 0.0
+    if track is not None and len(track):
+        tt = track["t_ns"].to_numpy(np.int64)
+        h = track["alt_m"].to_numpy(np.float64)
+        h = h[(tt >= t[0]) & (tt <= t_end) & np.isfinite(h)]
+        start = float(np.median(h)) if len(h) else 0.0
+    shift = start - datum
+    name = (f"baro (raw {shift:+.1f} m: starts at the reference height)" if start
+            else f"baro (raw, relative to its start: {datum:+.1f} m subtracted)")
+    return pd.DataFrame({"t_ns": t, "alt_m": v + shift}), name
 
 
 def _spectrogram_panel(imu: pd.DataFrame, cols: list[str], name: str, unit: str) -> tuple[str, object]:
@@ -446,13 +461,18 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
     if pre.get("ground_vehicle"):   # a rover's height is GPS noise: no altitude or climb to report
         numbers.update(max_alt_m=float("nan"), max_vspeed_mps=float("nan"), ground_vehicle=True)
     alt_series = {}
-    baro = baro_relative(log["baro"])
+    track_h = pd.DataFrame({"t_ns": ned["t_ns"], "alt_m": -ned["pos_d_m"]}) if ned is not None else None
+    cal_h = pd.DataFrame({"t_ns": st["t_ns"], "alt_m": st["alt_cal_m"]}) \
+        if st is not None and "alt_cal_m" in st and st["alt_cal_m"].notna().any() else None
+    # the raw baro starts where the calibrated height does (the calibration points' datum), else
+    # at the track's height
+    baro = baro_relative(log["baro"], cal_h if cal_h is not None else track_h)
     if baro is not None:
         alt_series[baro[1]] = baro[0]
-    if ned is not None:
-        alt_series["−d (track)"] = pd.DataFrame({"t_ns": ned["t_ns"], "alt_m": -ned["pos_d_m"]})
-    if st is not None and "alt_cal_m" in st:
-        alt_series["calibrated"] = pd.DataFrame({"t_ns": st["t_ns"], "alt_m": st["alt_cal_m"]})
+    if track_h is not None:
+        alt_series["−d (track)"] = track_h
+    if cal_h is not None:
+        alt_series["calibrated"] = cal_h
     rf = rangefinder_height(log["rangefinder"])
     if rf is not None:
         alt_series["rangefinder"] = rf

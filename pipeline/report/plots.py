@@ -261,6 +261,10 @@ def ground_track(ned: pd.DataFrame) -> go.Figure | None:
     return layout(fig, "Ground track", height=480)
 
 
+#: at most this many calibration markers on the altitude panel
+MAX_MARKERS = 200
+
+
 def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None = None) -> go.Figure | None:
     """Altitude time series (``{name: DataFrame(t_ns, alt_m)}``) with BPM calibration points."""
     fig = go.Figure()
@@ -269,8 +273,14 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
             d = decimate(df[["t_ns", "alt_m"]], cols=["alt_m"], breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d["alt_m"], mode="lines", name=name, line=dict(color=colour(name))))
     if calib_points is not None and len(calib_points):
-        fig.add_trace(go.Scatter(x=_t(calib_points), y=calib_points["alt_m"], mode="markers",
-                                 marker=dict(size=6, symbol="x"), name="calibration points"))
+        # every k-th point, small and half see-through: a 10 Hz GPS reference as full markers
+        # is a solid band that hides the track and calibrated lines it lies on
+        n = len(calib_points)
+        k = max(1, -(-n // MAX_MARKERS))
+        pts = calib_points.iloc[::k]
+        name = "calibration points" + (f" ({len(pts)} of {n} shown)" if k > 1 else "")
+        fig.add_trace(go.Scatter(x=_t(pts), y=pts["alt_m"], mode="markers", opacity=0.6,
+                                 marker=dict(size=4, symbol="x"), name=name))
     if not fig.data:
         return None
     fig.update_xaxes(title="t [s]")
@@ -822,6 +832,10 @@ def label_colours(labels) -> dict[str, str]:
     return out
 
 
+#: the least distance, as a fraction of the panel's span, between two mode names on a panel
+MODE_LABEL_GAP = 0.06
+
+
 def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None = None) -> go.Figure:
     """Shade the flight-mode intervals of ``mode`` (the canonical ``mode`` stream) behind a time
     panel, one colour per mode name, the name written at the top of each band. Returns ``fig``."""
@@ -836,12 +850,21 @@ def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None 
     keep = np.r_[True, names[1:] != names[:-1]]    # a repeated record continues its band
     t, names = t[keep], names[keep]
     end = np.r_[t[1:], max(t_end_s if t_end_s is not None else t[-1], t[-1])]
+    # a name is written only where it starts MODE_LABEL_GAP of the span away from every name
+    # written, the longest bands first: modes switched within seconds (STABILIZE, LOITER at
+    # take-off) printed their names over each other; the segments timeline names every band
+    span = max(float(end[-1] - t[0]), 1e-9)
+    named: list[float] = []
+    for i in np.argsort(-(end - t), kind="stable"):
+        if end[i] > t[i] and all(abs(t[i] - u) >= MODE_LABEL_GAP * span for u in named):
+            named.append(t[i])
     for t0, t1, name in zip(t, end, names):
         if t1 <= t0:
             continue
+        text = name if t0 in named else None
+        note = dict(annotation_text=text, annotation_position="top left", annotation_font_size=9) if text else {}
         fig.add_vrect(x0=t0, x1=t1, fillcolor=label_colour(f"mode {name}"), opacity=0.08, line_width=0,
-                      layer="below", annotation_text=name, annotation_position="top left",
-                      annotation_font_size=9)
+                      layer="below", **note)
     return fig
 
 

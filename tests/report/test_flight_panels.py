@@ -196,6 +196,29 @@ def test_flight_mode_bands_cover_each_mode_until_the_next_and_the_last_until_the
     assert plots.mode_bands(go.Figure(), None).layout.shapes == ()
 
 
+def test_mode_names_switched_within_moments_are_not_printed_over_each_other():
+    import plotly.graph_objects as go
+
+    # STABILIZE, LOITER 0.5 s later, AUTO at 1 s, RTL at 300 s of a 330 s flight: the longest
+    # band (AUTO) and RTL are named; STABILIZE and LOITER start within 6 % of the span of AUTO,
+    # so only their bands are drawn
+    mode = _stream("mode", 4, 1.0, mode=["STABILIZE", "LOITER", "AUTO", "RTL"])
+    mode["t_ns"] = np.array([0, 0.5, 1.0, 300.0]) * 1e9
+    mode["t_ns"] = mode["t_ns"].astype(np.int64)
+    fig = plots.mode_bands(go.Figure(go.Scatter(x=[0, 330], y=[0, 1])), mode, 330.0)
+    assert len(fig.layout.shapes) == 4
+    assert [a.text for a in fig.layout.annotations] == ["AUTO", "RTL"]
+
+
+def test_the_altitude_panel_thins_its_calibration_markers_and_names_how_many():
+    t = np.arange(651, dtype=np.int64) * 10**8
+    pts = pd.DataFrame({"t_ns": t, "alt_m": np.linspace(20, 65, 651)})
+    fig = plots.altitude({"−d (track)": pts}, pts)
+    marks = fig.data[-1]
+    assert len(marks.x) <= plots.MAX_MARKERS and marks.name == f"calibration points ({len(marks.x)} of 651 shown)"
+    assert plots.altitude({}, pts.iloc[:50]).data[-1].name == "calibration points"
+
+
 def test_a_maneuver_label_has_one_colour_for_its_segment_and_its_prediction():
     seg = pd.DataFrame({"t_start_ns": [0, 5 * 10**9], "t_end_ns": [4 * 10**9, 9 * 10**9], "label": ["M1", "M2"]})
     cls = pd.DataFrame({"t_ns": np.arange(10) * 10**9, "label": ["M1"] * 5 + ["unknown"] * 5,
@@ -298,3 +321,16 @@ def test_the_seventeen_labels_of_an_f3a_schedule_get_seventeen_colours_none_the_
     v = [t for t in fig.data if t.name == "confidence V"][0]
     assert v.line.color == plots.CONFIDENCE_COLOUR
     assert len({t.marker.color for t in fig.data if t.mode == "markers"}) == 17
+
+
+def test_the_baro_starts_at_the_tracks_height_where_the_flight_does_not_start_at_its_origin():
+    from pipeline.report.flight import baro_relative
+
+    # a simulated flight begins in the air, 20 m above its NED origin; the baro reads 21.5 m
+    climb = np.clip(np.arange(100) / 10.0 - 2.0, 0.0, None)     # level for 2 s, then 1 m/s up
+    baro = _stream("baro", 100, 10.0, alt_rel_m=21.5 + climb)
+    track = pd.DataFrame({"t_ns": baro["t_ns"], "alt_m": 20.0 + climb})
+    shifted, name = baro_relative(baro, track)
+    assert np.allclose(shifted["alt_m"], track["alt_m"]) and "reference height" in name
+    alone, name = baro_relative(baro)      # no track: relative to its own start, as before
+    assert np.allclose(alone["alt_m"], climb) and "+21.5 m subtracted" in name

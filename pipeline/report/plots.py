@@ -593,12 +593,20 @@ def unit_axes(fig: go.Figure, titles: list[str], colours: list[str | None] | Non
 
 def battery(bat: pd.DataFrame | None) -> go.Figure | None:
     """Battery voltage [V] (left axis), current [A] and remaining capacity [%] each on its own
-    right axis: three units, three scales, never two on one axis."""
+    right axis: three units, three scales, never two on one axis. A remaining capacity that
+    never changes (PX4 logs 100 % throughout when it has no estimate) is named in the title,
+    not drawn: its third axis would narrow the panel out of line with the others for a flat
+    line."""
     b = _first(bat)
     if b is None:
         return None
     fig = go.Figure()
     titles, colours = [], []
+    title = "Battery"
+    rem = b["remaining_frac"].dropna().to_numpy(np.float64) if "remaining_frac" in b else np.array([])
+    if len(rem) and np.ptp(rem) == 0:
+        title += f" (remaining capacity {100 * rem[0]:.0f} % throughout, not drawn)"
+        b = b.drop(columns="remaining_frac")
     for c, scale, name in (("voltage_V", 1.0, label("voltage_V")), ("current_A", 1.0, label("current_A")),
                            ("remaining_frac", 100.0, "remaining capacity [%]")):
         if c in b and b[c].notna().any():
@@ -612,7 +620,7 @@ def battery(bat: pd.DataFrame | None) -> go.Figure | None:
         return None
     extra = unit_axes(fig, titles, colours)
     fig.update_xaxes(title="t [s]")
-    return layout(fig, "Battery", **extra)
+    return layout(fig, title, **extra)
 
 
 #: how an actuator output column reads (:func:`output_kind`) -> (axis title, unit in a trace

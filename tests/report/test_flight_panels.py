@@ -105,6 +105,16 @@ def test_the_battery_panel_draws_voltage_left_and_current_and_remaining_percent_
     assert plots.battery(bat.iloc[:0]) is None
 
 
+def test_a_remaining_capacity_that_never_changes_is_named_in_the_title_not_drawn_on_a_third_axis():
+    n = 30
+    bat = _stream("battery", n, 1.0, voltage_V=np.linspace(24.5, 23.5, n), current_A=np.full(n, 12.0),
+                  remaining_frac=np.ones(n))                      # PX4 without a capacity estimate
+    fig = plots.battery(bat)
+    assert _names(fig) == ["voltage [V]", "current [A]"]
+    assert fig.layout.title.text == "Battery (remaining capacity 100 % throughout, not drawn)"
+    assert fig.layout.xaxis.domain is None                      # full width, in line with the other panels
+
+
 def test_attitude_is_drawn_against_the_setpoint_with_yaw_unwrapped():
     from pipeline.frames.rotations import quat_to_euler
 

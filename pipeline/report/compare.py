@@ -134,6 +134,8 @@ def _overlay(tracks: Mapping[str, pd.DataFrame], col: str, title: str, ylabel: s
         if d is None or col not in d or not d[col].notna().any():
             continue
         dd = plots.decimate(d[["t_s", col]], POINTS_PER_TRACE, cols=[col], breaks=True)
+        if col == "roll_deg":     # an aerobatic roll wraps through ±180°: a hole, not a stroke
+            dd = plots.break_wraps(dd, col)
         # one colour per flight, by its place on the page (the same on every panel)
         fig.add_trace(go.Scatter(x=dd["t_s"], y=dd[col], mode="lines", name=f,
                                  line=dict(color=FLIGHT_COLOURS[i % len(FLIGHT_COLOURS)])))

@@ -288,6 +288,25 @@ def altitude(series: dict[str, pd.DataFrame], calib_points: pd.DataFrame | None 
     return layout(fig, "Altitude")
 
 
+def break_wraps(d: pd.DataFrame, col: str = "v", limit: float = 180.0) -> pd.DataFrame:
+    """``d`` (rows in time order, a time column ``t_ns`` or ``t_s`` and an angle column ``col``
+    in degrees) with a hole (a row of only the midpoint time) between consecutive rows whose
+    angle steps by more than ``limit``: the angle wrapped (roll through ±180° inverted), so the
+    line is broken there instead of drawn as a vertical stroke across the panel. For display
+    only."""
+    v = d[col].to_numpy(np.float64)
+    jump = np.flatnonzero(np.abs(np.diff(v)) > limit)    # NaN steps compare False
+    if not len(jump):
+        return d
+    t_col = "t_ns" if "t_ns" in d else "t_s"
+    t = d[t_col].to_numpy()
+    mid = t[jump] + (t[jump + 1] - t[jump]) // 2 if t_col == "t_ns" else 0.5 * (t[jump] + t[jump + 1])
+    holes = pd.DataFrame({t_col: mid})
+    both = pd.concat([d, holes], ignore_index=True)
+    order = np.argsort(np.r_[2 * np.arange(len(d)), 2 * jump + 1], kind="stable")
+    return both.iloc[order].reset_index(drop=True)
+
+
 def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
              setpoint: pd.DataFrame | None = None, frame: str = "") -> go.Figure | None:
     """Roll, pitch, yaw in degrees (ZYX, for display; yaw unwrapped) against time, with the
@@ -301,7 +320,7 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
         v = np.degrees(np.unwrap(a) if name == "yaw" else a)
         if name == "yaw":
             yaw_deg = v
-        d = decimate(pd.DataFrame({"t_ns": att["t_ns"].to_numpy(), "v": v}), breaks=True)
+        d = break_wraps(decimate(pd.DataFrame({"t_ns": att["t_ns"].to_numpy(), "v": v}), breaks=True))
         fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} [°]",
                                  line=dict(color=colour(name))))
     sp = _first(setpoint)
@@ -320,7 +339,7 @@ def attitude(att: pd.DataFrame, euler: tuple[np.ndarray, np.ndarray, np.ndarray]
                 # fast spin, and a 1000° offset hides a 10° tracking error
                 y = np.interp(ok["t_ns"].to_numpy(np.float64), att["t_ns"].to_numpy(np.float64)[fin], yaw_deg[fin])
                 v = y + (np.degrees(a) - y + 180.0) % 360.0 - 180.0
-            d = decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(), "v": v}), breaks=True)
+            d = break_wraps(decimate(pd.DataFrame({"t_ns": ok["t_ns"].to_numpy(), "v": v}), breaks=True))
             fig.add_trace(go.Scatter(x=_t(d), y=d["v"], mode="lines", name=f"{name} setpoint [°]",
                                      line=dict(color=colour(name), dash="dash")))
     fig.update_xaxes(title="t [s]")

@@ -344,3 +344,14 @@ def test_the_baro_starts_at_the_tracks_height_where_the_flight_does_not_start_at
     assert np.allclose(shifted["alt_m"], track["alt_m"]) and "reference height" in name
     alone, name = baro_relative(baro)      # no track: relative to its own start, as before
     assert np.allclose(alone["alt_m"], climb) and "+21.5 m subtracted" in name
+
+
+def test_an_inverted_rolls_wrap_through_180_degrees_is_a_hole_in_its_line_not_a_vertical_stroke():
+    d = pd.DataFrame({"t_ns": np.arange(6, dtype=np.int64) * 10**9,
+                      "v": [170.0, 178.0, -179.0, -170.0, np.nan, -160.0]})
+    out = plots.break_wraps(d)
+    assert out["t_ns"].tolist() == [0, 10**9, 15 * 10**8, 2 * 10**9, 3 * 10**9, 4 * 10**9, 5 * 10**9]
+    assert np.isnan(out["v"].iloc[2]) and out["v"].iloc[[1, 3]].tolist() == [178.0, -179.0]
+    assert plots.break_wraps(d.iloc[:2]) is not None and len(plots.break_wraps(d.iloc[:2])) == 2
+    secs = plots.break_wraps(pd.DataFrame({"t_s": [0.0, 1.0], "roll_deg": [179.0, -179.0]}), "roll_deg")
+    assert secs["t_s"].tolist() == [0.0, 0.5, 1.0] and np.isnan(secs["roll_deg"].iloc[1])

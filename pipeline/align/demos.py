@@ -235,7 +235,9 @@ def flight_demos(state: pd.DataFrame, segments: pd.DataFrame, *, flight_id: str,
         idx = np.flatnonzero(inside)
         reason = ""
         if int(row.t_end_ns) <= int(row.t_start_ns):
-            reason = "the segment ends before it starts (t_end_ns <= t_start_ns)"
+            reason = ("the segment is empty (t_end_ns <= t_start_ns; for segments carried from the reference: "
+                      "the alignment puts the whole maneuver at one instant of this flight, which does not fly "
+                      "it where the schedule does)")
         elif gap[idx].any():
             n_gap = int(gap[idx].sum())
             reason = f"{n_gap} gap row{'s' * (n_gap != 1)} inside the segment"   # the align page shows it

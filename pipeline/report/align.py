@@ -29,7 +29,7 @@ from ..io import schema
 from ..io.parquet import read_table, read_table_meta
 from ..io.stage import declared
 from .pages import count_text, figure_divs, relative_href, render, table_html, write_page
-from .plots import colour, label, label_colours, layout
+from .plots import break_wraps, colour, label, label_colours, layout
 
 _AXES = (("pos", "position", ("pos_n_m", "pos_e_m", "pos_d_m")),
          ("vel", "velocity", ("vel_n_mps", "vel_e_mps", "vel_d_mps")),
@@ -66,12 +66,18 @@ def learned_figure(man: str, learned: pd.DataFrame, demos: pd.DataFrame) -> go.F
             fig.add_trace(go.Scatter(x=t, y=mu, mode="lines", line=dict(width=2.5, color=colour(col)),
                                      name="learned", legendgroup="learned", showlegend=first), row=r, col=c)
     eul_l = _euler_deg(learned[[f"mu_{c}" for c in ("q_w", "q_x", "q_y", "q_z")]].to_numpy())
+
+    def wrapped(ts, v) -> pd.DataFrame:
+        # roll and yaw wrap through ±180° (a rolling or turning aerobatic maneuver): a hole there
+        return break_wraps(pd.DataFrame({"t_s": np.asarray(ts, np.float64), "v": v}))
+
     for c in range(3):
         for k, (name, g) in enumerate(demos.groupby("demo", sort=False)):
-            e = _euler_deg(g[["q_w", "q_x", "q_y", "q_z"]].to_numpy())
-            fig.add_trace(go.Scatter(x=g["t_s"], y=e[:, c], mode="lines", line=dict(width=1, color=_GREY),
+            e = wrapped(g["t_s"], _euler_deg(g[["q_w", "q_x", "q_y", "q_z"]].to_numpy())[:, c])
+            fig.add_trace(go.Scatter(x=e["t_s"], y=e["v"], mode="lines", line=dict(width=1, color=_GREY),
                                      legendgroup="demos", showlegend=False), row=4, col=c + 1)
-        fig.add_trace(go.Scatter(x=t, y=eul_l[:, c], mode="lines", line=dict(width=2.5, color=_CYC[c]),
+        e = wrapped(t, eul_l[:, c])
+        fig.add_trace(go.Scatter(x=e["t_s"], y=e["v"], mode="lines", line=dict(width=2.5, color=_CYC[c]),
                                  legendgroup="learned", showlegend=False), row=4, col=c + 1)
     fig.update_xaxes(title="hidden time [s]", row=4)
     return layout(fig, f"{man}: learned trajectory and demos on the hidden time axis (box frame)",

@@ -59,6 +59,25 @@ tr.failed td{background:#fdecea} .reason{color:#b00020} .absent{color:#777}
 """
 
 
+def labelled_right(c: pd.DataFrame) -> str:
+    """``" (labelled M1 samples: 100% right)"`` for a classify table whose ``truth`` names
+    maneuvers the model set knows (its ``ll_<label>`` columns): the share of those samples it
+    labels right. The shares over the whole flight count its take-off, cruise and landing too
+    (a simulated M1 flight read "M1 54%, M4 43%" though every M1 sample was right); empty when
+    the flight has no such labels."""
+    if "truth" not in c or "pred" not in c:
+        return ""
+    known = [k[3:] for k in c.columns if k.startswith("ll_") and k != "ll_background"]
+    truth = c["truth"].astype(str)
+    mask = truth.isin(known).to_numpy()
+    if not mask.any():
+        return ""
+    right = 100.0 * float((c["pred"].astype(str).to_numpy()[mask] == truth.to_numpy()[mask]).mean())
+    labs = sorted(set(truth[mask]))
+    what = f"labelled {labs[0]} samples" if len(labs) == 1 else f"{int(mask.sum()):,} samples of {len(labs)} known maneuvers"
+    return f" ({what}: {right:.0f}% right)"
+
+
 def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | None) -> str:
     """``"<n> segments; sim classifier: M1 62%, M3 20%"`` from the segments and the classify
     tables ``{model_set: path}`` (share of classified samples per predicted maneuver, the four
@@ -79,7 +98,7 @@ def maneuver_summary(segments: str | os.PathLike | None, classified: Mapping | N
             more = " …" if len(share) > 4 else ""
             # the unknown share said, last: "background 3%" alone read as the whole flight
             rest = f", unknown {100 * unknown:.0f}%" if found and unknown > 0 else ""
-            parts.append(f"{m} classifier: {found or 'unknown only'}{more}{rest}")
+            parts.append(f"{m} classifier: {found or 'unknown only'}{more}{rest}{labelled_right(c)}")
     return "; ".join(parts)
 
 

@@ -209,3 +209,16 @@ def test_a_ground_vehicle_has_no_altitude_or_climb_numbers_and_says_why():
     assert txt["max_alt"] == "– (ground vehicle)" and txt["max_vspeed"] == "– (ground vehicle)"
     assert txt["max_hspeed"] == "1.7 m/s"
     assert fs.number_texts({**n, "ground_vehicle": False})["max_alt"] == "– (no height)"
+
+
+def test_the_index_says_how_many_labelled_maneuver_samples_the_classifier_got_right(tmp_path):
+    from pipeline.report.index import maneuver_summary
+
+    p = tmp_path / "c.parquet"
+    # a simulated M1 flight: its low-dynamic start and end read M4, every M1 sample is right
+    pd.DataFrame({"truth": ["low"] * 4 + ["M1"] * 5 + ["low"] * 1, "pred": ["M4"] * 4 + ["M1"] * 5 + ["M4"],
+                  "ll_M1": 0.0, "ll_M4": 0.0}).to_parquet(p)
+    assert maneuver_summary(None, {"sim": p}) == "sim classifier: M4 50%, M1 50% (labelled M1 samples: 100% right)"
+    pd.DataFrame({"truth": ["M1", "M2", "M2", "x"], "pred": ["M1", "M1", "M2", "M2"],
+                  "ll_M1": 0.0, "ll_M2": 0.0, "ll_background": 0.0}).to_parquet(p)
+    assert maneuver_summary(None, {"sim": p}).endswith("(3 samples of 2 known maneuvers: 67% right)")

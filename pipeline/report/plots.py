@@ -393,10 +393,12 @@ def gps_quality(gps: pd.DataFrame | None) -> go.Figure | None:
     if g is None:
         return None
     fig = go.Figure()
+    left = []
     for c in ("fix_type", "n_sats", "hdop", "vdop"):
         if c in g and g[c].notna().any():
             d = decimate(g[["t_ns", c]], cols=[c], breaks=True)
             fig.add_trace(go.Scatter(x=_t(d), y=d[c], mode="lines", name=label(c), line=dict(color=colour(c))))
+            left.append(c)
     right = False
     for c in ("hacc_m", "vacc_m"):
         if c in g and g[c].notna().any():
@@ -409,7 +411,9 @@ def gps_quality(gps: pd.DataFrame | None) -> go.Figure | None:
     if right:
         fig.update_layout(yaxis2=right_axis("accuracy [m]"))
     fig.update_xaxes(title="t [s]")
-    fig.layout.yaxis.title = "fix type (3 = 3-D), satellites, DOP"
+    # the left axis names what it holds: a log with satellites alone read "fix type, satellites, DOP"
+    words = {"fix_type": "fix type (3 = 3-D)", "n_sats": "satellites", "hdop": "DOP", "vdop": "DOP"}
+    fig.layout.yaxis.title = ", ".join(dict.fromkeys(words[c] for c in left))
     return layout(fig, "GPS quality")
 
 

@@ -42,6 +42,10 @@ def test_the_gps_quality_panel_draws_fix_type_satellites_dop_and_accuracy_on_its
     assert fig.layout.yaxis2.tickmode == "auto" and fig.layout.yaxis2.overlaying == "y"
     assert plots.gps_quality(gps.assign(fix_type=np.nan, n_sats=np.nan, hdop=np.nan, hacc_m=np.nan)) is None
     assert plots.gps_quality(None) is None
+    assert fig.layout.yaxis.title.text == "fix type (3 = 3-D), satellites, DOP"
+    # a log with satellites alone (the kd0aij CSVs): the axis names what it draws
+    sats = plots.gps_quality(gps.assign(fix_type=np.nan, hdop=np.nan, hacc_m=np.nan))
+    assert sats.layout.yaxis.title.text == "satellites"
 
 
 def test_the_vibration_panel_prefers_the_autopilots_metric():

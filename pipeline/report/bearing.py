@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import plotly.graph_objects as go
 
 from ..estimate.bearing_run import (CONVERGED_SIGMA_DEG, BearingPair, BearingReplayResult, BearingTrack,
@@ -30,7 +31,7 @@ from ..estimate.bearing_run import (CONVERGED_SIGMA_DEG, BearingPair, BearingRep
 from ..estimate.models import wrap_angle
 from ..io.stage import declared
 from .pages import figure_divs, number_text, relative_href, render, vector_text, write_page
-from .plots import layout
+from .plots import break_wraps, layout
 
 #: the page's template when a caller declares none (the rule declares it)
 TEMPLATE = Path(__file__).resolve().parents[2] / "reports" / "templates" / "bearing.html.j2"
@@ -93,6 +94,11 @@ def unwrap_deg(angle_rad: np.ndarray, near_deg: np.ndarray | None = None) -> np.
     return out
 
 
+#: the range panel's axis reaches 1.2x the larger of the true range's maximum and this
+#: percentile of every estimate's range (plotly's autoscale button shows all of it)
+RANGE_AXIS_PERCENTILE = 95.0
+
+
 def range_sigma(track: BearingTrack) -> np.ndarray:
     """The range 1σ of a track, ``sqrt(gᵀ P_pos g)`` with ``g`` the unit line of sight (the
     ``range_sigma_m`` column of its table)."""
@@ -152,6 +158,15 @@ def bearing_figures(bp: BearingPair, tracks: Mapping[str, BearingTrack]) -> list
             fig.add_trace(go.Scatter(x=t, y=mean, mode="lines", name=_short(e), legendgroup=_short(e),
                                      line=dict(color=c)))
         fig.add_trace(go.Scatter(x=t, y=truth, mode="lines", name="truth", line=dict(color=TRUTH_COLOUR)))
+        if title == "Range":
+            # a bank's first seconds can reach 10x the true range (its widest filters): scaled to
+            # them, the truth and the converged estimates were a flat line at the bottom
+            est = np.concatenate([np.hypot(tr.mean[:, 0], tr.mean[:, 1]) for tr in tracks.values()] or [np.zeros(0)])
+            est = est[np.isfinite(est)]
+            top = max(np.nanmax(truth) if np.isfinite(truth).any() else 0.0,
+                      float(np.percentile(est, RANGE_AXIS_PERCENTILE)) if len(est) else 0.0)
+            if top > 0:
+                fig.update_yaxes(range=[0.0, 1.2 * top])
         out.append((title, layout(fig, fig.layout.title.text, height=340)))
         if title.startswith("Course"):
             # each estimate and the truth unwrapped on their own drift whole turns apart (a spin
@@ -160,9 +175,12 @@ def bearing_figures(bp: BearingPair, tracks: Mapping[str, BearingTrack]) -> list
                          "course error [°]", height=300)
             for e, tr in tracks.items():
                 c = COLOURS.get(e, "#7f7f7f")
-                err = np.degrees(wrap_angle(tr.mean[:, 3] - bp.truth[:, 3]))
-                _band(fig, t, err, np.degrees(np.sqrt(np.maximum(tr.cov[:, 3, 3], 0.0))), _short(e), c)
-                fig.add_trace(go.Scatter(x=t, y=err, mode="lines", name=_short(e), legendgroup=_short(e),
+                # a hole where the wrapped error jumps across ±180°, not a stroke over the panel
+                d = break_wraps(pd.DataFrame({"t_s": t, "v": np.degrees(wrap_angle(tr.mean[:, 3] - bp.truth[:, 3])),
+                                              "s": np.degrees(np.sqrt(np.maximum(tr.cov[:, 3, 3], 0.0)))}))
+                te, err = d["t_s"].to_numpy(), d["v"].to_numpy()
+                _band(fig, te, err, d["s"].to_numpy(), _short(e), c)
+                fig.add_trace(go.Scatter(x=te, y=err, mode="lines", name=_short(e), legendgroup=_short(e),
                                          line=dict(color=c)))
             fig.update_yaxes(range=[-180, 180], tickvals=[-180, -90, 0, 90, 180])
             out.append(("Course error", layout(fig, fig.layout.title.text, height=300)))

@@ -70,3 +70,26 @@ def test_the_align_pages_maneuver_table_says_whether_each_maneuver_converged_in_
     n = head.index("EM iterations (E-steps)")
     assert all(r[n] == "2" for r in rows), rows
     assert ">True<" not in page and ">False<" not in page
+
+
+def test_the_model_pages_test_flights_table_has_no_empty_thesis_columns(tmp_path):
+    from pipeline.io import schema
+    from pipeline.io.parquet import write_table
+    from pipeline.report.model import build_model_report
+
+    d = tmp_path / "m"
+    d.mkdir()
+    (d / "meta.json").write_text(json.dumps({"name": "m", "status": "ok", "labels": [], "training": {},
+                                             "config": {}, "spec": {"data": "flights"}}))
+    np.savez(d / "params.npz")
+    ev = pd.DataFrame({"table": "flights", "maneuver": ["loop", "roll"], "n_runs": [1, 2], "FA_pct": [100.0, 50.0],
+                       "MAoT_pct": [91.4, 43.2], "thesis_FA_pct": np.nan, "thesis_MAoT_pct": np.nan,
+                       "split": "test flights", "decision": "both"})
+    write_table(ev[list(schema.EVAL_COLUMNS)], d / "evaluation.parquet", schema.MODEL_EVALUATION, name="model_evaluation")
+    build_model_report(d, d / "evaluation.parquet", tmp_path / "m.html",
+                       template=ROOT / "reports" / "templates" / "model.html.j2", plotly_js="plotly.min.js")
+    page = (tmp_path / "m.html").read_text()
+    text = page[page.index("<h2>Test flights"):]
+    head = [html.unescape(h) for h in re.findall(r"<th>(.*?)</th>", text[:text.index("</table>")])]
+    assert head == ["maneuver", "runs", "FA [%]", "MAoT [%]"]      # no "seed 000 §11" columns of dashes
+    assert _cells(page, "Test flights") == [["loop", "1", "100.00", "91.40"], ["roll", "2", "50.00", "43.20"]]

@@ -473,6 +473,10 @@ def vibration(vib: pd.DataFrame | None, imu: pd.DataFrame | None = None) -> go.F
                                          line=dict(color=None if c.startswith("clip") else colour(c), dash=dash)))
         if fig.data:
             extra = unit_axes(fig, titles)
+            if "clipping events" in titles:
+                # a count from 0: all zero (no clipping) autoscaled to -1..1 read as negative counts
+                k = titles.index("clipping events")
+                fig.layout["yaxis" if k == 0 else f"yaxis{k + 1}"].rangemode = "tozero"
             fig.update_xaxes(title="t [s]")
             return layout(fig, "Vibration (autopilot's metric)", **extra)
     r = accel_rms(imu)
@@ -863,8 +867,34 @@ def label_colours(labels) -> dict[str, str]:
     return out
 
 
-#: the least distance, as a fraction of the panel's span, between two mode names on a panel
-MODE_LABEL_GAP = 0.06
+#: the width of one character of a 9 pt band name, and the least space between two names, as
+#: fractions of a panel's span (a 1000 px plot area: ~5.8 px a character, 10 px apart)
+LABEL_CHAR = 0.0058
+LABEL_PAD = 0.01
+
+
+def spaced_labels(at: np.ndarray, width: np.ndarray, span: float, texts, *, align: str = "centre") -> np.ndarray:
+    """Which of the names ``texts`` placed at ``at`` (centred on it, or starting there with
+    ``align="left"``) on a panel ``span`` wide to write so that no two written ones overlap
+    (:data:`LABEL_CHAR` a character, :data:`LABEL_PAD` apart): the widest bands (``width``)
+    first, a band of zero or negative width never. Returns a boolean mask in the order of
+    ``at``. A band left unnamed keeps its colour and its hover text."""
+    at, width = np.asarray(at, np.float64), np.asarray(width, np.float64)
+    n_chars = np.array([len(str(t)) for t in texts], dtype=np.float64)
+    span = max(float(span), 1e-9)
+    say = np.zeros(len(at), dtype=bool)
+    for i in np.argsort(-width, kind="stable"):
+        if width[i] <= 0:
+            continue
+        j = np.flatnonzero(say)
+        if align == "left":    # the name written first along the axis must end before the next starts
+            first = np.where(at[j] <= at[i], n_chars[j], n_chars[i])
+            room = first * LABEL_CHAR * span
+        else:
+            room = 0.5 * (n_chars[j] + n_chars[i]) * LABEL_CHAR * span
+        if not (np.abs(at[j] - at[i]) < room + LABEL_PAD * span).any():
+            say[i] = True
+    return say
 
 
 def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None = None) -> go.Figure:
@@ -881,18 +911,14 @@ def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None 
     keep = np.r_[True, names[1:] != names[:-1]]    # a repeated record continues its band
     t, names = t[keep], names[keep]
     end = np.r_[t[1:], max(t_end_s if t_end_s is not None else t[-1], t[-1])]
-    # a name is written only where it starts MODE_LABEL_GAP of the span away from every name
-    # written, the longest bands first: modes switched within seconds (STABILIZE, LOITER at
-    # take-off) printed their names over each other; the segments timeline names every band
-    span = max(float(end[-1] - t[0]), 1e-9)
-    named: list[float] = []
-    for i in np.argsort(-(end - t), kind="stable"):
-        if end[i] > t[i] and all(abs(t[i] - u) >= MODE_LABEL_GAP * span for u in named):
-            named.append(t[i])
-    for t0, t1, name in zip(t, end, names):
+    # a name is written only where it does not run into another, the longest bands first:
+    # modes switched within seconds (STABILIZE, LOITER at take-off) printed their names over
+    # each other; the segments timeline's bars carry every name as hover text
+    named = spaced_labels(t, end - t, float(end[-1] - t[0]), names, align="left")
+    for t0, t1, name, say in zip(t, end, names, named):
         if t1 <= t0:
             continue
-        text = name if t0 in named else None
+        text = name if say else None
         note = dict(annotation_text=text, annotation_position="top left", annotation_font_size=9) if text else {}
         fig.add_vrect(x0=t0, x1=t1, fillcolor=label_colour(f"mode {name}"), opacity=0.08, line_width=0,
                       layer="below", **note)
@@ -912,16 +938,26 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
     colours = label_colours([*(segments["label"].astype(str) if segments is not None and len(segments) else []),
                              *(classified["label"].astype(str).unique() if classified is not None and len(classified) else [])])
     if segments is not None and len(segments):
-        for r in segments.itertuples():
-            t0, t1 = r.t_start_ns * 1e-9, r.t_end_ns * 1e-9
-            lab = str(r.label)
-            is_mode = lab.startswith("mode:")
-            row, text = (MODE_SEGMENTS_ROW, lab[len("mode:"):]) if is_mode else (LABEL_SEGMENTS_ROW, lab)
+        t0s = segments["t_start_ns"].to_numpy(np.float64) * 1e-9
+        t1s = segments["t_end_ns"].to_numpy(np.float64) * 1e-9
+        labs = segments["label"].astype(str).to_numpy()
+        is_mode = np.char.startswith(labs.astype(str), "mode:")
+        # each row's names apart from each other (a 2 s LOITER between two modes wrote its name
+        # over theirs); every bar keeps its hover text
+        say = np.zeros(len(labs), dtype=bool)
+        span = float(np.nanmax(t1s) - np.nanmin(t0s)) if len(labs) else 0.0
+        for row_mask in (is_mode, ~is_mode):
+            idx = np.flatnonzero(row_mask)
+            texts = [lab[len("mode:"):] if m else lab for lab, m in zip(labs[idx], is_mode[idx])]
+            say[idx] = spaced_labels(0.5 * (t0s[idx] + t1s[idx]), t1s[idx] - t0s[idx], span, texts)
+        for t0, t1, lab, mode_row, named in zip(t0s, t1s, labs, is_mode, say):
+            row, text = (MODE_SEGMENTS_ROW, lab[len("mode:"):]) if mode_row else (LABEL_SEGMENTS_ROW, lab)
             fig.add_trace(go.Scatter(x=[t0, t1], y=[row, row], mode="lines",
                                      line=dict(width=14, color=colours[lab]),
                                      name=lab, showlegend=False, hovertext=lab))
-            fig.add_annotation(x=(t0 + t1) / 2, y=row, text=text, showarrow=False, yshift=14,
-                               font=dict(size=9))
+            if named:
+                fig.add_annotation(x=(t0 + t1) / 2, y=row, text=text, showarrow=False, yshift=14,
+                                   font=dict(size=9))
     if classified is not None and len(classified):
         d = decimate(classified)
         for lab, g in d.groupby(d["label"].astype(str), sort=True):

@@ -56,6 +56,7 @@ def test_the_vibration_panel_prefers_the_autopilots_metric():
     assert _names(fig)[:3] == [f"vibration {a} [m/s²]" for a in "xyz"]
     assert "clipping events 1" in _names(fig) and fig.layout.yaxis2.title.text == "clipping events"
     assert fig.layout.title.text.startswith("Vibration (autopilot")
+    assert fig.layout.yaxis2.rangemode == "tozero"        # a count: never drawn below 0
 
 
 def test_the_px4_gyro_vibration_is_drawn_on_a_rad_per_s_axis_of_its_own_never_on_the_m_per_s2_axis():
@@ -214,7 +215,7 @@ def test_mode_names_switched_within_moments_are_not_printed_over_each_other():
     import plotly.graph_objects as go
 
     # STABILIZE, LOITER 0.5 s later, AUTO at 1 s, RTL at 300 s of a 330 s flight: the longest
-    # band (AUTO) and RTL are named; STABILIZE and LOITER start within 6 % of the span of AUTO,
+    # band (AUTO) and RTL are named; STABILIZE and LOITER would run into the name AUTO,
     # so only their bands are drawn
     mode = _stream("mode", 4, 1.0, mode=["STABILIZE", "LOITER", "AUTO", "RTL"])
     mode["t_ns"] = np.array([0, 0.5, 1.0, 300.0]) * 1e9
@@ -359,3 +360,18 @@ def test_an_inverted_rolls_wrap_through_180_degrees_is_a_hole_in_its_line_not_a_
     assert plots.break_wraps(d.iloc[:2]) is not None and len(plots.break_wraps(d.iloc[:2])) == 2
     secs = plots.break_wraps(pd.DataFrame({"t_s": [0.0, 1.0], "roll_deg": [179.0, -179.0]}), "roll_deg")
     assert secs["t_s"].tolist() == [0.0, 0.5, 1.0] and np.isnan(secs["roll_deg"].iloc[1])
+
+
+def test_segment_names_on_the_timeline_are_written_only_where_they_do_not_overlap():
+    seg = pd.DataFrame({"t_start_ns": np.array([0, 20, 22, 40], dtype=np.int64) * 10**9,
+                        "t_end_ns": np.array([20, 22, 40, 800], dtype=np.int64) * 10**9,
+                        "label": ["mode:STABILIZE", "mode:LOITER", "mode:AUTO", "mode:RTL"]})
+    fig = plots.timeline(seg)
+    # 20 s of STABILIZE, 2 s of LOITER and 18 s of AUTO at take-off on an 800 s panel: the names
+    # would overlap, so the longest is written and the other two bars keep their hover text
+    assert [a.text for a in fig.layout.annotations] == ["STABILIZE", "RTL"]
+    assert len(fig.data) == 4 and fig.data[1].hovertext == "mode:LOITER"
+    # names apart by more than their half widths are all written; left-aligned ones by the first's
+    assert plots.spaced_labels([0.0, 0.5], [1.0, 1.0], 1.0, ["a", "b"]).all()
+    assert plots.spaced_labels([0.0, 0.05], [1.0, 2.0], 1.0, ["STABILIZE", "AUTO"], align="left").tolist() == [False, True]
+    assert plots.spaced_labels([0.0, 0.07], [1.0, 2.0], 1.0, ["STABILIZE", "AUTO"], align="left").all()

@@ -118,6 +118,20 @@ def _band(fig: go.Figure, t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, na
     lo, hi = np.where(ok, mean - sigma, np.nan), np.where(ok, mean + sigma, np.nan)
     if floor is not None:
         lo = np.maximum(lo, floor)
+    first, last = np.flatnonzero(ok)[[0, -1]]
+    if not ok[first:last + 1].all():
+        # holes inside (a wrapped angle's breaks): "tonexty" joins the edges across a hole into
+        # wedges over the panel, so each run is a closed outline of its own ("toself" fills each
+        # piece of a trace between gaps)
+        xs, ys = [], []
+        edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
+        for a, b in zip(edges[::2], edges[1::2]):
+            xs += [*t[a:b], *t[a:b][::-1], None]
+            ys += [*hi[a:b], *lo[a:b][::-1], None]
+        fig.add_trace(go.Scatter(x=xs, y=ys, mode="lines", line=dict(width=0), fill="toself",
+                                 fillcolor=_rgba(colour, 0.15), legendgroup=name, name=f"{name} ±1σ",
+                                 hoverinfo="skip"))
+        return
     fig.add_trace(go.Scatter(x=t, y=hi, mode="lines", line=dict(width=0), legendgroup=name, showlegend=False,
                              hoverinfo="skip", name=f"{name} +1σ"))
     fig.add_trace(go.Scatter(x=t, y=lo, mode="lines", line=dict(width=0), fill="tonexty",

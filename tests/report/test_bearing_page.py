@@ -154,3 +154,18 @@ def test_the_range_axis_is_scaled_to_the_truth_and_most_estimates_not_a_banks_fi
                           if tr.name in ("CPPV bank", "MPC bank", "CV/CT IMM")])
     lo, hi = fig.layout.yaxis.range
     assert lo == 0.0 and hi == pytest.approx(1.2 * max(truth.max(), np.percentile(est[np.isfinite(est)], 95)))
+
+
+def test_a_band_with_holes_is_one_closed_outline_per_run_not_edges_joined_across_the_holes():
+    import plotly.graph_objects as go
+
+    from pipeline.report.bearing import _band
+
+    fig = go.Figure()
+    t = np.arange(7.0)
+    mean = np.array([0.0, 1.0, np.nan, 2.0, 3.0, 4.0, np.nan])
+    _band(fig, t, mean, np.full(7, 0.5), "x", "#1f77b4")
+    (tr,) = fig.data
+    assert tr.fill == "toself" and tr.name == "x ±1σ"
+    assert list(tr.x) == [0, 1, 1, 0, None, 3, 4, 5, 5, 4, 3, None]
+    assert list(tr.y) == [0.5, 1.5, 0.5, -0.5, None, 2.5, 3.5, 4.5, 3.5, 2.5, 1.5, None]

@@ -773,6 +773,7 @@ def write_report(path, size, st, seed, scen, run: Runner, tr_df, crlb_sum, switc
 
 def figures(curves: pd.DataFrame, crlb: pd.DataFrame, study3: pd.DataFrame, run: Runner) -> list:
     import plotly.graph_objects as go
+    from plotly.colors import qualitative
     from plotly.subplots import make_subplots
 
     figs = []
@@ -785,11 +786,17 @@ def figures(curves: pd.DataFrame, crlb: pd.DataFrame, study3: pd.DataFrame, run:
                     ["config", "t_s"])
             if not len(c):
                 continue
-            fig = make_subplots(rows=1, cols=2, subplot_titles=("thesis metric, range", "heading error (deg)"))
-            for i, (name, g) in enumerate(c.groupby("config", sort=False)):
-                fig.add_scatter(x=g["t_s"], y=g["thesis_r"], name=name, legendgroup=name, row=1, col=1)
+            fig = make_subplots(rows=1, cols=2, subplot_titles=("thesis metric, range [1]", "heading error [°]"))
+            groups = list(c.groupby("config", sort=False))
+            # one colour per configuration on both panels (each panel's own cycle gave the same
+            # configuration two colours, and the heading panel's lines matched no legend entry)
+            cyc = qualitative.Plotly if len(groups) <= len(qualitative.Plotly) else qualitative.Dark24
+            for i, (name, g) in enumerate(groups):
+                line = {"color": cyc[i % len(cyc)]}
+                fig.add_scatter(x=g["t_s"], y=g["thesis_r"], name=name, legendgroup=name, line=line, row=1, col=1)
                 fig.add_scatter(x=g["t_s"], y=g["heading_deg"], name=name, legendgroup=name, showlegend=False,
-                                row=1, col=2)
+                                line=line, row=1, col=2)
+            fig.update_xaxes(title="t [s]")
             figs.append((title, layout(fig, f"{title}: mean relative range error and heading error")))
         g = curves[curves["part"] == "imm_grid"]
         if len(g):

@@ -196,25 +196,31 @@ def geolocation_panels(tables: Mapping[str, pd.DataFrame]) -> list[tuple[str, di
     """
     import plotly.graph_objects as go
 
+    from ..report.plots import decimate
+    from ..report.study import layout
+
     ser, summ = tables["geo_series"], tables["geo_summary"]
     panels: list[tuple[str, dict]] = []
     main = [c for c in ("base", "maneuvering", "mobile") if c in set(ser["case"])]
-    for col, title, ylab in (("eps_m", "Seed 001: mean error vs time", "error (m)"),
-                             ("eta_pct", "Seed 001: percent error vs time", "percent error (%)")):
-        fig = go.Figure([go.Scatter(x=ser.loc[ser.case == c, "t_s"], y=ser.loc[ser.case == c, col], name=c, mode="lines")
-                         for c in main])
-        fig.update_layout(title=title, xaxis_title="time (s)", yaxis_title=ylab)
-        panels.append((title, fig.to_dict()))
+    for col, title, ylab in (("eps_m", "Seed 001: mean error vs time", "error [m]"),
+                             ("eta_pct", "Seed 001: percent error vs time", "percent error [%]")):
+        fig = go.Figure()
+        for c in main:
+            d = decimate(ser.loc[ser.case == c, ["t_s", col]].reset_index(drop=True), cols=[col])
+            fig.add_trace(go.Scatter(x=d["t_s"], y=d[col], name=c, mode="lines"))
+        fig.update_layout(xaxis_title="time [s]", yaxis_title=ylab)
+        panels.append((title, layout(fig, title).to_dict()))
     fig = go.Figure([go.Scatter(x=ser.loc[ser.case == c, "mean_dist_m"], y=ser.loc[ser.case == c, "eps_m"], name=c,
                                 mode="markers", marker={"size": 3}) for c in main])
-    fig.update_layout(title="Seed 001: error vs mean observer distance", xaxis_title="mean UAV-target distance (m)",
-                      yaxis_title="error (m)")
-    panels.append(("Seed 001: error vs distance", fig.to_dict()))
+    fig.update_layout(xaxis_title="mean UAV-target distance [m]", yaxis_title="error [m]")
+    panels.append(("Seed 001: error vs distance", layout(fig, "Seed 001: error vs mean observer distance").to_dict()))
     for prefix, xcol, title, xlab in (("particles_", "n_particles", "Seed 001: error vs particle count", "particles N"),
                                       ("observers_", "n_observers", "Seed 001: error vs observer count", "observers")):
         s = summ[summ.case.str.startswith(prefix)]
         fig = go.Figure([go.Scatter(x=s[xcol], y=s["eps_m"], mode="lines+markers", name="mean error")])
-        fig.update_layout(title=title, xaxis_title=xlab, yaxis_title="mean error (m)",
+        # ticks at the swept counts (10, 20, 40, ...): plotly's log ticks read "9 10 2 3 4 5"
+        fig.update_layout(xaxis_title=xlab, yaxis_title="mean error [m]",
                           xaxis_type="log" if len(s) > 2 else None)
-        panels.append((title, fig.to_dict()))
+        fig.update_xaxes(tickvals=list(s[xcol]))
+        panels.append((title, layout(fig, title, showlegend=False, height=360).to_dict()))
     return panels

@@ -166,3 +166,21 @@ def test_the_bank_sample_std_lies_within_the_crlb_band_on_one_fixed_orbit():
     tr = run_bank(bo.BASE, enc.t_s, enc.bearing, enc.sigma_bearing, enc.ownship_vel, store_weights=False)
     _, ratio = bo.crlb_check(enc.rel[0], enc.t_s, tr.cppv_mean, tr.cppv_cov[0, 0], enc.sigma_bearing, (60.0, 120.0))
     assert all(0.9 <= ratio[q] <= 2.0 for q in ("r", "v", "omega")), ratio
+
+
+def test_each_configuration_has_one_colour_on_the_range_and_the_heading_panel():
+    from types import SimpleNamespace
+
+    from pipeline.studies.bearing_only import figures
+
+    t = np.arange(3.0)
+    curves = pd.concat([pd.DataFrame({"part": "table_4_2", "config": name, "kind": "orbit", "t_s": t,
+                                      "thesis_r": 0.1 * k + t, "heading_deg": 10.0 * k + t})
+                        for k, name in enumerate(("cppv_10_1_1", "cppv_25_1_1", "cppv_150_1_1"))])
+    figs = dict(figures(curves, pd.DataFrame(), pd.DataFrame(), SimpleNamespace(results={})))
+    fig = figs["Table 4.2 parameterisations"]
+    by_name: dict[str, set] = {}
+    for tr in fig.data:
+        by_name.setdefault(tr.name, set()).add(tr.line.color)
+    assert len(by_name) == 3 and all(len(c) == 1 for c in by_name.values())      # same on both panels
+    assert len({c for cs in by_name.values() for c in cs}) == 3                      # and apart from each other

@@ -771,6 +771,10 @@ def write_report(path, size, st, seed, scen, run: Runner, tr_df, crlb_sum, switc
     write_text(path, "\n".join(lines))
 
 
+#: the CRLB panels start here: at t = 0 every run holds the same initial estimate (std 0)
+CRLB_PLOT_FROM_S = 1.0
+
+
 def figures(curves: pd.DataFrame, crlb: pd.DataFrame, study3: pd.DataFrame, run: Runner) -> list:
     import plotly.graph_objects as go
     from plotly.colors import qualitative
@@ -803,22 +807,33 @@ def figures(curves: pd.DataFrame, crlb: pd.DataFrame, study3: pd.DataFrame, run:
             fig = go.Figure()
             for name, gg in g.groupby("config", sort=False):
                 fig.add_scatter(x=gg["t_s"], y=gg["mu_cv"], name=name)
+            fig.update_xaxes(title="t [s]")
+            fig.update_yaxes(title="μ_CV [1]")
             figs.append(("IMM mode probability", layout(fig, "CT→CV: run-mean mu_CV(t)")))
-        conv = []
-        for name, r in run.results.items():
-            conv.append((name, heading_converged_s(r["t_s"], r["err"]["head"])))
-        fig = go.Figure(go.Bar(x=[c[0] for c in conv], y=[c[1] for c in conv]))
+        conv = [(name, heading_converged_s(r["t_s"], r["err"]["head"])) for name, r in run.results.items()]
+        done = [(n, v) for n, v in conv if np.isfinite(v)]
+        never = [n for n, v in conv if not np.isfinite(v)]
+        fig = go.Figure(go.Bar(x=[c[0] for c in done], y=[c[1] for c in done], name="converged"))
+        if never:
+            # a configuration that never converges drew no bar at all, as if it were not run
+            fig.add_scatter(x=never, y=[0.0] * len(never), mode="markers", marker={"symbol": "x", "size": 9,
+                            "color": "#d62728"}, name="not within the run")
+        fig.update_xaxes(categoryorder="array", categoryarray=[c[0] for c in conv])
+        fig.update_yaxes(title="t [s]")
         figs.append(("Convergence", layout(fig, "heading convergence time (run mean < 0.1 rad), s")))
     if len(crlb):
-        fig = make_subplots(rows=1, cols=4, subplot_titles=("r (m)", "v (m/s)", "omega (rad/s)", "theta (rad)"))
+        fig = make_subplots(rows=1, cols=4, subplot_titles=("r [m]", "v [m/s]", "ω [rad/s]", "θ [rad]"))
         for i, q in enumerate(("r", "v", "omega", "theta")):
-            g = crlb[crlb["quantity"] == q]
+            # from t = 1 s: every run starts from the same estimate, a sample std of 0 (1e-16 on a
+            # log axis that then spanned 18 decades)
+            g = crlb[(crlb["quantity"] == q) & (crlb["t_s"] >= CRLB_PLOT_FROM_S)]
             fig.add_scatter(x=g["t_s"], y=g["sample_std"], name="sample std", legendgroup="s", showlegend=i == 0,
                             line={"color": "#1f77b4"}, row=1, col=i + 1)
             fig.add_scatter(x=g["t_s"], y=g["sqrt_crlb"], name="sqrt CRLB", legendgroup="c", showlegend=i == 0,
                             line={"color": "black", "dash": "dash"}, row=1, col=i + 1)
             fig.update_yaxes(type="log", row=1, col=i + 1)
-        figs.append(("CRLB", layout(fig, "fixed orbit: sample std vs sqrt(CRLB)")))
+        fig.update_xaxes(title="t [s]")
+        figs.append(("CRLB", layout(fig, f"fixed orbit: sample std vs sqrt(CRLB) (from t = {CRLB_PLOT_FROM_S:g} s)")))
     if len(study3):
         fig = make_subplots(rows=len(study3["scenario"].unique()), cols=3, shared_xaxes=True,
                             subplot_titles=[f"{s}: {q}" for s in study3["scenario"].unique()

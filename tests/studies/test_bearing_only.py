@@ -184,3 +184,23 @@ def test_each_configuration_has_one_colour_on_the_range_and_the_heading_panel():
         by_name.setdefault(tr.name, set()).add(tr.line.color)
     assert len(by_name) == 3 and all(len(c) == 1 for c in by_name.values())      # same on both panels
     assert len({c for cs in by_name.values() for c in cs}) == 3                      # and apart from each other
+
+
+def test_a_configuration_that_never_converges_is_marked_and_the_crlb_panels_start_after_the_shared_start():
+    from types import SimpleNamespace
+
+    from pipeline.studies.bearing_only import CRLB_PLOT_FROM_S, figures
+
+    t = np.arange(0.0, 3.0, 0.5)
+    head = {"fast": np.full((2, len(t)), 0.05), "never": np.full((2, len(t)), 0.5)}
+    run = SimpleNamespace(results={k: {"t_s": t, "err": {"head": v}} for k, v in head.items()})
+    curves = pd.DataFrame({"part": "table_4_2", "config": "fast", "kind": "orbit", "t_s": t,
+                           "thesis_r": 0.1, "heading_deg": 1.0})
+    crlb = pd.DataFrame({"quantity": "r", "t_s": t, "sample_std": np.r_[0.0, np.ones(len(t) - 1)],
+                         "sqrt_crlb": np.ones(len(t))})
+    figs = dict(figures(curves, crlb, pd.DataFrame(), run))
+    conv = figs["Convergence"]
+    assert list(conv.data[0].x) == ["fast"] and list(conv.data[1].x) == ["never"]
+    assert conv.data[1].name == "not within the run"
+    std = next(tr for tr in figs["CRLB"].data if tr.name == "sample std")
+    assert min(std.x) >= CRLB_PLOT_FROM_S and min(std.y) > 0

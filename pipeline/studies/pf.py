@@ -340,9 +340,9 @@ def figures(tl: pd.DataFrame, runs: pd.DataFrame) -> list:
     figs.append(("modes", layout(fig, "Weave (GPS): stacked S/L/R/W fractions")))
     r = tl[tl["scenario"] == "weave_radar"]
     fig = go.Figure()
-    for c, lab in (("pos_n_m", "N (m)"), ("pos_e_m", "E (m)"), ("vel_n_mps", "v_N (m/s)"), ("vel_e_mps", "v_E (m/s)")):
+    for c, lab in (("pos_n_m", "N [m]"), ("pos_e_m", "E [m]"), ("vel_n_mps", "v_N [m/s]"), ("vel_e_mps", "v_E [m/s]")):
         fig.add_trace(go.Scatter(x=r["step"], y=r[f"rmse_{c}"], mode="lines", name=lab))
-    fig.update_layout(xaxis_title="step k", yaxis_title="RMS error over seeds")
+    fig.update_layout(xaxis_title="step k", yaxis_title="RMS error over seeds [m, m/s]")
     figs.append(("errors", layout(fig, "Weave (radar, near the site): RMS errors in N, E, v_N, v_E")))
     fig = go.Figure()
     for sc in ("weave_gps", "straight_gps", "pi_turn_gps"):
@@ -357,15 +357,17 @@ def figures(tl: pd.DataFrame, runs: pd.DataFrame) -> list:
         g = w[w["flag_seed0"] == flag]
         fig.add_trace(go.Scatter(x=g["truth_e_m"], y=g["truth_n_m"], mode="markers", marker=dict(color=col, size=4),
                                  name="flagged" if flag else "not flagged"))
-    fig.update_layout(xaxis_title="E (m)", yaxis_title="N (m)", yaxis_scaleanchor="x")
+    fig.update_layout(xaxis_title="E [m]", yaxis_title="N [m]", yaxis_scaleanchor="x")
     figs.append(("track", layout(fig, "Weave (GPS, seed 0): the track coloured by the weave flag")))
     rs = runs[runs["scenario"].str.startswith("range_")]
     if len(rs):
         g = rs.groupby("scenario", sort=False)["weave_frac_in_weave"].agg(["mean", "std"]).reset_index()
-        fig = go.Figure(go.Scatter(x=[float(s.split("_")[1]) for s in g["scenario"]], y=g["mean"],
-                                   error_y=dict(array=g["std"]), mode="lines+markers", name="W during weave"))
-        fig.update_layout(xaxis_title="end of track at (d, d): d (m)", yaxis_title="weave fraction during the weave",
-                          xaxis_type="log")
+        d = [float(s.split("_")[1]) for s in g["scenario"]]
+        fig = go.Figure(go.Scatter(x=d, y=g["mean"], error_y=dict(array=g["std"]), mode="lines+markers",
+                                   name="W during weave"))
+        # ticks at the swept ranges: plotly's log ticks read "9 1000 2 3 4 5 ... 10k"
+        fig.update_layout(xaxis_title="end of track at (d, d): d [m]", yaxis_title="weave fraction during the weave",
+                          xaxis_type="log", xaxis_tickvals=d)
         figs.append(("range", layout(fig, "Radar range sweep: weave fraction during the weave")))
     return figs
 

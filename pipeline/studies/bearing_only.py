@@ -837,7 +837,7 @@ def figures(curves: pd.DataFrame, crlb: pd.DataFrame, study3: pd.DataFrame, run:
     if len(study3):
         fig = make_subplots(rows=len(study3["scenario"].unique()), cols=3, shared_xaxes=True,
                             subplot_titles=[f"{s}: {q}" for s in study3["scenario"].unique()
-                                            for q in ("range (m)", "omega (deg/s)", "mu_CV")])
+                                            for q in ("range [m]", "ω [°/s]", "μ_CV [1]")])
         for i, (s, g) in enumerate(study3.groupby("scenario", sort=False)):
             fig.add_scatter(x=g["t_s"], y=g["r_true_m"], line={"color": "black"}, showlegend=False, row=i + 1, col=1)
             fig.add_scatter(x=g["t_s"], y=g["r_est_m"], line={"color": "#1f77b4"}, showlegend=False, row=i + 1, col=1)

@@ -635,33 +635,50 @@ def write_report(path, size, st, seed, q, qt, mcs, radar, cfg=None, q2_scale=Non
 
 def figures(qt, mc_time, hmm_time=None, hrm=None) -> list:
     """The page's plots: the q score, Monte Carlo error vs filter std and NEES, EKF vs EKF+HMM."""
+    from plotly.colors import qualitative
+    from plotly.subplots import make_subplots
+
     figs = []
     fig = go.Figure(go.Scatter(x=qt["q"], y=qt["score"], mode="lines+markers", name="score"))
-    fig.update_layout(xaxis_type="log", xaxis_title="q (m²/s⁵)", yaxis_title="normalised RMSE")
+    fig.update_layout(xaxis_type="log", xaxis_title="q [m²/s⁵]", yaxis_title="normalised RMSE [1]")
+    fig.update_xaxes(tickvals=list(qt["q"]))
     figs.append(("q search", layout(fig, "q on the training runs: normalised RMSE")))
+    units = {"pos": "position [m]", "vel": "velocity [m/s]", "acc": "acceleration [m/s²]"}
+    colours = {"ekf": "#1f77b4", "rts": "#d62728"}
     for man, g in mc_time.groupby("maneuver", sort=False):
-        fig = go.Figure()
-        for (f, grp), idx in [((f, grp), idx) for f in ("ekf", "rts") for grp, idx in MC_GROUPS.items()]:
+        # one panel per unit (a position, a velocity and an acceleration on one axis read as
+        # one quantity), the filter by colour, error std solid and the filter's own std dotted
+        fig = make_subplots(rows=1, cols=len(MC_GROUPS), subplot_titles=[units.get(k, k) for k in MC_GROUPS])
+        for c, (grp, idx) in enumerate(MC_GROUPS.items(), start=1):
             cols = [STATE_COLUMNS[i] for i in idx]
-            h = g[(g["filter"] == f) & g["component"].isin(cols)].groupby("t_s")
-            fig.add_trace(go.Scatter(x=h["err_var"].mean().index, y=np.sqrt(h["err_var"].mean().to_numpy()),
-                                     mode="lines", name=f"{f} {grp} error std"))
-            fig.add_trace(go.Scatter(x=h["filter_var"].mean().index, y=np.sqrt(h["filter_var"].mean().to_numpy()),
-                                     mode="lines", line=dict(dash="dot"), name=f"{f} {grp} filter std"))
-        fig.update_layout(xaxis_title="t (s)", yaxis_title="std, mean variance over the group's axes",
-                          yaxis_type="log")
-        figs.append((f"MC {man}", layout(fig, f"Monte Carlo {man}: error std (solid) vs filter std (dotted)")))
+            for f in ("ekf", "rts"):
+                h = g[(g["filter"] == f) & g["component"].isin(cols)].groupby("t_s")
+                for what, dash in (("err_var", None), ("filter_var", "dot")):
+                    v = h[what].mean()
+                    name = f"{f.upper()} {'error std' if what == 'err_var' else 'filter std'}"
+                    fig.add_trace(go.Scatter(x=v.index, y=np.sqrt(v.to_numpy()), mode="lines", name=name,
+                                             legendgroup=name, showlegend=c == 1,
+                                             line=dict(color=colours[f], dash=dash)), row=1, col=c)
+        # decade labels with 2 and 5 between: the default labelled every minor tick (2 3 4 ... 9)
+        fig.update_yaxes(type="log", dtick="D2")
+        fig.update_xaxes(title="t [s]")
+        figs.append((f"MC {man}", layout(fig, f"Monte Carlo {man}: error std (solid) vs filter std (dotted), "
+                                              "RMS over the group's axes")))
     fig = go.Figure()
+    mans = list(dict.fromkeys(mc_time["maneuver"]))
     for (man, f), g in mc_time[mc_time["component"] == STATE_COLUMNS[0]].groupby(["maneuver", "filter"], sort=False):
-        fig.add_trace(go.Scatter(x=g["t_s"], y=g["nees_avg"], mode="lines", name=f"{man} {f}"))
+        fig.add_trace(go.Scatter(x=g["t_s"], y=g["nees_avg"], mode="lines", name=f"{man} {f.upper()}",
+                                 line=dict(color=qualitative.Plotly[mans.index(man) % 10],
+                                           dash="dot" if f == "rts" else None)))
     fig.add_hline(y=9.0, line_dash="dash")
-    fig.update_layout(xaxis_title="t (s)", yaxis_title="run-averaged NEES (9 = consistent)", yaxis_type="log")
-    figs.append(("NEES", layout(fig, "Monte Carlo run-averaged NEES")))
+    fig.update_layout(xaxis_title="t [s]", yaxis_title="run-averaged NEES [1] (9 = consistent)", yaxis_type="log")
+    fig.update_yaxes(dtick="D2")
+    figs.append(("NEES", layout(fig, "Monte Carlo run-averaged NEES (EKF solid, RTS dotted)")))
     if hrm is not None:
         fig = go.Figure()
         for (sc, f), g in hrm.groupby(["scenario", "filter"], sort=False):
             fig.add_trace(go.Bar(x=g["maneuver"], y=g["acc_mps2"], name=f"{sc} {f}"))
-        fig.update_layout(barmode="group", yaxis_title="acceleration RMSE (m/s²)")
+        fig.update_layout(barmode="group", yaxis_title="acceleration RMSE [m/s²]")
         figs.append(("EKF vs EKF+HMM", layout(fig, "Acceleration RMSE, EKF vs EKF+HMM, S1/S2")))
         for man, g in hmm_time[hmm_time["scenario"] == "S1"].groupby("maneuver", sort=False):
             fig = go.Figure()
@@ -670,7 +687,7 @@ def figures(qt, mc_time, hmm_time=None, hrm=None) -> list:
                 ms_ = h.assign(mse=h["err_var"] + h["mean_err"] ** 2).groupby("t_s")["mse"].mean()
                 fig.add_trace(go.Scatter(x=ms_.index, y=np.sqrt(ms_.to_numpy()), mode="lines",
                                          name=f"{f} acc RMS error"))
-            fig.update_layout(xaxis_title="t (s)", yaxis_title="RMS acceleration error per axis (m/s²)")
+            fig.update_layout(xaxis_title="t [s]", yaxis_title="RMS acceleration error per axis [m/s²]")
             figs.append((f"S1 {man}", layout(fig, f"{man} S1: acceleration error over time")))
     return figs
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 
@@ -125,3 +126,22 @@ def test_the_target_plans_only_the_study_and_plotly_js():
     assert m, out[-3000:]
     jobs = {r.split()[0]: int(r.split()[1]) for r in m.group(1).strip().splitlines()}
     assert jobs == {"plotly_js": 1, "study_seed000_ekf": 1}
+
+
+def test_the_monte_carlo_panels_put_each_unit_on_its_own_axis_and_each_filter_in_one_colour():
+    from pipeline.estimate.models import STATE_COLUMNS
+    from pipeline.studies.seed000_ekf import figures
+
+    t = np.arange(3) * 0.2
+    mc = pd.DataFrame([{"maneuver": "M1", "filter": f, "component": c, "t_s": tt, "err_var": 0.04,
+                        "filter_var": 0.09, "nees_avg": 9.0} for f in ("ekf", "rts") for c in STATE_COLUMNS for tt in t])
+    figs = dict(figures(pd.DataFrame({"q": [0.1, 1.0, 10.0], "score": [1.2, 1.0, 1.1]}), mc))
+    fig = figs["MC M1"]
+    assert [a.text for a in fig.layout.annotations] == ["position [m]", "velocity [m/s]", "acceleration [m/s²]"]
+    assert {tr.yaxis for tr in fig.data} == {"y", "y2", "y3"}          # never two units on one axis
+    colour = {tr.name: set() for tr in fig.data}
+    for tr in fig.data:
+        colour[tr.name].add(tr.line.color)
+    assert sorted(colour) == ["EKF error std", "EKF filter std", "RTS error std", "RTS filter std"]
+    assert colour["EKF error std"] == colour["EKF filter std"] != colour["RTS error std"]
+    np.testing.assert_allclose(fig.data[0].y, 0.2)

@@ -72,6 +72,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
+from plotly.colors import qualitative
 
 from ..config import ROOT, ConfigError, load_config, section
 from ..io.parquet import write_table
@@ -738,7 +739,7 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
         for table, g in th.groupby("table", sort=False):
             fig.add_trace(go.Scatter(x=g["maneuver"], y=g["thesis_MAoT_pct"], mode="markers",
                                      marker=dict(symbol="x", size=9), name=f"{table} thesis"))
-        fig.update_layout(barmode="group", yaxis_title="MAoT (%)")
+        fig.update_layout(barmode="group", yaxis_title="MAoT [%]")
         ekf_fig = ("Tables 3.5–3.8: MAoT on EKF input",
                    layout(fig, "Tables 3.5–3.8: MAoT on EKF estimates (bars: ours, ×: thesis, truth-trained)"))
     else:
@@ -751,7 +752,7 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
     for table, g in th.groupby("table", sort=False):
         fig.add_trace(go.Scatter(x=g["maneuver"], y=g["thesis_MAoT_pct"], mode="markers",
                                  marker=dict(symbol="x", size=9), name=f"{table} thesis"))
-    fig.update_layout(barmode="group", yaxis_title="MAoT (%)")
+    fig.update_layout(barmode="group", yaxis_title="MAoT [%]")
     figs.append(("Tables 3.1–3.4: MAoT", layout(fig, "Tables 3.1–3.4: MAoT per maneuver (bars: ours, ×: thesis)")))
     if sw is not None and len(sw):
         fig = go.Figure()
@@ -762,14 +763,20 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
         m = sw["mode"] == "cumulative"
         fig.add_trace(go.Scatter(x=cell[m], y=sw.loc[m, "thesis_MAoT_final_pct"], mode="markers",
                                  marker=dict(symbol="x", size=9, color="black"), name="thesis (cumulative)"))
-        fig.update_layout(barmode="group", yaxis_title="final-maneuver MAoT (%)")
+        fig.update_layout(barmode="group", yaxis_title="final-maneuver MAoT [%]")
         figs.append(("Tables 3.10–3.12", layout(fig, "Tables 3.10–3.12: final-maneuver MAoT per switch cell")))
     if gerr is not None and len(gerr):
         fig = go.Figure()
+        mans = list(dict.fromkeys(gerr["maneuver"]))
         for (man, q), g in gerr[gerr["quantity"].isin(["acc", "acc_fd"])].groupby(["maneuver", "quantity"]):
             a = g.groupby("t_s")["err_var"].mean()
-            fig.add_trace(go.Scatter(x=a.index, y=np.sqrt(a.to_numpy()), mode="lines", name=f"{man} {q}"))
-        fig.update_layout(xaxis_title="t (s)", yaxis_title="error std, mean over n/e/d (m/s²)")
+            # a maneuver's two estimates in one colour (GMR solid, finite difference dotted): the
+            # default cycle gave the eight lines eight unrelated colours
+            fig.add_trace(go.Scatter(x=a.index, y=np.sqrt(a.to_numpy()), mode="lines",
+                                     name=f"{man} {'GMR' if q == 'acc' else 'finite difference'}",
+                                     line=dict(color=qualitative.Plotly[mans.index(man) % 10],
+                                               dash="dot" if q == "acc_fd" else None)))
+        fig.update_layout(xaxis_title="t [s]", yaxis_title="error std, RMS over n/e/d [m/s²]")
         figs.append(("GMR error over time", layout(fig, "GMR vs finite-difference acceleration error over time")))
     if ekf_fig is not None:
         figs.append(ekf_fig)

@@ -117,3 +117,17 @@ def _defaults():
     from pipeline.studies.seed000_classification import DEFAULTS, SIZES
 
     return DEFAULTS, SIZES
+
+
+def test_the_gmr_error_panel_draws_each_maneuvers_two_estimates_in_one_colour():
+
+    from pipeline.studies.seed000_classification import figures
+
+    gerr = pd.DataFrame([{"maneuver": m, "quantity": q, "t_s": t, "err_var": 0.25}
+                         for m in ("M1", "M2") for q in ("acc", "acc_fd") for t in (0.0, 0.2)])
+    tables = pd.DataFrame(columns=["table", "maneuver", "MAoT_pct", "thesis_MAoT_pct"])
+    fig = dict(figures(tables, None, gerr))["GMR error over time"]
+    colour = {tr.name: (tr.line.color, tr.line.dash) for tr in fig.data}
+    assert colour["M1 GMR"][0] == colour["M1 finite difference"][0] != colour["M2 GMR"][0]
+    assert colour["M1 finite difference"][1] == "dot" and colour["M1 GMR"][1] is None
+    assert fig.layout.yaxis.title.text == "error std, RMS over n/e/d [m/s²]"

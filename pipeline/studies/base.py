@@ -310,8 +310,11 @@ def write_text(path: str | os.PathLike, text: str) -> None:
 
 
 def md_table(df: pd.DataFrame, fmt: str = "{:.2f}") -> str:
-    """A GitHub-markdown table (no extra dependency); non-finite floats print as ``–``."""
+    """A GitHub-markdown table (no extra dependency); non-finite floats print as ``–``, flags
+    as ``yes``/``no`` (as on the report pages' tables, never Python's ``True``/``False``)."""
     def cell(v):
+        if isinstance(v, (bool, np.bool_)):
+            return "yes" if v else "no"
         return fmt.format(v) if isinstance(v, (float, np.floating)) and np.isfinite(v) else (
             "–" if isinstance(v, (float, np.floating)) else str(v))
     head = "| " + " | ".join(map(str, df.columns)) + " |"

@@ -31,3 +31,13 @@ def test_run_calls_yields_in_the_planned_order_here_or_on_worker_processes_and_a
     with pytest.raises(ValueError, match="call 1 failed"):
         got.extend(run_calls(_fail_on_one, [{"x": 0}, {"x": 1}, {"x": 2}], 2))
     assert got == [0]
+
+
+def test_a_study_tables_flags_read_yes_or_no_and_a_missing_number_a_dash():
+    import numpy as np
+    import pandas as pd
+
+    from pipeline.studies.base import md_table
+
+    df = pd.DataFrame({"maneuver": ["tHat", "upL"], "better": [True, False], "rms_m": [33.3, np.nan]})
+    assert md_table(df).splitlines()[2:] == ["| tHat | yes | 33.30 |", "| upL | no | – |"]

@@ -179,7 +179,9 @@ def real_part(inputs, align_cfg: Mapping, st: Mapping, progress) -> tuple[pd.Dat
     return loo, summ, notices
 
 
-def _figure(summ: pd.DataFrame) -> go.Figure | None:
+def _figure(summ: pd.DataFrame, frame: str = "box frame") -> go.Figure | None:
+    """The leave-one-out distances per maneuver, three bars each; ``frame`` names the frame in
+    the title (the box frame and the centred one were two panels of one title)."""
     if summ is None or not len(summ):
         return None
     x = [f"{a}:{b}" for a, b in zip(summ["set"], summ["maneuver"])]
@@ -187,8 +189,8 @@ def _figure(summ: pd.DataFrame) -> go.Figure | None:
     for col, name in (("rms_learned_m", "learned from the others"), ("rms_best_other_m", "closest other demo"),
                       ("rms_dba_m", "DBA of the others")):
         fig.add_trace(go.Bar(x=x, y=summ[col], name=name))
-    fig.update_layout(barmode="group", title="Leave one out: RMS distance to the left-out demo after DTW (m)",
-                      template="plotly_white", height=420, yaxis_title="m")
+    fig.update_layout(barmode="group", title=f"Leave one out ({frame}): RMS distance to the left-out demo after DTW",
+                      template="plotly_white", height=420, yaxis_title="RMS distance [m]")
     return fig
 
 
@@ -309,7 +311,9 @@ def run_trajectory_learning(inputs: Mapping | None, outputs: Mapping, config: Ma
     write_text(paths["report"], "\n".join(md))
     build_study_page(NAME, paths["page"], results=paths["results"], report_md=paths["report"], template=template,
                      definitions=res.definitions, figures=[("Leave one out", _figure(summ)),
-                                                               ("Leave one out, centred", _figure(summ_all[summ_all["frame"] == "centred"] if len(summ_all) else summ_all))],
+                                                               ("Leave one out, centred",
+                                                                _figure(summ_all[summ_all["frame"] == "centred"] if len(summ_all) else summ_all,
+                                                                        "each demo centred on its mean position"))],
                      title=f"Study: trajectory learning from repeated demonstrations ({size})",
                      facts=[("size", size), ("seed", str(seed)), ("sets", ", ".join(st["sets"])),
                             ("tables", ", ".join(f"{t}.parquet" for t in OUTPUT_TABLES))])

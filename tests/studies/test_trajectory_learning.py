@@ -203,3 +203,15 @@ def test_the_trajectory_learned_from_the_other_demos_is_closer_on_80_pct_of_the_
                            lambda msg: None)
     assert len(summ) >= 30
     assert 100.0 * float(summ["better"].mean()) >= 80.0  # RESULT align_real_loo_better_pct
+
+
+def test_the_two_leave_one_out_panels_name_their_frames():
+    import pandas as pd
+
+    from pipeline.studies.trajectory_learning import _figure
+
+    s = pd.DataFrame({"set": ["p23"], "maneuver": ["M"], "rms_learned_m": [1.0], "rms_best_other_m": [2.0],
+                      "rms_dba_m": [3.0]})
+    box, centred = _figure(s), _figure(s, "each demo centred on its mean position")
+    assert box.layout.title.text != centred.layout.title.text and "(box frame)" in box.layout.title.text
+    assert box.layout.yaxis.title.text == "RMS distance [m]"

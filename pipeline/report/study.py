@@ -78,7 +78,9 @@ def markdown_to_html(md: str) -> str:
             th = "".join(f"<th>{_inline(c)}</th>" for c in head)
             rows = "".join("<tr>" + "".join(f'<td{" class=num" if num.match(c) else ""}>{_inline(c)}</td>'
                                             for c in r) + "</tr>" for r in body)
-            out.append(f"<table><thead><tr>{th}</tr></thead><tbody>{rows}</tbody></table>")
+            # in a box that scrolls sideways: a wide study table (flightcoach_ekf_hmm's 14
+            # columns) ran past the page's right edge
+            out.append(f'<div class="wide"><table><thead><tr>{th}</tr></thead><tbody>{rows}</tbody></table></div>')
             continue
         if s.startswith("- "):
             items = []

@@ -308,7 +308,7 @@ def figures(tl: pd.DataFrame, sw: pd.DataFrame) -> list:
         fig.add_trace(go.Bar(base=tl["t_start_s"], x=tl["t_end_s"] - tl["t_start_s"], y=[row] * len(tl),
                              orientation="h", text=tl[col], hovertext=tl[col], name=row,
                              marker=dict(color=[labels.index(v) for v in tl[col]], colorscale="Turbo")))
-    fig.update_layout(xaxis_title="t (s)", showlegend=False, barmode="overlay")
+    fig.update_layout(xaxis_title="t [s]", showlegend=False, barmode="overlay")
     f1 = layout(fig, "P23 #350, whole flight without resets: labels over time", height=300)
     fig = go.Figure()
     for c, name in (("p21_balanced_pct", "P21 balanced accuracy (calibration)"),
@@ -316,7 +316,7 @@ def figures(tl: pd.DataFrame, sw: pd.DataFrame) -> list:
         fig.add_trace(go.Scatter(x=sw["slack_nats_per_sample"], y=sw[c], mode="lines+markers", name=name))
     fig.add_trace(go.Scatter(x=sw["slack_nats_per_sample"], y=100 * sw["p23_correct_at_end"] / sw["p23_n"],
                              mode="lines+markers", name="P23 correct at segment end"))
-    fig.update_layout(xaxis_title="one-class slack (nats/sample)", yaxis_title="%")
+    fig.update_layout(xaxis_title="one-class slack [nats/sample]", yaxis_title="[%]")
     return [("Timeline", f1), ("Slack sweep", layout(fig, "One-class slack sweep"))]
 
 

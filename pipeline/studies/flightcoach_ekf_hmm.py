@@ -373,13 +373,13 @@ def figures(man: pd.DataFrame, tl: pd.DataFrame) -> list:
     fig.add_trace(go.Bar(x=x, y=man["ekf_acc_rmse_mps2"], name="EKF"))
     fig.add_trace(go.Bar(x=x, y=man["ekf_hmm_acc_rmse_mps2"], name="EKF+HMM",
                          text=[f"{s:.0f} % HMM" for s in man["hmm_share_pct"]]))
-    fig.update_layout(barmode="group", yaxis_title="acceleration RMSE (m/s²)")
+    fig.update_layout(barmode="group", yaxis_title="acceleration RMSE [m/s²]")
     f1 = layout(fig, "Test flight: acceleration RMSE per maneuver")
     fig = go.Figure()
     for col, name in (("ref_acc_n_mps2", "reference"), ("ekf_acc_n_mps2", "EKF"),
                       ("ekf_hmm_acc_n_mps2", "EKF+HMM"), ("gmr_acc_n_mps2", "HMM input (GMR)")):
         fig.add_trace(go.Scatter(x=tl["t_s"], y=tl[col], mode="lines", name=name))
-    fig.update_layout(xaxis_title="t (s)", yaxis_title="a_N (m/s²)")
+    fig.update_layout(xaxis_title="t [s]", yaxis_title="a_N [m/s²]")
     return [("Acceleration RMSE", f1), ("North acceleration", layout(fig, "Test flight: north acceleration"))]
 
 

@@ -131,3 +131,17 @@ def test_the_gmr_error_panel_draws_each_maneuvers_two_estimates_in_one_colour():
     assert colour["M1 GMR"][0] == colour["M1 finite difference"][0] != colour["M2 GMR"][0]
     assert colour["M1 finite difference"][1] == "dot" and colour["M1 GMR"][1] is None
     assert fig.layout.yaxis.title.text == "error std, RMS over n/e/d [m/s²]"
+
+
+def test_each_thesis_value_is_drawn_over_its_own_tables_bar_in_its_colour():
+    from pipeline.studies.seed000_classification import figures
+
+    tables = pd.DataFrame([{"table": tb, "maneuver": m, "MAoT_pct": 80.0, "thesis_MAoT_pct": th}
+                           for tb, th in (("3.3", 98.0), ("3.4", 97.0), ("3.4+1c", float("nan")))
+                           for m in ("M1", "M2")])
+    fig = dict(figures(tables, None, None))["Tables 3.1–3.4: MAoT"]
+    assert fig.layout.scattermode == "group"
+    bars = {tr.offsetgroup: tr.marker.color for tr in fig.data if tr.type == "bar"}
+    marks = {tr.offsetgroup: tr.marker.color for tr in fig.data if tr.type == "scatter"}
+    assert bars == marks and len(bars) == 3
+    assert [tr.showlegend for tr in fig.data if tr.type == "scatter"] == [True, True, False]

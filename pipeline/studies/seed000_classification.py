@@ -730,16 +730,23 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
     if et is not None and len(et):
         fig = go.Figure()
         keys = ["table", "trained_on", "increments"]
+        bars = []
         for (table, trained_on, inc), g in et[et["maneuver"].isin(ALL)].groupby(keys, sort=False):
             if inc != increments and (table != "3.8" or trained_on != "truth"):
                 continue
             name = f"{table} ours, {trained_on}-trained" + (f", {inc} increments" if inc != increments else "")
-            fig.add_trace(go.Bar(x=g["maneuver"], y=g["MAoT_pct"], name=name))
-        th = et[(et["trained_on"] == "truth") & (et["increments"] == increments)].dropna(subset=["thesis_MAoT_pct"])
-        for table, g in th.groupby("table", sort=False):
-            fig.add_trace(go.Scatter(x=g["maneuver"], y=g["thesis_MAoT_pct"], mode="markers",
-                                     marker=dict(symbol="x", size=9), name=f"{table} thesis"))
-        fig.update_layout(barmode="group", yaxis_title="MAoT [%]")
+            colour = qualitative.Plotly[len(bars) % 10]
+            fig.add_trace(go.Bar(x=g["maneuver"], y=g["MAoT_pct"], name=name, offsetgroup=name, marker_color=colour))
+            bars.append((name, colour, g if trained_on == "truth" and inc == increments else None))
+        # the thesis's (truth-trained) value over its own bar, in its colour; the other bars hold
+        # their place with an empty group (as in the Tables 3.1-3.4 chart)
+        for name, colour, g in bars:
+            has = g is not None and g["thesis_MAoT_pct"].notna().any()
+            fig.add_trace(go.Scatter(x=g["maneuver"] if has else [], y=g["thesis_MAoT_pct"] if has else [],
+                                     mode="markers", offsetgroup=name, showlegend=bool(has),
+                                     marker=dict(symbol="x", size=9, color=colour),
+                                     name=f"{name.split(' ')[0]} thesis"))
+        fig.update_layout(barmode="group", scattermode="group", yaxis_title="MAoT [%]")
         ekf_fig = ("Tables 3.5–3.8: MAoT on EKF input",
                    layout(fig, "Tables 3.5–3.8: MAoT on EKF estimates (bars: ours, ×: thesis, truth-trained)"))
     else:

@@ -145,3 +145,17 @@ def test_each_thesis_value_is_drawn_over_its_own_tables_bar_in_its_colour():
     marks = {tr.offsetgroup: tr.marker.color for tr in fig.data if tr.type == "scatter"}
     assert bars == marks and len(bars) == 3
     assert [tr.showlegend for tr in fig.data if tr.type == "scatter"] == [True, True, False]
+
+
+def test_the_ekf_input_chart_puts_each_thesis_value_over_its_truth_trained_bar():
+    from pipeline.studies.seed000_classification import figures
+
+    et = pd.DataFrame([{"table": tb, "trained_on": tr, "increments": "prior", "maneuver": m, "MAoT_pct": 80.0,
+                        "thesis_MAoT_pct": 97.0 if tr == "truth" else float("nan")}
+                       for tb in ("3.7", "3.8") for tr in ("truth", "ekf") for m in ("M1", "M2")])
+    tables = pd.DataFrame(columns=["table", "maneuver", "MAoT_pct", "thesis_MAoT_pct"])
+    fig = dict(figures(tables, None, None, et))["Tables 3.5–3.8: MAoT on EKF input"]
+    bars = {tr.offsetgroup: tr.marker.color for tr in fig.data if tr.type == "bar"}
+    marks = [(tr.offsetgroup, tr.marker.color, len(tr.x)) for tr in fig.data if tr.type == "scatter"]
+    assert [(g, c) for g, c, _ in marks] == list(bars.items())          # one group per bar, same colour
+    assert [n for g, _, n in marks] == [2, 0, 2, 0]                      # thesis values: truth-trained only

@@ -112,6 +112,17 @@ def baro_relative(baro: pd.DataFrame | None, track: pd.DataFrame | None = None) 
     return pd.DataFrame({"t_ns": t, "alt_m": v + shift}), name
 
 
+def altitude_panel(series: Mapping[str, pd.DataFrame], calib_pts: pd.DataFrame | None, *,
+                   ground: bool = False):
+    """The altitude panel (:func:`plots.altitude`); for a ground vehicle its title says that
+    the heights drawn are the sensors' (husky-ros1's GPS height wanders 35 m over a 347 m
+    drive), as the summary table already leaves its altitude and climb out."""
+    fig = plots.altitude(dict(series), calib_pts)
+    if fig is not None and ground:
+        fig.update_layout(title="Altitude (a ground vehicle: the sensors' height, not a climb)")
+    return fig
+
+
 def _spectrogram_panel(imu: pd.DataFrame, cols: list[str], name: str, unit: str) -> tuple[str, object]:
     """``(title, figure or None)`` of one IMU spectrogram at the IMU's own rate; without a
     figure the title says why (an IMU logged too slowly for a spectrum, too few samples)."""
@@ -501,7 +512,7 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         # browser draws it in software WebGL, ~0.6 s in one task, which the page's first
         # screen (and the user's first scroll) need not wait for
         ("Ground track", plots.ground_track(ned)),
-        ("Altitude", plots.altitude(alt_series, calib_pts)),
+        ("Altitude", altitude_panel(alt_series, calib_pts, ground=bool(pre.get("ground_vehicle")))),
         ("3-D path", plots.path_3d(ned)),
         ("Attitude", plots.attitude(att, euler, log["setpoint"], frame=att_frame)),
         # in °/s, as flight-test engineers read body rates and as the summary's max body rate

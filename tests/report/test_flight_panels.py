@@ -375,3 +375,12 @@ def test_segment_names_on_the_timeline_are_written_only_where_they_do_not_overla
     assert plots.spaced_labels([0.0, 0.5], [1.0, 1.0], 1.0, ["a", "b"]).all()
     assert plots.spaced_labels([0.0, 0.05], [1.0, 2.0], 1.0, ["STABILIZE", "AUTO"], align="left").tolist() == [False, True]
     assert plots.spaced_labels([0.0, 0.07], [1.0, 2.0], 1.0, ["STABILIZE", "AUTO"], align="left").all()
+
+
+def test_a_ground_vehicles_altitude_panel_says_its_heights_are_the_sensors():
+    from pipeline.report.flight import altitude_panel
+
+    h = pd.DataFrame({"t_ns": np.arange(5, dtype=np.int64) * 10**9, "alt_m": [0.0, -5.0, -12.0, -20.0, -30.0]})
+    assert altitude_panel({"−d (track)": h}, None).layout.title.text == "Altitude"
+    assert "ground vehicle" in altitude_panel({"−d (track)": h}, None, ground=True).layout.title.text
+    assert altitude_panel({}, None, ground=True) is None

@@ -190,8 +190,15 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     if study_links:
         models_html += f"<h2>Studies</h2><ul>{study_links}</ul>"
     if compare:
+        # how many of the index's flights each comparison holds (a vehicle's page of one flight
+        # compares nothing, and says so before it is opened)
+        n_of = pd.Series(list((vehicles or {}).values()), dtype=object).value_counts().to_dict()
+
+        def flights_of(v: str) -> str:
+            n = int(n_of.get(v, 0))
+            return f' <span class="absent">({count_text(n, "flight")})</span>' if n else ""
         models_html = ("<h2>Vehicles: flights compared</h2><ul>" + "".join(
-            f'<li><a href="{html.escape(u)}">{html.escape(v)}</a></li>' for v, u in compare.items())
+            f'<li><a href="{html.escape(u)}">{html.escape(v)}</a>{flights_of(v)}</li>' for v, u in compare.items())
             + "</ul>" + models_html)
     skipped_html = ""
     if skipped:

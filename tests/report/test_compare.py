@@ -100,6 +100,8 @@ def test_the_comparison_page_and_the_index_columns(tmp_path):
     assert '<td>2015-05-21</td><td><a href="report/compare/copter.html">copter</a></td>' in t
     assert "Skipped manifest rows" in t and "<td>lost</td><td class=\"reason\">logs/lost.bin not found</td>" in t
     assert "1 manifest row skipped" in t
+    # the vehicles list says how many flights each comparison holds
+    assert f'<a href="report/compare/copter.html">copter</a> <span class="absent">({len(flights)} flights)</span>' in t
 
 
 def test_a_parameter_is_listed_whenever_its_values_differ_and_integers_read_as_integers():

@@ -76,19 +76,19 @@ def attitude_source(state: pd.DataFrame | None, log) -> tuple[pd.DataFrame | Non
 BARO_DATUM_S = 1.0
 
 
-def baro_relative(baro: pd.DataFrame | None, track: pd.DataFrame | None = None) -> tuple[pd.DataFrame, str] | None:
+def baro_relative(baro: pd.DataFrame | None, track: pd.DataFrame | None = None, *,
+                  ref_name: str = "the track's height") -> tuple[pd.DataFrame, str] | None:
     """The barometric altitude of the altitude panel: ``(DataFrame(t_ns, alt_m), legend name)``.
 
     The first instance's ``alt_rel_m`` less its start (the median of its first
     :data:`BARO_DATUM_S` of valid samples), plus the reference height ``track`` (``t_ns``,
     ``alt_m``: the calibrated height, else the track's −d) over that same second where it has
     one, so the baro shares the panel's axis with the track, the calibrated height and the
-    calibration points. Without that term a flight whose NED origin is not where it starts (a
-    simulated flight begins in the air, 20 m above its origin) drew its baro 20 m below
-    everything else. The raw value's datum
-    differs by source: a ULog's is the ISA pressure altitude (1013.25 hPa: hundreds of metres), a
-    DataFlash log's the ground at arming; the legend names the shift. ``None`` without a valid
-    sample."""
+    calibration points (the legend names it by ``ref_name``). Without that term a flight whose
+    NED origin is not where it starts (a simulated flight begins in the air, 20 m above its
+    origin) drew its baro 20 m below everything else. The raw value's datum differs by source:
+    a ULog's is the ISA pressure altitude (1013.25 hPa: hundreds of metres), a DataFlash log's
+    the ground at arming; the legend names the shift. ``None`` without a valid sample."""
     b = first_instance(baro)
     if b is None or not len(b) or "alt_rel_m" not in b:
         return None
@@ -107,7 +107,7 @@ def baro_relative(baro: pd.DataFrame | None, track: pd.DataFrame | None = None) 
         h = h[(tt >= t[0]) & (tt <= t_end) & np.isfinite(h)]
         start = float(np.median(h)) if len(h) else 0.0
     shift = start - datum
-    name = (f"baro (raw {shift:+.1f} m: starts at the reference height)" if start
+    name = (f"baro (raw, shifted {shift:+.1f} m to start at {ref_name})" if start
             else f"baro (raw, relative to its start: {datum:+.1f} m subtracted)")
     return pd.DataFrame({"t_ns": t, "alt_m": v + shift}), name
 
@@ -477,7 +477,8 @@ def build_flight_report(ingest_dir: str | os.PathLike, out_html: str | os.PathLi
         if st is not None and "alt_cal_m" in st and st["alt_cal_m"].notna().any() else None
     # the raw baro starts where the calibrated height does (the calibration points' datum), else
     # at the track's height
-    baro = baro_relative(log["baro"], cal_h if cal_h is not None else track_h)
+    baro = baro_relative(log["baro"], cal_h if cal_h is not None else track_h,
+                         ref_name="the calibrated height" if cal_h is not None else "the track's height")
     if baro is not None:
         alt_series[baro[1]] = baro[0]
     if track_h is not None:

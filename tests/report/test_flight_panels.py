@@ -346,7 +346,8 @@ def test_the_baro_starts_at_the_tracks_height_where_the_flight_does_not_start_at
     baro = _stream("baro", 100, 10.0, alt_rel_m=21.5 + climb)
     track = pd.DataFrame({"t_ns": baro["t_ns"], "alt_m": 20.0 + climb})
     shifted, name = baro_relative(baro, track)
-    assert np.allclose(shifted["alt_m"], track["alt_m"]) and "reference height" in name
+    assert np.allclose(shifted["alt_m"], track["alt_m"])
+    assert name == "baro (raw, shifted -1.5 m to start at the track's height)"
     alone, name = baro_relative(baro)      # no track: relative to its own start, as before
     assert np.allclose(alone["alt_m"], climb) and "+21.5 m subtracted" in name
 

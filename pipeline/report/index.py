@@ -50,6 +50,19 @@ def flight_summary(flight_id: str, meta_path: str | os.PathLike, page: str | os.
     return row
 
 
+#: click a column head of the flights table to sort by it, again to reverse: a number with its
+#: unit ("9,502 m", "60.0 s") by value, anything else ("–", dates, names) as text, after the
+#: numbers either way
+SORT_JS = """(function(){const t=document.getElementById('flights');if(!t)return;
+const num=s=>{const m=s.trim().replace(/,/g,'').match(/^(-?\\d+(?:\\.\\d+)?)\\s*[A-Za-z/%°²]*$/);return m?parseFloat(m[1]):null;};
+t.querySelectorAll('thead th').forEach((th,i)=>{th.style.cursor='pointer';th.title='sort by this column';
+th.addEventListener('click',()=>{const asc=th.dataset.dir!=='asc';
+t.querySelectorAll('thead th').forEach(h=>delete h.dataset.dir);th.dataset.dir=asc?'asc':'desc';
+const rows=[...t.tBodies[0].rows];rows.sort((a,b)=>{const x=a.cells[i].innerText,y=b.cells[i].innerText,kx=num(x),ky=num(y);
+if(kx!==null&&ky!==null)return asc?kx-ky:ky-kx;if(kx!==null||ky!==null)return kx!==null?-1:1;
+return asc?x.localeCompare(y):y.localeCompare(x);});
+rows.forEach(r=>t.tBodies[0].appendChild(r));});});})();"""
+
 _CSS = """
 body{font-family:system-ui,sans-serif;margin:2em;color:#222}
 table{border-collapse:collapse;font-size:14px}
@@ -214,8 +227,8 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
 <style>{_CSS}</style></head><body>
 <h1>uavpipe — flights</h1>
 <p>{count_text(len(rows), "flight")}, {n_failed} failed{f", {count_text(len(skipped), 'manifest row')} skipped" if skipped else ""}.</p>
-<table><thead><tr><th>flight</th><th>date (UTC)</th><th>vehicle</th><th>status</th><th>format</th><th>duration</th><th>distance (horizontal path)</th>
+<table id="flights"><thead><tr><th>flight</th><th>date (UTC)</th><th>vehicle</th><th>status</th><th>format</th><th>duration</th><th>distance (horizontal path)</th>
 <th>max horizontal speed</th><th>maneuvers</th><th>ingest warnings</th></tr></thead>
-<tbody>{''.join(body)}</tbody></table>{skipped_html}{models_html}</body></html>"""
+<tbody>{''.join(body)}</tbody></table>{skipped_html}{models_html}<script>{SORT_JS}</script></body></html>"""
     write_page(page, out_html)
     return table

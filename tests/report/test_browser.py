@@ -644,3 +644,29 @@ def test_every_page_opens_in_under_3_s_headless(open_times):
                     f"main-thread limit is): {open_times}")
     slow = {k: round(v[0], 2) for k, v in open_times.items() if k != "load average per core" and v[0] >= MAX_LOAD_S}
     assert not slow, f"pages opened after {MAX_LOAD_S} s or more (load {load:.1f} per core): {slow}"
+
+
+def test_a_click_on_a_column_head_of_the_index_sorts_the_flights_by_it(report_tree):
+    _need_browser()
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM)
+        try:
+            page = browser.new_page()
+            page.goto((report_tree / "index.html").as_uri())
+
+            def order():
+                return page.eval_on_selector_all("#flights tbody tr", "rs => rs.map(r => r.cells[0].innerText)")
+
+            page.click("#flights thead th:nth-child(1)")
+            assert order() == ["bad", "demo-quad"]
+            page.click("#flights thead th:nth-child(1)")
+            assert order() == ["demo-quad", "bad"]
+            # by duration: the demo's 60.0 s first either way, the failed flight's dash after it
+            page.click("#flights thead th:nth-child(6)")
+            assert order() == ["demo-quad", "bad"]
+            page.click("#flights thead th:nth-child(6)")
+            assert order() == ["demo-quad", "bad"]
+        finally:
+            browser.close()

@@ -646,27 +646,23 @@ def test_every_page_opens_in_under_3_s_headless(open_times):
     assert not slow, f"pages opened after {MAX_LOAD_S} s or more (load {load:.1f} per core): {slow}"
 
 
-def test_a_click_on_a_column_head_of_the_index_sorts_the_flights_by_it(report_tree):
-    _need_browser()
-    from playwright.sync_api import sync_playwright
+def test_a_click_on_a_column_head_of_the_index_sorts_the_flights_by_it(report_tree, browser):
+    # the module's one browser (a second sync_playwright inside its running loop is refused)
+    page = browser.new_page()
+    try:
+        page.goto((report_tree / "index.html").as_uri())
 
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM)
-        try:
-            page = browser.new_page()
-            page.goto((report_tree / "index.html").as_uri())
+        def order():
+            return page.eval_on_selector_all("#flights tbody tr", "rs => rs.map(r => r.cells[0].innerText)")
 
-            def order():
-                return page.eval_on_selector_all("#flights tbody tr", "rs => rs.map(r => r.cells[0].innerText)")
-
-            page.click("#flights thead th:nth-child(1)")
-            assert order() == ["bad", "demo-quad"]
-            page.click("#flights thead th:nth-child(1)")
-            assert order() == ["demo-quad", "bad"]
-            # by duration: the demo's 60.0 s first either way, the failed flight's dash after it
-            page.click("#flights thead th:nth-child(6)")
-            assert order() == ["demo-quad", "bad"]
-            page.click("#flights thead th:nth-child(6)")
-            assert order() == ["demo-quad", "bad"]
-        finally:
-            browser.close()
+        page.click("#flights thead th:nth-child(1)")
+        assert order() == ["bad", "demo-quad"]
+        page.click("#flights thead th:nth-child(1)")
+        assert order() == ["demo-quad", "bad"]
+        # by duration: the demo's 60.0 s first either way, the failed flight's dash after it
+        page.click("#flights thead th:nth-child(6)")
+        assert order() == ["demo-quad", "bad"]
+        page.click("#flights thead th:nth-child(6)")
+        assert order() == ["demo-quad", "bad"]
+    finally:
+        page.close()

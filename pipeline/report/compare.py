@@ -128,13 +128,13 @@ def overlay_range(tracks: Mapping[str, pd.DataFrame], cols: Sequence[str]) -> li
 
 
 def _overlay(tracks: Mapping[str, pd.DataFrame], col: str, title: str, ylabel: str,
-             x_range: list[float] | None = None) -> go.Figure | None:
+             x_range: list[float] | None = None, *, wraps: bool = False) -> go.Figure | None:
     fig = go.Figure()
     for i, (f, d) in enumerate(tracks.items()):
         if d is None or col not in d or not d[col].notna().any():
             continue
         dd = plots.decimate(d[["t_s", col]], POINTS_PER_TRACE, cols=[col], breaks=True)
-        if col == "roll_deg":     # an aerobatic roll wraps through ±180°: a hole, not a stroke
+        if wraps:     # an angle through ±180° (an aerobatic roll): a hole, not a stroke
             dd = plots.break_wraps(dd, col)
         # one colour per flight, by its place on the page (the same on every panel)
         fig.add_trace(go.Scatter(x=dd["t_s"], y=dd[col], mode="lines", name=f,
@@ -193,7 +193,7 @@ def build_compare_page(vehicle: str, flights: Sequence[str], out_html: str | os.
     xr = overlay_range(tracks, ["alt_m", "speed_mps", "roll_deg", "pitch_deg"])
     figs = [("Altitude above start", _overlay(tracks, "alt_m", "Altitude above start", "altitude [m, up]", xr)),
             ("Horizontal speed", _overlay(tracks, "speed_mps", "Horizontal speed", "speed [m/s]", xr)),
-            ("Roll", _overlay(tracks, "roll_deg", "Roll (state: body FRD, mount-corrected)", "roll [°]", xr)),
+            ("Roll", _overlay(tracks, "roll_deg", "Roll (state: body FRD, mount-corrected)", "roll [°]", xr, wraps=True)),
             ("Pitch", _overlay(tracks, "pitch_deg", "Pitch (state: body FRD, mount-corrected)", "pitch [°]", xr))]
     if len(per_flight) >= 2:
         p_headers, p_rows = differing_params(per_flight)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import html
 import json
 import os
+from collections import Counter
 from pathlib import Path
 from typing import Mapping
 
@@ -205,10 +206,10 @@ def build_index(flight_ids: list[str], meta_paths: list[str], out_html: str | os
     if compare:
         # how many of the index's flights each comparison holds (a vehicle's page of one flight
         # compares nothing, and says so before it is opened)
-        n_of = pd.Series(list((vehicles or {}).values()), dtype=object).value_counts().to_dict()
+        n_of = Counter((vehicles or {}).values())
 
         def flights_of(v: str) -> str:
-            n = int(n_of.get(v, 0))
+            n = n_of[v]
             return f' <span class="absent">({count_text(n, "flight")})</span>' if n else ""
         models_html = ("<h2>Vehicles: flights compared</h2><ul>" + "".join(
             f'<li><a href="{html.escape(u)}">{html.escape(v)}</a>{flights_of(v)}</li>' for v, u in compare.items())

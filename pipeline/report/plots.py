@@ -918,8 +918,7 @@ def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None 
     for t0, t1, name, say in zip(t, end, names, named):
         if t1 <= t0:
             continue
-        text = name if say else None
-        note = dict(annotation_text=text, annotation_position="top left", annotation_font_size=9) if text else {}
+        note = dict(annotation_text=name, annotation_position="top left", annotation_font_size=9) if say else {}
         fig.add_vrect(x0=t0, x1=t1, fillcolor=label_colour(f"mode {name}"), opacity=0.08, line_width=0,
                       layer="below", **note)
     return fig
@@ -942,16 +941,16 @@ def timeline(segments: pd.DataFrame | None, classified: pd.DataFrame | None = No
         t1s = segments["t_end_ns"].to_numpy(np.float64) * 1e-9
         labs = segments["label"].astype(str).to_numpy()
         is_mode = np.char.startswith(labs.astype(str), "mode:")
+        texts = np.array([lab[len("mode:"):] if m else lab for lab, m in zip(labs, is_mode)], dtype=object)
         # each row's names apart from each other (a 2 s LOITER between two modes wrote its name
         # over theirs); every bar keeps its hover text
         say = np.zeros(len(labs), dtype=bool)
         span = float(np.nanmax(t1s) - np.nanmin(t0s)) if len(labs) else 0.0
         for row_mask in (is_mode, ~is_mode):
             idx = np.flatnonzero(row_mask)
-            texts = [lab[len("mode:"):] if m else lab for lab, m in zip(labs[idx], is_mode[idx])]
-            say[idx] = spaced_labels(0.5 * (t0s[idx] + t1s[idx]), t1s[idx] - t0s[idx], span, texts)
-        for t0, t1, lab, mode_row, named in zip(t0s, t1s, labs, is_mode, say):
-            row, text = (MODE_SEGMENTS_ROW, lab[len("mode:"):]) if mode_row else (LABEL_SEGMENTS_ROW, lab)
+            say[idx] = spaced_labels(0.5 * (t0s[idx] + t1s[idx]), t1s[idx] - t0s[idx], span, texts[idx])
+        for t0, t1, lab, text, mode_row, named in zip(t0s, t1s, labs, texts, is_mode, say):
+            row = MODE_SEGMENTS_ROW if mode_row else LABEL_SEGMENTS_ROW
             fig.add_trace(go.Scatter(x=[t0, t1], y=[row, row], mode="lines",
                                      line=dict(width=14, color=colours[lab]),
                                      name=lab, showlegend=False, hovertext=lab))

@@ -753,15 +753,14 @@ def figures(tables: pd.DataFrame, sw: pd.DataFrame | None, gerr: pd.DataFrame | 
         ekf_fig = None
     t = tables[tables["maneuver"].isin(ALL)]
     fig = go.Figure()
-    order = list(dict.fromkeys(t["table"]))
-    for i, (table, g) in enumerate(t.groupby("table", sort=False)):
+    groups = list(t.groupby("table", sort=False))
+    for i, (table, g) in enumerate(groups):
         fig.add_trace(go.Bar(x=g["maneuver"], y=g["MAoT_pct"], name=f"{table} ours", offsetgroup=table,
                              marker_color=qualitative.Plotly[i % 10]))
     # each thesis value as an × in its table's colour over its table's bar (scattermode group, one
     # offset group per table; the tables without a thesis value hold their place empty): the ×s
     # had all sat at the maneuver's centre, over whichever bar was there
-    for i, table in enumerate(order):
-        g = t[t["table"] == table]
+    for i, (table, g) in enumerate(groups):
         fig.add_trace(go.Scatter(x=g["maneuver"], y=g["thesis_MAoT_pct"], mode="markers", offsetgroup=table,
                                  marker=dict(symbol="x", size=9, color=qualitative.Plotly[i % 10]),
                                  name=f"{table} thesis", showlegend=bool(g["thesis_MAoT_pct"].notna().any())))

@@ -549,7 +549,7 @@ def preprocess_log(log: FlightLog, config: Mapping | PreprocessConfig | None = N
     P["control"] = _prepare(S["control"], cfg, "control", None)
 
     # position source
-    pos_src, pos_df, pos_cols, gps_origin = None, None, POS, None
+    pos_src, pos_df, gps_origin = None, None, None
     choices = [cfg.position_source] if cfg.position_source != "auto" else ["local_position", "gps", "truth"]
     for src in choices:
         if src in ("local_position", "truth") and _has(P[src], POS[:2]):

@@ -14,7 +14,6 @@ references one local ``plotly.min.js`` by a relative URL, so it opens offline fr
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np

@@ -61,8 +61,8 @@ from ..estimate.models import wrap_angle
 from ..io.parquet import write_table
 from ..report.study import build_study_page, layout
 from ..simulate.encounter import Encounter, ScenarioSettings, simulate_encounters
-from .base import (Progress, Results, StudyResult, input_path, md_table, output_path, run_calls, say,
-                   study_settings, write_text)
+from .base import (Progress, Results, StudyResult, input_path, md_table, output_path, run_calls, study_settings,
+                   write_text)
 
 NAME = "bearing_only"
 OUTPUT_TABLES = ("curves", "runs", "trends", "crlb", "study3")

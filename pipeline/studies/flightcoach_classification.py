@@ -292,7 +292,7 @@ def write_report(path: Path, size: str, seed: int, st: dict, ms, n_train: int, p
          f"## Rule families (each calibrated on P21 alone; the default family, `{rule}`, is a design choice, "
          "module docstring)", "",
          md_table(families, "{:.3g}"), "",
-         f"Default (`datasets/config.yaml` `model_sets.f3a.hmm`): decision `both`, "
+         "Default (`datasets/config.yaml` `model_sets.f3a.hmm`): decision `both`, "
          + (f"`threshold_slack: {chosen:g}`, `threshold_fraction: 1`" if rule == "slack"
             else f"`threshold_slack: 0`, `threshold_fraction: {frac:g}`") + ".", "",
          "## Decision rules on P21 (known accepted, unknown rejected, balanced, % at segment end)", "",

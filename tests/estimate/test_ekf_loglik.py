@@ -26,8 +26,6 @@ def _joint_loglik(F, Q, H, R, m0, P0, z, bu=None):
     """log N(vec z; mean, cov) of the stacked sequence (rows of z: (T, M, n_z), NaN missing)."""
     T = z.shape[0]
     n_x = len(m0)
-    means, covs = [m0], [P0]
-    cross = {}
     # x_k = F^k x_0 + Σ F^(k-1-j) (w_j + bu): mean and the covariance between all x_k, x_l
     Phi = [np.eye(n_x)]
     for k in range(1, T):

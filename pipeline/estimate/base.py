@@ -74,6 +74,13 @@ class GaussianState:
         State covariance.
     t_ns : int
         Time of the estimate (ns), shared by every run of a batch.
+
+    Notes
+    -----
+    Frozen, and its arrays are read-only views of the ones it was given, not copies: the
+    filters write a posterior covariance straight into the run's stored history (``out=``) and
+    wrap that. A caller that edits an array after handing it over edits the state too, so hand
+    over arrays you no longer change.
     """
 
     mean: F64

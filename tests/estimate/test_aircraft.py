@@ -204,7 +204,8 @@ def test_batched_jacobians_equal_the_per_state_ones():
     np.testing.assert_array_equal(J2, J)
     np.testing.assert_allclose(f, yak54_step(x, 0.05, P), rtol=1e-15, atol=1e-15)
     f3, J3 = Yak54Transition(np.eye(17), P).linearise(x[0], 0.05)
-    np.testing.assert_array_equal(J3, J[0]) and np.testing.assert_array_equal(f3, f[0])
+    np.testing.assert_array_equal(J3, J[0])
+    np.testing.assert_array_equal(f3, f[0])
 
 
 def test_the_transition_is_nonlinear_and_batches_over_runs():

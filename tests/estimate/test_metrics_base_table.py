@@ -45,14 +45,15 @@ def test_best_and_worst_runs_have_the_lowest_and_highest_summed_absolute_error()
     assert best_worst(err) == (2, 4)
 
 
-def test_a_gaussian_state_is_frozen_and_checks_its_shapes():
+def test_a_gaussian_state_is_frozen_read_only_shares_the_given_arrays_and_checks_its_shapes():
     m = np.zeros(9)
     s = GaussianState(m, initial_cov(), 5)
     with pytest.raises(AttributeError):
         s.t_ns = 3
     with pytest.raises(ValueError):
         s.mean[0] = 1.0
-    m[0] = 2.0  # the caller's array stays writeable
+    m[0] = 2.0  # the caller's array stays writeable, and the state is a view of it (no copy)
+    assert s.mean[0] == 2.0 and np.shares_memory(s.mean, m)
     assert s.batch_shape == () and s.n_x == 9
     with pytest.raises(ValueError, match="cov shape"):
         GaussianState(np.zeros((2, 9)), initial_cov(), 0)

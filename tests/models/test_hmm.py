@@ -84,11 +84,16 @@ def test_hmmlearn_published_wikipedia_example():
     frameprob = np.array([[0.9, 0.2], [0.9, 0.2], [0.1, 0.8], [0.9, 0.2], [0.9, 0.2]])
     la, ll = forward_log(safe_log([0.5, 0.5]), safe_log([[0.7, 0.3], [0.3, 0.7]]), np.log(frameprob))
     assert round(ll, 4) == -3.3725
+    # the published lattice is the unscaled alpha, printed to 4 decimals
     ref = [[0.4500, 0.1000], [0.3105, 0.0410], [0.0230, 0.0975], [0.0408, 0.0150], [0.0298, 0.0046]]
-    # the published lattice is scaled per step; compare normalised rows
-    a = np.exp(la - la.max(1, keepdims=True))
-    r = np.asarray(ref) / np.max(ref, 1, keepdims=True)
-    np.testing.assert_allclose(a, r, atol=2e-3 / 0.0046)
+    np.testing.assert_allclose(np.exp(la), ref, rtol=0, atol=5e-5)
+    # and exactly the hand-written unscaled recursion alpha_t = (alpha_{t-1} A) * b_t
+    A = np.array([[0.7, 0.3], [0.3, 0.7]])
+    alpha = [0.5 * frameprob[0]]
+    for b in frameprob[1:]:
+        alpha.append((alpha[-1] @ A) * b)
+    np.testing.assert_allclose(np.exp(la), alpha, rtol=1e-12, atol=0)
+    assert ll == pytest.approx(np.log(alpha[-1].sum()), rel=1e-12)
 
 
 def _train_data(rng, S=3, d=2, n=25, T=60):

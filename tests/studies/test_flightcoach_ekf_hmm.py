@@ -90,7 +90,9 @@ def test_the_maneuver_table_follows_the_acceptance_rule(tiny):
                    reason="issue-14 real-data target missed on faithful data (0/17 better)")
 def test_the_full_study_meets_the_real_data_acceptance(ran, tmp_path):
     r = ran(NAME, tmp_path, {"size": "small"}, _inputs()).figures
-    assert r["flightcoach_ekf_hmm_n_maneuvers"] == "17"
+    # the precondition fails as a failure (pytest.fail raises Failed), not as the expected miss
+    if r.get("flightcoach_ekf_hmm_n_maneuvers") != "17":
+        pytest.fail(f"precondition: 17 labelled test maneuvers, got {r.get('flightcoach_ekf_hmm_n_maneuvers')!r}")
     assert int(r["flightcoach_ekf_hmm_acc_better_maneuvers"]) >= 12
 
 

@@ -60,8 +60,31 @@ def test_the_monte_carlo_tables_hold_every_maneuver_filter_and_component(tiny):
     # the smoother lowers every group's RMSE on every maneuver
     for g in ("pos_m", "vel_mps", "acc_mps2"):
         assert np.all(ms[f"rts_rmse_{g}"] < ms[f"ekf_rmse_{g}"]), g
-    lo, hi = ms[["nees_band_lo", "nees_band_hi"]].iloc[0]
-    assert lo < 9 < hi
+    # the band is the two-sided 95 % band of chi2(9 N)/N for the N runs averaged, scipy's own
+    # quantiles; the NEES mean and the in-band share are recomputed from the per-time table
+    from scipy.stats import chi2
+
+    from pipeline.estimate.models import STATE_COLUMNS
+
+    for r in ms.itertuples():
+        n = int(r.n_runs)
+        lo, hi = chi2.ppf(0.025, 9 * n) / n, chi2.ppf(0.975, 9 * n) / n
+        assert (r.nees_band_lo, r.nees_band_hi) == pytest.approx((lo, hi), rel=1e-12), r.maneuver
+        got = {}
+        for f in ("ekf", "rts"):
+            g = mt[(mt["maneuver"] == r.maneuver) & (mt["filter"] == f)]
+            # one run-averaged NEES per step, repeated on the step's nine component rows
+            assert (g.groupby("t_s")["nees_avg"].nunique(dropna=False) == 1).all(), (r.maneuver, f)
+            step = g[g["component"] == STATE_COLUMNS[0]].sort_values("t_s")["nees_avg"].to_numpy()
+            assert len(step) == r.n_steps and len(g) == 9 * r.n_steps, (r.maneuver, f)
+            got[f] = float(np.mean(step)), 100.0 * float(np.mean((step >= lo) & (step <= hi)))
+            assert getattr(r, f"{f}_nees_mean") == pytest.approx(got[f][0], rel=1e-12), (r.maneuver, f)
+            assert getattr(r, f"{f}_nees_in_band_pct") == pytest.approx(got[f][1], abs=1e-9), (r.maneuver, f)
+        # the RESULT lines print the EKF's two, to 2 and 1 decimals
+        assert float(tiny.figures[f"seed000_ekf_mc_{r.maneuver}_ekf_nees_mean"]) == pytest.approx(
+            got["ekf"][0], abs=0.005 + 1e-9)
+        assert float(tiny.figures[f"seed000_ekf_mc_{r.maneuver}_ekf_nees_in_band_pct"]) == pytest.approx(
+            got["ekf"][1], abs=0.05 + 1e-9)
 
 
 @pytest.mark.slow

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from . import schema
-from .base import FlightLog, IngestError, Progress
+from .base import FlightLog, IngestError, Progress, losses_text
 from .parquet import write_flightlog
 from .stage import declared
 from .registry import read_log
@@ -147,7 +147,8 @@ def run_ingest(inputs, outputs, config: dict | None, *, flight_id: str, fmt: str
     m = log.meta
     duration = log.duration_s
     if m["status"] != "failed":
+        lost = losses_text(m["diagnostics"] or {}) if m["status"] == "partial" else ""
         print(f"uavpipe ingest: {log_path} -> {paths['meta'].parent} ({m['source_format']}, "
-              f"{duration:.1f} s, {m['status']})", file=sys.stderr)
+              f"{duration:.1f} s, {m['status']}{': ' + lost if lost else ''})", file=sys.stderr)
     return IngestResult(status=m["status"], diagnostics=m["diagnostics"], duration_s=duration,
                         source_format=m.get("source_format"), error=m.get("error"), paths=tuple(written))

@@ -25,10 +25,12 @@ is record-for-record the sequence ``mavutil.mavlink_connection(path).recv_msg()`
 Corrupt input never raises a library exception. A frame that fails to decode is counted in
 ``meta['diagnostics']['records_dropped']`` by reason (``bad_crc``, ``bad_length``,
 ``bad_incompat_flags``, ``bad_payload``, ``bad_frame``, ``bad_magic``, ``bad_timestamp``,
-``truncated``, ``unknown_type``) and the reader resynchronises on the next position where a
-plausible framing timestamp is followed by a frame that decodes with a valid CRC. Every byte
-that is not part of a kept record is counted in ``bytes_skipped``, so
-``meta['mavlink']['bytes_decoded'] + bytes_skipped`` is the file size.
+``truncated``, ``unknown_type``; ``damaged`` where garbage stands in place of a record) and
+the reader resynchronises on the next position where a plausible framing timestamp is followed
+by a frame that decodes with a valid CRC. Every byte that is not part of a kept record is
+counted in ``bytes_skipped``, so ``meta['mavlink']['bytes_decoded'] + bytes_skipped`` is the
+file size, and each damaged span gets a warning with its bytes, the times of the records either
+side and about how many records it held (a span hides how many it really held).
 A file in which no record decodes raises :class:`~pipeline.io.base.IngestError`.
 
 Time
@@ -287,6 +289,34 @@ def _classify(err: str) -> str:
     return "bad_payload"
 
 
+#: damaged spans described one by one in the warnings; the rest are summed in one more line
+MAX_DAMAGE_WARNINGS = 5
+
+
+def _warn_damage(res: "_Scan", all_ts: np.ndarray, t0: int, n_bytes: int, warnings: list[str]) -> None:
+    """One warning per damaged span (the first :data:`MAX_DAMAGE_WARNINGS`): its bytes, the
+    framing times of the records either side (s from the log start) and the records it would
+    hold at the file's mean record length. ``records_dropped`` counts the damaged records by
+    reason; this says where they were."""
+    mean_len = res.bytes_kept / max(len(all_ts), 1)
+
+    def at(k: int) -> str:
+        return f"{(int(all_ts[k]) - t0) * 1e-6:.3f} s" if 0 <= k < len(all_ts) else "none"
+
+    for a, b, k in res.spans[:MAX_DAMAGE_WARNINGS]:
+        if b >= n_bytes:
+            warnings.append(f"tlog undecodable from byte {a} to its end ({b - a} byte(s); last record "
+                            f"before it at t = {at(k - 1)}): cut short or damaged")
+            continue
+        warnings.append(f"tlog damaged at bytes {a}-{b}: {b - a} byte(s) not decoded (records either side at "
+                        f"t = {at(k - 1)} and {at(k)}; about {max(1, round((b - a) / max(mean_len, 1.0)))} "
+                        f"record(s) at this log's mean record length); decoding resumed at byte {b}")
+    if len(res.spans) > MAX_DAMAGE_WARNINGS:
+        rest = res.spans[MAX_DAMAGE_WARNINGS:]
+        warnings.append(f"tlog damaged in {len(rest)} more span(s) ({sum(b - a for a, b, _ in rest)} byte(s) "
+                        f"in all, the last at byte {rest[-1][0]})")
+
+
 class _Scan:
     """Result of walking the record framing: per-type rows and byte/record accounting."""
 
@@ -305,6 +335,9 @@ class _Scan:
         self.params: list[tuple[int, int, str, float]] = []
         self.protocols: set[int] = set()
         self.mode_names: list[str] = []
+        # damaged spans the resynchronisation stepped over: (first byte, resume byte, number of
+        # records decoded before it), merged when one follows another
+        self.spans: list[tuple[int, int, int]] = []
 
 
 def _scan(data: bytes, progress: Progress | None) -> _Scan:
@@ -358,6 +391,7 @@ def _scan(data: bytes, progress: Progress | None) -> _Scan:
         if n - pos < 8 + 8:  # shorter than the smallest record (timestamp + empty v1 frame)
             res.dropped["truncated"] += 1
             res.bytes_skipped += n - pos
+            res.spans.append((pos, n, len(res.all_ts)))
             break
         ts = int.from_bytes(data[pos:pos + 8], "big")
         magic = data[pos + 8]
@@ -387,10 +421,18 @@ def _scan(data: bytes, progress: Progress | None) -> _Scan:
                     continue
             if reason and _plausible(ts):  # it was framed like a record: count it
                 res.dropped[reason] += 1
+            else:  # garbage in place of a record: at least one record lost
+                res.dropped["damaged"] += 1
         elif _plausible(ts):  # a record's time, then no start byte: a damaged record
             res.dropped["bad_magic"] += 1
+        else:
+            res.dropped["damaged"] += 1
         nxt = resync(pos + 1)
         res.bytes_skipped += nxt - pos
+        if res.spans and res.spans[-1][1] == pos:
+            res.spans[-1] = (res.spans[-1][0], nxt, res.spans[-1][2])
+        else:
+            res.spans.append((pos, nxt, len(res.all_ts)))
         pos = nxt
     if progress is not None:
         progress(n, n)
@@ -467,7 +509,8 @@ class TlogReader(LogReader):
 
     name = "tlog"
     source_format = "mavlink_tlog"
-    version = "4"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: (0, 0, 0) mag is missing
+    version = "5"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: (0, 0, 0) mag is missing;
+    # 5: damaged spans named in warnings, garbage in place of a record counted (damaged)
     priority = 15
 
     @classmethod
@@ -762,6 +805,7 @@ def _build(res: _Scan) -> FlightLog:
     diag["record_counts"] = dict(sorted(res.counts.items()))
     diag["records_dropped"] = dict(sorted((k, v) for k, v in res.dropped.items() if v))
     diag["bytes_skipped"] = int(res.bytes_skipped)
+    _warn_damage(res, all_ts, t0, n_bytes=res.bytes_kept + res.bytes_skipped, warnings=warnings)
     diag["records_ignored"] = dict(sorted(ignored.items()))
     diag["messages"] = [
         {"t_ns": int((ts - t0) * 1000), "severity": sev, "text": text}

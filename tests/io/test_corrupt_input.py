@@ -23,6 +23,7 @@ from helpers_ulog import ULogWriter, add_sensor_combined
 from pipeline.io import registry
 from pipeline.io.base import IngestError, losses_text
 from pipeline.io.dataflash.streams import TIME_OUTLIER_US, time_outliers
+from pipeline.io.tlog import write_tlog
 from pipeline.simulate.demo import write_demo_flight
 
 DEMO_S = 60.0  # the demo flight's length (s); its log starts 2 s after boot
@@ -117,6 +118,94 @@ def test_a_csv_row_stamped_centuries_away_is_dropped_by_the_common_ingest_path(t
     assert any("absurd time stamp" in w and "gps 1" in w for w in d["warnings"])
     assert log.span_ns() == (0, 29 * 100_000_000)  # 10 Hz rows: the flight is 2.9 s
     assert len(log["gps"]) == 28
+
+
+# --- DataFlash and tlog: a block of random bytes inside the file -----------------------------
+
+def _overwrite(path, at, n, seed=7):
+    """``path`` with ``n`` random bytes written over it from byte ``at``; returns the bytes."""
+    data = bytearray(path.read_bytes())
+    data[at:at + n] = np.random.default_rng(seed).integers(0, 256, n, dtype=np.uint8).tobytes()
+    path.write_bytes(bytes(data))
+    return data
+
+
+def test_a_dataflash_log_with_a_damaged_block_counts_the_span_and_says_where_and_how_much(tmp_path):
+    clean = tmp_path / "clean.bin"
+    write_demo_flight(clean, seed=0, duration_s=DEMO_S)
+    size = clean.stat().st_size
+    hit = tmp_path / "hit.bin"
+    hit.write_bytes(clean.read_bytes())
+    _overwrite(hit, size // 2, 1024)
+    a, b = registry.read_log(clean), registry.read_log(hit)
+    diag = b.meta["diagnostics"]
+    assert a.meta["status"] == "ok" and not a.meta["diagnostics"]["warnings"]
+    assert b.meta["status"] == "partial" and diag["records_dropped"]["damaged"] == 1
+    assert "damaged" in losses_text(diag)
+    (w,) = [w for w in diag["warnings"] if w.startswith("DataFlash damaged at bytes")]
+    first, resume = map(int, w.split()[4].rstrip(":").split("-"))
+    # the span starts and ends within one record (FMT Length: a byte) of the overwritten block:
+    # a record whose header survived keeps its place in the chain (DataFlash has no checksum)
+    at = size // 2
+    assert abs(first - at) < 255 and abs(resume - (at + 1024)) < 255
+    assert diag["bytes_skipped"] == resume - first
+    # the estimate in the warning is the records really lost, to within a factor of two
+    lost = sum(a.n_rows().values()) - sum(b.n_rows().values())
+    est = int(w.split("about ")[1].split()[0])
+    assert lost > 0 and lost / 2 <= est <= 2 * lost
+
+
+def _attitude_tlog(path, n=400):
+    """A tlog of one vehicle: a heartbeat, then ``n`` ATTITUDE records at 10 Hz."""
+    from pymavlink.dialects.v20 import ardupilotmega as v2
+
+    m = v2.MAVLink(None)
+    t0 = 1_700_000_000_000_000
+    recs = [(t0, m.heartbeat_encode(2, 3, v2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, 4))]
+    recs += [(t0 + 100_000 * (k + 1), m.attitude_encode(100 * (k + 1), 0.01 * k, 0.0, 0.1, 0, 0, 0))
+             for k in range(n)]
+    return write_tlog(path, recs)
+
+
+def test_a_tlog_with_a_damaged_block_says_where_and_about_how_many_records_it_held(tmp_path):
+    clean = _attitude_tlog(tmp_path / "clean.tlog")
+    size = clean.stat().st_size
+    hit = tmp_path / "hit.tlog"
+    hit.write_bytes(clean.read_bytes())
+    _overwrite(hit, size // 2, 512)
+    a, b = registry.read_log(clean), registry.read_log(hit)
+    assert a.meta["status"] == "ok" and not any("damaged" in w for w in a.meta["diagnostics"]["warnings"])
+    diag = b.meta["diagnostics"]
+    assert b.meta["status"] == "partial" and sum(diag["records_dropped"].values()) >= 1
+    (w,) = [w for w in diag["warnings"] if w.startswith("tlog damaged at bytes")]
+    first, resume = map(int, w.split()[4].rstrip(":").split("-"))
+    assert first <= size // 2 and resume >= size // 2 + 512 and diag["bytes_skipped"] == resume - first
+    lost = len(a["attitude"]) - len(b["attitude"])
+    est = int(w.split("about ")[1].split()[0])
+    assert lost > 0 and lost / 2 <= est <= 2 * lost
+    # the records either side are named by their time from the log start (10 Hz records)
+    t_before, t_after = (float(x) for x in w.split("t = ")[1].split(";")[0].replace(" s", "").split(" and "))
+    assert 0 < t_before < t_after and t_after - t_before == pytest.approx(0.1 * (lost + 1), abs=1e-6)
+
+
+def test_a_tlog_cut_inside_a_record_says_so_in_a_warning(tmp_path):
+    p = _attitude_tlog(tmp_path / "cut.tlog")
+    p.write_bytes(p.read_bytes()[:-20])
+    diag = registry.read_log(p).meta["diagnostics"]
+    assert diag["records_dropped"] == {"truncated": 1}
+    assert any(w.startswith("tlog undecodable from byte") and "cut short" in w for w in diag["warnings"])
+
+
+def test_the_ingest_line_of_a_partial_log_says_what_was_lost(tmp_path, capsys):
+    from pipeline.io.ingest import outputs_for, run_ingest
+
+    p = tmp_path / "cut.bin"
+    write_demo_flight(p, seed=0, duration_s=DEMO_S)
+    p.write_bytes(p.read_bytes()[:-5])
+    res = run_ingest({"log": p}, outputs_for(tmp_path / "out"), None, flight_id="cut")
+    line = [x for x in capsys.readouterr().err.splitlines() if " -> " in x][0]
+    assert res.status == "partial" and line.endswith("partial: " + losses_text(res.diagnostics) + ")")
+    assert "truncated" in line
 
 
 # --- ULog: the definitions scan runs into the end of the file ------------------------------

@@ -19,15 +19,63 @@ def test_the_tiny_geolocation_study_returns_its_tables_rows_and_panels():
     summ = tables["geo_summary"]
     assert summ["case"].tolist() == ["base", "maneuvering", "mobile", "particles_10", "particles_80",
                                      "observers_1", "observers_2"]
-    assert np.all(np.isfinite(summ["eps_m"])) and np.all(summ["eps_m"] >= 0)
+    assert np.all(np.isfinite(summ["eps_m"])) and np.all(np.isfinite(summ["eta_pct"]))
     names = [r[0] for r in rows]
     for n in ("geo_eta_pct_base", "geo_eta_pct_maneuvering", "geo_eta_base_met", "geo_obs_1_to_2_met",
               "geo_particles_10_vs_80_met", "geo_bound_pct", "geo_sigma_px", "geo_mobile_dist_60_80_pct"):
         assert n in names
     assert all(isinstance(d, str) and d for _, _, d in rows)
-    assert all(v in (0, 1) for n, v, _ in rows if n.endswith("_met"))
     meta = {k: json.loads(v) for k, v in zip(tables["geo_config"]["key"], tables["geo_config"]["value"])}
     assert meta["focal_px"] == 800.0 and meta["size"] == "tiny" and np.isclose(meta["threshold"], 1 / 3)
+
+    # the RESULT rows recomputed from the tables. At tiny size every case is one run, so the series
+    # (per step, mean over runs) is that run's own and the summary's pooled means are the series'
+    # means after the first second (digest D11)
+    rv = dict((n, v) for n, v, _ in rows)
+    assert len(rv) == len(rows) and set(summ["n_runs"]) == {1}
+    ser = tables["geo_series"]
+    assert list(dict.fromkeys(ser["case"])) == summ["case"].tolist()
+    rec = {}
+    for case, g in ser.groupby("case", sort=False):
+        g = g[g["t_s"] >= 1.0]
+        d = g["mean_dist_m"].to_numpy()
+        d = d[np.isfinite(d)]
+        rec[case] = {"eps_m": float(np.nanmean(g["eps_m"].to_numpy())), "eta_pct": float(np.nanmean(g["eta_pct"].to_numpy())),
+                     "dist_60_80_pct": 100.0 * float(np.mean((d >= 60.0) & (d <= 80.0)))}
+    by = summ.set_index("case")
+    for case, r in rec.items():
+        assert by.loc[case, "eps_m"] == pytest.approx(r["eps_m"], rel=1e-12), case
+        assert by.loc[case, "eta_pct"] == pytest.approx(r["eta_pct"], rel=1e-12), case
+        assert by.loc[case, "dist_60_80_pct"] == pytest.approx(r["dist_60_80_pct"], rel=1e-12), case
+    for name in ("base", "maneuvering", "mobile"):
+        s = by.loc[name]
+        assert rv[f"geo_eta_pct_{name}"] == pytest.approx(rec[name]["eta_pct"], abs=0.005 + 1e-9), name
+        assert rv[f"geo_eps_m_{name}"] == pytest.approx(rec[name]["eps_m"], abs=0.005 + 1e-9), name
+        assert rv[f"geo_lost_runs_{name}"] == f"{s['n_lost']}/1", name
+        # one run: its own mean is the median over runs; lost, no run is left for the not-lost mean
+        assert rv[f"geo_eta_pct_{name}_run_median"] == pytest.approx(rec[name]["eta_pct"], abs=0.005 + 1e-9), name
+        if s["n_lost"]:
+            assert np.isnan(rv[f"geo_eta_pct_{name}_not_lost"]), name
+        else:
+            assert rv[f"geo_eta_pct_{name}_not_lost"] == pytest.approx(rec[name]["eta_pct"], abs=0.005 + 1e-9), name
+    for kind, k in (("particles", 10), ("particles", 80), ("observers", 1), ("observers", 2)):
+        case = f"{kind}_{k}"
+        assert rv[f"geo_eps_m_{case}"] == pytest.approx(rec[case]["eps_m"], abs=0.005 + 1e-9), case
+        assert rv[f"geo_lost_runs_{case}"] == f"{by.loc[case, 'n_lost']}/1", case
+        if by.loc[case, "n_lost"]:
+            assert np.isnan(rv[f"geo_eps_m_{case}_not_lost"]), case
+        else:
+            assert rv[f"geo_eps_m_{case}_not_lost"] == pytest.approx(rec[case]["eps_m"], abs=0.005 + 1e-9), case
+    assert rv["geo_mobile_dist_60_80_pct"] == pytest.approx(rec["mobile"]["dist_60_80_pct"], abs=0.05 + 1e-9)
+    # σ_px = f tan σ_ψ and the bound 100 sin σ_ψ, from the written settings
+    assert rv["geo_sigma_px"] == pytest.approx(meta["focal_px"] * np.tan(meta["sigma_psi_rad"]), abs=0.005 + 1e-9)
+    assert rv["geo_bound_pct"] == pytest.approx(100.0 * np.sin(meta["sigma_psi_rad"]), abs=0.05 + 1e-9)
+    # each acceptance flag is its formula (issue 17) on the summary's eps and eta
+    eps, eta = by["eps_m"], by["eta_pct"]
+    assert {n: v for n, v in rv.items() if n.endswith("_met")} == {
+        "geo_eta_base_met": int(eta["base"] <= 15.0), "geo_eta_maneuvering_met": int(eta["maneuvering"] <= 15.0),
+        "geo_obs_1_to_2_met": int(eps["observers_2"] <= eps["observers_1"] / 2),
+        "geo_particles_10_vs_80_met": int(eps["particles_10"] >= 1.5 * eps["particles_80"])}
     panels = geolocation_panels(tables)
     assert len(panels) == 5 and all(isinstance(f, dict) and "data" in f for _, f in panels)
 

@@ -118,9 +118,10 @@ def test_the_real_leave_one_out_writes_a_row_per_fold_and_the_result_line(tmp_pa
 def test_a_maneuver_with_one_demo_is_counted_as_unscored_not_dropped_silently(tmp_path):
     # maneuver "c" is flown in one flight only: it has no leave-one-out, and the shares' denominator
     # leaves it out, so a RESULT line says so
-    res, _ = _real_loo_of_three_flights(tmp_path, lambda k: [(0, 5, "a"), (5, 10, "b" if k else "c")])
+    res, out = _real_loo_of_three_flights(tmp_path, lambda k: [(0, 5, "a"), (5, 10, "b" if k else "c")])
     assert res.results["align_real_loo_maneuvers_unscored"] == "1"
     assert res.results["align_real_loo_maneuvers"] == "2"
+    _check_real_results(out)       # "b" has two demos: its folds are single_other, left out of 3plus
 
 
 def test_a_set_whose_flights_are_absent_is_skipped_with_a_notice(tmp_path):

@@ -19,6 +19,8 @@ record-at-a-time loop:
    a body), which reproduces pymavlink's byte-wise resynchronisation
    (``DFReader_binary._parse_next``) exactly: bytes between chain records are skipped and
    counted, and a record that runs past the end of the file ends the chain (``truncated``).
+   Each break is a damaged span: counted in ``records_dropped['damaged']`` and named in a
+   warning (:func:`_note_damage`), which pymavlink does not do.
 3. **Per-type pass.** For each type the bodies are gathered into an ``(n, L-3)`` byte matrix
    and viewed through a NumPy structured dtype built from the FMT record (format characters
    ``a b B g h H i I f d n N Z c C e E L M q Q`` per the DataFlash specification). Scaled
@@ -384,6 +386,54 @@ def _chain(cand: np.ndarray, ends: np.ndarray, n_bytes: int) -> tuple[np.ndarray
     return on, truncated
 
 
+#: damaged spans described one by one in the warnings; the rest are summed in one more line
+MAX_DAMAGE_WARNINGS = 5
+
+
+def _note_damage(diag: dict, pos: np.ndarray, lens: np.ndarray, ptype: np.ndarray,
+                 formats: dict[int, MsgFormat], n_bytes: int, truncated: bool) -> None:
+    """Count and describe the bytes the record chain steps over (``diag`` is edited).
+
+    A healthy log is one unbroken chain (every real log of ``../shared/realdata`` is, up to a
+    cut end). Each gap inside it is a damaged span: the records there cannot be told apart,
+    so the span is counted once in ``records_dropped['damaged']`` (at least one record lost,
+    as the ULog reader counts its ``corrupt`` spans) and named in a warning with its byte
+    range, the record types either side and the records it would hold at the log's mean
+    record length. Without this the loss showed only in ``bytes_skipped`` (pymavlink skips
+    such bytes silently too).
+    """
+    if not len(pos):
+        return
+    ends = pos + lens
+    gap = np.flatnonzero(ends[:-1] != pos[1:])
+    spans = [(0, int(pos[0]), -1, 0)] if pos[0] > 0 else []
+    spans += [(int(ends[i]), int(pos[i + 1]), int(i), int(i) + 1) for i in gap]
+
+    def name(k: int) -> str:
+        f = formats.get(int(ptype[k]))
+        return f.name if f is not None else f"type {int(ptype[k])}"
+
+    mean_len = float(lens.mean())
+    for a, b, before, after in spans[:MAX_DAMAGE_WARNINGS]:
+        where = (f"records either side: {name(before)}, {name(after)}" if before >= 0
+                 else f"before the first record, a {name(after)}")
+        diag["warnings"].append(f"DataFlash damaged at bytes {a}-{b}: {b - a} byte(s) not decoded ({where}; "
+                                f"about {max(1, round((b - a) / mean_len))} record(s) at this log's mean "
+                                f"record length); decoding resumed at byte {b}")
+    if len(spans) > MAX_DAMAGE_WARNINGS:
+        rest = spans[MAX_DAMAGE_WARNINGS:]
+        diag["warnings"].append(f"DataFlash damaged in {len(rest)} more span(s) ({sum(b - a for a, b, *_ in rest)} "
+                                f"byte(s) in all, the last at byte {rest[-1][0]})")
+    if spans:
+        diag["records_dropped"]["damaged"] = len(spans)
+    tail = n_bytes - int(ends[-1])
+    if truncated and tail:
+        diag["warnings"].append(f"DataFlash log cut short: its last {tail} byte(s) are an incomplete record "
+                                f"(the file ends at byte {n_bytes})")
+    elif tail:
+        diag["warnings"].append(f"DataFlash log ends in {tail} byte(s) that hold no record")
+
+
 _HEADER_CHUNK = 1 << 23  # 8 MiB: the comparison temporary stays small and is reused
 
 
@@ -508,6 +558,7 @@ def decode(src, *, apply_mult: bool = False, types: set[str] | None = None,
     if truncated:
         diag["records_dropped"]["truncated"] = 1
     diag["bytes_skipped"] = n - used
+    _note_damage(diag, pos, lengths[ptype], ptype, formats_by_id, n, truncated)
     if progress:
         progress(n // 4, n)
     # A3 95 headers of types without a FMT record inside skipped bytes: records whose format

@@ -71,7 +71,7 @@ from .decode import Columns, DecodeResult
 
 SOURCE_FORMAT = "ardupilot_dataflash"
 READER_NAME = "dataflash"
-READER_VERSION = "5"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: bad_timestamp drops; 5: NTUN home height from the median of the fixes
+READER_VERSION = "6"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3); 4: bad_timestamp drops; 5: NTUN home height from the median of the fixes; 6: damaged spans counted and named
 
 GPS_EPOCH_UNIX_S = 315964800
 #: pymavlink's fixed GPS − UTC (DFReader._gpsTimeToTime), true since 2017-01-01; the reader

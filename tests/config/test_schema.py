@@ -446,3 +446,18 @@ def test_an_unquoted_iso_time_that_yaml_reads_as_a_timestamp_is_taken_as_its_tex
     assert out == "2026-01-02T12:00:00+00:00"
     from pipeline.simulate.datasets import DatasetSettings
     assert DatasetSettings.from_config(validate_config(cfg)["simulate"]).start_time_utc_ns == 1767355200 * 10**9
+
+
+def test_the_schemas_stream_names_are_the_canonical_streams_and_a_bad_ros_stream_fails_at_start_up():
+    from pipeline.io.schema import STREAM_NAMES
+
+    raw = yaml.safe_load(C.SCHEMA_PATH.read_text())
+    assert raw["$defs"]["stream_name"]["enum"] == list(STREAM_NAMES)
+    for bad, where in (({"/imu/data": {"stream": "imuu"}}, "ingest.ros.topics['/imu/data'].stream: 'imuu'"),
+                       ({"/imu/data": "imuu"}, "ingest.ros.topics['/imu/data']: 'imuu'")):
+        with pytest.raises(ConfigError, match=re.escape(where)):
+            validate_config({"ingest": {"ros": {"topics": bad}}})
+    ok = {"/a": "ignore", "/b": None, "/c": False, "/d": "gps", "/e": {"stream": "imu", "instance": 1}}
+    assert validate_config({"ingest": {"ros": {"topics": ok}}})["ingest"]["ros"]["topics"] == ok
+    with pytest.raises(ConfigError, match=re.escape("custom['/r'].stream: 'radr'")):
+        validate_config({"ingest": {"ros": {"custom": {"/r": {"stream": "radr", "fields": {"range_m": "r"}}}}}})

@@ -535,7 +535,7 @@ def test_topic_map_overrides(msgs, tmp_path):
 
 @pytest.mark.parametrize("cfg, words", [
     ({"ros": {"topics": {"/imu/data": "gps"}}}, "cannot go to stream 'gps'"),
-    ({"ros": {"topics": {"/imu/data": "nonsense"}}}, "unknown stream"),
+    ({"ros": {"topics": {"/imu/data": "nonsense"}}}, "'nonsense' is not null or False or 'ignore' or one of imu, gps"),
     ({"ros": {"custom": {"/radar": {"stream": "radar", "fields": {"range": "range"}}}}}, "not column"),
     ({"ros": {"custom": {"/radar": {"type": "x/msg/Y", "stream": "radar", "fields": {"range_m": "range"}}}}},
      "expects type"),

@@ -363,6 +363,10 @@ class LogReader(abc.ABC):
         The reader decodes the whole file from memory: :func:`~pipeline.io.registry.read_log`
         reads the file once, hashes those bytes and passes them as ``read(..., data=buffer)``
         (a read-only ``uint8`` NumPy array), so the file is read once per ingest.
+    magic : bytes
+        The fixed bytes every file of the format starts with (``b""``: none). A file shorter
+        than them that is their beginning is reported as cut inside its header, not as an
+        unknown format.
     """
 
     name: str = ""
@@ -370,6 +374,7 @@ class LogReader(abc.ABC):
     version: str = "1"
     priority: int = 50
     reads_bytes: bool = False
+    magic: bytes = b""
 
     @classmethod
     @abc.abstractmethod

@@ -84,6 +84,7 @@ class McapReader(LogReader):
     source_format = "mcap"
     version = "2"  # 2: REP 117 +/-inf ranges read as the limit (valid False)
     priority = 11
+    magic = MCAP_MAGIC
 
     @classmethod
     def sniff(cls, path: Path, head: bytes) -> str | None:

@@ -97,6 +97,10 @@ def detect(path: str | os.PathLike) -> tuple[type[LogReader], str]:
         raise IngestError(p, _folder_problem(p))
     if not p.is_file():   # a device, a FIFO, a socket: nothing was read from it
         raise IngestError(p, "not a regular file (a device, pipe or socket); give a log file")
+    cut = [r for r in readers() if r.magic and len(head) < len(r.magic) and r.magic.startswith(head)]
+    if cut:  # a log cut inside its fixed header (a 10-byte '#ROSBAG V2' is no unknown format)
+        raise IngestError(p, f"truncated: its {len(head)} byte(s) are the start of a {cut[0].name} "
+                             f"file's {len(cut[0].magic)}-byte header, and nothing follows")
     raise IngestError(p, f"unrecognised log format (file starting {head[:8].hex(' ')}); known formats: "
                       f"{', '.join(r.name for r in readers())}")
 

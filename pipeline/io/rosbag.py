@@ -211,6 +211,7 @@ class Ros1BagReader(LogReader):
     source_format = "ros1bag"
     version = "2"  # 2: REP 117 +/-inf ranges read as the limit (valid False)
     priority = 10
+    magic = ROS1_MAGIC
 
     @classmethod
     def sniff(cls, path: Path, head: bytes) -> str | None:

@@ -160,6 +160,7 @@ class ULogReader(LogReader):
     source_format = "px4_ulog"
     version = "3"  # 2: the schema 1.1 streams; 3: estimator_status (schema 1.3)
     priority = 10
+    magic = MAGIC
 
     @classmethod
     def sniff(cls, path: Path, head: bytes) -> str | None:

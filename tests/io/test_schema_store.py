@@ -158,6 +158,15 @@ def test_registry_errors_name_the_file(tmp_path):
     write_table(schema.empty("state"), out, schema.columns("state"), name="state")
     with pytest.raises(IngestError, match=r"state\.parquet: a uavpipe 'state' table \(a pipeline output\), not a flight log"):
         read_log(out)
+    # a file cut inside a format's fixed header is said to be cut, not of an unknown format
+    from pipeline.io.rosbag import ROS1_MAGIC
+    from pipeline.io.ulog import MAGIC as ULOG_MAGIC
+
+    for name, head, fmt in (("cut.bag", ROS1_MAGIC[:10], "rosbag1"), ("cut.ulg", ULOG_MAGIC[:5], "ulog")):
+        (tmp_path / name).write_bytes(head)
+        with pytest.raises(IngestError, match=rf"{name}: truncated: its {len(head)} byte\(s\) are the start of a "
+                                              rf"{fmt} file's {len(ROS1_MAGIC if fmt == 'rosbag1' else ULOG_MAGIC)}-byte"):
+            read_log(tmp_path / name)
     # a device reads as nothing: said as such, not "unrecognised log format (file starting )"
     with pytest.raises(IngestError, match=r"/dev/null: not a regular file"):
         detect("/dev/null")

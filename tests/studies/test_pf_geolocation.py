@@ -40,7 +40,8 @@ def test_the_tiny_geolocation_study_returns_its_tables_rows_and_panels():
         g = g[g["t_s"] >= 1.0]
         d = g["mean_dist_m"].to_numpy()
         d = d[np.isfinite(d)]
-        rec[case] = {"eps_m": float(np.nanmean(g["eps_m"].to_numpy())), "eta_pct": float(np.nanmean(g["eta_pct"].to_numpy())),
+        rec[case] = {"eps_m": float(np.nanmean(g["eps_m"].to_numpy())),
+                     "eta_pct": float(np.nanmean(g["eta_pct"].to_numpy())),
                      "dist_60_80_pct": 100.0 * float(np.mean((d >= 60.0) & (d <= 80.0)))}
     by = summ.set_index("case")
     for case, r in rec.items():

@@ -40,7 +40,9 @@ def test_noise_free_truth_at_50hz():
     acc = differentiate(pos, dt, 2, d)
     jerk = differentiate(pos, dt, 3, d)
     vel = differentiate(pos, dt, 1, d)
-    for est, k, tol in ((vel, 1, 0.05), (acc, 2, 0.05), (jerk, 3, 0.15)):
+    # measured worst axis: 5.4e-5, 8.2e-3, 2.3e-2 (the smoothing's bias grows with the order);
+    # a half-sample time shift of the velocity gives 4.7e-3, 25x the velocity bound
+    for est, k, tol in ((vel, 1, 2e-4), (acc, 2, 1.2e-2), (jerk, 3, 3e-2)):
         ref = truth(t, k)
         ratio = _rms(est - ref) / _rms(ref)
         assert np.all(ratio <= tol), (k, ratio)

@@ -75,7 +75,31 @@ def test_confidence_formula():
 
 def test_unknown_when_not_confident(three_models):
     params = [HMMParams.from_hmmlearn(m) for m in three_models]
-    # a point equidistant from models 0 and 2's first states: V_c close to 0 -> unknown
+    # points on the line between models 0 and 2's first states: V_c = log10 exp(LL_other - LL_c)
+    # from hmmlearn's scores, labelled exactly where V_c < -1 (the thesis's threshold)
+    a, c = three_models[0], three_models[2]
+
+    def point(s):
+        return s * np.array([-3.0, -3.0])
+
+    def ll_v(s):
+        ll = np.array([m.score(point(s)[None]) for m in (a, c)])
+        return ll, (ll.min() - ll.max()) / np.log(10)
+
+    # V_c rises from below -1 (at model 0's state) to 0 at the midpoint: bisect for V_c = -1
+    lo, hi = 0.0, 0.5
+    assert ll_v(lo)[1] < -1 < ll_v(hi)[1]
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ll_v(mid)[1] < -1 else (lo, mid)
+    for s, confident in ((lo - 1e-3, True), (hi + 1e-3, False)):
+        ll, v = ll_v(s)
+        assert abs(v + 1) < 0.05 and (v < -1) == confident             # just below / just above -1
+        res = OnlineClassifier([params[0], params[2]], mode="cumulative").start(1).step(point(s)[None])
+        best = int(np.argmax(ll))
+        assert res.best[0] == best and res.V[0, best] == pytest.approx(v, abs=1e-9)
+        assert res.label[0] == (best if confident else UNKNOWN)
+    # two equal models: V_c = log10(1) = 0 -> unknown
     clf = OnlineClassifier([params[0], params[0]], mode="cumulative").start(1)
     res = clf.step(np.array([[0.0, 0.0]]))
     assert res.V[0, res.best[0]] == pytest.approx(0.0, abs=1e-12)

@@ -666,3 +666,29 @@ def test_a_click_on_a_column_head_of_the_index_sorts_the_flights_by_it(report_tr
         assert order() == ["demo-quad", "bad"]
     finally:
         page.close()
+
+
+def test_the_index_sort_orders_numbers_with_units_by_value_and_puts_dashes_and_text_last(browser, tmp_path):
+    # the index's sorting script on a table with more rows than the report tree has flights
+    from pipeline.report.index import SORT_JS
+
+    rows = [("a", "60.0 s", "1,200 m"), ("b", "–", "x"), ("c", "9.5 s", "35 m"), ("d", "120 s", "–"),
+            ("e", "-3 s", "7 m")]
+    body = "".join(f"<tr><td>{n}</td><td>{d}</td><td>{h}</td></tr>" for n, d, h in rows)
+    html = tmp_path / "sort.html"
+    html.write_text(f"<html><body><table id='flights'><thead><tr><th>flight</th><th>duration</th><th>height</th>"
+                    f"</tr></thead><tbody>{body}</tbody></table><script>{SORT_JS}</script></body></html>")
+    page = browser.new_page()
+    try:
+        page.goto(html.as_uri())
+
+        def order(col):
+            page.click(f"#flights thead th:nth-child({col})")
+            return "".join(page.eval_on_selector_all("#flights tbody tr", "rs => rs.map(r => r.cells[0].innerText)"))
+
+        assert order(2) == "ecadb"           # -3 < 9.5 < 60 < 120 (a string sort gives 120 < 60), dash last
+        assert order(2) == "daceb"           # reversed numbers, the dash still last
+        by_height = order(3)                 # 7 < 35 < 1,200 m (thousands separator read), then dash and text
+        assert by_height[:3] == "eca" and set(by_height[3:]) == {"b", "d"}
+    finally:
+        page.close()

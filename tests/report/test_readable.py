@@ -61,7 +61,15 @@ def test_a_component_has_the_same_colour_in_every_quantity_and_its_setpoint():
     assert plots.colour("vel_n_mps") == plots.colour("pos_n_m")
     assert plots.colour("roll") == plots.colour("roll_rad") == plots.colour("p_radps")
     assert len({plots.colour(f"acc_{a}_mps2") for a in "xyz"}) == 3
-    assert plots.colour("an unknown series") == plots.colour("an unknown series")
+    # a name with no palette token: a pick from the cycle by the name itself (crc32, the same in
+    # every process; Python's hash() is salted per process), never by trace order
+    import subprocess
+    import sys
+
+    other = subprocess.run([sys.executable, "-c", "from pipeline.report import plots; print(plots.colour('an unknown series'))"],
+                           capture_output=True, text=True, check=True).stdout.strip()
+    assert plots.colour("an unknown series") == other
+    assert len({plots.colour(f"unknown series {i}") for i in range(20)}) >= 5
     assert len({plots.colour(f"servo_{i}_us") for i in range(1, 11)}) == 10
     assert plots.colour("rc_2_us") == plots.colour("servo_2_us")
 

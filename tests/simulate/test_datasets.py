@@ -80,9 +80,22 @@ def test_summary_table(generated):
     assert {"n", "e", "d", "fwd", "right", "down", "norm"} == set(s["axis"])
     row = s[(s.maneuver == "M1") & (s.quantity == "jerk") & (s.axis == "norm")].iloc[0]
     row4 = s[(s.maneuver == "M4") & (s.quantity == "jerk") & (s.axis == "norm")].iloc[0]
-    assert row["rms"] > row4["rms"] and row["max"] >= row["rms"] >= 0 and row["n_runs"] == 10
+    assert row["rms"] > row4["rms"] and row["n_runs"] == 10
     acc = s[(s.quantity == "acc") & (s.axis == "norm")]
     assert acc["max"].max() <= 10.0
+    # the summary runs over the 100 Hz truth; the written 5 Hz sets sample the same runs: their
+    # acceleration norm's RMS agrees to 2 % (measured 0.2-0.3 %) and no set value exceeds the
+    # summary's maximum (the 5 Hz jerk misses the 100 Hz jerk's short peaks at the command
+    # steps: M4 0.66 against 2.50 m/s^3 RMS, so only its maximum is compared)
+    for man in ("M1", "M4"):
+        sets = pd.concat([read_table(base / "a" / "sets" / f"{man}_{p}.parquet", SET_COLUMNS) for p in ("train", "test")])
+        for q, cols in (("acc", ["acc_n_mps2", "acc_e_mps2", "acc_d_mps2"]),
+                        ("jerk", ["jerk_n_mps3", "jerk_e_mps3", "jerk_d_mps3"])):
+            norm = np.linalg.norm(sets[cols].to_numpy(), axis=1)
+            r = s[(s.maneuver == man) & (s.quantity == q) & (s.axis == "norm")].iloc[0]
+            if q == "acc":
+                assert np.sqrt(np.mean(norm ** 2)) == pytest.approx(r["rms"], rel=0.02), man
+            assert norm.max() <= r["max"] * (1 + 1e-9), (man, q)
 
 
 def test_same_seed_same_bytes_other_seed_differs(generated):

@@ -289,7 +289,14 @@ def _validator_class():
 def _validate(instance: Any, schema_: Mapping[str, Any], where: str) -> None:
     errors = list(_validator_class()(schema_).iter_errors(instance))
     if errors:
-        rank, _, msg = min((_explain(e, schema_) for e in errors), key=lambda r: r[:2])
+        found = sorted((_explain(e, schema_) for e in errors), key=lambda r: r[:2])
+        msg = found[0][2]
+        # the line stays one line; the other keys in trouble are named, so a file with three
+        # mistakes is not fixed in three runs
+        key = msg.split(": ")[0]
+        others = [k for k in dict.fromkeys(r[2].split(": ")[0] for r in found[1:]) if k != key]
+        if others:
+            msg += f" (also wrong: {', '.join(others[:5])}{' and more' if len(others) > 5 else ''})"
         raise ConfigError(f"{where}{msg}")
 
 

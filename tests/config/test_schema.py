@@ -244,17 +244,19 @@ def test_unknown_keys_are_reported_before_sibling_type_errors_deterministically(
     msgs = {str(_raises(bad)) for _ in range(3)}
     assert msgs == {"preprocess.rate_hx: unknown key (allowed: rate_hz, gap_multiple, clock_jump_s, "
                     "position_source, ned_method, velocity_source, vertical_from_baro, methods, causal, butterworth, "
-                    "derivatives, gps_smoother, bpm, segments, vehicles, flights)"}
+                    "derivatives, gps_smoother, bpm, segments, vehicles, flights) (also wrong: hmm.tol, "
+                    "preprocess.gap_multiple, preprocess.rate_hz)"}
     # no unknown key: the first error in key order
     assert str(_raises({"preprocess": {"rate_hz": "fast", "gap_multiple": "x"}})) == \
-        "preprocess.gap_multiple: 'x' is not a number"
+        "preprocess.gap_multiple: 'x' is not a number (also wrong: preprocess.rate_hz)"
 
 
 def test_a_yaml_nan_or_inf_is_not_a_number_even_where_a_range_is_set(tmp_path):
     # NaN compares false with every bound, so only the type check can stop it before a stage
     p = tmp_path / "cfg.yaml"
     p.write_text("preprocess:\n  rate_hz: .nan\nsimulate:\n  rate_hz: .inf\n")
-    with pytest.raises(ConfigError, match=r": preprocess\.rate_hz: nan is not a finite number$"):
+    with pytest.raises(ConfigError, match=r": preprocess\.rate_hz: nan is not a finite number \(also wrong: "
+                                          r"simulate\.rate_hz\)$"):
         load_config(p)
     assert str(_raises({"simulate": {"rate_hz": float("-inf")}})) == "simulate.rate_hz: -inf is not a finite number"
 
@@ -461,3 +463,14 @@ def test_the_schemas_stream_names_are_the_canonical_streams_and_a_bad_ros_stream
     assert validate_config({"ingest": {"ros": {"topics": ok}}})["ingest"]["ros"]["topics"] == ok
     with pytest.raises(ConfigError, match=re.escape("custom['/r'].stream: 'radr'")):
         validate_config({"ingest": {"ros": {"custom": {"/r": {"stream": "radr", "fields": {"range_m": "r"}}}}}})
+
+
+def test_a_config_with_several_mistakes_names_the_first_and_the_other_keys_on_one_line():
+    with pytest.raises(ConfigError) as err:
+        validate_config({"preprocess": {"rate_hzz": 25, "rate_hz": -5, "gap_multiple": "x"}})
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith("preprocess.rate_hzz: unknown key")
+    assert msg.endswith("(also wrong: preprocess.gap_multiple, preprocess.rate_hz)")
+    with pytest.raises(ConfigError) as one:
+        validate_config({"preprocess": {"rate_hz": -5}})
+    assert "also wrong" not in str(one.value)

@@ -85,11 +85,37 @@ def test_dba_refinement_does_not_increase_the_summed_squared_dtw_cost(rng):
     assert all(b <= a + 1e-12 for a, b in zip(costs, costs[1:]))
 
 
-def test_dba_with_a_window_and_std_scaling_runs_on_demos_of_other_lengths(rng):
+def test_dba_with_a_window_and_std_scaling_on_demos_of_other_lengths_is_dba_of_the_divided_demos(rng):
     _, demos = _warped_copies(rng, M=3)
     demos = [demos[0], demos[1][:120], demos[2] * [1.0, 100.0]]
+    s = np.concatenate(demos).std(axis=0)            # "std": per feature, pooled over all demos
     avg = dba_average(demos, window=10, scale="std")  # widened to |L − T_i| where needed
-    assert avg.shape[1] == 2 and np.isfinite(avg).all()
+    k = medoid_index(demos, window=10, scale="std")
+    assert avg.shape == demos[k].shape and np.isfinite(avg).all()
+    np.testing.assert_array_equal(dba_average(demos, window=10, scale=s), avg)
+    # the scale divides the DTW cost only: the average of the divided demos, multiplied back
+    divided = [d / s for d in demos]
+    np.testing.assert_allclose(dba_average(divided, window=10) * s, avg, rtol=1e-12, atol=1e-12)
+    # and it matters here (the ×100 feature would dominate an unscaled cost; from one start, as
+    # the medoid may move with the scaling)
+    scaled, plain = (dba_average(demos, init=0, window=10, scale=sc) for sc in ("std", None))
+    assert np.abs(scaled - plain).max() > 1e-3
+    # a window at least as long as the longest demo constrains nothing
+    np.testing.assert_array_equal(dba_average(demos, window=150, scale="std"), dba_average(demos, scale="std"))
+    # ... which 10 does (from the same start: the medoid itself moves with the window)
+    free, banded = (dba_average(demos, init=0, window=w, scale="std") for w in (None, 10))
+    assert np.abs(free - banded).max() > 1e-3
+    # one iteration stepped by hand from the first demo: each average sample is the mean of the
+    # demo samples aligned to it, alignments with the band widened to |150 − T_i| (30 for the 120)
+    acc, cnt = np.zeros((150, 2)), np.zeros(150)
+    for d in demos:
+        p = dtw(demos[0], d, step_pattern="symmetric1", local="sqeuclidean", scale=s,
+                window=max(10, abs(150 - len(d)))).path
+        assert np.abs(p[:, 0] - p[:, 1]).max() <= max(10, abs(150 - len(d)))
+        np.add.at(acc, p[:, 0], d[p[:, 1]])
+        np.add.at(cnt, p[:, 0], 1.0)
+    np.testing.assert_allclose(dba_average(demos, init=0, n_iter=1, window=10, scale="std"),
+                               acc / cnt[:, None], rtol=1e-12, atol=1e-14)
 
 
 @pytest.mark.parametrize("demos, kw, match", [

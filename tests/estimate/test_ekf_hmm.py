@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from helpers_maneuvers import synth_bulk
-from pipeline.estimate.base import ConstantAcceleration, GaussianState
+from pipeline.estimate.base import ConstantAcceleration, GaussianState, LinearTransition
 from pipeline.estimate.ekf import ExtendedKalmanFilter, run_filter
 from pipeline.estimate.ekf_hmm import (EkfHmmError, classifier_state, ekf_state_frame, hmm_filter, hmm_step,
                                        prior_increment_track, q2_from_runs, run_ekf_hmm)
@@ -115,9 +115,29 @@ def test_radar_gaps_are_predict_only_steps_of_both_filters(trained):
     ekf, prior, t_ns, z, _ = _radar_runs(data, ("M2",), np.random.default_rng(4))
     z = z.copy()
     z[10:15, 0] = np.nan
-    out = run_ekf_hmm(ekf, prior, t_ns, z, ms, np.eye(9) * 0.1)
-    assert out.ekf.n_predict_only[0] == 5 and out.hmm.n_predict_only[0] == 5
-    assert np.all(np.isfinite(out.hmm.mean))
+    Q2 = np.eye(9) * 0.1
+    out = run_ekf_hmm(ekf, prior, t_ns, z, ms, Q2)
+    assert out.ekf.n_predict_only.tolist() == [5, 0] and out.hmm.n_predict_only.tolist() == [5, 0]
+    assert (out.ekf.dof[0, 10:15] == 0).all() and (out.hmm.dof[0, 10:15] == 0).all()
+    assert out.hmm_axes[0, 10:15].any()          # the gap holds HMM-input predictions, not only CA
+    for k in range(10, 15):
+        dt = (int(t_ns[k]) - int(t_ns[k - 1])) * 1e-9
+        A, Q = ca_transition(dt), white_jerk_q(dt, ekf.transition.q)
+        # baseline EKF: the CA prediction of the posterior before, nothing added by an update
+        m, P = out.ekf.mean[0, k - 1], out.ekf.cov[0, k - 1]
+        np.testing.assert_allclose(out.ekf.mean[0, k], A @ m, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(out.ekf.cov[0, k], A @ P @ A.T + Q, rtol=1e-12, atol=1e-12)
+        # EKF+HMM: F·x + B·u, F P Fᵀ + Q_k as hmm_step assembles them from step k−1's inputs
+        F, Qk, bu = hmm_step(out.hmm_axes[:1, k], A, Q, hmm_transition(dt), hmm_input(dt), Q2,
+                             out.acc_hmm[:1, k - 1], out.jerk_hmm[:1, k - 1])
+        m, P = out.hmm.mean[0, k - 1], out.hmm.cov[0, k - 1]
+        np.testing.assert_allclose(out.hmm.mean[0, k], F[0] @ m + bu[0], rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(out.hmm.cov[0, k], F[0] @ P @ F[0].T + Qk[0], rtol=1e-12, atol=1e-12)
+    # the first step after the gap is an update again: the covariance shrinks below the prediction
+    k, dt = 15, (int(t_ns[15]) - int(t_ns[14])) * 1e-9
+    A = ca_transition(dt)
+    pred = A @ out.ekf.cov[0, 14] @ A.T + white_jerk_q(dt, ekf.transition.q)
+    assert np.trace(out.ekf.cov[0, k]) < 0.5 * np.trace(pred)
 
 
 def test_gated_axes_fall_back_to_ca(trained):
@@ -433,9 +453,29 @@ def _small_hmm_case(R=2, T=6):
     return ekf, prior, t_ns, z, np.eye(9), axes, np.zeros((R, T, 3)), np.zeros((R, T, 3))
 
 
-def test_the_hmm_filter_runs_on_the_small_case_it_is_checked_with():
-    out = hmm_filter(*_small_hmm_case(), store="mean")
-    assert np.all(np.isfinite(out.mean))
+def test_the_hmm_filter_on_every_axis_is_the_framework_filter_of_a_h_q2_and_the_b_input():
+    ekf, prior, t_ns, z, Q2, axes, acc, jerk = _small_hmm_case()
+    out = hmm_filter(ekf, prior, t_ns, z, Q2, axes, acc, jerk, store="filtered")
+    # step 0 is an update of the prior (no predict); every later step predicts with A_H and Q₂
+    # on all three axes: the linear transition (A_H(dt), Q₂) in run_filter, with â = ĵ = 0
+    lin = ExtendedKalmanFilter(LinearTransition(hmm_transition(DT), Q2), ekf.measurement)
+    ref = run_filter(lin, prior, t_ns, z, store="filtered")
+    np.testing.assert_allclose(out.mean, ref.mean, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(out.cov, ref.cov, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(out.dof, ref.dof)
+    # non-zero GMR inputs enter as B [â; ĵ] of the step before (run_filter's bu into step k)
+    rng = np.random.default_rng(7)
+    acc, jerk = rng.standard_normal(acc.shape), rng.standard_normal(jerk.shape)
+    out = hmm_filter(ekf, prior, t_ns, z, Q2, axes, acc, jerk, store="filtered")
+    u = np.concatenate([acc, jerk], axis=-1)                          # (R, T, 6)
+    bu = np.zeros((len(t_ns), acc.shape[0], 9))
+    bu[1:] = np.swapaxes(u[:, :-1] @ hmm_input(DT).T, 0, 1)
+    ref = run_filter(lin, prior, t_ns, z, store="filtered", bu=bu)
+    np.testing.assert_allclose(out.mean, ref.mean, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(out.cov, ref.cov, rtol=1e-12, atol=1e-12)
+    # ... and the CA filter (white-jerk Q) is something else: the check can tell them apart
+    ca = run_filter(ekf, prior, t_ns, z, store="filtered")
+    assert np.abs(ca.mean[:, 1:] - out.mean[:, 1:]).max() > 1e-3
 
 
 @pytest.mark.parametrize("run, axis", [(0, 0), (1, 2)])

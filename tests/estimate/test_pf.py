@@ -270,7 +270,23 @@ def test_equal_stamps_and_whole_float_stamps_keep_their_current_meaning():
     t3 = t.copy()
     t3[4] = t3[3]  # a second update at the same instant, no predict
     c = run_pf(_cv_pf(300, 7).init(mean=np.zeros(4), cov=np.eye(4)), t3, Z)
-    assert np.isfinite(c.mean).all()
+    # the same seed stepped by hand to step 3 (no predict at step 0: no prior time)
+    pf = _cv_pf(300, 7).init(mean=np.zeros(4), cov=np.eye(4))
+    for k in range(4):
+        s = pf.step(0.0 if k == 0 else (t3[k] - t3[k - 1]) * 1e-9, Z[k])
+        np.testing.assert_array_equal(c.mean[k], s.mean)
+    x, logw = pf.x.copy(), pf.logw.copy()
+    # step 4 weights those very particles by p(Z[4] | x) (the Gaussian of σ_z on N, E), unmoved
+    lw = logw - 0.5 * np.sum(((Z[4] - x[:, :2]) / SIG_Z) ** 2, axis=1)
+    w = np.exp(lw - lw.max())
+    w /= w.sum()
+    np.testing.assert_allclose(c.mean[4], w @ x, rtol=1e-12, atol=1e-12)
+    s4 = pf.step(0.0, Z[4])
+    np.testing.assert_array_equal(c.mean[4], s4.mean)
+    np.testing.assert_array_equal(c.neff[4], s4.neff)
+    # and it is an update: the second measurement moved the estimate
+    assert not c.predict_only[4] and np.isfinite(c.loglik[4])
+    assert np.abs(c.mean[4, :2] - c.mean[3, :2]).max() > 1e-3
 
 
 def test_an_empty_track_gives_an_empty_result():

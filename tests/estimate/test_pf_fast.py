@@ -138,10 +138,30 @@ def test_the_jump_markov_run_refuses_mismatched_mode_settings_with_one_clear_err
 
 
 def test_the_jump_markov_run_keeps_a_pi_whose_rows_miss_one_by_round_off_only():
-    pi = _PI3.copy()
-    pi[:, 0] += 4e-10                                   # within the 1e-9 row-sum tolerance
-    a = _jm(Pi_dt=pi, mode0=np.arange(50) % 3)
-    assert all(np.all(np.isfinite(v)) for v in a[:3])
+    # an asymmetric Π (its transpose or a column normalisation is another chain), rows off by
+    # ±4e-10, within the 1e-9 row-sum tolerance
+    exact = np.array([[0.8, 0.15, 0.05], [0.1, 0.7, 0.2], [0.05, 0.25, 0.7]])
+    pi = exact.copy()
+    pi[0, 0] += 4e-10
+    pi[1, 1] -= 4e-10
+    pi[2, 2] += 2e-10
+    n, T = 3000, 8
+    x0 = np.random.default_rng(3).standard_normal((n, 7))
+    kw = dict(x0=x0, mode0=np.arange(n) % 3, z=0.1 * cv_track(T, seed=6), sigma_z=2.0)
+    a = _jm(Pi_dt=pi, **kw)
+    # the same seed on the row-renormalised Π: a draw falls in a 1e-10 sliver with probability
+    # ~N·T·1e-10, so every particle takes the same mode, draw for draw
+    b = _jm(Pi_dt=pi / pi.sum(axis=1, keepdims=True), **kw)
+    for u, v in zip(a, b):
+        np.testing.assert_array_equal(u, v)
+    assert np.all(np.isfinite(a[0])) and np.allclose(a[1].sum(axis=1), 1.0)
+    # ... and the chain used is Π's rows as given: one step from mode 0 lands in modes 0, 1, 2
+    # with 0.8, 0.15, 0.05 (Πᵀ's first row would give 0.8, 0.1, 0.1), on a predict-only step
+    # so that no resampling reshuffles the modes
+    m = 20_000
+    c = _jm(Pi_dt=pi, x0=np.zeros((m, 7)), mode0=np.zeros(m, dtype=np.int64), z=np.full((1, 2), np.nan))
+    frac = np.bincount(c[3], minlength=3) / m
+    assert np.all(np.abs(frac - exact[0]) < 4 * np.sqrt(exact[0] * (1 - exact[0]) / m)), frac
 
 
 @pytest.mark.parametrize("x0, z, kw, match", [

@@ -62,8 +62,17 @@ def test_a_turning_track_holds_more_turn_mode_than_a_straight_one(tmp_path):
 def test_missing_positions_are_predict_only_steps_counted_in_the_metadata(tmp_path):
     out = tmp_path / "pf.parquet"
     run_pf_jm({"state": _state(tmp_path, nan_at=range(100, 130))}, {"pf_jm": out}, CFG, flight_id="f")
-    meta = read_table_meta(out)
-    assert meta["n_predict_only"] >= 10 and meta["n_steps"] == 200
+    meta, df = read_table_meta(out), read_table(out)
+    # 25 Hz samples 100–129 (4.00–5.16 s) have no position; the 10 Hz steps take the sample
+    # nearest each 0.1 s tick, so the ticks 4.0, 4.1, …, 5.1 s (12 of them) land on them (4.0 s
+    # on sample 100 itself, 5.1 s between samples 127 and 128, 5.2 s on the valid 130)
+    t = (np.arange(0, 20.0, 1 / 25.0) * 1e9).astype(np.int64)
+    nearest = np.abs(t[None, :] - np.arange(200)[:, None] * 100_000_000).argmin(axis=1)
+    assert np.isin(nearest, np.arange(100, 130)).sum() == 12
+    assert meta["n_predict_only"] == 12 and meta["n_steps"] == 200
+    # those are the steps stamped inside the gap, and a predict-only step never resamples
+    gap = df["t_ns"].between(t[100], t[129]).to_numpy()
+    assert gap.sum() == 12 and not df.loc[gap, "resampled"].any()
 
 
 def test_the_same_seed_writes_the_same_table(tmp_path):

@@ -189,19 +189,27 @@ def read_log(path: str | os.PathLike, *, fmt: str | None = None, flight_id: str 
     finally:
         if hasher is not None:
             hasher.join()
-    log.drop_absurd_times()  # whatever the reader: no sample centuries away from the flight
     from .origin import check_gps
     from .sidecar import attach_sidecar, find_sidecar
 
     side = Path(labels) if labels else find_sidecar(p)
-    if side is not None:
-        attach_sidecar(log, side)  # raises IngestError naming the side-car
+    step = "checking time stamps"
+    try:
+        log.drop_absurd_times()  # whatever the reader: no sample centuries away from the flight
+        if side is not None:
+            step = f"attaching the side-car {side.name}"
+            attach_sidecar(log, side)  # raises IngestError naming the side-car
+        step = "checking the GPS"
+        check_gps(log)  # lat = lon = 0 never a position; why the NED origin is null
+    except IngestError:
+        raise
+    except Exception as exc:  # the same last line of defence as around the reader
+        raise IngestError(p, f"{step} failed: {type(exc).__name__}: {exc}") from exc
     if not any(log.n_rows().values()):
         # a log cut to its headers, or with nothing mapped: 'partial' would hide that it is empty
         lost = losses_text(log.meta.get("diagnostics") or {})
         raise IngestError(p, f"no data: every stream is empty after decoding as {reader_cls.name}"
                              + (f"; {lost}" if lost else ""))
-    check_gps(log)  # lat = lon = 0 never a position; why the NED origin is null
     m = log.meta
     m["flight_id"] = flight_id or m.get("flight_id") or flight_id_for(p)
     m["source_path"] = str(p)

@@ -111,14 +111,45 @@ def read_sidecar(path: str | os.PathLike) -> tuple[pd.DataFrame, pd.DataFrame, d
         truth = read_table(p, schema.columns("truth"))
     except Exception as exc:
         raise IngestError(p, f"truth side-car unreadable: {type(exc).__name__}: {exc}") from None
-    rows = meta.get("labels") or []
+    rows, bad = _label_rows(meta.get("labels"))
     labels = pd.DataFrame({
-        "t_start_ns": np.array([r["t_start_ns"] for r in rows], np.int64),
-        "t_end_ns": np.array([r["t_end_ns"] for r in rows], np.int64),
-        "label": pd.array([r["label"] for r in rows], dtype="string"),
-        "source": pd.array([r.get("source") for r in rows], dtype="string"),
+        "t_start_ns": np.array([r[0] for r in rows], np.int64),
+        "t_end_ns": np.array([r[1] for r in rows], np.int64),
+        "label": pd.array([r[2] for r in rows], dtype="string"),
+        "source": pd.array([r[3] for r in rows], dtype="string"),
     })
+    meta["labels_dropped"] = bad
     return truth, schema.conform("labels", labels), meta
+
+
+def _label_rows(rows) -> tuple[list[tuple], list[str]]:
+    """The side-car's label rows as ``(t_start_ns, t_end_ns, label, source)``, and one reason
+    per row that cannot be one (``"row 3: no t_end_ns"``): a hand-edited side-car with a
+    missing or non-integer time, or an end before its start, loses that row only."""
+    if rows is None:
+        return [], []
+    if not isinstance(rows, list):
+        return [], [f"labels: expected a list of rows, got {type(rows).__name__}"]
+    good, bad = [], []
+    for i, r in enumerate(rows):
+        if not isinstance(r, dict):
+            bad.append(f"row {i}: not a mapping")
+            continue
+        missing = [k for k in ("t_start_ns", "t_end_ns", "label") if r.get(k) is None]
+        if missing:
+            bad.append(f"row {i}: no {', '.join(missing)}")
+            continue
+        try:
+            t0, t1 = int(r["t_start_ns"]), int(r["t_end_ns"])
+        except (TypeError, ValueError, OverflowError):
+            bad.append(f"row {i}: time not an integer ({r['t_start_ns']!r}, {r['t_end_ns']!r})")
+            continue
+        if t1 < t0:
+            bad.append(f"row {i}: ends before it starts")
+            continue
+        src = r.get("source")
+        good.append((t0, t1, str(r["label"]), None if src is None else str(src)))
+    return good, bad
 
 
 def attach_sidecar(log: FlightLog, path: str | os.PathLike) -> FlightLog:
@@ -152,5 +183,11 @@ def attach_sidecar(log: FlightLog, path: str | os.PathLike) -> FlightLog:
     log.streams["truth"] = schema.conform("truth", truth)
     log.streams["labels"] = labels
     log.meta["labels_path"] = str(path)
+    bad = meta.get("labels_dropped") or []
+    if bad:
+        diag = log.meta.setdefault("diagnostics", schema.new_diagnostics())
+        diag["records_dropped"]["bad_label"] = diag["records_dropped"].get("bad_label", 0) + len(bad)
+        diag["warnings"].append(f"truth side-car {Path(path).name}: {len(bad)} label row(s) dropped "
+                                f"({'; '.join(bad[:3])}{'; ...' if len(bad) > 3 else ''})")
     _adopt_frame(log, meta)
     return log

@@ -70,6 +70,41 @@ def test_bad_sidecars(tmp_path):
         read_sidecar(other)
 
 
+def test_a_hand_edited_side_car_loses_its_bad_label_rows_only_counted_and_named(tmp_path):
+    rows = [{"t_start_ns": 0, "t_end_ns": 20_000_000, "label": "low", "source": "x"},
+            {"t_start_ns": 20_000_000, "label": "M1"},                            # no end
+            {"t_start_ns": None, "t_end_ns": 5, "label": "M2"},                   # a null time
+            {"t_start_ns": "later", "t_end_ns": 5, "label": "M3"},                # not an integer
+            {"t_start_ns": 40_000_000, "t_end_ns": 30_000_000, "label": "M4"},   # ends before it starts
+            {"t_start_ns": 30_000_000, "t_end_ns": 40_000_000, "label": "M5"}]
+    p = tmp_path / "h.truth.parquet"
+    write_table(schema.conform("truth", _truth()), p, schema.columns("truth"), name="truth", extra={"labels": rows})
+    _, labels, meta = read_sidecar(p)
+    assert list(labels["label"]) == ["low", "M5"] and list(labels["source"].fillna("-")) == ["x", "-"]
+    assert meta["labels_dropped"] == ["row 1: no t_end_ns", "row 2: no t_start_ns",
+                                      "row 3: time not an integer ('later', 5)", "row 4: ends before it starts"]
+    log = attach_sidecar(FlightLog.from_streams({}, {}), p)
+    diag = log.meta["diagnostics"]
+    assert diag["records_dropped"]["bad_label"] == 4 and len(log["labels"]) == 2
+    assert diag["warnings"][-1].startswith("truth side-car h.truth.parquet: 4 label row(s) dropped (row 1: no t_end_ns;")
+
+
+def test_a_side_car_failing_in_an_unforeseen_way_is_one_ingest_error_naming_the_log(tmp_path, monkeypatch):
+    from pipeline.io import registry, sidecar
+    from pipeline.simulate.demo import write_demo_flight
+
+    log = tmp_path / "d.bin"
+    write_demo_flight(log, seed=0, duration_s=5.0)
+    p = write_sidecar(sidecar_path(log), _truth(), _labels())
+
+    def broken(*a, **k):
+        raise KeyError("t_end_ns")
+
+    monkeypatch.setattr(sidecar, "attach_sidecar", broken)
+    with pytest.raises(IngestError, match=rf"d\.bin: attaching the side-car {p.name} failed: KeyError: 't_end_ns'"):
+        registry.read_log(log)
+
+
 def test_a_side_car_that_shares_no_time_with_the_log_is_refused_naming_it(tmp_path):
     # a ULog given a simulated flight's truth was a 6.6-year flight with one warning
     p = write_sidecar(tmp_path / "a.truth.parquet", _truth(), _labels(), t0_utc_ns=1_000_000_000)

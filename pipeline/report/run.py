@@ -7,6 +7,9 @@ between pages are made relative to the page written, so the tree opens from ``fi
 
 from __future__ import annotations
 
+import os
+import sys
+from html import escape
 from pathlib import Path
 from typing import Mapping
 
@@ -15,7 +18,7 @@ from .compare import build_compare_page
 from .flight import build_flight_report, write_plotly_js
 from .index import build_index
 from .model import build_model_report
-from .pages import relative_href
+from .pages import relative_href, write_page
 
 
 
@@ -43,13 +46,31 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
     index page, for the back link; ``vehicle``: the manifest's, for the summary table.
     """
     page = declared(outputs, "page")
-    build_flight_report(Path(declared(inputs, "meta")).parent, page, template=declared(inputs, "template"),
-                        plotly_js=relative_href(declared(inputs, "plotly"), page), index_href=relative_href(index, page),
-                        state=declared(inputs, "state"), segments=declared(inputs, "segments"),
-                        calibration=declared(inputs, "calibration"),
-                        classified={_model_set_of(p): p for p in declared_list(inputs, "classified")},
-                        estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")},
-                        vehicle=vehicle)
+    ingest_dir = Path(declared(inputs, "meta")).parent
+    try:
+        build_flight_report(ingest_dir, page, template=declared(inputs, "template"),
+                            plotly_js=relative_href(declared(inputs, "plotly"), page),
+                            index_href=relative_href(index, page),
+                            state=declared(inputs, "state"), segments=declared(inputs, "segments"),
+                            calibration=declared(inputs, "calibration"),
+                            classified={_model_set_of(p): p for p in declared_list(inputs, "classified")},
+                            estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")},
+                            vehicle=vehicle)
+    except Exception as exc:  # one flight's unreadable table must not cost the index its page
+        reason = f"{type(exc).__name__}: {' '.join(str(exc).split())}"[:500]
+        print(f"uavpipe report: {ingest_dir.name}: page not built: {reason}", file=sys.stderr)
+        failure_page(page, ingest_dir.name, reason, relative_href(index, page))
+
+
+def failure_page(out_html: str | os.PathLike, flight: str, reason: str, index_href: str) -> None:
+    """A flight page that says, in one line, why the real one could not be built (a damaged
+    stream or derived table), with the link back to the index; no plots, no script."""
+    write_page(f"<!doctype html><html><head><meta charset='utf-8'><title>{escape(flight)}: page not built</title>"
+               f"</head><body style='font-family:system-ui,sans-serif;margin:2em'>"
+               f"<p><a href='{escape(index_href)}'>&larr; all flights</a></p><h1>{escape(flight)}</h1>"
+               f"<p class='reason' style='color:#b00020'>The page could not be built: {escape(reason)}</p>"
+               f"<p>The flight's tables are under <code>results/</code>; rerun its jobs after fixing the input.</p>"
+               f"</body></html>", out_html)
 
 
 def run_compare_report(inputs, outputs, config: Mapping | None = None, *, vehicle: str,

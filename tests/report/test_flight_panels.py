@@ -385,3 +385,24 @@ def test_a_ground_vehicles_altitude_panel_says_its_heights_are_the_sensors():
     assert altitude_panel({"−d (track)": h}, None).layout.title.text == "Altitude"
     assert "ground vehicle" in altitude_panel({"−d (track)": h}, None, ground=True).layout.title.text
     assert altitude_panel({}, None, ground=True) is None
+
+
+def test_a_flight_whose_stream_file_is_damaged_gets_a_one_line_page_and_the_run_goes_on(tmp_path, capsys):
+    from pipeline.io.ingest import outputs_for, run_ingest
+    from pipeline.report.run import run_flight_report
+    from pipeline.simulate.demo import write_demo_flight
+
+    write_demo_flight(tmp_path / "demo.bin", seed=1, duration_s=10.0)
+    run_ingest({"log": tmp_path / "demo.bin"}, outputs_for(tmp_path / "ingest" / "demo"), None, flight_id="demo")
+    capsys.readouterr()
+    (tmp_path / "ingest" / "demo" / "imu.parquet").write_bytes(b"PAR1 not a parquet file PAR1")
+    page = tmp_path / "report" / "flights" / "demo.html"
+    run_flight_report({"meta": tmp_path / "ingest" / "demo" / "meta.json", "template": ROOT / "reports" / "templates" / "flight.html.j2",
+                       "plotly": tmp_path / "report" / "assets" / "plotly.min.js", "state": None, "segments": None,
+                       "calibration": None, "classified": [], "estimates": []},
+                      {"page": page}, index=str(tmp_path / "index.html"))
+    text = html.unescape(page.read_text())
+    assert "<h1>demo</h1>" in text and "The page could not be built: " in text and "<script" not in text
+    assert "href='../../index.html'" in text
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("uavpipe report: demo: page not built: ") and "imu.parquet" in err[0]

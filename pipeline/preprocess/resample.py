@@ -317,9 +317,13 @@ def resample(df: pd.DataFrame, grid_ns: NDArray[np.int64], methods: Mapping[str,
             y = np.where(w < 0.5, x[k0], x[k1])
             y = np.where(valid, y, np.nan)
         elif method == "mean":
+            lin = np.where(exact | (w == 0.0), x[k0], x[k0] + w * (x[k1] - x[k0]))
             y = _cell_mean(t, x, g)
-            y = np.where(np.isfinite(y), y, x[k0] + w * (x[k1] - x[k0]))
-            y = np.where(valid, y, np.nan)
+            y = np.where(np.isfinite(y), y, lin)
+            # NaN where linear interpolation gives NaN: the cell mean integrates the finite
+            # samples only, so it drew a line across a run of missing values (a sensor's
+            # implausible readings set to NaN) and filled it as if it had been measured
+            y = np.where(valid & np.isfinite(lin), y, np.nan)
         else:  # previous: hold the last sample, at most max_gap after it
             k = np.searchsorted(t, g, side="right") - 1
             kc = np.clip(k, 0, len(t) - 1)

@@ -197,3 +197,21 @@ def test_a_few_stamps_far_from_the_rest_are_strays_and_a_logger_pause_is_not():
     df = pd.DataFrame({"t_ns": damaged, "x": 1.0})
     out, d = repair_timestamps(df)
     assert d["stray"] == 3 and d["clock_jumps"] == 0 and np.array_equal(out["t_ns"], ns_)
+
+
+@pytest.mark.parametrize("method", ["mean", "linear", "nearest"])
+def test_a_run_of_missing_values_stays_missing_on_the_grid_for_every_method(method):
+    # a 200 Hz sensor with 5 s of readings set to NaN (implausible values): the cell mean drew a
+    # line across them and filled all 125 grid points of the hole as if measured
+    t = np.arange(0, 20_000_000_000, 5_000_000, dtype=np.int64)
+    x = np.sin(t * 1e-9)
+    hole = (t >= 5_000_000_000) & (t < 10_000_000_000)
+    x[hole] = np.nan
+    g = np.arange(0, 20_000_000_000, 40_000_000, dtype=np.int64)
+    y, valid = resample(pd.DataFrame({"t_ns": t, "a": x}), g, {"a": method})
+    inside = (g >= 5_000_000_000) & (g < 10_000_000_000)
+    assert valid[inside].all()                       # the time stamps have no gap ...
+    assert np.isnan(y["a"].to_numpy()[inside]).all()  # ... but the values do
+    # away from the hole the values are kept (the edges: at most one grid point either side)
+    outside = (g < 4_950_000_000) | (g > 10_040_000_000)
+    assert np.isfinite(y["a"].to_numpy()[outside]).all()

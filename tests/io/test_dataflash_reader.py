@@ -472,5 +472,21 @@ def test_message_lacking_an_expected_field_costs_only_its_stream(tmp_path):
                         "IMU": {"TimeUS": [100, 150, 200], "GyrX": [0.1, 0.2, 0.3]}})
     log = read_log(p)
     assert len(log["imu"]) == 3 and len(log["gps"]) == 0
-    assert any(w.startswith("gps: not mapped (KeyError") for w in log.meta["diagnostics"]["warnings"])
+    assert any(w.startswith("gps: GPS not mapped (KeyError") and "its 2 record(s) left out" in w
+               for w in log.meta["diagnostics"]["warnings"])
+    assert log.meta["diagnostics"]["records_dropped"] == {"unmapped:GPS": 2} and log.meta["status"] == "partial"
     assert log.meta["ned_origin"]["lat_deg"] == 1.0
+
+
+def test_a_second_imu_lacking_a_field_costs_its_own_records_not_the_first_imus(tmp_path):
+    p = tmp_path / "imu2.bin"
+    with DataFlashWriter(p) as w:
+        w.define("IMU", 131, "Qffffff", "TimeUS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
+        w.define("IMU2", 132, "Qfff", "TimeUS,GyrX,GyrY,GyrZ")  # no accelerometer
+        w.write_merged({"IMU": {"TimeUS": [100, 150, 200], "GyrX": [0.1, 0.2, 0.3]},
+                        "IMU2": {"TimeUS": [110, 160], "GyrX": [0.4, 0.5]}})
+    log = read_log(p)
+    assert len(log["imu"]) == 3 and set(log["imu"]["instance"]) == {0}
+    assert log.meta["diagnostics"]["records_dropped"] == {"unmapped:IMU2": 2}
+    assert any(w.startswith("imu: IMU2 not mapped") and w.endswith("the stream's other messages kept")
+               for w in log.meta["diagnostics"]["warnings"])

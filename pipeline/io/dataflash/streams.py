@@ -861,7 +861,8 @@ def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,
                       diag: dict) -> Iterator[tuple[str, list[Part] | None]]:
     """Run :data:`STREAM_TABLE` one stream at a time: ``(stream, [part, ...] or None)``.
 
-    A message lacking an expected field costs its stream (with a warning), not the whole log.
+    A message lacking an expected field costs its own records (counted in
+    ``records_dropped['unmapped:<name>']``, with a warning), not its stream or the log.
     Streams come one by one so that a consumer can conform each and drop its parts before the
     next is built (the peak holds one stream's loose columns, not all of them).
     """
@@ -881,9 +882,14 @@ def iter_stream_parts(res: DecodeResult, clock: _Clock, t0_us: int,
                 with np.errstate(invalid="ignore"):
                     got = builder(ctx, msg if isinstance(msg, str) else msg[0], parts)
             except (KeyError, ValueError, TypeError, IndexError) as exc:
-                diag["warnings"].append(f"{stream}: not mapped ({type(exc).__name__}: {exc})")
-                parts = None
-                break
+                # only this message type is lost: an IMU3 without a field it should have kept
+                # IMU and IMU2 out of the imu stream too, and the log still read 'ok'
+                name = msg if isinstance(msg, str) else next((m for m in msg if _has(res, m)), msg[0])
+                n = int(diag.get("record_counts", {}).get(name, 0))
+                diag["records_dropped"][f"unmapped:{name}"] = n
+                diag["warnings"].append(f"{stream}: {name} not mapped ({type(exc).__name__}: {exc}); its {n} "
+                                        f"record(s) left out" + (", the stream's other messages kept" if parts else ""))
+                continue
             for p in (got if isinstance(got, list) else [got]):
                 if p is not None and len(p["t_ns"]):
                     parts.append(p)

@@ -38,6 +38,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from .. import __version__
 from ..io.atomic import atomic_output
@@ -176,20 +177,52 @@ def label_state(state: pd.DataFrame, segments: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def _one_line(exc: BaseException) -> str:
+    """``Type: message`` of ``exc`` on one line (pyarrow and OS messages may span several, and a
+    reason recorded in ``skipped`` or metadata must stay one line)."""
+    msg = " ".join(str(exc).split()) or "(no message)"
+    return f"{type(exc).__name__}: {msg}"
+
+
 def flight_runs(states: Sequence, segments: Sequence, skipped: dict | None = None) -> pd.DataFrame:
-    """One training run per labelled segment of each flight (``run_id`` = ``<flight>:<segment>``,
-    ``<flight>`` the state file's :func:`pipeline.io.stage.source_names` name: its stem in the workflow).
-    A flight that gives no labelled sample is left out with its reason in ``skipped``
-    (``{flight: reason}``), so training can say so instead of passing over it in silence."""
+    """One training run per labelled segment of each flight.
+
+    Parameters
+    ----------
+    states, segments : sequence of path
+        The flights' state and segment tables, in the same order.
+    skipped : dict, optional
+        Filled with ``{flight: reason}`` for every flight left out: one whose files cannot be
+        read (``unreadable state: ...``/``unreadable segments: ...``), or that gives no labelled
+        sample; so training says so instead of passing over it in silence, and one damaged
+        flight never stops the others.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The labelled samples, ``run_id`` = ``<flight>:<segment>`` with ``<flight>`` the state
+        file's :func:`pipeline.io.stage.source_names` name (its stem in the workflow); empty when
+        no flight gives one.
+    """
     frames = []
     skipped = {} if skipped is None else skipped
     for sp, gp, src in zip(states, segments, source_names(states)):
-        st = read_table(sp)
-        if not len(st):
+        # the metadata first: pyarrow reads a directory as an (empty) dataset, but not its schema
+        try:
             meta = read_table_meta(sp)
-            skipped[src] = f"no state ({meta.get('error') or 'preprocessing gave no samples'})"
+            st = read_table(sp)
+        except (OSError, ValueError, pa.ArrowException) as exc:  # damaged, missing, a directory
+            skipped[src] = f"unreadable state: {_one_line(exc)}"
             continue
-        seg = read_table(gp)
+        if not len(st):
+            why = " ".join(str(meta.get("error") or "preprocessing gave no samples").split())
+            skipped[src] = f"no state ({why})"
+            continue
+        try:
+            seg = read_table(gp)
+        except (OSError, ValueError, pa.ArrowException) as exc:
+            skipped[src] = f"unreadable segments: {_one_line(exc)}"
+            continue
         lab = label_state(st, seg)
         lab = lab[lab["segment_id"] >= 0]
         if not len(lab):
@@ -274,7 +307,7 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
                  + "; ".join(f"{r} ({why})" for r, why in list(dropped.items())[:5])
                  + (f"; … {len(dropped) - 5} more (meta.json training_dropped)" if len(dropped) > 5 else ""))
     except ValueError as exc:  # ModelError, numpy LinAlgError, bad tables: a placeholder model
-        reason = f"training failed: {type(exc).__name__}: {exc}"
+        reason = f"training failed: {_one_line(exc)}"
         _say(f"{model_set}: {reason}")
         _write_failed_model(out, spec, reason)
         return ModelStageResult(model_set, "failed", reason, json.loads(meta_path.read_text()))
@@ -333,9 +366,10 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
     state = read_table(state_path)
     reason = ""
     if m_status == "failed":
-        reason = f"model set {model_set} failed: {m_error}"
+        reason = " ".join(f"model set {model_set} failed: {m_error}".split())
     elif st_meta.get("status") == "failed":
-        reason = st_meta.get("error") or "preprocessing failed"
+        # one line: the reason goes into the log line and the placeholder's metadata
+        reason = " ".join(str(st_meta.get("error") or "preprocessing failed").split())
     elif not len(state) or not state["pos_n_m"].notna().any():
         reason = "no position data to classify"
     if not reason:
@@ -352,7 +386,7 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
             res = ms.classify(lab, mode=mode, decision=decision, reset_t_ns=resets,
                               box_heading_rad=float(box) if box is not None else 0.0)
         except ValueError as exc:  # ModelError and numerical failures on odd flights
-            reason = f"classification failed: {type(exc).__name__}: {exc}"
+            reason = f"classification failed: {_one_line(exc)}"
         else:
             res["run_id"] = res["run_id"].astype(str)
             if "truth" in res:
@@ -391,6 +425,26 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
     correct only as ``unknown``). ``data: flights``: the
     classifications of the ``role: test`` flights (``inputs.classified``), one run per labelled
     segment (no thesis values). ``inputs.params``/``inputs.meta``: the trained set.
+
+    Parameters
+    ----------
+    inputs : mapping
+        ``params``/``meta`` of the model set; ``train_sets``/``test_sets`` (``data: simulated``)
+        or ``classified`` (``data: flights``).
+    outputs : mapping
+        ``evaluation``: the Parquet table of per-maneuver rows.
+    config : mapping
+        The set's entry of ``model_sets``.
+    model_set : str
+        Its name (recorded in the table metadata).
+
+    Returns
+    -------
+    ModelStageResult
+        The model set's status; ``diagnostics`` holds ``n_rows`` and, for ``data: flights``,
+        ``flights_used`` (the flights that counted) and ``flights_skipped`` (``{flight: reason}``
+        for the others: unreadable, a failed or empty classification, no labelled sample, or a
+        failed model set), also written to the table metadata.
     """
     from .classifier import ManeuverModelSet
 
@@ -403,6 +457,12 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
     simulated = spec.get("data", "simulated") == "simulated"
     tables_of = thesis_tables_for(spec) if simulated else {}
     rows = []
+    # which test flights counted and why the others did not: the evaluation's metadata says so,
+    # so a table over fewer flights than classified is never a silent loss
+    used: list[str] = []
+    skipped: dict[str, str] = {}
+    if status != "ok" and not simulated:
+        skipped = {f: f"model set {name} failed" for f in source_names(classified)}
     if status == "ok":
         ms = ManeuverModelSet.load(model_dir)
         if spec.get("data", "simulated") == "simulated":
@@ -418,12 +478,27 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
                     rows.append(tab)
         else:
             parts = []
-            for p in classified:
-                c = read_table(p)
-                if len(c) and "truth" in c:
-                    c = c[c["truth"].astype(str) != ""].copy()
-                    c["run_id"] = _runs_from_truth(c, Path(p).stem)
-                    parts.append(c)
+            # source_names: the stems in the workflow, told apart should two flights share one
+            for p, flight in zip(classified, source_names(classified)):
+                try:
+                    c, c_meta = read_table(p), read_table_meta(p)
+                except (OSError, ValueError, pa.ArrowException) as exc:  # damaged, missing
+                    skipped[flight] = f"unreadable classification: {_one_line(exc)}"
+                    continue
+                if c_meta.get("status") == "failed" or not len(c):
+                    why = c_meta.get("error") or "no classified samples"
+                    skipped[flight] = " ".join(f"no classification ({why})".split())
+                    continue
+                if "truth" not in c:
+                    skipped[flight] = "no 'truth' column (not classified with its segments)"
+                    continue
+                c = c[c["truth"].astype(str) != ""].copy()
+                if not len(c):
+                    skipped[flight] = "no classified sample inside a labelled segment"
+                    continue
+                c["run_id"] = _runs_from_truth(c, flight)
+                parts.append(c)
+                used.append(flight)
             if parts:
                 tab = per_maneuver_table(pd.concat(parts, ignore_index=True), ms.labels_, truth_col="truth")
                 tab.insert(0, "table", "flights")
@@ -433,10 +508,15 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
                 rows.append(tab)
     table = pd.concat(rows, ignore_index=True)[list(EVAL_COLUMNS)] if rows else \
         pd.DataFrame({c: pd.Series([], dtype=float if c.endswith("pct") else str) for c in EVAL_COLUMNS})
+    flights = {} if simulated else {"flights_used": used, "flights_skipped": skipped}
     write_table(table, out_path, schema.MODEL_EVALUATION,
                 name="model_evaluation",
                 extra={"model_set": name, "model": name, "status": status, "error": error,
                        "input": spec.get("input", "truth") if simulated else "flights",
-                       "thesis_tables": sorted(t for t in set(tables_of.values()) if t in THESIS_CLASSIFICATION)})
+                       "thesis_tables": sorted(t for t in set(tables_of.values()) if t in THESIS_CLASSIFICATION),
+                       **flights})
+    if skipped and status == "ok":
+        _say(f"{name}: {len(skipped)} of {len(classified)} test flight(s) left out of the evaluation: "
+             + "; ".join(f"{f} ({why})" for f, why in skipped.items()))
     _say(f"{name}: evaluation with {len(table)} rows ({status})")
-    return ModelStageResult(name, status, error, {"n_rows": len(table)})
+    return ModelStageResult(name, status, error, {"n_rows": len(table), **flights})

@@ -154,3 +154,120 @@ def test_training_flights_that_give_no_labelled_sample_are_named_with_the_reason
     res = run_train({"states": states[1:], "segments": segments[1:]},
                     {"params": d / "params.npz", "meta": d / "meta.json"}, spec, model_set="m", seed=1)
     assert res.status == "failed" and "nolabels: no labelled segments; failed: no state" in res.error
+
+
+def _flight_files(synth, rng, tmp_path, names):
+    """State and segment tables of one labelled M1+M2 flight per name: (states, segments)."""
+    from pipeline.io import schema
+    from pipeline.io.parquet import write_table
+
+    run = synth[0]
+    flight = pd.concat([run("M1", rng), run("M2", rng, t0_ns=26_000_000_000)], ignore_index=True)
+    seg = pd.DataFrame({"segment_id": [0, 1], "t_start_ns": [0, 26_000_000_000],
+                        "t_end_ns": [25_000_000_000, 51_000_000_000], "label": ["M1", "M2"]})
+    states, segments = [], []
+    for name in names:
+        write_table(schema.conform("state", flight.drop(columns="label")), tmp_path / f"{name}.parquet",
+                    schema.STATE, name="state", extra={"flight_id": name})
+        write_table(schema.conform("segments", seg), tmp_path / f"{name}.seg.parquet", schema.SEGMENTS,
+                    name="segments")
+        states.append(tmp_path / f"{name}.parquet")
+        segments.append(tmp_path / f"{name}.seg.parquet")
+    return states, segments
+
+
+_FLIGHTS_SPEC = {"data": "flights", "vehicles": ["q"], "hmm": {"n_states": 3, "n_iter": 3, "phases": False}}
+
+
+def test_a_training_flight_with_a_garbage_state_or_segments_file_is_skipped_by_name_and_the_others_train(
+        synth, rng, tmp_path, capsys):
+    import json
+
+    states, segments = _flight_files(synth, rng, tmp_path, ["good", "badstate", "badseg"])
+    states[1].write_bytes(b"not a parquet file\n\x00\x01 damaged on the card")
+    segments[2].write_bytes(b"PAR1 truncated")
+    d = tmp_path / "m"
+    res = run_train({"states": states, "segments": segments}, {"params": d / "params.npz", "meta": d / "meta.json"},
+                    _FLIGHTS_SPEC, model_set="m", seed=1)
+    assert res.status == "ok", res.error
+    assert res.diagnostics["labels"] == ["M1", "M2"]
+    skipped = res.diagnostics["training_skipped"]
+    assert set(skipped) == {"badstate", "badseg"}
+    assert skipped["badstate"].startswith("unreadable state: ArrowInvalid: ")
+    assert skipped["badseg"].startswith("unreadable segments: ArrowInvalid: ")
+    assert all("\n" not in why for why in skipped.values())
+    assert json.loads((d / "meta.json").read_text())["training_skipped"] == skipped
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert "m: 2 of 3 training flight(s) gave no labelled sample: badstate (unreadable state: ArrowInvalid" in err
+
+
+@pytest.mark.parametrize("damage, kind", [("missing", "FileNotFoundError"), ("directory", "OSError")])
+def test_a_training_flight_whose_state_path_is_missing_or_a_directory_is_skipped_in_one_line_not_a_traceback(
+        synth, rng, tmp_path, capsys, damage, kind):
+    states, segments = _flight_files(synth, rng, tmp_path, ["good", "bad"])
+    states[1].unlink()
+    if damage == "directory":
+        states[1].mkdir()
+    d = tmp_path / "m"
+    out = {"params": d / "params.npz", "meta": d / "meta.json"}
+    res = run_train({"states": states, "segments": segments}, out, _FLIGHTS_SPEC, model_set="m", seed=1)
+    assert res.status == "ok", res.error
+    why = res.diagnostics["training_skipped"]["bad"]
+    assert why.startswith(f"unreadable state: {kind}: ") and "bad.parquet" in why and "\n" not in why
+    assert list(res.diagnostics["training_skipped"]) == ["bad"]
+    # no flight left: a failed placeholder whose one-line reason names the flight, still no traceback
+    res = run_train({"states": states[1:], "segments": segments[1:]}, out, _FLIGHTS_SPEC, model_set="m", seed=1)
+    assert res.status == "failed" and f"bad: unreadable state: {kind}" in res.error and "\n" not in res.error
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_flight_evaluation_metadata_lists_the_flights_used_and_names_each_skipped_one_with_its_reason(
+        synth, rng, tmp_path, capsys):
+    from pipeline.io import schema
+    from pipeline.io.parquet import write_table
+    from pipeline.models.run import run_classify
+
+    _, spec, model = _trained(synth, rng, tmp_path)
+    states, segments = _flight_files(synth, rng, tmp_path, ["f1", "f2"])
+    write_table(schema.conform("state", pd.DataFrame({"t_ns": pd.Series([], dtype="int64")})),
+                tmp_path / "f3.parquet", schema.STATE, name="state",
+                extra={"flight_id": "f3", "status": "failed", "error": "preprocessing failed: no GPS\nfix"})
+    cdir = tmp_path / "classify"
+    classified = [cdir / f"{f}.parquet" for f in ("f1", "f2", "f3", "f4", "f5", "f6")]
+    # f4: classified without its segments; f5: its one segment after the flight ended
+    late = pd.DataFrame({"segment_id": [0], "t_start_ns": [90_000_000_000], "t_end_ns": [99_000_000_000],
+                         "label": ["M1"]})
+    write_table(schema.conform("segments", late), tmp_path / "late.seg.parquet", schema.SEGMENTS, name="segments")
+    for st, seg, out in zip([*states, tmp_path / "f3.parquet", states[0], states[0]],
+                            [*segments, None, None, tmp_path / "late.seg.parquet"], classified):
+        run_classify({**model, "state": st, "segments": seg}, {"classification": out}, {}, model_set="m")
+    classified[5].write_bytes(b"garbage")  # f6: damaged on disk
+    ev_out = tmp_path / "evaluation.parquet"
+    res = run_evaluate({**model, "classified": classified}, {"evaluation": ev_out}, {**spec, "data": "flights"},
+                       model_set="m")
+    assert res.status == "ok"
+    meta = read_table_meta(ev_out)
+    assert meta["flights_used"] == ["f1", "f2"] == res.diagnostics["flights_used"]
+    skipped = meta["flights_skipped"]
+    assert skipped["f3"] == "no classification (preprocessing failed: no GPS fix)"
+    assert skipped["f4"] == "no 'truth' column (not classified with its segments)"
+    assert skipped["f5"] == "no classified sample inside a labelled segment"
+    assert skipped["f6"].startswith("unreadable classification: ArrowInvalid: ") and "f6.parquet" in skipped["f6"]
+    assert list(skipped) == ["f3", "f4", "f5", "f6"] and all("\n" not in why for why in skipped.values())
+    assert set(read_table(ev_out)["n_runs"]) == {2}  # one run per segment of each used flight
+    err = capsys.readouterr().err
+    assert "m: 4 of 6 test flight(s) left out of the evaluation: f3 (no classification (" in err
+    assert "placeholder classification (preprocessing failed: no GPS fix)" in err  # one line there too
+
+
+def test_a_failed_model_set_names_every_test_flight_as_skipped_in_the_evaluation_metadata(tmp_path):
+    d = tmp_path / "m"
+    model = {"params": d / "params.npz", "meta": d / "meta.json"}
+    assert run_train({"states": [], "segments": []}, model, _FLIGHTS_SPEC, model_set="m", seed=1).status == "failed"
+    ev_out = tmp_path / "evaluation.parquet"
+    res = run_evaluate({**model, "classified": [tmp_path / "f1.parquet"]}, {"evaluation": ev_out}, _FLIGHTS_SPEC,
+                       model_set="m")
+    meta = read_table_meta(ev_out)
+    assert res.status == meta["status"] == "failed"
+    assert meta["flights_used"] == [] and meta["flights_skipped"] == {"f1": "model set m failed"}

@@ -10,11 +10,14 @@ the demos of every maneuver label and writes the four declared tables (``io.sche
 each (maneuvers are rows: the DAG does not depend on the data).
 
 **Bad input** is reported, never raised: a flight of the set that is not among the inputs is
-skipped with a notice (an ``alignment`` row, status ``dropped``); a demo with ``gap`` rows inside
-its segment is dropped with the reason; a maneuver with fewer than ``align.min_demos`` usable
-demos is skipped, with the reason in ``alignment`` and ``iterations``; a fit that fails
-numerically skips the maneuver with the error. The workflow (``rules/align.smk``) and
-``uavpipe align`` call the same function.
+skipped with a notice (an ``alignment`` row, status ``dropped``); so is a flight whose
+preprocessing failed (its placeholder's error), whose ``state``/``segments`` file cannot be read
+(the file named), whose fit to the reference fails or whose demos cannot be cut (the error on one
+line), and the others go on; when that flight is the reference, the box-less flights stay in NED
+with a notice. A demo with ``gap`` rows inside its segment is dropped with the reason; a maneuver
+with fewer than ``align.min_demos`` usable demos is skipped, with the reason in ``alignment`` and
+``iterations``; a fit that fails skips the maneuver with the error. The workflow
+(``rules/align.smk``) and ``uavpipe align`` call the same function.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from __future__ import annotations
 import re
 import sys
 import time
+import traceback
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -162,13 +166,70 @@ def by_occurrence(maneuvers: Mapping[str, list], repeated: set[str] | None = Non
     return out
 
 
+def _one_line(exc: BaseException, *, where: bool = True) -> str:
+    """``Type: message (at file:line)`` of ``exc`` on one line; ``where=False`` leaves out the
+    place it was raised (a file that cannot be read: the reader's line says nothing more)."""
+    msg = " ".join(str(exc).split()) or "(no message)"
+    tb = traceback.extract_tb(exc.__traceback__) if where else []
+    at = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    return f"{type(exc).__name__}: {msg}{at}"
+
+
+def _failed_preprocess_reason(meta: Mapping[str, Any]) -> str | None:
+    """Why preprocessing of a flight failed, from its ``state`` metadata, or None when it did not.
+
+    Parameters
+    ----------
+    meta : mapping
+        The ``uavpipe`` metadata of the flight's ``state`` table (:func:`read_table_meta`).
+
+    Returns
+    -------
+    str or None
+        ``preprocessing failed: <error>`` for a preprocess placeholder (``status``/``error`` at the
+        top level, :mod:`pipeline.preprocess.run`) or a ``preprocess`` diagnostics block whose
+        status is ``failed``; None otherwise.
+    """
+    pre = meta.get("preprocess") or {}
+    if meta.get("status") != "failed" and pre.get("status") != "failed":
+        return None
+    error = str(meta.get("error") or pre.get("error") or "").strip()
+    if not error:
+        return "preprocessing failed"
+    # the placeholder's own reason may already start so (a preprocess exception): said once
+    return error if error.startswith("preprocessing failed") else f"preprocessing failed: {error}"
+
+
+def _read_flight(state_path: str, segments_path: str) -> tuple[pd.DataFrame, pd.DataFrame, dict] | str:
+    """The ``state`` and ``segments`` tables of one flight and the state's metadata, or the one-line
+    reason it cannot be used (a preprocess placeholder; a file that cannot be read, named)."""
+    try:
+        meta = read_table_meta(state_path)
+    except Exception as exc:  # a damaged file is this flight's problem, not the set's
+        return f"cannot read {state_path}: {_one_line(exc, where=False)}"
+    failed = _failed_preprocess_reason(meta)
+    if failed is not None:
+        return failed
+    tables = []
+    for p in (state_path, segments_path):
+        try:
+            tables.append(read_table(p))
+        except Exception as exc:
+            return f"cannot read {p}: {_one_line(exc, where=False)}"
+    return tables[0], tables[1], meta
+
+
 def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
     """Read and cut the demos of ``align.sets[set_name]`` from the declared inputs.
 
     ``inputs``: ``states`` and ``segments`` (lists of ``results/{state,segments}/<flight>.parquet``
     or the CLI's ``DIR/<flight>/{state,segments}.parquet``; the flight id is
     :func:`table_flight_id`'s). Flights of the set without inputs are skipped with a notice, and
-    inputs of flights the set does not list are ignored with one.
+    inputs of flights the set does not list are ignored with one. A flight that cannot be used
+    (preprocessing failed, a file that cannot be read, a failed fit to the reference or demo
+    cut) is a whole-flight :class:`~pipeline.align.demos.Dropped` (segment -1) with the one-line
+    reason, and a notice; the other flights go on. Without a usable reference the box-less
+    flights stay in NED (notice).
     """
     spec = (config.get("sets") or {}).get(set_name)
     if spec is None:
@@ -195,39 +256,57 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
             dropped.append(Dropped(f"{f}:", f, "", -1, "flight missing"))
             continue
         sp, gp = paths[f]
-        meta = read_table_meta(sp)
-        status = (meta.get("preprocess") or {}).get("status")
-        if status == "failed":
-            reason = (meta.get("preprocess") or {}).get("error") or "preprocessing failed"
-            notices.append(f"set {set_name}: flight {f}: {reason}: skipped")
-            dropped.append(Dropped(f"{f}:", f, "", -1, f"preprocessing failed: {reason}"))
+        got = _read_flight(sp, gp)
+        if isinstance(got, str):
+            notices.append(f"set {set_name}: flight {f}: {got}: skipped")
+            dropped.append(Dropped(f"{f}:", f, "", -1, got))
             continue
+        state, seg, meta = got
         box = meta.get("box_rotation_rad")
         pilot = meta.get("box_pilot_ned_m")  # the box origin (older state tables: none, NED origin)
         origins[f] = [float(v) for v in pilot] if pilot is not None else None
-        loaded[f] = (read_table(sp), read_table(gp), float(box) if box is not None else None)
+        loaded[f] = (state, seg, float(box) if box is not None else None)
     if ref is not None and ref not in loaded:
         notices.append(f"set {set_name}: reference {ref} not available: box-less flights stay in NED")
-    per_flight: list[FlightDemos] = []
-    info: dict[str, dict] = {}
-    for f, (state, seg, box) in loaded.items():
+    ref_ok = ref is not None and ref in loaded
+    done: dict[str, FlightDemos] = {}
+    flight_dropped: dict[str, list[Dropped]] = {}
+    # the reference first, so that when its demos cannot be cut the box-less flights are not
+    # fitted to it (they stay in NED, as without a reference); the tables keep the set's order
+    for f in sorted(loaded, key=lambda g: g != ref):
+        state, seg, box = loaded[f]
         fit = None
-        if box is None and ref is not None and ref in loaded and f != ref:
-            r_state, r_seg, r_box = loaded[ref]
-            fit, carried = fit_to_reference(state, r_state, r_seg, ref_heading_rad=r_box, sample_hz=hz,
-                                            fit_hz=float(fit_cfg.get("sample_hz", 1.0)),
-                                            headings=int(fit_cfg.get("headings", 24)),
-                                            iterations=int(fit_cfg.get("iterations", 30)),
-                                            ref_origin_ned_m=origins.get(ref), schedule_exclude=exclude)
-            if not len(seg):
-                seg = carried
-        fd = flight_demos(state, seg, flight_id=f, heading_rad=box, fit=fit, sample_hz=hz, exclude=exclude,
-                          box_origin_ned_m=origins.get(f))
+        step = f"cannot cut the demos of {paths[f][0]}"
+        try:
+            if box is None and ref_ok and f != ref:
+                step = f"fit to reference {ref} failed"
+                r_state, r_seg, r_box = loaded[ref]
+                fit, carried = fit_to_reference(state, r_state, r_seg, ref_heading_rad=r_box, sample_hz=hz,
+                                                fit_hz=float(fit_cfg.get("sample_hz", 1.0)),
+                                                headings=int(fit_cfg.get("headings", 24)),
+                                                iterations=int(fit_cfg.get("iterations", 30)),
+                                                ref_origin_ned_m=origins.get(ref), schedule_exclude=exclude)
+                if not len(seg):
+                    seg = carried
+                step = f"cannot cut the demos of {paths[f][0]}"
+            fd = flight_demos(state, seg, flight_id=f, heading_rad=box, fit=fit, sample_hz=hz, exclude=exclude,
+                              box_origin_ned_m=origins.get(f))
+        except Exception as exc:  # one bad flight never stops the others: its drop says why
+            reason = f"{step}: {_one_line(exc)}"
+            notices.append(f"set {set_name}: flight {f}: {reason}: skipped")
+            flight_dropped[f] = [Dropped(f"{f}:", f, "", -1, reason)]
+            if f == ref:
+                ref_ok = False
+                notices.append(f"set {set_name}: reference {ref} failed: box-less flights stay in NED")
+            continue
         if fit is not None:
             _say(f"set {set_name}: {f} fitted to {ref}: {fit_summary(fd.diagnostics)}")
-        per_flight.append(fd)
-        dropped.extend(fd.dropped)
-        info[f] = fd.diagnostics
+        done[f] = fd
+        flight_dropped[f] = list(fd.dropped)
+    per_flight = [done[f] for f in loaded if f in done]
+    info = {f: done[f].diagnostics for f in loaded if f in done}
+    for f in loaded:
+        dropped.extend(flight_dropped.get(f, ()))
     order: list[str] = []
     for fd in sorted(per_flight, key=lambda d: d.flight_id != ref):  # the reference's order first
         for d in fd.demos:
@@ -435,13 +514,13 @@ def run_align(inputs, outputs, config: Mapping[str, Any], *, set_name: str) -> A
             reason = f"{len(demos)} usable demo(s) (< align.min_demos = {min_demos})"
         else:
             t0 = time.perf_counter()
-            dt_demo = float(np.median(np.concatenate([np.diff(d.t_ns) for d in demos]))) * 1e-9
             try:
+                dt_demo = float(np.median(np.concatenate([np.diff(d.t_ns) for d in demos]))) * 1e-9
                 model = make_learner(config, dt_demo).fit([d.x for d in demos])
                 dt = float(getattr(model, "dt_hidden_", 0.5 * dt_demo))
                 tabs = _maneuver_tables(label, demos, model, dt, meta_of)
-            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
-                reason = f"fit failed: {type(exc).__name__}: {exc}"
+            except Exception as exc:  # one maneuver's bad demos never stop the set: its row says why
+                reason = f"fit failed: {_one_line(exc)}"
             else:
                 for k, v in tabs.items():
                     parts[k].append(v)

@@ -15,7 +15,7 @@ from helpers_align import synthetic_segments, synthetic_state, write_flight
 import pipeline.align.run as align_run
 from pipeline.align.demos import DEMO_COLUMNS
 from pipeline.io import schema
-from pipeline.io.parquet import read_table, read_table_meta
+from pipeline.io.parquet import read_table, read_table_meta, write_table
 
 
 class StandInLearner:
@@ -207,3 +207,137 @@ def test_the_same_set_learned_twice_gives_the_same_bytes(tmp_path):
     align_run.run_align(flights, b, cfg, set_name="s")
     for k in a:  # metadata included: run times are said, not stored
         assert Path(a[k]).read_bytes() == Path(b[k]).read_bytes(), k
+
+
+# --- flights that cannot be used: dropped with one line, the others go on ---------------------------
+
+def _failed_flight(root: Path, flight: str, error: str) -> tuple[str, str]:
+    """A flight whose ingest failed, preprocessed by the stage itself: its placeholder ``state``
+    and ``segments`` (empty, ``status: failed`` and ``error`` at the top of their metadata)."""
+    from pipeline.preprocess.run import run_preprocess
+
+    meta = root / "ingest" / flight / "meta.json"
+    meta.parent.mkdir(parents=True)
+    meta.write_text(f'{{"flight_id": "{flight}", "status": "failed", "error": "{error}"}}')
+    out = {"state": root / "state" / f"{flight}.parquet", "segments": root / "segments" / f"{flight}.parquet",
+           "calibration": root / "calibration" / f"{flight}.parquet", "info": root / "state" / f"{flight}.json"}
+    res = run_preprocess({"meta": str(meta)}, {k: str(v) for k, v in out.items()})
+    assert res.status == "failed" and read_table_meta(out["state"])["status"] == "failed"
+    return str(out["state"]), str(out["segments"])
+
+
+def _box_less_flight(root: Path, flight: str = "f3") -> tuple[str, str]:
+    seg = synthetic_segments([(0, 4, "tkOf"), (4, 12, "a"), (12, 20, "b"), (20, 26, "a")])
+    return write_flight(root, flight, synthetic_state(800, seed=3), seg)  # no box rotation: NED
+
+
+def test_a_flight_whose_preprocessing_failed_is_dropped_with_its_error_and_the_others_kept(tmp_path, stand_in):
+    paths = [*_two_flights(tmp_path), _failed_flight(tmp_path, "bad", "no GPS fix")]
+    cfg = _config({"s": {"flights": ["f1", "f2", "bad"]}})
+    ds = align_run.load_demo_set(_inputs(paths), cfg, "s")
+    assert [(d.name, d.reason) for d in ds.dropped if d.flight_id == "bad"] == [
+        ("bad:", "preprocessing failed: ingest failed: no GPS fix")]
+    assert "set s: flight bad: preprocessing failed: ingest failed: no GPS fix: skipped" in ds.notices
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(paths), out, cfg, set_name="s")
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    bad = al[al["flight_id"] == "bad"]
+    assert bad["status"].tolist() == ["dropped"]
+    assert bad["reason"].tolist() == ["preprocessing failed: ingest failed: no GPS fix"]
+    assert set(read_table(out["learned"])["maneuver"]) == {"a#1", "a#2", "b"}
+    assert res.diagnostics["n_dropped"] == 1 and set(res.diagnostics["flights"]) == {"f1", "f2"}
+
+
+def test_a_preprocess_error_that_already_says_preprocessing_failed_is_not_said_twice(tmp_path, stand_in):
+    # the placeholder of a flight whose preprocessing raised (pipeline.preprocess.run): its error
+    # starts "preprocessing failed: ", at the top of the state and segments metadata
+    extra = {"flight_id": "bad", "status": "failed", "error": "preprocessing failed: time span 0 s"}
+    sp, gp = tmp_path / "state" / "bad.parquet", tmp_path / "segments" / "bad.parquet"
+    write_table(schema.empty("state"), sp, schema.STATE, name="state", extra=extra)
+    write_table(schema.empty("segments"), gp, schema.SEGMENTS, name="segments", extra=extra)
+    ds = align_run.load_demo_set(_inputs([*_two_flights(tmp_path), (str(sp), str(gp))]),
+                                 _config({"s": {"flights": ["f1", "f2", "bad"]}}), "s")
+    assert [d.reason for d in ds.dropped if d.flight_id == "bad"] == ["preprocessing failed: time span 0 s"]
+
+
+def test_a_failed_reference_flight_leaves_the_box_less_flights_in_ned_with_a_notice(tmp_path, stand_in):
+    paths = [*_two_flights(tmp_path), _box_less_flight(tmp_path), _failed_flight(tmp_path, "ref", "no GPS fix")]
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(paths), out,
+                              _config({"s": {"flights": ["f1", "f2", "f3", "ref"], "reference": "ref"}}),
+                              set_name="s")
+    assert "set s: reference ref not available: box-less flights stay in NED" in res.diagnostics["notices"]
+    assert res.diagnostics["flights"]["f3"]["frame"] == "ned"
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    assert al[al["flight_id"] == "ref"]["reason"].tolist() == ["preprocessing failed: ingest failed: no GPS fix"]
+    used = al[al["status"] == "used"]
+    assert set(used["flight_id"]) == {"f1", "f2", "f3"}
+    assert set(used[used["flight_id"] == "f3"]["frame"]) == {"ned"}
+
+
+def test_a_reference_whose_demos_cannot_be_cut_is_dropped_and_the_box_less_flights_stay_in_ned(tmp_path,
+                                                                                                 stand_in):
+    seg = synthetic_segments([(0, 4, "tkOf"), (4, 12, "a"), (12, 20, "b")])
+    sp, gp = write_flight(tmp_path, "ref", synthetic_state(600, seed=4), seg, 0.2)
+    # a state table without pos_n_m (a foreign or older file): readable, but no demos in it
+    cols = tuple(c for c in schema.STATE if c.name != "pos_n_m")
+    write_table(synthetic_state(600, seed=4), sp, cols, name="state",
+                extra={"flight_id": "ref", "preprocess": {"status": "ok"}, "box_rotation_rad": 0.2})
+    paths = [*_two_flights(tmp_path), _box_less_flight(tmp_path), (sp, gp)]
+    ds = align_run.load_demo_set(_inputs(paths), _config({"s": {"flights": ["f1", "f2", "f3", "ref"],
+                                                                "reference": "ref"}}), "s")
+    (drop,) = [d for d in ds.dropped if d.flight_id == "ref"]
+    assert drop.reason.startswith(f"cannot cut the demos of {sp}: KeyError:") and "\n" not in drop.reason
+    assert "set s: reference ref failed: box-less flights stay in NED" in ds.notices
+    assert ds.flights["f3"]["frame"] == "ned" and set(ds.flights) == {"f1", "f2", "f3"}
+    assert {d.flight_id for demos in ds.maneuvers.values() for d in demos} == {"f1", "f2", "f3"}
+
+
+def test_a_box_less_flight_whose_fit_to_the_reference_fails_is_dropped_and_the_others_kept(tmp_path, stand_in):
+    seg = synthetic_segments([(0, 4, "tkOf"), (4, 12, "a"), (12, 20, "b"), (20, 26, "a")])
+    st = synthetic_state(800, heading_rad=np.radians(30.0), seed=1)
+    st[["pos_n_m", "pos_e_m", "pos_d_m"]] = np.nan  # no position to fit to (its own demos: dropped, said)
+    f2 = _two_flights(tmp_path)[1]  # (its f1 is overwritten below)
+    paths = [write_flight(tmp_path, "f1", st, seg, np.radians(30.0)), f2, _box_less_flight(tmp_path)]
+    ds = align_run.load_demo_set(_inputs(paths), _config({"s": {"flights": ["f1", "f2", "f3"],
+                                                                "reference": "f1"}}), "s")
+    (drop,) = [d for d in ds.dropped if d.flight_id == "f3"]
+    assert drop.name == "f3:" and drop.reason.startswith("fit to reference f1 failed: ValueError:")
+    assert "\n" not in drop.reason
+    assert any(n.startswith("set s: flight f3: fit to reference f1 failed") for n in ds.notices)
+    assert {d.flight_id for demos in ds.maneuvers.values() for d in demos} == {"f2"}
+
+
+def test_an_unreadable_state_file_is_dropped_with_a_reason_naming_the_file(tmp_path, stand_in):
+    paths = _two_flights(tmp_path)
+    paths.append(write_flight(tmp_path, "f3", synthetic_state(800, seed=3), synthetic_segments([(4, 12, "a")]), 0.0))
+    Path(paths[2][0]).write_bytes(b"\x00garbage, not Parquet\xff" * 8)
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(paths), out, _config({"s": {"flights": ["f1", "f2", "f3"]}}), set_name="s")
+    al = read_table(out["alignment"], schema.ALIGN_ALIGNMENT)
+    (reason,) = al[al["flight_id"] == "f3"]["reason"].tolist()
+    assert reason.startswith(f"cannot read {paths[2][0]}: ArrowInvalid:") and "\n" not in reason
+    assert set(read_table(out["learned"])["maneuver"]) == {"a#1", "a#2", "b"}
+    assert set(res.diagnostics["flights"]) == {"f1", "f2"}
+
+
+def test_an_unreadable_segments_file_is_dropped_with_a_reason_naming_the_file(tmp_path, stand_in):
+    paths = _two_flights(tmp_path)
+    Path(paths[1][1]).write_bytes(b"not Parquet")
+    ds = align_run.load_demo_set(_inputs(paths), _config({"s": {"flights": ["f1", "f2"]}}), "s")
+    (drop,) = [d for d in ds.dropped if d.flight_id == "f2"]
+    assert drop.reason.startswith(f"cannot read {paths[1][1]}: ") and set(ds.flights) == {"f1"}
+
+
+def test_a_learner_error_of_any_kind_skips_its_maneuver_with_the_error_on_one_line(tmp_path, monkeypatch):
+    class Broken:
+        def fit(self, demos):
+            raise IndexError("index 7 is out of bounds\nfor axis 0")
+
+    monkeypatch.setattr(align_run, "make_learner", lambda config, dt: Broken())
+    out = _outputs(tmp_path)
+    res = align_run.run_align(_inputs(_two_flights(tmp_path)), out, _config({"s": {"flights": ["f1", "f2"]}}),
+                              set_name="s")
+    assert res.status == "failed"
+    reason = res.diagnostics["maneuvers"]["b"]["reason"]
+    assert reason.startswith("fit failed: IndexError: index 7 is out of bounds for axis 0 (at test_run.py:")

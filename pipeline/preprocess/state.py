@@ -252,7 +252,14 @@ def _prepare(df: pd.DataFrame, cfg: PreprocessConfig, name: str, diag: dict | No
     not counted when ``diag`` is None)."""
     if df is None or not len(df):
         return schema.empty(name) if name in schema.STREAMS else pd.DataFrame()
-    df = primary_instance(df)
+    kept = primary_instance(df)
+    if diag is not None and len(kept) < len(df):
+        # one sensor per stream: the others' rows are not used, and the diagnostics say so
+        n = df["instance"].value_counts()
+        used = int(kept["instance"].iloc[0])
+        diag.setdefault("instances", {})[key or name] = {
+            "used": used, "rows_not_used": {str(int(i)): int(c) for i, c in n.sort_index().items() if int(i) != used}}
+    df = kept
     df, d = repair_timestamps(df, clock_jump_s=cfg.clock_jump_s)
     if diag is not None and any(d.values()):
         diag["timestamp_repairs"][key or name] = d
@@ -423,7 +430,15 @@ def _gps_ned(gps: pd.DataFrame, meta: dict, diag: dict, ned_method: str = "wgs84
         alt = gps["alt_msl_m"].to_numpy(dtype=np.float64, na_value=np.nan)
         alt_kind = "alt_msl_m"
     fix = gps["fix_type"].to_numpy(dtype=np.float64, na_value=np.nan)
-    ok = np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0)) & (np.isnan(fix) | (fix >= min_fix))
+    has_pos = np.isfinite(lat) & np.isfinite(lon) & ~((lat == 0) & (lon == 0))
+    low_fix = has_pos & ~(np.isnan(fix) | (fix >= min_fix))
+    ok = has_pos & ~low_fix
+    dropped = {k: int(v) for k, v in (("no_position", (~has_pos).sum()), ("low_fix", low_fix.sum())) if v}
+    if dropped:
+        diag["gps_fixes_dropped"] = dropped
+        if low_fix.any():
+            diag["notes"].append(f"gps: {int(low_fix.sum())} of {len(lat)} fixes below fix type {min_fix} "
+                                 "not used (preprocess.bpm.gps_min_fix)")
     # a latitude beyond ±90° or a longitude beyond ±180° is no position (a reader's unit slip,
     # e.g. degE7 read as degrees, or a corrupt record): dropped and counted, never converted
     # into a point thousands of km away

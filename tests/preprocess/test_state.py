@@ -409,3 +409,19 @@ def test_a_height_spike_no_aircraft_could_fly_is_dropped_and_a_step_is_kept():
     baro = pd.DataFrame({"t_ns": t, "alt_rel_m": h})
     res = preprocess_log(FlightLog.from_streams({"flight_id": "spk"}, {"baro": baro}))
     assert res.diagnostics["implausible_values"] == {"baro": {"alt_rel_m": 3}}
+
+
+def test_a_second_sensor_instance_and_gps_fixes_left_out_are_counted_in_the_diagnostics(rng):
+    log, _ = synthetic_flight(rng, gap=False)
+    gps, imu = log["gps"].copy(), log["imu"].copy()
+    gps.loc[[10, 11, 12], "fix_type"] = 2.0          # 2-D fixes: below the default minimum of 3
+    gps.loc[20, ["lat_deg", "lon_deg"]] = np.nan      # a fix without coordinates
+    imu2 = imu.iloc[::2].assign(instance=1)          # a second IMU with half the samples
+    res = preprocess_log(FlightLog.from_streams(log.meta, {**{k: log[k] for k in ("attitude", "control")},
+                                                           "gps": gps, "imu": pd.concat([imu, imu2])}))
+    d = res.diagnostics
+    assert d["instances"]["imu"] == {"used": 0, "rows_not_used": {"1": len(imu2)}}
+    assert d["gps_fixes_dropped"] == {"no_position": 1, "low_fix": 3}
+    assert f"gps: 3 of {len(gps)} fixes below fix type 3 not used (preprocess.bpm.gps_min_fix)" in d["notes"]
+    clean = preprocess_log(FlightLog.from_streams(log.meta, {k: log[k] for k in ("attitude", "control", "gps", "imu")}))
+    assert "instances" not in clean.diagnostics and "gps_fixes_dropped" not in clean.diagnostics

@@ -25,7 +25,6 @@ from __future__ import annotations
 import re
 import sys
 import time
-import traceback
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -36,7 +35,7 @@ from numpy.typing import NDArray
 
 from ..io import schema
 from ..io.parquet import read_table, read_table_meta, write_table
-from ..io.stage import declared, declared_list
+from ..io.stage import declared, declared_list, exception_line
 from .demos import DEMO_COLUMNS, Demo, Dropped, FlightDemos, fit_to_reference, flight_demos
 
 F64 = NDArray[np.float64]
@@ -166,15 +165,6 @@ def by_occurrence(maneuvers: Mapping[str, list], repeated: set[str] | None = Non
     return out
 
 
-def _one_line(exc: BaseException, *, where: bool = True) -> str:
-    """``Type: message (at file:line)`` of ``exc`` on one line; ``where=False`` leaves out the
-    place it was raised (a file that cannot be read: the reader's line says nothing more)."""
-    msg = " ".join(str(exc).split()) or "(no message)"
-    tb = traceback.extract_tb(exc.__traceback__) if where else []
-    at = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
-    return f"{type(exc).__name__}: {msg}{at}"
-
-
 def _failed_preprocess_reason(meta: Mapping[str, Any]) -> str | None:
     """Why preprocessing of a flight failed, from its ``state`` metadata, or None when it did not.
 
@@ -206,7 +196,7 @@ def _read_flight(state_path: str, segments_path: str) -> tuple[pd.DataFrame, pd.
     try:
         meta = read_table_meta(state_path)
     except Exception as exc:  # a damaged file is this flight's problem, not the set's
-        return f"cannot read {state_path}: {_one_line(exc, where=False)}"
+        return f"cannot read {state_path}: {exception_line(exc, where=False)}"
     failed = _failed_preprocess_reason(meta)
     if failed is not None:
         return failed
@@ -215,7 +205,7 @@ def _read_flight(state_path: str, segments_path: str) -> tuple[pd.DataFrame, pd.
         try:
             tables.append(read_table(p))
         except Exception as exc:
-            return f"cannot read {p}: {_one_line(exc, where=False)}"
+            return f"cannot read {p}: {exception_line(exc, where=False)}"
     return tables[0], tables[1], meta
 
 
@@ -292,7 +282,7 @@ def load_demo_set(inputs, config: Mapping[str, Any], set_name: str) -> DemoSet:
             fd = flight_demos(state, seg, flight_id=f, heading_rad=box, fit=fit, sample_hz=hz, exclude=exclude,
                               box_origin_ned_m=origins.get(f))
         except Exception as exc:  # one bad flight never stops the others: its drop says why
-            reason = f"{step}: {_one_line(exc)}"
+            reason = f"{step}: {exception_line(exc)}"
             notices.append(f"set {set_name}: flight {f}: {reason}: skipped")
             flight_dropped[f] = [Dropped(f"{f}:", f, "", -1, reason)]
             if f == ref:
@@ -520,7 +510,7 @@ def run_align(inputs, outputs, config: Mapping[str, Any], *, set_name: str) -> A
                 dt = float(getattr(model, "dt_hidden_", 0.5 * dt_demo))
                 tabs = _maneuver_tables(label, demos, model, dt, meta_of)
             except Exception as exc:  # one maneuver's bad demos never stop the set: its row says why
-                reason = f"fit failed: {_one_line(exc)}"
+                reason = f"fit failed: {exception_line(exc)}"
             else:
                 for k, v in tabs.items():
                     parts[k].append(v)

@@ -17,6 +17,19 @@ first valid measurement to the last; a step holds the radar sample nearest to it
 time stamp) or, where the radar has no sample, the grid time and no measurement: a
 predict-only step, counted as ``n_predict_only`` in every output's metadata.
 
+**Radar rows not used** are counted, never lost in silence: every output's metadata holds
+``n_radar_rows`` (the stream's rows, all instances; the synthetic radar's rows, gaps
+included) and ``radar_dropped`` (:func:`radar_steps`: ``nan_field``, ``duplicate_stamp``,
+``same_step``; and ``other_instance``, the rows of radar instances other than the lowest,
+which the filters do not use), so ``n_steps - n_predict_only == n_radar_rows - sum(radar_dropped)``;
+``notes`` says when other instances or duplicated stamps were set aside. Duplicated stamps
+(ingest keeps them and only counts them) are data, not a failure: the first row of each is kept.
+
+**Heading (EKF+HMM).** The classifier's heading is the attitude stream's yaw (else the state's
+``yaw_rad``) interpolated to the steps and held beyond its ends; the ``ekf_hmm`` metadata counts
+the steps whose heading was bridged over an attitude gap longer than :data:`YAW_GAP_LIMIT_S` or
+held beyond the attitude's span (``yaw_filled``).
+
 **Reference (NEES).** A simulated flight carries its truth (the ingest ``truth`` stream from
 the ``<log>.truth.parquet`` side-car, 200 Hz, in the radar's NED frame): it is interpolated to
 the steps and is the NEES reference. A synthetic-radar flight's reference is the preprocessed
@@ -28,10 +41,13 @@ initialisation) is the reference at the first step, else it comes from the first
 **Outputs** (``io.schema`` tables ``estimate``/``estimate_hmm``): ``results/estimate/ekf/``,
 ``ekf_rts/`` (the smoothed EKF; its ``nis`` is the filter's) and ``ekf_hmm/`` (the EKF+HMM's
 own estimate with ``mode``, ``pred``, ``V_best``). Failures are placeholders, never crashes:
-no radar (or no state track to synthesise it from) gives three empty tables with ``status:
-failed`` and the reason; a model set without GMR (feature set other than
-:data:`~pipeline.estimate.ekf_hmm.GMR_FEATURE_SETS`, e.g. ``f3a``'s ``aero``), a failed model set or a failed Q₂ give an
-empty ``ekf_hmm`` table with the reason beside complete EKF tables (``status: partial``).
+no radar (or no state track to synthesise it from), an unreadable input or any other error of
+the flight's EKF (``estimate failed: <type>: <message> (at <file>:<line>)``) gives three empty
+tables with ``status: failed`` and the one-line reason; a model set without GMR (feature set
+other than :data:`~pipeline.estimate.ekf_hmm.GMR_FEATURE_SETS`, e.g. ``f3a``'s ``aero``), a
+failed or unreadable model set or a failed Q₂ give an empty ``ekf_hmm`` table with the reason
+beside complete EKF tables (``status: partial``), and so does any error of the EKF+HMM itself
+(``EKF+HMM failed: <type>: <message> ...``).
 """
 
 from __future__ import annotations
@@ -48,7 +64,7 @@ from numpy.typing import NDArray
 
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta, write_json, write_table
-from ..io.stage import declared, declared_list, say
+from ..io.stage import declared, declared_list, exception_line, say
 from .base import ConstantAcceleration, GaussianState
 from .ekf import ExtendedKalmanFilter, run_filter
 from .ekf_hmm import GMR_FEATURE_SETS, q2_from_runs, run_ekf_hmm
@@ -62,6 +78,12 @@ F64 = NDArray[np.float64]
 #: the estimators of one flight job, in output order (``results/estimate/<estimator>/``)
 ESTIMATORS: tuple[str, ...] = ("ekf", "ekf_rts", "ekf_hmm")
 
+#: longest attitude gap (s) the EKF+HMM's heading is bridged across without being counted: the
+#: linear fill is exact only at a constant turn rate, and rolling into or out of a turn takes
+#: about a second, so a longer hole can hide a change of turn rate and a heading tens of
+#: degrees off (the attitude streams run at 10 Hz or faster: a 1 s hole is many samples lost)
+YAW_GAP_LIMIT_S: float = 1.0
+
 
 @dataclass(frozen=True)
 class EstimateResult:
@@ -74,9 +96,12 @@ class EstimateResult:
         ``ok`` (all three estimates), ``partial`` (EKF and RTS; ``ekf_hmm`` a placeholder) or
         ``failed`` (three placeholders).
     error : str
-        The reason when not ``ok`` (``ekf_hmm``'s when partial).
+        The reason when not ``ok`` (``ekf_hmm``'s when partial), one line.
     diagnostics : dict
-        Steps, predict-only steps, radar source and site, reference, RMSE per group.
+        Steps, predict-only steps, radar rows and the rows not used (``n_radar_rows``,
+        ``radar_dropped``), radar source and site, reference, RMSE per group, ``notes``; with
+        the EKF+HMM run, also its heading's source and filled steps (``yaw_from``,
+        ``yaw_filled``).
     """
 
     flight_id: str | None
@@ -174,28 +199,56 @@ def synthesise_radar(state: pd.DataFrame, model: RadarModel, rate_hz: float,
     return pd.DataFrame({"t_ns": t[idx], **dict(zip(RADAR_FIELDS, z.T))})
 
 
-def radar_steps(radar: pd.DataFrame) -> tuple[NDArray[np.int64], F64, int]:
-    """The filter's steps from radar samples: ``(t_ns (T,), z (T, 4), period_ns)``.
+def radar_steps(radar: pd.DataFrame) -> tuple[NDArray[np.int64], F64, int, dict[str, int]]:
+    """The filter's steps from radar samples, and the rows it could not use.
 
-    Steps are a regular grid at the median sample period from the first valid sample to the
-    last; each step takes the nearest sample (its own time stamp; the first of two sharing a
-    step), and a step without one keeps the grid time and a NaN measurement (predict only).
+    Steps are a regular grid at the median period between distinct sample times, from the first
+    valid sample to the last; each step takes the first sample that rounds to it (its own time
+    stamp), and a step without one keeps the grid time and a NaN measurement (predict only).
+
+    Parameters
+    ----------
+    radar : DataFrame
+        ``t_ns`` and :data:`~pipeline.estimate.models.RADAR_FIELDS`, one radar instance, in any
+        order; duplicated time stamps allowed (ingest keeps them and only counts them).
+
+    Returns
+    -------
+    t_ns : ndarray of int64, shape (T,)
+        The steps.
+    z : ndarray, shape (T, 4)
+        The measurement of each step, NaN on a predict-only step.
+    period_ns : int
+        The grid period (0 with fewer than two usable samples).
+    dropped : dict
+        Rows not used, by reason, every key present: ``nan_field`` (a field NaN or infinite),
+        ``duplicate_stamp`` (the time stamp of an earlier row, which is kept), ``same_step``
+        (a later distinct time in a step already taken). ``T - (NaN rows of z)`` is
+        ``len(radar) - sum(dropped.values())``.
     """
-    r = radar.dropna(subset=list(RADAR_FIELDS)).sort_values("t_ns", kind="stable")
+    fields = list(RADAR_FIELDS)
+    # an infinite field would poison the filter's state for good, like a NaN one
+    finite = np.isfinite(radar[fields].to_numpy(dtype=np.float64)).all(axis=1)
+    r = radar[finite].sort_values("t_ns", kind="stable")
     t = r["t_ns"].to_numpy(dtype=np.int64)
+    zr = r[fields].to_numpy(dtype=np.float64)
+    # a repeated stamp: keep the first row (in stream order, the sort is stable) so the period
+    # below is that of the distinct times and never zero
+    dup = np.r_[False, t[1:] == t[:-1]] if len(t) else np.zeros(0, dtype=bool)
+    dropped = {"nan_field": int((~finite).sum()), "duplicate_stamp": int(dup.sum()), "same_step": 0}
+    t, zr = t[~dup], zr[~dup]
     if len(t) < 2:
-        return t, r[list(RADAR_FIELDS)].to_numpy(dtype=np.float64), 0
-    period = int(np.median(np.diff(t)))
-    if period <= 0:
-        raise ValueError("radar time stamps do not increase")
+        return t, zr, 0, dropped
+    period = int(np.median(np.diff(t)))  # >= 1: the times now strictly increase
     grid = _grid(int(t[0]), int(t[-1]), period)
     k = np.rint((t - t[0]) / period).astype(np.int64)
     first = np.r_[True, k[1:] != k[:-1]]
+    dropped["same_step"] = int((~first).sum())
     steps = grid.copy()
     steps[k[first]] = t[first]
     z = np.full((len(grid), 4), np.nan)
-    z[k[first]] = r[list(RADAR_FIELDS)].to_numpy(dtype=np.float64)[first]
-    return steps, z, period
+    z[k[first]] = zr[first]
+    return steps, z, period, dropped
 
 
 def radar_init(z: F64, model: RadarModel) -> F64:
@@ -222,27 +275,67 @@ def _interp(t_src: NDArray[np.int64], values: F64, t: NDArray[np.int64]) -> F64:
     return out
 
 
-def _yaw_at(log, state: pd.DataFrame | None, t: NDArray[np.int64]) -> F64 | None:
-    """Heading (rad) at the steps: the ``attitude`` stream (first instance), else the state's
-    ``yaw_rad``; unwrapped before interpolation."""
+def _yaw_at(log, state: pd.DataFrame | None, t: NDArray[np.int64]) -> tuple[F64 | None, dict]:
+    """Heading (rad) at the steps, and how much of it was filled in.
+
+    Parameters
+    ----------
+    log : FlightLog
+        Its ``attitude`` stream (first instance) is the source, else ``state``.
+    state : DataFrame or None
+        The preprocessed state; its ``yaw_rad`` is the source without attitude.
+    t : ndarray of int64, shape (T,)
+        The steps.
+
+    Returns
+    -------
+    yaw : ndarray, shape (T,), or None
+        Unwrapped, linearly interpolated, held at the nearest heading before the first and
+        after the last sample; None without two finite headings.
+    info : dict
+        ``yaw_from`` (``attitude``, ``state`` or None), ``yaw_gap_limit_s``
+        (:data:`YAW_GAP_LIMIT_S`) and ``yaw_filled``: ``across_gap``, the steps interpolated
+        between two headings more than the limit apart, and ``held``, the steps before the
+        first or after the last heading (the filter gets these values all the same; the
+        counts say how far to trust its classification there).
+    """
     from ..frames.rotations import quat_to_euler
 
+    info: dict[str, Any] = {"yaw_from": None, "yaw_gap_limit_s": YAW_GAP_LIMIT_S,
+                            "yaw_filled": {"across_gap": 0, "held": 0}}
     att = log["attitude"]
     if len(att):
         att = att[att["instance"] == att["instance"].min()].dropna(subset=["q_w", "q_x", "q_y", "q_z"])
     if len(att) >= 2:
         ts, yaw = att["t_ns"].to_numpy(np.int64), quat_to_euler(att[["q_w", "q_x", "q_y", "q_z"]].to_numpy())[2]
+        info["yaw_from"] = "attitude"
     elif state is not None and len(state) and state["yaw_rad"].notna().sum() >= 2:
         s = state.dropna(subset=["yaw_rad"])
         ts, yaw = s["t_ns"].to_numpy(np.int64), s["yaw_rad"].to_numpy(np.float64)
+        info["yaw_from"] = "state"
     else:
-        return None
+        return None, info
+    # one NaN heading (a degenerate quaternion) would turn every later unwrapped value NaN;
+    # sorted, as np.interp needs
+    ok = np.isfinite(yaw)
+    order = np.argsort(ts[ok], kind="stable")
+    ts, yaw = ts[ok][order], yaw[ok][order]
+    if len(ts) < 2:
+        info["yaw_from"] = None
+        return None, info
     y = _interp(ts, np.unwrap(yaw)[:, None], t)[:, 0]
-    # before the first / after the last attitude sample: hold the nearest heading
+    # before the first / after the last heading: hold the nearest one
     ok = np.isfinite(y)
     if not ok.any():
-        return None
-    return np.interp(np.arange(len(y)), np.flatnonzero(ok), y[ok])
+        info["yaw_from"] = None
+        return None, info
+    held = (t < ts[0]) | (t > ts[-1])
+    i = np.searchsorted(ts, t)
+    on_sample = ts[np.clip(i, 0, len(ts) - 1)] == t
+    i = np.clip(i, 1, len(ts) - 1)   # inside the span and off a sample: ts[i - 1] < t < ts[i]
+    across = ~held & ~on_sample & (ts[i] - ts[i - 1] > YAW_GAP_LIMIT_S * 1e9)
+    info["yaw_filled"] = {"across_gap": int(across.sum()), "held": int(held.sum())}
+    return np.interp(np.arange(len(y)), np.flatnonzero(ok), y[ok]), info
 
 
 # --- the stage ----------------------------------------------------------------------------------
@@ -260,18 +353,28 @@ def _paths(outputs) -> dict[str, str]:
 
 
 def _ekf_hmm_blocker(inputs, config: Mapping) -> tuple[str, Any, F64 | None]:
-    """``(reason, model_set, Q2)``: why the EKF+HMM cannot run ('' when it can)."""
+    """``(reason, model_set, Q2)``: why the EKF+HMM cannot run ('' when it can), in one line
+    naming the file when one is unreadable."""
+    from ..models.base import ModelError
+    from ..models.classifier import ManeuverModelSet
+
     model = (config.get("ekf_hmm") or {}).get("model", "sim")
     params, q2_path = declared(inputs, "model_params"), declared(inputs, "q2")
     if not params or not Path(params).exists():
         return f"no model set {model} given", None, None
     mdir = Path(params).parent
-    meta = json.loads((mdir / "meta.json").read_text())
+    try:
+        meta = json.loads((mdir / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return f"{mdir / 'meta.json'}: not a readable JSON file ({exception_line(exc)})", None, None
+    if not isinstance(meta, dict):
+        return f"{mdir / 'meta.json'}: holds a JSON {type(meta).__name__}, not an object", None, None
     if meta.get("status") == "failed":
         return f"model set {model} failed: {meta.get('error')}", None, None
-    from ..models.classifier import ManeuverModelSet
-
-    ms = ManeuverModelSet.load(mdir)
+    try:
+        ms = ManeuverModelSet.load(mdir)
+    except ModelError as exc:   # its message names the folder and says what is wrong
+        return " ".join(str(exc).split()), None, None
     fs = ms.config.feature_set
     if fs not in GMR_FEATURE_SETS:
         return (f"model set {model} has no GMR (feature set {fs}; the EKF+HMM needs one of "
@@ -367,37 +470,69 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     """
     paths = _paths(outputs)
     meta_path = Path(declared(inputs, "meta"))
-    meta = json.loads(meta_path.read_text())
-    fid = flight_id or meta.get("flight_id")
     ekf_cfg = {"q": 1.0, "p0_sigma": [1.0, 0.1, 0.01], "joseph": True, "init": "reference",
                "above_site": True, **dict(config.get("ekf") or {})}
-    above = bool(ekf_cfg["above_site"])
     hmm_cfg = {"model": "sim", "q2_scale": 1.0, "reset_at_segments": False, "increments": "prior",
                "decision": "both", **dict(config.get("ekf_hmm") or {})}
+    # the ingest folder is named after its flight: the name a placeholder gets when meta.json
+    # cannot say it
+    base = {"flight_id": flight_id or meta_path.parent.name, "vehicle": vehicle, "q": float(ekf_cfg["q"]),
+            "model_set": hmm_cfg["model"]}
+    known: dict[str, Any] = {}   # the radar counts once taken, kept by a later failure's placeholders
+    try:
+        return _estimate_flight(inputs, paths, config, meta_path, ekf_cfg, hmm_cfg, base, known,
+                                flight_id=flight_id, seed=seed)
+    except Exception as exc:  # one bad flight never stops the others: its placeholders say why
+        return _fail(paths, base, f"estimate failed: {exception_line(exc)}", known)
+
+
+def _fail(paths: Mapping[str, str], base: Mapping, reason: str, known: Mapping | None = None) -> EstimateResult:
+    """Three placeholders with ``status: failed`` and the one-line ``reason`` (any table written
+    before the failure is replaced: a flight's three outputs agree); ``known``: counts taken so
+    far (radar rows and drops, notes), kept in their metadata."""
+    fid = base["flight_id"]
+    _say(f"{fid}: placeholder estimates ({reason})")
+    diag = {"n_steps": 0, "n_predict_only": 0, **(known or {})}
+    extra = {**base, "status": "failed", "error": reason, **diag}
+    for e in ESTIMATORS:
+        _placeholder(paths[e], "estimate_hmm" if e == "ekf_hmm" else "estimate", {**extra, "estimator": e})
+    return EstimateResult(fid, "failed", reason, diag)
+
+
+def _estimate_flight(inputs, paths: Mapping[str, str], config: Mapping, meta_path: Path, ekf_cfg: dict,
+                     hmm_cfg: dict, base: dict, known: dict, *, flight_id: str | None,
+                     seed: int) -> EstimateResult:
+    """The work of :func:`run_estimate` from reading its inputs on: ``base`` gets the flight id
+    and ``known`` the radar counts as they are learnt, for the placeholders of a failure
+    raised here."""
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return _fail(paths, base, f"{meta_path}: not a readable JSON file ({exception_line(exc)})")
+    if not isinstance(meta, dict):
+        return _fail(paths, base, f"{meta_path}: holds a JSON {type(meta).__name__}, not an object")
+    fid = base["flight_id"] = flight_id or meta.get("flight_id")
+    if meta.get("status") == "failed":
+        return _fail(paths, base, f"ingest failed: {meta.get('error') or 'unknown reason'}")
+    above = bool(ekf_cfg["above_site"])
     synth = config.get("synthetic_radar")
     state_path = declared(inputs, "state")
-    state = read_table(state_path) if state_path and Path(state_path).exists() else None
-    st_meta = read_table_meta(state_path) if state is not None else {}
-    base = {"flight_id": fid, "vehicle": vehicle, "q": float(ekf_cfg["q"]), "model_set": hmm_cfg["model"]}
-
-    def fail(reason: str) -> EstimateResult:
-        _say(f"{fid}: placeholder estimates ({reason})")
-        extra = {**base, "status": "failed", "error": reason, "n_steps": 0, "n_predict_only": 0}
-        for e in ESTIMATORS:
-            _placeholder(paths[e], "estimate_hmm" if e == "ekf_hmm" else "estimate", {**extra, "estimator": e})
-        return EstimateResult(fid, "failed", reason, {"n_steps": 0, "n_predict_only": 0})
-
-    if meta.get("status") == "failed":
-        return fail(f"ingest failed: {meta.get('error') or 'unknown reason'}")
+    try:
+        state = read_table(state_path) if state_path and Path(state_path).exists() else None
+        st_meta = read_table_meta(state_path) if state is not None else {}
+    except (OSError, ValueError) as exc:     # a damaged state file (pyarrow's errors are ValueErrors)
+        return _fail(paths, base, f"{state_path}: cannot read the state ({exception_line(exc)})")
     try:
         log = read_flightlog(meta_path.parent, streams=["radar", "truth", "attitude"])
     except (ValueError, OSError) as exc:     # a damaged or swapped stream file, named
-        return fail(f"cannot read the ingested streams: {exc}")
+        return _fail(paths, base, f"cannot read the ingested streams: {' '.join(str(exc).split())}")
     # --- the radar and its model
+    notes: list[str] = []
+    n_other = 0
     if synth is not None:
         if state is None or not len(state) or not state["pos_n_m"].notna().any():
             why = st_meta.get("error") or "no position track"
-            return fail(f"no state track to synthesise the radar from ({why})")
+            return _fail(paths, base, f"no state track to synthesise the radar from ({why})")
         model = radar_model(synth.get("site_ned_m", (0.0, 0.0, 0.0)), tau_rd_s=synth.get("tau_rd_s", 0.0),
                             sigma_range_m=synth.get("sigma_range_m", 1.5), sigma_dcos=synth.get("sigma_dcos", 4.5e-5),
                             sigma_range_rate_mps=synth.get("sigma_range_rate_mps", 0.2), above_site=above)
@@ -406,8 +541,15 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     else:
         radar = log["radar"]
         if not len(radar):
-            return fail("no radar stream in the log (and the vehicle is not in estimate.synthetic_radar)")
-        radar = radar[radar["instance"] == radar["instance"].min()]
+            return _fail(paths, base, "no radar stream in the log (and the vehicle is not in estimate.synthetic_radar)")
+        inst = radar["instance"].to_numpy()
+        lowest = radar["instance"].min()
+        mine = inst == lowest
+        n_other = int((~mine).sum())
+        if n_other:
+            others = ", ".join(map(str, sorted(pd.unique(inst[~mine]), key=str)))
+            notes.append(f"radar: instance {others} ignored ({n_other} rows); the filters use instance {lowest} only")
+        radar = radar[mine]
         site_meta = (meta.get("radar") or {})
         if site_meta.get("site_ned_m") is not None:
             site, tau, site_from = site_meta["site_ned_m"], float(site_meta.get("tau_rd_s") or 0.0), "meta.json"
@@ -416,9 +558,14 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
             site_from = "estimate.radar.site_ned_m"
         model = radar_model(site, tau_rd_s=tau, above_site=above)
         source = "stream"
-    t, z, period = radar_steps(radar)
+    n_rows = len(radar) + n_other
+    t, z, period, dropped = radar_steps(radar)
+    if dropped["duplicate_stamp"]:
+        notes.append(f"radar: {dropped['duplicate_stamp']} row(s) repeat an earlier time stamp; "
+                     "the first row of each stamp is used")
+    known.update(n_radar_rows=n_rows, radar_dropped={**dropped, "other_instance": n_other}, notes=notes)
     if len(t) < 2:
-        return fail(f"{len(t)} valid radar sample(s): nothing to filter")
+        return _fail(paths, base, f"{len(t)} valid radar sample(s): nothing to filter", known)
     # --- the reference (NEES) and the initial state
     truth = log["truth"]
     ref, ref_name = None, "none"
@@ -438,35 +585,39 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
     track = run_filter(ekf, prior, t, zz, store="all")
     smooth = rts_smooth(track)
     n_po = int(track.n_predict_only[0])
-    diag = {"n_steps": int(len(t)), "n_predict_only": n_po, "radar": source, "radar_site_ned_m": list(model.site_ned_m),
+    diag = {"n_steps": int(len(t)), "n_predict_only": n_po, "n_radar_rows": n_rows,
+            "radar_dropped": known["radar_dropped"], "radar": source, "radar_site_ned_m": list(model.site_ned_m),
             "radar_site_from": site_from, "radar_period_s": period * 1e-9, "reference": ref_name, "init": init,
-            "above_site": above}
-    extra = {**base, **diag, "status": "ok", "error": None}
+            "above_site": above, "notes": list(notes)}
+    extra = {**base, **diag, "notes": list(notes), "status": "ok", "error": None}   # diag's notes grow below
     err = {}
     for name, mean, cov in (("ekf", track.mean[0], track.cov[0]), ("ekf_rts", smooth.mean[0], smooth.cov[0])):
         df = estimate_frame(t, mean, cov, nis=track.nis[0], nees=_nees(ref, mean, cov))
         write_table(df, paths[name], schema.ESTIMATE, name="estimate", extra={**extra, "estimator": name})
         if ref is not None:
             err[name] = _rmse(mean - ref)
-    # --- the EKF+HMM
-    reason, ms, Q2 = _ekf_hmm_blocker(inputs, config)
+    # --- the EKF+HMM: whatever stops it, the EKF tables above stand (status partial)
     status = "ok"
-    if not reason:
-        seg_path = declared(inputs, "segments")
-        resets = None
-        if hmm_cfg["reset_at_segments"] and seg_path and Path(seg_path).exists():
-            seg = read_table(seg_path)
-            resets = seg["t_start_ns"].to_numpy(np.int64) if len(seg) else None
-        yaw = _yaw_at(log, state, t)
-        box = float((meta.get("params") or {}).get("box_rotation_rad") or st_meta.get("box_rotation_rad") or 0.0)
-        try:
+    try:
+        reason, ms, Q2 = _ekf_hmm_blocker(inputs, config)
+        if not reason:
+            seg_path = declared(inputs, "segments")
+            resets = None
+            if hmm_cfg["reset_at_segments"] and seg_path and Path(seg_path).exists():
+                seg = read_table(seg_path)
+                resets = seg["t_start_ns"].to_numpy(np.int64) if len(seg) else None
+            yaw, yaw_info = _yaw_at(log, state, t)
+            diag.update(yaw_info)
+            filled = yaw_info["yaw_filled"]
+            if filled["across_gap"] or filled["held"]:
+                diag["notes"].append(f"heading: {filled['across_gap']} step(s) interpolated across "
+                                     f"{yaw_info['yaw_from']} gaps over {YAW_GAP_LIMIT_S:g} s, "
+                                     f"{filled['held']} held beyond its span")
+            box = float((meta.get("params") or {}).get("box_rotation_rad") or st_meta.get("box_rotation_rad") or 0.0)
             ht = run_ekf_hmm(ekf, prior, t, zz, ms, Q2, yaw_rad=None if yaw is None else yaw[None],
                              box_heading_rad=box, reset_t_ns=resets, store="filtered",
                              increments=hmm_cfg["increments"],
                              decision=None if hmm_cfg["decision"] == "model" else hmm_cfg["decision"])
-        except ValueError as exc:  # ModelError and numerical failures of the classifier
-            reason = f"EKF+HMM failed: {type(exc).__name__}: {exc}"
-        else:
             # the thesis's output (Ch. 4.1): the EKF+HMM estimate after a known classification,
             # the baseline EKF's after unknown (the filter itself runs on, unreset)
             out = ht.output
@@ -478,12 +629,14 @@ def run_estimate(inputs, outputs, config: Mapping, *, flight_id: str | None = No
             df = schema.conform("estimate_hmm", df)
             n_mode = int(df["mode"].sum())
             write_table(df, paths["ekf_hmm"], schema.ESTIMATE_HMM, name="estimate_hmm",
-                        extra={**extra, "estimator": "ekf_hmm", "n_hmm_steps": n_mode,
-                               "increments": hmm_cfg["increments"],
+                        extra={**extra, **yaw_info, "notes": diag["notes"], "estimator": "ekf_hmm",
+                               "n_hmm_steps": n_mode, "increments": hmm_cfg["increments"],
                                "n_predict_only": int(ht.hmm.n_predict_only[0])})
             diag["n_hmm_steps"] = n_mode
             if ref is not None:
                 err["ekf_hmm"] = _rmse(hm - ref)
+    except Exception as exc:  # ModelError, the classifier's numerical failures, anything else
+        reason = f"EKF+HMM failed: {exception_line(exc)}"
     if reason:
         status = "partial"
         _placeholder(paths["ekf_hmm"], "estimate_hmm",

@@ -5,6 +5,7 @@ Every ``run_<stage>(inputs, outputs, config, **job)`` reads its paths through th
 functions, so the two shapes behave the same everywhere. :func:`say` is how an entry point
 reports a job on stderr (the workflow's log), and :func:`caller_restates` how the command line,
 which prints its own line per input, keeps the job's summary from being said twice.
+:func:`exception_line` is how a stage writes a failure's reason: one line.
 """
 
 from __future__ import annotations
@@ -18,6 +19,25 @@ from typing import Any
 
 #: set while a caller prints each job's outcome itself (:func:`caller_restates`)
 _RESTATED: contextvars.ContextVar[bool] = contextvars.ContextVar("uavpipe_restated", default=False)
+
+
+def exception_line(exc: BaseException, *, where: bool = True) -> str:
+    """``exc`` as one line for a placeholder's reason, a skipped entry or a log line:
+    ``Type: message (at file:line)``, whitespace collapsed (pyarrow and OS messages span
+    several lines; a reason read in a table's metadata or a report has no room for a
+    traceback). ``where=False`` leaves out the place it was raised (a file that cannot be read:
+    the reader's line says nothing more). A :class:`MemoryError` says "out of memory"."""
+    msg = " ".join(str(exc).split()) or "(no message)"
+    if isinstance(exc, MemoryError):
+        msg = f"out of memory ({msg})"
+    at = ""
+    if where:
+        import traceback
+        from pathlib import Path
+
+        tb = traceback.extract_tb(exc.__traceback__)
+        at = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    return f"{type(exc).__name__}: {msg}{at}"
 
 
 def say(prefix: str, msg: str, *, restated: bool = False) -> None:

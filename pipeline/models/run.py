@@ -46,7 +46,7 @@ from ..io import schema
 from ..io.parquet import read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
-from ..io.stage import declared, declared_list, say, source_names
+from ..io.stage import declared, declared_list, exception_line, say, source_names
 from .base import ModelError, ModelsConfig
 from .metrics import THESIS_CLASSIFICATION, per_maneuver_table, thesis_side_by_side
 
@@ -177,13 +177,6 @@ def label_state(state: pd.DataFrame, segments: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def _one_line(exc: BaseException) -> str:
-    """``Type: message`` of ``exc`` on one line (pyarrow and OS messages may span several, and a
-    reason recorded in ``skipped`` or metadata must stay one line)."""
-    msg = " ".join(str(exc).split()) or "(no message)"
-    return f"{type(exc).__name__}: {msg}"
-
-
 def flight_runs(states: Sequence, segments: Sequence, skipped: dict | None = None) -> pd.DataFrame:
     """One training run per labelled segment of each flight.
 
@@ -212,7 +205,7 @@ def flight_runs(states: Sequence, segments: Sequence, skipped: dict | None = Non
             meta = read_table_meta(sp)
             st = read_table(sp)
         except (OSError, ValueError, pa.ArrowException) as exc:  # damaged, missing, a directory
-            skipped[src] = f"unreadable state: {_one_line(exc)}"
+            skipped[src] = f"unreadable state: {exception_line(exc, where=False)}"
             continue
         if not len(st):
             why = " ".join(str(meta.get("error") or "preprocessing gave no samples").split())
@@ -221,7 +214,7 @@ def flight_runs(states: Sequence, segments: Sequence, skipped: dict | None = Non
         try:
             seg = read_table(gp)
         except (OSError, ValueError, pa.ArrowException) as exc:
-            skipped[src] = f"unreadable segments: {_one_line(exc)}"
+            skipped[src] = f"unreadable segments: {exception_line(exc, where=False)}"
             continue
         lab = label_state(st, seg)
         lab = lab[lab["segment_id"] >= 0]
@@ -307,7 +300,7 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
                  + "; ".join(f"{r} ({why})" for r, why in list(dropped.items())[:5])
                  + (f"; … {len(dropped) - 5} more (meta.json training_dropped)" if len(dropped) > 5 else ""))
     except ValueError as exc:  # ModelError, numpy LinAlgError, bad tables: a placeholder model
-        reason = f"training failed: {_one_line(exc)}"
+        reason = f"training failed: {exception_line(exc, where=False)}"
         _say(f"{model_set}: {reason}")
         _write_failed_model(out, spec, reason)
         return ModelStageResult(model_set, "failed", reason, json.loads(meta_path.read_text()))
@@ -386,7 +379,7 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
             res = ms.classify(lab, mode=mode, decision=decision, reset_t_ns=resets,
                               box_heading_rad=float(box) if box is not None else 0.0)
         except ValueError as exc:  # ModelError and numerical failures on odd flights
-            reason = f"classification failed: {_one_line(exc)}"
+            reason = f"classification failed: {exception_line(exc, where=False)}"
         else:
             res["run_id"] = res["run_id"].astype(str)
             if "truth" in res:
@@ -483,7 +476,7 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
                 try:
                     c, c_meta = read_table(p), read_table_meta(p)
                 except (OSError, ValueError, pa.ArrowException) as exc:  # damaged, missing
-                    skipped[flight] = f"unreadable classification: {_one_line(exc)}"
+                    skipped[flight] = f"unreadable classification: {exception_line(exc, where=False)}"
                     continue
                 if c_meta.get("status") == "failed" or not len(c):
                     why = c_meta.get("error") or "no classified samples"

@@ -21,7 +21,6 @@ still raises: it is no flight's fault, and every flight would fail the same way.
 from __future__ import annotations
 
 import json
-import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
@@ -29,7 +28,7 @@ from typing import Mapping
 from ..config import ConfigError
 from ..io import schema
 from ..io.parquet import read_flightlog, write_json, write_table
-from ..io.stage import declared, say
+from ..io.stage import declared, exception_line, say
 from .calibrate import CALIBRATION
 from .resample import TimeBaseError
 from .state import PreprocessResult, preprocess_log, summary_line, write_outputs
@@ -97,15 +96,10 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
 
 def _one_line(exc: BaseException) -> str:
     """``exc`` as one line: the message alone for a :class:`TimeBaseError` (it says what and
-    why); ``Type: message (at file:line)`` otherwise, the line where it was raised."""
-    msg = " ".join(str(exc).split()) or "(no message)"
+    why); :func:`~pipeline.io.stage.exception_line` otherwise."""
     if isinstance(exc, TimeBaseError):
-        return msg
-    if isinstance(exc, MemoryError):
-        msg = f"out of memory ({msg})"
-    tb = traceback.extract_tb(exc.__traceback__)
-    where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
-    return f"{type(exc).__name__}: {msg}{where}"
+        return " ".join(str(exc).split()) or "(no message)"
+    return exception_line(exc)
 
 
 def _placeholder(paths: Mapping, fid: str | None, reason: str) -> PreprocessStageResult:

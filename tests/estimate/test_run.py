@@ -6,6 +6,8 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -16,10 +18,12 @@ from helpers_estimate import SITE, ingested_flight
 from helpers_maneuvers import synth_bulk, synth_run
 from pipeline.config import ConfigError, validate_config
 from pipeline.estimate.models import RADAR_FIELDS, STATE_COLUMNS, RadarModel
-from pipeline.estimate.run import (ESTIMATORS, job_config, radar_rng, radar_steps, run_estimate, run_q2,
-                                   synthesise_radar)
+import pipeline.estimate.run as estimate_run
+from pipeline.estimate.run import (ESTIMATORS, YAW_GAP_LIMIT_S, job_config, radar_rng, radar_steps, run_estimate,
+                                   run_q2, synthesise_radar)
 from pipeline.io import schema
-from pipeline.io.parquet import read_table, read_table_meta
+from pipeline.io.base import FlightLog
+from pipeline.io.parquet import read_flightlog, read_table, read_table_meta, write_flightlog
 from pipeline.models.base import ModelsConfig
 from pipeline.models.classifier import ManeuverModelSet
 from pipeline.report.plots import mode_timeline
@@ -110,8 +114,8 @@ def test_radar_gaps_are_predict_only_steps_counted_in_the_metadata(tmp_path, mod
 def test_radar_steps_keep_the_sample_times_and_fill_the_grid():
     t = np.array([0, 200, 400, 1000, 1200, 1401]) * 1_000_000
     r = pd.DataFrame({"t_ns": t, **{f: np.arange(6.0) for f in RADAR_FIELDS}})
-    steps, z, period = radar_steps(r)
-    assert period == 200_000_000
+    steps, z, period, dropped = radar_steps(r)
+    assert period == 200_000_000 and dropped == {"nan_field": 0, "duplicate_stamp": 0, "same_step": 0}
     assert steps.tolist() == (np.array([0, 200, 400, 600, 800, 1000, 1200, 1401]) * 1_000_000).tolist()
     assert np.isnan(z[3:5]).all() and z[:3, 0].tolist() == [0, 1, 2] and z[5:, 0].tolist() == [3, 4, 5]
 
@@ -205,3 +209,177 @@ def test_q2_of_a_model_set_trained_on_estimates_takes_its_errors_against_the_tru
     qb = np.array(json.loads((tmp_path / "b.json").read_text())["Q2"])
     # the truth's own position increments are unchanged, so only the GMR inputs differ: larger errors
     assert np.trace(qb[6:, 6:]) > np.trace(qa[6:, 6:])
+
+
+# --- bad input: rows set aside are counted, errors become placeholders with one line ---------------
+
+def _rewrite(inputs: dict, **change) -> dict:
+    """``inputs``'s ingested flight with streams replaced: ``change[stream](frame) -> frame``."""
+    d = Path(inputs["meta"]).parent
+    log = read_flightlog(d)
+    streams = {n: log[n] for n in schema.STREAM_NAMES}
+    for name, edit in change.items():
+        streams[name] = edit(streams[name].copy())
+    write_flightlog(FlightLog.from_streams(log.meta, streams), d)
+    return inputs
+
+
+def _radar_meta(out) -> list[tuple]:
+    return [(m["n_radar_rows"], m["radar_dropped"], m["notes"]) for m in (read_table_meta(out[e]) for e in ESTIMATORS)]
+
+
+def test_radar_steps_keep_the_first_row_of_a_repeated_stamp_and_count_every_row_set_aside():
+    ms = [0, 200, 200, 400, 600, 610, 800, 1000, 1000, 1200]   # two repeats; 610 shares 600's step
+    r = pd.DataFrame({"t_ns": np.array(ms) * 1_000_000, **{f: np.arange(10.0) for f in RADAR_FIELDS}})
+    r.loc[4, "range_m"], r.loc[6, "dcos_u"] = np.nan, np.inf         # 600 and 800: unusable fields
+    steps, z, period, dropped = radar_steps(r.iloc[::-1])       # in any order
+    assert dropped == {"nan_field": 2, "duplicate_stamp": 2, "same_step": 0} and period == 200_000_000
+    # 610 now holds the step of 600 (whose row had a NaN field); 800 is a predict-only step
+    assert steps.tolist() == (np.array([0, 200, 400, 610, 800, 1000, 1200]) * 1_000_000).tolist()
+    assert z[:4, 0].tolist() == [0, 2, 3, 5] and np.isnan(z[4]).all() and z[5:, 0].tolist() == [8, 9]
+    assert len(steps) - np.isnan(z[:, 0]).sum() == len(r) - sum(dropped.values())
+    # the stable sort keeps the first row of a repeated stamp in stream order, here the reversed one
+    assert radar_steps(r)[1][1, 0] == 1 and radar_steps(r.iloc[::-1])[1][1, 0] == 2
+    # two samples in one step with no NaN: the first taken, the later one counted
+    r2 = r.copy()
+    r2.loc[4, "range_m"] = 4.0
+    steps, z, _, dropped = radar_steps(r2)
+    assert dropped == {"nan_field": 1, "duplicate_stamp": 2, "same_step": 1} and z[3, 0] == 4.0
+    assert len(steps) - np.isnan(z[:, 0]).sum() == len(r2) - sum(dropped.values())
+
+
+def test_radar_steps_of_a_radar_whose_stamps_all_repeat_is_one_sample_not_an_error():
+    r = pd.DataFrame({"t_ns": np.full(5, 7, dtype=np.int64), **{f: np.arange(5.0) for f in RADAR_FIELDS}})
+    steps, z, period, dropped = radar_steps(r)
+    assert (len(steps), period, dropped["duplicate_stamp"]) == (1, 0, 4) and z[0, 0] == 0.0
+
+
+def test_a_flight_whose_radar_repeats_time_stamps_is_estimated_with_the_repeats_counted(tmp_path, models):
+    """Every radar row written twice (the repeats of rows 10-14 with other values; ingest keeps
+    them all): more repeats than distinct stamps once stopped the job. Duplicated stamps are data,
+    not a failure: the first row of each is used, the flight is ``ok`` (every step still has its
+    measurement) and the repeats are counted in every output."""
+    def repeat(r):
+        again = r.copy()
+        again.loc[10:14, "range_m"] += 50.0
+        return pd.concat([r, again], ignore_index=True)
+
+    plain, _ = _run(tmp_path / "plain", ingested_flight(tmp_path / "plain"))
+    res, out = _run(tmp_path, _rewrite(ingested_flight(tmp_path), radar=repeat), models)
+    assert res.status == "ok", res.error
+    d = res.diagnostics
+    assert (d["n_steps"], d["n_predict_only"], d["n_radar_rows"]) == (151, 0, 302)
+    assert d["radar_dropped"] == {"nan_field": 0, "duplicate_stamp": 151, "same_step": 0, "other_instance": 0}
+    assert any("151 row(s) repeat an earlier time stamp" in n for n in d["notes"])
+    for e in ESTIMATORS:
+        assert len(read_table(out[e])) == 151 and read_table_meta(out[e])["status"] == "ok", e
+    assert {(n, str(dr)) for n, dr, _ in _radar_meta(out)} == {(302, str(d["radar_dropped"]))}
+    # the first row of each stamp: the estimate is the flight's without its repeats
+    pd.testing.assert_frame_equal(read_table(out["ekf"]), read_table(tmp_path / "plain" / "ekf" / "f1.parquet"))
+    assert plain.diagnostics["radar_dropped"]["duplicate_stamp"] == 0
+
+
+def test_radar_rows_with_nan_fields_or_sharing_a_step_are_counted_in_every_outputs_metadata(tmp_path):
+    def damage(r):
+        r.loc[[20, 21], "range_rate_mps"] = np.nan
+        extra = r.iloc[[30]].copy()
+        extra["t_ns"] += 10_000_000   # 10 ms after row 30: the same 0.2 s step
+        return pd.concat([r, extra], ignore_index=True)
+
+    res, out = _run(tmp_path, _rewrite(ingested_flight(tmp_path), radar=damage))
+    assert res.status == "partial" and "no model set" in res.error     # EKF only: no model given
+    d = res.diagnostics
+    assert (d["n_steps"], d["n_predict_only"], d["n_radar_rows"]) == (151, 2, 152)
+    assert d["radar_dropped"] == {"nan_field": 2, "duplicate_stamp": 0, "same_step": 1, "other_instance": 0}
+    assert d["n_steps"] - d["n_predict_only"] == d["n_radar_rows"] - sum(d["radar_dropped"].values())
+    for n_rows, dropped, _ in _radar_meta(out):   # the ekf_hmm placeholder's too
+        assert (n_rows, dropped) == (152, d["radar_dropped"])
+
+
+def test_a_second_radar_instance_is_counted_and_noted_and_leaves_the_estimate_unchanged(tmp_path):
+    plain, _ = _run(tmp_path / "plain", ingested_flight(tmp_path / "plain"))
+
+    def second(r):
+        other = r.copy()
+        other["instance"], other["range_m"] = 1, other["range_m"] + 500.0
+        return pd.concat([r, other], ignore_index=True)
+
+    res, out = _run(tmp_path, _rewrite(ingested_flight(tmp_path), radar=second))
+    d = res.diagnostics
+    assert (d["n_radar_rows"], d["radar_dropped"]["other_instance"], d["n_predict_only"]) == (302, 151, 0)
+    assert any("radar: instance 1 ignored (151 rows)" in n and "instance 0 only" in n for n in d["notes"])
+    assert all(any("instance 1 ignored" in n for n in notes) for _, _, notes in _radar_meta(out))
+    pd.testing.assert_frame_equal(read_table(out["ekf"]), read_table(tmp_path / "plain" / "ekf" / "f1.parquet"))
+    assert plain.diagnostics["radar_dropped"]["other_instance"] == 0 and plain.diagnostics["notes"] == []
+
+
+def test_an_error_inside_the_filter_gives_three_placeholders_with_a_one_line_reason(tmp_path, models, monkeypatch):
+    inputs = ingested_flight(tmp_path)
+    good, out = _run(tmp_path, inputs, models)   # outputs of an earlier run: replaced, not left stale
+    assert good.status == "ok"
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("covariance\nnot positive definite")
+
+    monkeypatch.setattr(estimate_run, "run_filter", broken)
+    res, out = _run(tmp_path, inputs, models)   # returns: nothing escapes run_estimate
+    assert res.status == "failed"
+    assert res.error.startswith("estimate failed: RuntimeError: covariance not positive definite (at ")
+    assert "\n" not in res.error
+    for e in ESTIMATORS:
+        m = read_table_meta(out[e])
+        assert (m["status"], m["error"], len(read_table(out[e]))) == ("failed", res.error, 0), e
+        assert m["n_radar_rows"] == 151   # what was learnt before the failure is kept
+    assert list(read_table(out["ekf_hmm"]).columns) == schema.column_names("estimate_hmm")
+
+
+def test_an_error_inside_the_ekf_hmm_leaves_the_ekf_tables_and_a_placeholder_saying_why(tmp_path, models, monkeypatch):
+    def broken(*args, **kwargs):
+        raise KeyError("pos_n_m")
+
+    monkeypatch.setattr(estimate_run, "run_ekf_hmm", broken)
+    res, out = _run(tmp_path, ingested_flight(tmp_path), models)
+    assert res.status == "partial" and res.error.startswith("EKF+HMM failed: KeyError: 'pos_n_m' (at ")
+    assert len(read_table(out["ekf"])) == len(read_table(out["ekf_rts"])) == 151
+    m = read_table_meta(out["ekf_hmm"])
+    assert (m["status"], m["error"], len(read_table(out["ekf_hmm"]))) == ("failed", res.error, 0)
+
+
+def test_an_unreadable_input_is_named_in_one_line_and_never_a_traceback(tmp_path, models):
+    # the model set's meta.json: the EKF tables stand, the ekf_hmm placeholder names the file
+    bad_models = tmp_path / "models"
+    shutil.copytree(models, bad_models)
+    (bad_models / "sim" / "meta.json").write_text("{not json")
+    res, out = _run(tmp_path / "m", ingested_flight(tmp_path / "m"), bad_models)
+    assert res.status == "partial" and res.error.startswith(f"{bad_models / 'sim' / 'meta.json'}: not a readable JSON")
+    assert len(read_table(out["ekf"])) == 151 and "\n" not in res.error
+    # the model set's params.npz: the loader's own line, naming the folder
+    shutil.copy(models / "sim" / "meta.json", bad_models / "sim" / "meta.json")
+    (bad_models / "sim" / "params.npz").write_bytes(b"truncated")
+    res, _ = _run(tmp_path / "p", ingested_flight(tmp_path / "p"), bad_models)
+    assert res.status == "partial" and str(bad_models / "sim") in res.error
+    # the flight's own inputs: three placeholders naming the file
+    for name, damage in (("meta", lambda i: Path(i["meta"]).write_text("[1, 2]")),
+                         ("state", lambda i: Path(i["state"]).write_bytes(b"PAR1 not parquet"))):
+        inputs = ingested_flight(tmp_path / name)
+        damage(inputs)
+        res, out = _run(tmp_path / name, inputs, models)
+        assert res.status == "failed" and res.error.startswith(str(inputs[name])), res.error
+        assert "\n" not in res.error and read_table_meta(out["ekf"])["error"] == res.error
+
+
+def test_ekf_hmm_heading_bridged_over_a_long_attitude_gap_or_held_past_its_end_is_counted(tmp_path, models):
+    """Attitude rows 50-69 missing (a 4.2 s gap: 20 steps bridged), row 100 missing (0.4 s, under
+    the limit: not counted) and none after row 140 (10 steps held)."""
+    assert YAW_GAP_LIMIT_S == 1.0
+    inputs = _rewrite(ingested_flight(tmp_path),
+                      attitude=lambda a: a.drop(index=[*range(50, 70), 100, *range(141, 151)]))
+    res, out = _run(tmp_path, inputs, models)
+    assert res.status == "ok", res.error
+    assert res.diagnostics["yaw_filled"] == {"across_gap": 20, "held": 10}
+    m = read_table_meta(out["ekf_hmm"])
+    assert (m["yaw_from"], m["yaw_gap_limit_s"], m["yaw_filled"]) == ("attitude", 1.0, {"across_gap": 20, "held": 10})
+    note = "heading: 20 step(s) interpolated across attitude gaps over 1 s, 10 held beyond its span"
+    assert note in m["notes"] and note in res.diagnostics["notes"]
+    plain, _ = _run(tmp_path / "plain", ingested_flight(tmp_path / "plain"), models)
+    assert plain.diagnostics["yaw_filled"] == {"across_gap": 0, "held": 0}

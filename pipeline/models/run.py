@@ -299,7 +299,7 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
             _say(f"{model_set}: {len(dropped)} training run(s) dropped: "
                  + "; ".join(f"{r} ({why})" for r, why in list(dropped.items())[:5])
                  + (f"; … {len(dropped) - 5} more (meta.json training_dropped)" if len(dropped) > 5 else ""))
-    except ValueError as exc:  # ModelError, numpy LinAlgError, bad tables: a placeholder model
+    except (ValueError, OSError, pa.ArrowException) as exc:  # ModelError, LinAlgError, a bad or missing set
         reason = f"training failed: {exception_line(exc, where=False)}"
         _say(f"{model_set}: {reason}")
         _write_failed_model(out, spec, reason)
@@ -353,12 +353,19 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
     model_dir = Path(declared(inputs, "params")).parent
     state_path, segments_path = declared(inputs, "state"), declared(inputs, "segments")
     out_path = declared(outputs, "classification")
-    st_meta = read_table_meta(state_path)
-    extra = {"model_set": model_set, "model": model_set, "flight_id": st_meta.get("flight_id")}
     m_status, m_error = model_status(model_dir)
-    state = read_table(state_path)
+    try:
+        st_meta = read_table_meta(state_path)
+        state = read_table(state_path)
+        unreadable = ""
+    except (OSError, ValueError, pa.ArrowException) as exc:  # one flight's damaged state: its placeholder
+        st_meta, state = {}, pd.DataFrame()
+        unreadable = f"cannot read {state_path}: {exception_line(exc, where=False)}"
+    extra = {"model_set": model_set, "model": model_set, "flight_id": st_meta.get("flight_id") or Path(state_path).stem}
     reason = ""
-    if m_status == "failed":
+    if unreadable:
+        reason = unreadable
+    elif m_status == "failed":
         reason = " ".join(f"model set {model_set} failed: {m_error}".split())
     elif st_meta.get("status") == "failed":
         # one line: the reason goes into the log line and the placeholder's metadata
@@ -366,20 +373,20 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
     elif not len(state) or not state["pos_n_m"].notna().any():
         reason = "no position data to classify"
     if not reason:
-        seg = read_table(segments_path) if segments_path else None
-        lab = label_state(state, seg).drop(columns="segment_id") if seg is not None else state
-        resets = None
-        if seg is not None and len(seg) and config.get("reset_at_segments", True):
-            resets = seg["t_start_ns"].to_numpy()
         try:
+            seg = read_table(segments_path) if segments_path else None
+            lab = label_state(state, seg).drop(columns="segment_id") if seg is not None else state
+            resets = None
+            if seg is not None and len(seg) and config.get("reset_at_segments", True):
+                resets = seg["t_start_ns"].to_numpy()
             ms = ManeuverModelSet.load(model_dir)
             # box-frame feature sets need the aerobatic box heading (FlightCoach meta, copied to
             # the state metadata by preprocess); 0 where the log has none
             box = st_meta.get("box_rotation_rad")
             res = ms.classify(lab, mode=mode, decision=decision, reset_t_ns=resets,
                               box_heading_rad=float(box) if box is not None else 0.0)
-        except ValueError as exc:  # ModelError and numerical failures on odd flights
-            reason = f"classification failed: {exception_line(exc, where=False)}"
+        except Exception as exc:  # ModelError, numerical failures on odd flights, a damaged table
+            reason = f"classification failed: {exception_line(exc)}"
         else:
             res["run_id"] = res["run_id"].astype(str)
             if "truth" in res:

@@ -271,3 +271,23 @@ def test_a_failed_model_set_names_every_test_flight_as_skipped_in_the_evaluation
     meta = read_table_meta(ev_out)
     assert res.status == meta["status"] == "failed"
     assert meta["flights_used"] == [] and meta["flights_skipped"] == {"f1": "model set m failed"}
+
+
+def test_a_flight_whose_state_or_segments_cannot_be_read_is_a_classification_placeholder_naming_it(synth, rng, tmp_path,
+                                                                                                      capsys):
+    from pipeline.models.run import run_classify
+
+    _, _, model = _trained(synth, rng, tmp_path)
+    states, segments = _flight_files(synth, rng, tmp_path, ["f1"])
+    bad_state = tmp_path / "bad.parquet"
+    bad_state.write_bytes(b"garbage")
+    bad_seg = tmp_path / "bad.seg.parquet"
+    bad_seg.write_bytes(b"PAR1 garbage")
+    for st, seg, why in ((bad_state, segments[0], f"cannot read {bad_state}: ArrowInvalid"),
+                         (states[0], bad_seg, "classification failed: ArrowInvalid")):
+        out = tmp_path / f"out-{st.stem}-{seg.stem}.parquet"
+        res = run_classify({**model, "state": st, "segments": seg}, {"classification": out}, {}, model_set="m")
+        meta = read_table_meta(out)
+        assert res.status == "failed" and res.error.startswith(why) and "\n" not in res.error
+        assert meta["status"] == "failed" and meta["error"] == res.error and not len(read_table(out))
+    assert "Traceback" not in capsys.readouterr().err

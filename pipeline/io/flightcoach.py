@@ -88,9 +88,16 @@ class FlightCoachReader(LogReader):
         missing = [c for c in _REQUIRED if c not in df.columns]
         if missing:
             raise IngestError(path, f"FlightCoach 'data' samples lack field(s) {missing}")
+        raw = df
         df = df.apply(pd.to_numeric, errors="coerce")
         n_raw = len(df)
         ok = np.isfinite(df[list(_REQUIRED)].to_numpy(dtype=np.float64)).all(axis=1)
+        # a value that is not a number (text where VN should be) becomes NaN, counted per
+        # column as the CSV reader counts it; the required fields' are the bad samples below
+        lost = (raw.notna() & df.isna()).to_numpy()[ok]
+        for c, n_bad in zip(df.columns, lost.sum(axis=0)):
+            if n_bad and c not in _REQUIRED:
+                diag["records_dropped"][f"bad_value:{c}"] = int(n_bad)
         # index map raw sample index -> kept row, for the maneuver indices
         kept_idx = np.flatnonzero(ok)
         if not len(kept_idx):

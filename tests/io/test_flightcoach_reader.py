@@ -127,6 +127,20 @@ def _doc(n=10, **over):
     return doc
 
 
+def test_text_in_an_optional_field_is_a_missing_value_counted_per_column(tmp_path):
+    doc = _doc()
+    doc["data"][2]["VN"] = "n/a"
+    doc["data"][5]["VN"] = "fast"
+    doc["data"][3]["N"] = "x"          # a required field: the sample goes (bad_sample), no double count
+    doc["data"][3]["VE"] = "y"
+    p = tmp_path / "fc.json"
+    p.write_text(json.dumps(doc))
+    log = registry.read_log(p)
+    assert log.meta["diagnostics"]["records_dropped"] == {"bad_sample": 1, "bad_value:VN": 2}
+    vn = log["local_position"]["vel_n_mps"]
+    assert vn.isna().sum() == 2 and len(vn) == 9
+
+
 def test_synthetic_degrees_only_bad_sample_and_bad_maneuver(tmp_path):
     doc = _doc()
     doc["data"][3]["N"] = None

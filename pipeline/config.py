@@ -2,10 +2,10 @@
 
 ``rules/schemas/config.schema.yaml`` (JSON Schema 2020-12) types every section and key of
 ``datasets/config.yaml``, holds every default and rejects unknown keys at every level. The
-workflow validates with ``snakemake.utils.validate(config, schema, set_default=True)``; the API
-and the CLI use :func:`load_config` / :func:`validate_config` here, which apply the same schema
-with the same default filling (a ``properties`` validator that first sets the defaults of absent
-keys, then descends), so both see identical dicts.
+workflow (``rules/common.smk``) validates with :func:`validate_config` here, as the API and the
+CLI do through :func:`load_config`: the same schema with the same default filling (a
+``properties`` validator that first sets the defaults of absent keys, then descends, as
+``snakemake.utils.validate(set_default=True)`` would), so both see identical dicts.
 
 A bad key or value raises :class:`ConfigError` whose message is one line naming the file, the key
 path, the value and what is allowed, e.g.::

@@ -33,7 +33,8 @@ uint8 sensor_id
 RADAR_TYPE = "uavpipe_msgs/msg/Radar"
 
 
-def _ros_messages(streams: Mapping[str, pd.DataFrame], t0_utc_ns: int, store, ros2: bool):
+def _ros_messages(streams: Mapping[str, pd.DataFrame], t0_utc_ns: int, store, ros2: bool,
+                  range_limits_m: tuple[float, float] = (0.17, 6.0)):
     """(topic, msgtype, t_ns, message) of every message, sorted by (time, topic)."""
     T = store.types
     Header = T["std_msgs/msg/Header"]
@@ -81,7 +82,8 @@ def _ros_messages(streams: Mapping[str, pd.DataFrame], t0_utc_ns: int, store, ro
     for k, tn in enumerate(rf["t_ns"].to_numpy()):
         d = float(rf["dist_m"].iat[k]) if bool(rf["valid"].iat[k]) else float("inf")
         out.append(("/rangefinder", Rg.__msgtype__, tn, Rg(header=hdr(tn, "rangefinder", k), radiation_type=1,
-                                                          field_of_view=0.05, min_range=0.17, max_range=6.0,
+                                                          field_of_view=0.05, min_range=float(range_limits_m[0]),
+                                                          max_range=float(range_limits_m[1]),
                                                           range=d, **extra)))
     rd = streams["radar"]
     Rad = T[RADAR_TYPE]
@@ -113,7 +115,8 @@ def _write_messages(writer, msgs, t0_utc_ns: int, store, serialize) -> None:
         writer.write(conns[topic], t0_utc_ns + int(tn), serialize(msg, mtype))
 
 
-def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int) -> Path:
+def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int,
+               range_limits_m: tuple[float, float] = (0.17, 6.0)) -> Path:
     """Write canonical streams as a ROS 1 bag (rosbags writer).
 
     Parameters
@@ -125,6 +128,8 @@ def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, 
         streams (``t_ns`` since the flight's t = 0).
     t0_utc_ns : int
         UTC of ``t_ns = 0``: header stamps and bag times are ``t0_utc_ns + t_ns``.
+    range_limits_m : (float, float)
+        The rangefinder's ``min_range``/``max_range`` (the reader judges validity by them).
 
     Returns
     -------
@@ -135,7 +140,7 @@ def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, 
 
     path = Path(path)
     store = _typestore(False)
-    msgs = _ros_messages(streams, t0_utc_ns, store, ros2=False)
+    msgs = _ros_messages(streams, t0_utc_ns, store, ros2=False, range_limits_m=range_limits_m)
     if path.exists():
         path.unlink()
     with Writer(path) as w:
@@ -143,7 +148,8 @@ def write_ros1(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, 
     return path
 
 
-def write_ros2_mcap(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int) -> Path:
+def write_ros2_mcap(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int,
+                    range_limits_m: tuple[float, float] = (0.17, 6.0)) -> Path:
     """Write canonical streams as a ROS 2 bag directory with MCAP storage (rosbags writer, CDR).
 
     Parameters
@@ -154,6 +160,8 @@ def write_ros2_mcap(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame]
         As :func:`write_ros1`.
     t0_utc_ns : int
         UTC of ``t_ns = 0``: header stamps and log times are ``t0_utc_ns + t_ns``.
+    range_limits_m : (float, float)
+        The rangefinder's ``min_range``/``max_range`` (the reader judges validity by them).
 
     Returns
     -------
@@ -164,7 +172,7 @@ def write_ros2_mcap(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame]
 
     path = Path(path)
     store = _typestore(True)
-    msgs = _ros_messages(streams, t0_utc_ns, store, ros2=True)
+    msgs = _ros_messages(streams, t0_utc_ns, store, ros2=True, range_limits_m=range_limits_m)
     if path.exists():
         shutil.rmtree(path)
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:

@@ -32,7 +32,8 @@ def _us(t_ns) -> np.ndarray:
 def write_tlog_streams(path: str | os.PathLike, streams: Mapping[str, pd.DataFrame], *, t0_utc_ns: int,
                        duration_s: float, boot_us: int,
                        origin: tuple[float, float, float] | None = None,
-                       undulation_m: float = 0.0) -> str | os.PathLike:
+                       undulation_m: float = 0.0,
+                       range_limits_m: tuple[float, float] = (0.17, 6.0)) -> str | os.PathLike:
     """Write canonical streams as a MAVLink telemetry log (see the module docstring).
 
     Parameters
@@ -54,6 +55,9 @@ def write_tlog_streams(path: str | os.PathLike, streams: Mapping[str, pd.DataFra
         then puts NED about it, as it does the DataFlash log's ``ORGN``.
     undulation_m : float
         Geoid undulation (WGS-84 minus MSL) at the origin.
+    range_limits_m : (float, float)
+        The rangefinder's limits, written as ``DISTANCE_SENSOR`` min/max distance (the reader
+        judges validity by them); an invalid reading is written 1 cm past the maximum.
 
     Returns
     -------
@@ -114,11 +118,15 @@ def write_tlog_streams(path: str | os.PathLike, streams: Mapping[str, pd.DataFra
         sv = [int(c[f"servo_{j}_us"].iat[k]) for j in range(1, 5)] + [0] * 12
         add(tu, link.servo_output_raw_encode((boot_us + tu) & 0xFFFFFFFF, 0, *sv))
     rf = streams["rangefinder"]
+    # the sensor's configured limits (DISTANCE_SENSOR min/max_distance): the reader judges a
+    # reading's validity by them, so fixed defaults turned every reading of a longer-range
+    # rangefinder invalid
+    lo_cm, hi_cm = (int(np.rint(v * 100)) for v in range_limits_m)
     for k, tu in enumerate(_us(rf["t_ns"])):
         cm = int(np.rint(rf["dist_m"].iat[k] * 100))
         valid = bool(rf["valid"].iat[k])
         # out of range: report the reading at the limit + 1 cm so that "valid" is recoverable
-        add(tu, link.distance_sensor_encode((boot_us + tu) // 1000, 17, 600, cm if valid else 601,
+        add(tu, link.distance_sensor_encode((boot_us + tu) // 1000, lo_cm, hi_cm, cm if valid else hi_cm + 1,
                                             mav.MAV_DISTANCE_SENSOR_LASER, 0, 25, 0))
     recs.sort(key=lambda r: (r[0], r[1]))
     with open(path, "wb") as fh:

@@ -63,6 +63,7 @@ def write_flight(out_dir: Path, stem: str, truth, sensors, params, rate_hz: floa
              "radar": {"site_ned_m": [float(v) for v in sensors.radar.site_ned_m],
                        "tau_rd_s": float(sensors.radar.tau_rd_s)}}
     paths = {}
+    limits = (float(sensors.rangefinder["min_m"]), float(sensors.rangefinder["max_m"]))
     for fmt in formats:
         p = out_dir / LOG_NAMES[fmt](stem)
         if fmt == "bin":
@@ -75,11 +76,12 @@ def write_flight(out_dir: Path, stem: str, truth, sensors, params, rate_hz: floa
                       undulation_m=sensors.geoid_undulation_m)
         elif fmt == "tlog":
             write_tlog_streams(p, streams, t0_utc_ns=t0_utc_ns, duration_s=float(truth.t_s[-1]),
-                               boot_us=BOOT_US, origin=o, undulation_m=sensors.geoid_undulation_m)
+                               boot_us=BOOT_US, origin=o, undulation_m=sensors.geoid_undulation_m,
+                               range_limits_m=limits)
         elif fmt == "bag":
-            write_ros1(p, streams, t0_utc_ns=t0_utc_ns)
+            write_ros1(p, streams, t0_utc_ns=t0_utc_ns, range_limits_m=limits)
         elif fmt == "mcap":
-            write_ros2_mcap(p, streams, t0_utc_ns=t0_utc_ns)
+            write_ros2_mcap(p, streams, t0_utc_ns=t0_utc_ns, range_limits_m=limits)
         else:
             raise ValueError(f"unknown log format {fmt!r}")
         write_sidecar(sidecar_path(p), tdf, lab, t0_utc_ns=t0_utc_ns,

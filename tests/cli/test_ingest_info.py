@@ -28,11 +28,24 @@ def demo_log(tmp_path_factory) -> Path:
     return p
 
 
+#: rows per stream of the 60 s demo flight: rate (Hz) x 60 s (control: 600 RCIN + 600 RCOU records;
+#: mode: its 4 MODE + 2 EV records; messages / params: its 2 MSG and 7 PARM records)
+DEMO_ROWS = {"imu": 3000, "gps": 300, "baro": 600, "mag": 600, "attitude": 600, "local_position": 600,
+             "rangefinder": 600, "control": 1200, "mode": 6, "setpoint": 600, "messages": 2, "params": 7}
+
+
 def test_info_names_reader_and_reason(demo_log, capsys):
+    from pipeline.io.dataflash import DataFlashReader
+
     assert main(["info", str(demo_log)]) == 0
     out = capsys.readouterr().out
-    assert "dataflash" in out and "reader" in out
-    assert "imu" in out and "gps" in out
+    lines = [" ".join(line.split()) for line in out.splitlines()]
+    assert lines[1] == (f"format ardupilot_dataflash (reader dataflash v{DataFlashReader.version}: "
+                        "DataFlash FMT-for-FMT record at offset 0 (A3 95 80 80))")
+    rows = {ln.split()[0]: int(ln.split()[1]) for ln in lines[lines.index("streams:") + 1:]
+            if len(ln.split()) > 2 and ln.split()[2] == "rows"}
+    assert rows == DEMO_ROWS
+    assert "imu 3000 rows 1 inst 50.00 Hz" in lines and "gps 300 rows 1 inst 5.00 Hz" in lines
 
 
 def test_info_json_and_wrong_extension(demo_log, tmp_path, capsys):
@@ -41,7 +54,8 @@ def test_info_json_and_wrong_extension(demo_log, tmp_path, capsys):
     assert main(["info", "--json", str(renamed)]) == 0
     d = json.loads(capsys.readouterr().out)[0]
     assert d["reader"].startswith("dataflash")
-    assert d["streams"]["imu"]["rows"] > 0
+    assert d["detected_by"] == "DataFlash FMT-for-FMT record at offset 0 (A3 95 80 80)"
+    assert {k: v["rows"] for k, v in d["streams"].items()} == DEMO_ROWS
 
 
 def test_ingest_continues_past_bad_file_and_exits_nonzero(demo_log, tmp_path, capsys):
@@ -201,11 +215,17 @@ def test_ingest_reads_the_log_once(demo_log, tmp_path, monkeypatch):
 def test_ingest_conforms_each_stream_once_and_never_through_pandas(demo_log, tmp_path, monkeypatch):
     from pipeline.io import schema as sch
 
+    from pipeline.io.dataflash import decode
+    from pipeline.io.dataflash.streams import stream_parts
+
     calls: list[str] = []
+    with_data: list[str] = []
     real = sch.conform_arrow_counted
 
     def counted(stream, data):
         calls.append(stream)
+        if data is not None:
+            with_data.append(stream)
         return real(stream, data)
 
     def no_pandas_conform(*a, **k):
@@ -215,8 +235,12 @@ def test_ingest_conforms_each_stream_once_and_never_through_pandas(demo_log, tmp
     monkeypatch.setattr(sch, "conform", no_pandas_conform)
     res = run_ingest(*_job(demo_log, tmp_path / "o"), None, flight_id="demo")
     assert res.status == "ok"
-    # every stream the decoder produced is conformed exactly once; written as conformed
-    assert sorted(calls) == sorted(set(calls)) and "imu" in calls
+    # every stream of the decoder's table is conformed exactly once, in table order; those with
+    # records are exactly the non-empty streams of the decoded parts (the others get None)
+    parts = stream_parts(decode(demo_log))
+    assert calls == list(parts)
+    assert set(with_data) == {k for k, v in parts.items() if v} == set(DEMO_ROWS)
+    assert len(with_data) == len(set(with_data))
 
 
 def test_a_log_the_manifest_says_embeds_labels_but_carries_none_gets_a_warning(demo_log, tmp_path):

@@ -216,3 +216,43 @@ def test_convert_unit_round_trips():
     for a, b in (("deg", "rad"), ("K", "degC"), ("mbar", "Pa"), ("kn", "m/s"), ("mG", "T"), ("g", "m/s^2")):
         np.testing.assert_allclose(convert_unit(convert_unit(x, a, b), b, a), x, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(convert_unit(np.array([0.0]), "K", "degC"), [-273.15])
+
+
+#: unit -> (base unit of its dimension, value of 1 unit in that base unit), from the definitions
+#: (international foot 0.3048 m, nautical mile 1852 m, standard gravity 9.80665 m/s^2, 1 G = 1e-4 T)
+_CLOSED_FORM = {
+    "m": ("m", 1.0), "cm": ("m", 0.01), "mm": ("m", 1e-3), "km": ("m", 1e3), "ft": ("m", 0.3048),
+    "m/s": ("m/s", 1.0), "cm/s": ("m/s", 0.01), "mm/s": ("m/s", 1e-3), "km/h": ("m/s", 1000 / 3600),
+    "kn": ("m/s", 1852 / 3600), "ft/s": ("m/s", 0.3048),
+    "m/s^2": ("m/s^2", 1.0), "m/s2": ("m/s^2", 1.0), "g": ("m/s^2", 9.80665), "mg": ("m/s^2", 9.80665e-3),
+    "rad": ("rad", 1.0), "deg": ("rad", np.pi / 180), "cdeg": ("rad", np.pi / 18000), "mrad": ("rad", 1e-3),
+    "deg*1e7": ("rad", np.pi / 180e7),
+    "rad/s": ("rad/s", 1.0), "deg/s": ("rad/s", np.pi / 180),
+    "Pa": ("Pa", 1.0), "hPa": ("Pa", 100.0), "mbar": ("Pa", 100.0), "kPa": ("Pa", 1000.0),
+    "degC": ("degC", 1.0), "cdegC": ("degC", 0.01),
+    "T": ("T", 1.0), "uT": ("T", 1e-6), "nT": ("T", 1e-9), "G": ("T", 1e-4), "mG": ("T", 1e-7),
+    "s": ("s", 1.0), "ms": ("s", 1e-3), "us": ("s", 1e-6), "ns": ("s", 1e-9),
+    "1": ("1", 1.0),
+}
+
+
+def test_every_unit_in_the_table_has_a_closed_form_check():
+    from pipeline.io.tabular import UNITS
+    assert set(UNITS) - {"K"} == set(_CLOSED_FORM)
+
+
+@pytest.mark.parametrize("src", sorted(_CLOSED_FORM))
+def test_convert_unit_scales_each_unit_to_its_si_base_by_the_defined_factor(src):
+    base, factor = _CLOSED_FORM[src]
+    x = np.array([0.0, 1.0, -2.5, 1234.5])
+    np.testing.assert_allclose(convert_unit(x, src, base), x * factor, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(convert_unit(x * factor, base, src), x, rtol=1e-14, atol=1e-300)
+
+
+def test_convert_unit_with_offsets_and_between_non_base_units_matches_closed_forms():
+    np.testing.assert_allclose(convert_unit(np.array([273.15, 300.0, 0.0]), "K", "degC"), [0.0, 26.85, -273.15],
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(convert_unit(np.array([2500.0, -1000.0]), "cdegC", "K"), [298.15, 263.15],
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(convert_unit(np.array([1.0]), "kn", "km/h"), [1.852], rtol=1e-14)
+    np.testing.assert_allclose(convert_unit(np.array([1000.0]), "mG", "uT"), [100.0], rtol=1e-14)

@@ -343,8 +343,15 @@ def test_synthetic_counts_senders_and_meta(synth):
         assert o["alt_wgs84_m"] == pytest.approx(488.123 + 536.7 - 488.6, rel=1e-12)
     # the second vehicle's attitude is not a sample
     assert (log["attitude"]["t_boot_ns"] != 9999 * 10**6).all()
-    # t0_boot_ns: boot clock at t_ns = 0 (vehicle boot stamps lag the framing by ~1 s here)
-    assert log.meta["t0_boot_ns"] is not None
+    # t0_boot_ns: boot clock at t_ns = 0, the median of time_boot_ms * 1e6 - t_ns over the
+    # vehicle's ATTITUDE, GLOBAL_POSITION_INT and SCALED_PRESSURE records of synthetic_records():
+    offsets = [1000 * 10**6 - 5_000_000,                      # GLOBAL_POSITION_INT
+               1200 * 10**6 - 10_000_000,                     # ATTITUDE
+               1400 * 10**6 - 13_000_000,                     # SCALED_PRESSURE
+               *[(2000 + k) * 10**6 - (23_000 + k) * 1000 for k in range(3)]]  # ATTITUDE x3
+    offsets.sort()
+    assert (offsets[2] + offsets[3]) // 2 == 1_682_000_000  # median of six: the mean of the middle two
+    assert log.meta["t0_boot_ns"] == 1_682_000_000
 
 
 def test_synthetic_gps(synth):

@@ -24,10 +24,22 @@ def test_the_bearing_is_atan2_of_east_over_north_offsets(settings):
     d = e.intruder[..., :2] - e.ownship[..., :2]
     np.testing.assert_allclose(e.bearing_true, np.arctan2(d[..., 1], d[..., 0]), atol=1e-12)
     np.testing.assert_allclose(e.rel[..., :2], d, atol=1e-9)
-    # an intruder due east of the ownship is at +90 deg
-    east = np.abs(d[..., 0]) < 1.0
-    if east.any():
-        assert np.all(np.abs(wrap_angle(e.bearing_true[east] - np.sign(d[east, 1]) * np.pi / 2)) < 1e-2)
+
+
+@pytest.mark.parametrize("course_deg, side, expected", [
+    (0.0, "east", np.pi / 2), (180.0, "west", -np.pi / 2), (270.0, "north", 0.0), (90.0, "south", np.pi)])
+def test_an_intruder_due_east_west_north_or_south_is_at_plus_90_minus_90_0_or_180_degrees(course_deg, side,
+                                                                                          expected):
+    # the intruder starts at range0, `angle` to the right of the ownship's course, with the ownship
+    # at the origin: a fixed 90 deg right of a course of 0 / 180 / 270 / 90 deg is E / W / N / S
+    s = ScenarioSettings.from_config({"orbit_s": 1.0, "range_m": [2000.0, 2000.0], "angle_deg": [90.0, 90.0],
+                                      "ownship_course_deg": course_deg})
+    e = simulate_encounters("orbit", 3, 7, s)
+    np.testing.assert_allclose(e.ownship[:, 0, :2], 0.0, atol=0.0)
+    n, east = {"east": (0, 1), "west": (0, -1), "north": (1, 0), "south": (-1, 0)}[side]
+    np.testing.assert_allclose(e.rel[:, 0, :2], np.broadcast_to([2000.0 * n, 2000.0 * east], (3, 2)), atol=1e-9)
+    # ±π are the same bearing (wrapped to [−π, π)): compare through the wrap
+    np.testing.assert_allclose(wrap_angle(e.bearing_true[:, 0] - expected), 0.0, atol=1e-12)
 
 
 def test_the_course_runs_from_north_toward_east_and_positive_omega_turns_right(settings):

@@ -119,11 +119,14 @@ def test_velocity_differences_equal_acceleration(batches, man):
     tr = batches[man]
     dt = tr.t_s[1] - tr.t_s[0]
     fd = (tr.vel[:, 2:] - tr.vel[:, :-2]) / (2 * dt)
-    err = np.max(np.abs(fd - tr.acc[:, 1:-1]))
-    assert err <= 0.01 * np.max(np.abs(tr.acc))
+    # central differences of the integrator's output: the worst relative error is ~6.6e-4 (acc)
+    # and ~3.9e-5 (vel) over the maneuvers, so 2e-3 and 1e-4 leave ~3x headroom
+    rel = np.max(np.abs(fd - tr.acc[:, 1:-1])) / np.max(np.abs(tr.acc))
+    assert rel <= 2e-3, (man, rel)
     # and positions difference to velocity
     fdp = (tr.pos[:, 2:] - tr.pos[:, :-2]) / (2 * dt)
-    assert np.max(np.abs(fdp - tr.vel[:, 1:-1])) <= 0.01 * np.max(np.abs(tr.vel))
+    rel_v = np.max(np.abs(fdp - tr.vel[:, 1:-1])) / np.max(np.abs(tr.vel))
+    assert rel_v <= 1e-4, (man, rel_v)
 
 
 def test_commands_smooth(settings):

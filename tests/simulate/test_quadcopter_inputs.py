@@ -24,6 +24,9 @@ def test_a_uniform_grid_from_the_rate_is_taken_with_its_first_step():
     assert uniform_step(t) == t[1] - t[0]
     tr = _fly(time_grid(1.0, 200.0))
     assert tr.pos.shape == (1, 201, 3) and np.all(np.isfinite(tr.pos))
+    # weight thrust, level, from rest at the origin: it hovers, so every row stays put
+    assert np.max(np.abs(tr.pos - tr.pos[..., :1, :])) < 1e-9 and np.max(np.abs(tr.pos[:, 0])) == 0.0
+    assert np.max(np.abs(tr.vel)) < 1e-12 and np.max(np.abs(tr.acc)) < 1e-12
 
 
 @pytest.mark.parametrize("t, match", [

@@ -67,12 +67,26 @@ def test_changing_the_master_seed_changes_every_simulated_and_trained_output(sim
     assert any(not np.array_equal(p1[k], p2[k]) for k in p1 if p1[k].dtype.kind == "f")
 
 
-def test_simulate_entry_points_take_only_their_section_and_the_master_seed(sim_cfg, tmp_path):
-    """The same simulate section and seed give the same bytes whatever the other sections hold
-    (the simulate entry points take only their own section and the master seed)."""
+def test_the_simulate_entry_points_take_only_inputs_outputs_their_section_and_the_master_seed():
+    """Every simulate entry point's signature is (inputs, outputs, config, *, seed): no other
+    config section and no other seed can reach it (``config`` is the ``simulate`` section)."""
     import inspect
 
     from pipeline.simulate import run
 
     for fn in (run.run_simulate_sets, run.run_simulate_logs, run.run_demo_log):
-        assert list(inspect.signature(fn).parameters) == ["inputs", "outputs", "config", "seed"]
+        params = inspect.signature(fn).parameters
+        assert list(params) == ["inputs", "outputs", "config", "seed"], fn.__name__
+        assert params["seed"].kind is inspect.Parameter.KEYWORD_ONLY, fn.__name__
+
+
+def test_the_demo_flight_is_the_same_bytes_whatever_its_config_holds_and_changes_with_the_seed(tmp_path):
+    from pipeline.simulate.run import run_demo_log
+
+    cfgs = (None, {"datasets": {"size": "tiny"}, "seed": 99, "models": {"hmm": {"n_states": 7}}})
+    a, b, c = (tmp_path / f"{n}.bin" for n in "abc")
+    run_demo_log({}, {"log": a}, cfgs[0], seed=3)
+    run_demo_log({}, {"log": b}, cfgs[1], seed=3)
+    run_demo_log({}, {"log": c}, cfgs[0], seed=4)
+    assert _digest(a) == _digest(b)
+    assert _digest(a) != _digest(c)

@@ -30,8 +30,27 @@ def test_uavpipe_align_writes_the_four_tables_and_the_page(tmp_path, monkeypatch
                "-o", str(tmp_path / "out"), "--page", str(tmp_path / "page" / "p23.html")])
     assert rc == 0
     assert "set p23 -> " in capsys.readouterr().out
-    assert set(read_table(tmp_path / "out" / "learned.parquet")["maneuver"]) == {"a", "b"}
     assert (tmp_path / "page" / "p23.html").stat().st_size > 1000
+    out = {k: read_table(tmp_path / "out" / f"{k}.parquet") for k in ("learned", "alignment", "iterations", "demos")}
+    flights = ("fc-p23-036", "fc-p23-350")
+    # each 8 s segment resampled every 0.32 s: n = 25 samples per demo, one demo per flight and
+    # maneuver; the stand-in learns T = 2n = 50 steps and reports len(loglik_) = 2 iterations
+    n, T = 25, 50
+    learned = out["learned"]
+    assert learned.groupby("maneuver", observed=True).size().to_dict() == {"a": T, "b": T}
+    assert learned["t"].tolist() == list(range(T)) * 2
+    for k in ("alignment", "demos"):
+        t = out[k]
+        sizes = t.groupby(["maneuver", "flight_id", "demo"], observed=True).size().to_dict()
+        assert sizes == {(m, f, f"{f}:{m}#1"): n for m in "ab" for f in flights}, k
+        assert t["j"].tolist() == list(range(n)) * 4, k
+        # the stand-in's warp, j -> round(j (T - 1) / (n - 1)), carried to both tables
+        assert t["tau"].tolist() == [round(j * (T - 1) / (n - 1)) for j in range(n)] * 4, k
+    assert set(out["alignment"]["status"]) == {"used"}
+    it = out["iterations"]
+    assert it[["maneuver", "iteration", "loglik", "n_demos"]].values.tolist() == \
+        [["a", 0, -2.0, 2], ["a", 1, -1.0, 2], ["b", 0, -2.0, 2], ["b", 1, -1.0, 2]]
+    assert set(it["status"]) == {"ok"}
 
 
 def test_uavpipe_align_names_an_unknown_set_in_one_line(tmp_path, capsys):

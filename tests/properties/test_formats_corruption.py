@@ -78,8 +78,10 @@ def test_truncated_ulog(cut):
                                                  "unrecognised log format"))
         else:
             # a cut inside a message is counted; a cut on a boundary just ends the log early
+            # every sensor_combined / vehicle_attitude DATA message wholly before the cut is kept
+            assert len(out["imu"]) == _complete_data_before(cut, "sensor_combined")
+            assert len(out["attitude"]) == _complete_data_before(cut, "vehicle_attitude")
             full = registry.read_log(_write(Path(d) / "full.ulg", ULOG))
-            assert len(out["imu"]) <= len(full["imu"])
             lost = len(full["imu"]) + len(full["attitude"]) - len(out["imu"]) - len(out["attitude"])
             if lost and _boundary(cut) is False:
                 assert out.meta["diagnostics"]["bytes_skipped"] > 0
@@ -101,6 +103,35 @@ def _boundary(cut: int) -> bool:
     return cut == pos
 
 
+def _messages(buf: bytes) -> list[tuple[int, int, str]]:
+    """(offset, payload size, type) of each message after the 16-byte ULog header."""
+    pos, out = 16, []
+    while pos + 3 <= len(buf):
+        size = buf[pos] | buf[pos + 1] << 8
+        out.append((pos, size, chr(buf[pos + 2])))
+        pos += 3 + size
+    return out
+
+
+#: msg_id of each subscription ('A': size, type, multi_id u8, msg_id u16, name)
+MSG_IDS = {ULOG[p + 6:p + 3 + n].decode(): ULOG[p + 4] | ULOG[p + 5] << 8
+           for p, n, typ in _messages(ULOG) if typ == "A"}
+
+
+def _complete_data_before(cut: int, name: str) -> int:
+    """DATA messages ('D': size, type, msg_id u16, ...) of topic ``name`` ending at or before ``cut``."""
+    return sum(1 for p, n, typ in _messages(ULOG)
+               if typ == "D" and (ULOG[p + 3] | ULOG[p + 4] << 8) == MSG_IDS[name] and p + 3 + n <= cut)
+
+
+def test_the_small_ulog_has_30_data_messages_per_topic_and_reads_whole():
+    assert _complete_data_before(len(ULOG), "sensor_combined") == 30
+    assert _complete_data_before(len(ULOG), "vehicle_attitude") == 30
+    with tempfile.TemporaryDirectory() as d:
+        log = _ingest(_write(Path(d) / "full.ulg", ULOG))
+    assert (len(log["imu"]), len(log["attitude"]), log.meta["status"]) == (30, 30, "ok")
+
+
 @HYP
 @given(start=st.integers(min_value=0, max_value=len(ULOG) - 1), junk=st.binary(min_size=1, max_size=64))
 def test_garbled_ulog(start, junk):
@@ -110,6 +141,15 @@ def test_garbled_ulog(start, junk):
         out = _ingest(_write(Path(d) / "garbled.ulg", bytes(raw)))
         if isinstance(out, FlightLog):
             assert out.meta["reader"] == "ulog"
+            # garbling never invents rows, and "ok" means nothing was lost; the converse does not
+            # hold (junk in a payload rewrites values, which no ULog checksum catches), and the
+            # rows lost need not be counted per message (a skipped span is counted in bytes)
+            assert len(out["imu"]) <= 30 and len(out["attitude"]) <= 30
+            if out.meta["status"] == "ok":
+                assert (len(out["imu"]), len(out["attitude"])) == (30, 30)
+                assert _losses(out) == 0
+            else:
+                assert out.meta["status"] == "partial" and _losses(out) > 0
 
 
 @pytest.mark.parametrize("frac", [0.0001, 0.37, 0.999])

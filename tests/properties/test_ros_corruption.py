@@ -28,6 +28,10 @@ from pipeline.io.base import FlightLog, IngestError
 from pipeline.io.mcap_reader import McapReader
 from pipeline.io.rosbag import Ros1BagReader, Ros2BagReader
 
+# a sweep of damaged bags (hypothesis): the full suite runs it; the fast lane keeps the
+# damaged-log cases of tests/io (one fixed damage each)
+pytestmark = pytest.mark.slow
+
 _spec = importlib.util.spec_from_file_location(
     "_ros_fixture_writers", Path(__file__).parents[1] / "io" / "test_ros_fixtures.py")
 fx = importlib.util.module_from_spec(_spec)

@@ -273,6 +273,7 @@ def test_calibration_flight_rangefinder_roundtrip(cal_written, fmt):
     assert len(hover) >= 2
 
 
+@pytest.mark.slow  # a second simulated flight in four formats (~1 s)
 def test_a_longer_range_rangefinder_keeps_its_configured_limits_in_every_format(tmp_path):
     # the tlog and ROS writers wrote fixed 0.17-6 m limits, and the readers judge validity by
     # the limits in the file: with max_m 200 every reading of the M3 flight (40-70 m up) came

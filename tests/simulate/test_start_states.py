@@ -23,6 +23,9 @@ from pipeline.simulate.datasets import DatasetSettings, simulate_set
 from pipeline.simulate.scenarios import SimSettings, run_named, scenario_for
 from pipeline.simulate.sensors import SensorSettings
 
+# 200 simulated runs per maneuver (a study-sized set): the full suite runs it
+pytestmark = pytest.mark.slow
+
 N_RUNS = 200
 
 

@@ -65,9 +65,15 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
     PreprocessStageResult
     """
     meta_path = Path(declared(inputs, "meta"))
-    meta = json.loads(meta_path.read_text())
-    fid = meta.get("flight_id")
     paths = {k: declared(outputs, k) for k in ("state", "segments", "calibration", "info")}
+    try:
+        meta = json.loads(meta_path.read_text())
+        if not isinstance(meta, dict):
+            raise ValueError(f"expected a JSON object, got {type(meta).__name__}")
+    except (OSError, ValueError) as exc:  # a damaged meta.json: this flight's placeholder, named
+        return _placeholder(paths, meta_path.parent.name,
+                            f"cannot read {meta_path}: {exception_line(exc, where=False)}")
+    fid = meta.get("flight_id")
     if meta.get("status") == "failed":
         return _placeholder(paths, fid, f"ingest failed: {meta.get('error') or 'unknown reason'}")
     try:

@@ -425,3 +425,21 @@ def test_a_second_sensor_instance_and_gps_fixes_left_out_are_counted_in_the_diag
     assert f"gps: 3 of {len(gps)} fixes below fix type 3 not used (preprocess.bpm.gps_min_fix)" in d["notes"]
     clean = preprocess_log(FlightLog.from_streams(log.meta, {k: log[k] for k in ("attitude", "control", "gps", "imu")}))
     assert "instances" not in clean.diagnostics and "gps_fixes_dropped" not in clean.diagnostics
+
+
+@pytest.mark.parametrize("text", ["{not json", "[1, 2]", None])
+def test_a_damaged_or_missing_ingest_meta_json_is_the_flights_placeholder_naming_it(text, tmp_path):
+    from pipeline.io.parquet import read_table_meta
+    from pipeline.preprocess.run import run_preprocess
+
+    d = tmp_path / "ingest" / "f1"
+    d.mkdir(parents=True)
+    meta = d / "meta.json"
+    if text is not None:
+        meta.write_text(text)
+    out = {k: tmp_path / f"{k}.parquet" for k in ("state", "segments", "calibration")} | {"info": tmp_path / "i.json"}
+    res = run_preprocess({"meta": str(meta)}, {k: str(v) for k, v in out.items()})
+    assert res.status == "failed" and res.flight_id == "f1"
+    reason = read_table_meta(out["state"])["error"]
+    assert reason.startswith(f"cannot read {meta}: ") and "\n" not in reason
+    assert ("FileNotFoundError" if text is None else "Error") in reason

@@ -64,7 +64,7 @@ from numpy.typing import NDArray
 
 from ..io import schema
 from ..io.parquet import read_flightlog, read_table, read_table_meta, write_json, write_table
-from ..io.stage import declared, declared_list, exception_line, say
+from ..io.stage import declared, declared_list, exception_line, one_line, say
 from .base import ConstantAcceleration, GaussianState
 from .ekf import ExtendedKalmanFilter, run_filter
 from .ekf_hmm import GMR_FEATURE_SETS, q2_from_runs, run_ekf_hmm
@@ -197,6 +197,19 @@ def synthesise_radar(state: pd.DataFrame, model: RadarModel, rate_hz: float,
     if (~bad).any():
         z[~bad] = model.h(x[~bad]) + noise[~bad]
     return pd.DataFrame({"t_ns": t[idx], **dict(zip(RADAR_FIELDS, z.T))})
+
+
+def _json_object(path: Path) -> tuple[dict | None, str]:
+    """``(the JSON object in path, "")``, or ``(None, one-line reason naming the file)`` when it
+    cannot be read, is not JSON or holds something other than an object (an ingest or model
+    ``meta.json``)."""
+    try:
+        obj = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return None, f"{path}: not a readable JSON file ({exception_line(exc)})"
+    if not isinstance(obj, dict):
+        return None, f"{path}: holds a JSON {type(obj).__name__}, not an object"
+    return obj, ""
 
 
 def radar_steps(radar: pd.DataFrame) -> tuple[NDArray[np.int64], F64, int, dict[str, int]]:
@@ -363,18 +376,15 @@ def _ekf_hmm_blocker(inputs, config: Mapping) -> tuple[str, Any, F64 | None]:
     if not params or not Path(params).exists():
         return f"no model set {model} given", None, None
     mdir = Path(params).parent
-    try:
-        meta = json.loads((mdir / "meta.json").read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        return f"{mdir / 'meta.json'}: not a readable JSON file ({exception_line(exc)})", None, None
-    if not isinstance(meta, dict):
-        return f"{mdir / 'meta.json'}: holds a JSON {type(meta).__name__}, not an object", None, None
+    meta, why = _json_object(mdir / "meta.json")
+    if meta is None:
+        return why, None, None
     if meta.get("status") == "failed":
         return f"model set {model} failed: {meta.get('error')}", None, None
     try:
         ms = ManeuverModelSet.load(mdir)
     except ModelError as exc:   # its message names the folder and says what is wrong
-        return " ".join(str(exc).split()), None, None
+        return one_line(exc), None, None
     fs = ms.config.feature_set
     if fs not in GMR_FEATURE_SETS:
         return (f"model set {model} has no GMR (feature set {fs}; the EKF+HMM needs one of "
@@ -505,12 +515,9 @@ def _estimate_flight(inputs, paths: Mapping[str, str], config: Mapping, meta_pat
     """The work of :func:`run_estimate` from reading its inputs on: ``base`` gets the flight id
     and ``known`` the radar counts as they are learnt, for the placeholders of a failure
     raised here."""
-    try:
-        meta = json.loads(meta_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        return _fail(paths, base, f"{meta_path}: not a readable JSON file ({exception_line(exc)})")
-    if not isinstance(meta, dict):
-        return _fail(paths, base, f"{meta_path}: holds a JSON {type(meta).__name__}, not an object")
+    meta, why = _json_object(meta_path)
+    if meta is None:
+        return _fail(paths, base, why)
     fid = base["flight_id"] = flight_id or meta.get("flight_id")
     if meta.get("status") == "failed":
         return _fail(paths, base, f"ingest failed: {meta.get('error') or 'unknown reason'}")

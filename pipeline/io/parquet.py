@@ -84,6 +84,12 @@ def write_table(df: pd.DataFrame, path: str | os.PathLike, cols: tuple[schema.Co
     _write_arrow(table, path, meta)
 
 
+#: what reading a damaged, missing or foreign table raises (:func:`read_table`,
+#: :func:`read_table_meta`): the OS's errors, pyarrow's (its ArrowInvalid is also a ValueError)
+#: and the JSON metadata's; a stage catches these to make one flight's bad file its placeholder
+READ_ERRORS: tuple[type[BaseException], ...] = (OSError, ValueError, pa.ArrowException)
+
+
 def read_table_meta(path: str | os.PathLike) -> dict:
     """The ``uavpipe`` metadata of a Parquet file written by :func:`write_table`."""
     md = pq.read_schema(path).metadata or {}

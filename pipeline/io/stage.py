@@ -21,13 +21,19 @@ from typing import Any
 _RESTATED: contextvars.ContextVar[bool] = contextvars.ContextVar("uavpipe_restated", default=False)
 
 
+def one_line(text: object) -> str:
+    """``text`` with every run of whitespace (newlines included) as one space: a reason written
+    into a table's metadata, a skipped entry or a log line stays one line."""
+    return " ".join(str(text).split())
+
+
 def exception_line(exc: BaseException, *, where: bool = True) -> str:
     """``exc`` as one line for a placeholder's reason, a skipped entry or a log line:
     ``Type: message (at file:line)``, whitespace collapsed (pyarrow and OS messages span
     several lines; a reason read in a table's metadata or a report has no room for a
     traceback). ``where=False`` leaves out the place it was raised (a file that cannot be read:
     the reader's line says nothing more). A :class:`MemoryError` says "out of memory"."""
-    msg = " ".join(str(exc).split()) or "(no message)"
+    msg = one_line(exc) or "(no message)"
     if isinstance(exc, MemoryError):
         msg = f"out of memory ({msg})"
     at = ""

@@ -38,15 +38,14 @@ from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
-import pyarrow as pa
 
 from .. import __version__
 from ..io.atomic import atomic_output
 from ..io import schema
-from ..io.parquet import read_table, read_table_meta, write_json, write_table
+from ..io.parquet import READ_ERRORS, read_table, read_table_meta, write_json, write_table
 from ..config import ConfigError
 from ..io.schema import CLASSIFY_MIN_COLUMNS, EVAL_COLUMNS  # noqa: F401  (declared in io.schema)
-from ..io.stage import declared, declared_list, exception_line, say, source_names
+from ..io.stage import declared, declared_list, exception_line, one_line, say, source_names
 from .base import ModelError, ModelsConfig
 from .metrics import THESIS_CLASSIFICATION, per_maneuver_table, thesis_side_by_side
 
@@ -204,16 +203,16 @@ def flight_runs(states: Sequence, segments: Sequence, skipped: dict | None = Non
         try:
             meta = read_table_meta(sp)
             st = read_table(sp)
-        except (OSError, ValueError, pa.ArrowException) as exc:  # damaged, missing, a directory
+        except READ_ERRORS as exc:  # damaged, missing, a directory
             skipped[src] = f"unreadable state: {exception_line(exc, where=False)}"
             continue
         if not len(st):
-            why = " ".join(str(meta.get("error") or "preprocessing gave no samples").split())
+            why = one_line(meta.get("error") or "preprocessing gave no samples")
             skipped[src] = f"no state ({why})"
             continue
         try:
             seg = read_table(gp)
-        except (OSError, ValueError, pa.ArrowException) as exc:
+        except READ_ERRORS as exc:
             skipped[src] = f"unreadable segments: {exception_line(exc, where=False)}"
             continue
         lab = label_state(st, seg)
@@ -299,7 +298,7 @@ def run_train(inputs, outputs, config: Mapping, *, model_set: str, seed: int) ->
             _say(f"{model_set}: {len(dropped)} training run(s) dropped: "
                  + "; ".join(f"{r} ({why})" for r, why in list(dropped.items())[:5])
                  + (f"; … {len(dropped) - 5} more (meta.json training_dropped)" if len(dropped) > 5 else ""))
-    except (ValueError, OSError, pa.ArrowException) as exc:  # ModelError, LinAlgError, a bad or missing set
+    except READ_ERRORS as exc:  # a bad or missing set; ModelError and LinAlgError are ValueErrors
         reason = f"training failed: {exception_line(exc, where=False)}"
         _say(f"{model_set}: {reason}")
         _write_failed_model(out, spec, reason)
@@ -358,7 +357,7 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
         st_meta = read_table_meta(state_path)
         state = read_table(state_path)
         unreadable = ""
-    except (OSError, ValueError, pa.ArrowException) as exc:  # one flight's damaged state: its placeholder
+    except READ_ERRORS as exc:  # one flight's damaged state: its placeholder
         st_meta, state = {}, pd.DataFrame()
         unreadable = f"cannot read {state_path}: {exception_line(exc, where=False)}"
     extra = {"model_set": model_set, "model": model_set, "flight_id": st_meta.get("flight_id") or Path(state_path).stem}
@@ -366,10 +365,10 @@ def run_classify(inputs, outputs, config: Mapping, *, model_set: str, mode: str 
     if unreadable:
         reason = unreadable
     elif m_status == "failed":
-        reason = " ".join(f"model set {model_set} failed: {m_error}".split())
+        reason = one_line(f"model set {model_set} failed: {m_error}")
     elif st_meta.get("status") == "failed":
         # one line: the reason goes into the log line and the placeholder's metadata
-        reason = " ".join(str(st_meta.get("error") or "preprocessing failed").split())
+        reason = one_line(st_meta.get("error") or "preprocessing failed")
     elif not len(state) or not state["pos_n_m"].notna().any():
         reason = "no position data to classify"
     if not reason:
@@ -482,12 +481,12 @@ def run_evaluate(inputs, outputs, config: Mapping, *, model_set: str) -> ModelSt
             for p, flight in zip(classified, source_names(classified)):
                 try:
                     c, c_meta = read_table(p), read_table_meta(p)
-                except (OSError, ValueError, pa.ArrowException) as exc:  # damaged, missing
+                except READ_ERRORS as exc:  # damaged, missing
                     skipped[flight] = f"unreadable classification: {exception_line(exc, where=False)}"
                     continue
                 if c_meta.get("status") == "failed" or not len(c):
                     why = c_meta.get("error") or "no classified samples"
-                    skipped[flight] = " ".join(f"no classification ({why})".split())
+                    skipped[flight] = one_line(f"no classification ({why})")
                     continue
                 if "truth" not in c:
                     skipped[flight] = "no 'truth' column (not classified with its segments)"

@@ -28,7 +28,7 @@ from typing import Mapping
 from ..config import ConfigError
 from ..io import schema
 from ..io.parquet import read_flightlog, write_json, write_table
-from ..io.stage import declared, exception_line, say
+from ..io.stage import declared, exception_line, one_line, say
 from .calibrate import CALIBRATION
 from .resample import TimeBaseError
 from .state import PreprocessResult, preprocess_log, summary_line, write_outputs
@@ -104,7 +104,7 @@ def _one_line(exc: BaseException) -> str:
     """``exc`` as one line: the message alone for a :class:`TimeBaseError` (it says what and
     why); :func:`~pipeline.io.stage.exception_line` otherwise."""
     if isinstance(exc, TimeBaseError):
-        return " ".join(str(exc).split()) or "(no message)"
+        return one_line(exc) or "(no message)"
     return exception_line(exc)
 
 

@@ -110,6 +110,38 @@ def white_jerk_q1(dt, q):  # pragma: no cover - compiled (its py_func is tested 
 
 
 @numba.njit(cache=True)
+def _inv_spd4(A, out):  # pragma: no cover - compiled
+    """``out = A⁻¹`` for a symmetric positive definite 4 × 4 ``A``: Gauss–Jordan with partial
+    pivoting in scalar loops (``np.linalg.inv`` pulls LAPACK into the kernel, which tripled its
+    compile time for the same numbers)."""
+    M = np.empty((4, 8))
+    for i in range(4):
+        for j in range(4):
+            M[i, j] = A[i, j]
+            M[i, 4 + j] = 1.0 if i == j else 0.0
+    for c in range(4):
+        p = c
+        for r in range(c + 1, 4):
+            if abs(M[r, c]) > abs(M[p, c]):
+                p = r
+        if p != c:
+            for j in range(8):
+                M[c, j], M[p, j] = M[p, j], M[c, j]
+        d = M[c, c]
+        for j in range(8):
+            M[c, j] /= d
+        for r in range(4):
+            if r != c:
+                f = M[r, c]
+                if f != 0.0:
+                    for j in range(8):
+                        M[r, j] -= f * M[c, j]
+    for i in range(4):
+        for j in range(4):
+            out[i, j] = M[i, 4 + j]
+
+
+@numba.njit(cache=True)
 def _rts_axis(t_s, zp, sp, zv, sv, za, sa, qb, sb0, q, smooth):  # pragma: no cover - compiled
     """One axis: forward Kalman filter over the sorted event times ``t_s`` (NaN ``zp``/``zv``/
     ``za``: no measurement at that event), started at the first position fix ``k0`` (its state
@@ -118,17 +150,22 @@ def _rts_axis(t_s, zp, sp, zv, sv, za, sa, qb, sb0, q, smooth):  # pragma: no co
     The state is ``[p, v, a, b]``: the white-jerk CA model and an accelerometer bias ``b`` (a
     random walk of PSD ``qb``, prior σ ``sb0``) that only the acceleration measurement
     ``z_a = a + b + e_a`` (σ ``sa``, per event) sees; without one, ``b`` stays apart from ``p, v, a``.
-    Returns (n, 4); all NaN when the axis has no finite position."""
+    Returns (n, 4); all NaN when the axis has no finite position.
+
+    The 4 × 4 algebra is written as scalar loops: the same operations as ``F @ P @ F.T`` and
+    ``np.outer``, but numba compiles the kernel in about a third of the time (it is compiled on
+    a fresh checkout's first run, in every test worker that smooths a track)."""
     n = len(t_s)
     xf = np.zeros((n, 4))
     Pf = np.zeros((n, 4, 4))
     xp = np.zeros((n, 4))
     Pp = np.zeros((n, 4, 4))
     F = np.eye(4)
-    Qk = np.zeros((4, 4))
+    T = np.zeros((4, 4))
     x = np.zeros(4)
+    x2 = np.zeros(4)
     P = np.zeros((4, 4))
-    H = np.zeros(4)
+    PH = np.zeros(4)
     k0 = 0
     while k0 < n and not np.isfinite(zp[k0]):
         k0 += 1
@@ -143,47 +180,93 @@ def _rts_axis(t_s, zp, sp, zv, sv, za, sa, qb, sb0, q, smooth):  # pragma: no co
     P[2, 2] = 1e2
     P[3, 3] = sb0 * sb0
     for k in range(n):
-        dt = t_s[k] - t_s[k - 1] if k > 0 else 0.0
         if k > 0:
+            dt = t_s[k] - t_s[k - 1]
             F[0, 1] = dt
             F[0, 2] = 0.5 * dt * dt
             F[1, 2] = dt
-            Qk[:3, :3] = white_jerk_q1(dt, q)
-            Qk[3, 3] = qb * dt
-            x = F @ x
-            P = F @ P @ F.T + Qk
-        xp[k] = x
-        Pp[k] = P
-        for j in range(3):              # scalar updates: position, velocity, acceleration
-            z = zp[k] if j == 0 else (zv[k] if j == 1 else za[k])
+            Q1 = white_jerk_q1(dt, q)
+            for i in range(4):        # x = F x
+                acc = 0.0
+                for j in range(4):
+                    acc += F[i, j] * x[j]
+                x2[i] = acc
+            for i in range(4):
+                x[i] = x2[i]
+            for i in range(4):        # T = F P
+                for j in range(4):
+                    acc = 0.0
+                    for m in range(4):
+                        acc += F[i, m] * P[m, j]
+                    T[i, j] = acc
+            for i in range(4):        # P = T Fᵀ + Q
+                for j in range(4):
+                    acc = 0.0
+                    for m in range(4):
+                        acc += T[i, m] * F[j, m]
+                    P[i, j] = acc + (Q1[i, j] if i < 3 and j < 3 else 0.0)
+            P[3, 3] += qb * dt
+        for i in range(4):              # element copies: numba compiles a row assignment
+            xp[k, i] = x[i]             # of a 3-D array (Pp[k] = P) in seconds
+            for j in range(4):
+                Pp[k, i, j] = P[i, j]
+        for jm in range(3):             # scalar updates: position, velocity, acceleration
+            z = zp[k] if jm == 0 else (zv[k] if jm == 1 else za[k])
             # the first fix is the prior; an acceleration there is new information
-            if not np.isfinite(z) or (k <= k0 and j < 2):
+            if not np.isfinite(z) or (k <= k0 and jm < 2):
                 continue
-            H[:] = 0.0
-            H[j] = 1.0
-            if j == 2:
-                H[3] = 1.0
-            r = sp[k] ** 2 if j == 0 else (sv * sv if j == 1 else sa[k] ** 2)
-            PH = P @ H
-            s = H @ PH + r
-            K = PH / s
-            x = x + K * (z - H @ x)
-            P = P - np.outer(K, PH)
-            P = 0.5 * (P + P.T)
-        xf[k] = x
-        Pf[k] = P
+            r = sp[k] ** 2 if jm == 0 else (sv * sv if jm == 1 else sa[k] ** 2)
+            # H = e_jm (+ e_3 for the acceleration, which measures a + b)
+            for i in range(4):
+                PH[i] = P[i, jm] + (P[i, 3] if jm == 2 else 0.0)
+            s = PH[jm] + (PH[3] if jm == 2 else 0.0) + r
+            innov = z - x[jm] - (x[3] if jm == 2 else 0.0)
+            for i in range(4):
+                x[i] += PH[i] / s * innov
+            for i in range(4):
+                for j in range(4):
+                    P[i, j] -= PH[i] / s * PH[j]
+            for i in range(4):
+                for j in range(i + 1, 4):
+                    m = 0.5 * (P[i, j] + P[j, i])
+                    P[i, j] = m
+                    P[j, i] = m
+        for i in range(4):
+            xf[k, i] = x[i]
+            for j in range(4):
+                Pf[k, i, j] = P[i, j]
     if not smooth:
         return xf
     xs = xf.copy()
+    Pinv = np.zeros((4, 4))
+    C = np.zeros((4, 4))
+    d = np.zeros(4)
     for k in range(n - 2, -1, -1):
         dt = t_s[k + 1] - t_s[k]
         F[0, 1] = dt
         F[0, 2] = 0.5 * dt * dt
         F[1, 2] = dt
-        C = Pf[k] @ F.T @ np.linalg.inv(Pp[k + 1])
-        xs[k] = xf[k] + C @ (xs[k + 1] - xp[k + 1])
+        _inv_spd4(Pp[k + 1], Pinv)      # Pp[k + 1] is a view: reading it is cheap to compile
+        for i in range(4):              # T = P_k|k Fᵀ
+            for j in range(4):
+                acc = 0.0
+                for m in range(4):
+                    acc += Pf[k, i, m] * F[j, m]
+                T[i, j] = acc
+        for i in range(4):              # C = T P⁻¹_k+1|k
+            for j in range(4):
+                acc = 0.0
+                for m in range(4):
+                    acc += T[i, m] * Pinv[m, j]
+                C[i, j] = acc
+        for i in range(4):
+            d[i] = xs[k + 1, i] - xp[k + 1, i]
+        for i in range(4):
+            acc = 0.0
+            for j in range(4):
+                acc += C[i, j] * d[j]
+            xs[k, i] = xf[k, i] + acc
     return xs
-
 
 def smooth_track(t_fix_ns: NDArray[np.int64], pos: NDArray, vel: NDArray, sigma_pos: NDArray,
                  t_out_ns: NDArray[np.int64], cfg: GpsSmoother, *, max_gap_ns: float,

@@ -44,6 +44,7 @@ shipped one), CSV by a header line whose fields look like column names, followed
 
 from __future__ import annotations
 
+import csv
 import functools
 import io
 import math
@@ -250,10 +251,14 @@ def _header_fields(head: bytes) -> tuple[list[str], str, list[str]] | None:
         return None
     hdr = lines[0]
     delim = max((",", ";", "\t"), key=hdr.count)
-    fields = [f.strip().strip('"') for f in hdr.split(delim)]
+    try:   # parsed as CSV: a quoted name or cell may hold the delimiter
+        parsed = list(csv.reader(lines[:2], delimiter=delim))
+    except csv.Error:
+        return None
+    fields = [f.strip() for f in parsed[0]] if parsed else []
     if len(fields) < 2 or not all(_NAME.match(f) for f in fields):
         return None
-    row = lines[1].split(delim) if len(lines) > 1 else []
+    row = parsed[1] if len(parsed) > 1 else []
     return fields, delim, row
 
 
@@ -280,7 +285,10 @@ class TabularReader(LogReader):
 
     name = "tabular"
     source_format = "table"
-    version = "3"  # 2: CSV lines with NUL bytes dropped and counted (unparseable_row); 3: non-UTF-8 lines too
+    # 2: CSV lines with NUL bytes dropped and counted (unparseable_row); 3: non-UTF-8 lines too;
+    # 4: header and first row parsed as CSV (quoted cells holding the delimiter), short rows
+    # counted under a quoted header too
+    version = "4"
     priority = 80  # structural guess: after every magic-number format
 
     @classmethod
@@ -411,19 +419,28 @@ def drop_short_lines(data: bytes, sep: str) -> tuple[bytes, LostLines | None]:
     :func:`drop_nul_lines` counts its lines. The CSV parser would fill the missing cells with
     NaN and keep the row, so its other columns passed as good data with nothing counted.
 
-    Fields are counted by separators, so the check is skipped when the header holds a quote
-    (a quoted separator would miscount every line); a quoted separator in a data line only
-    adds fields, so it never makes a good line short.
+    Data lines' fields are counted by separators: a quoted separator in a data line only adds
+    fields, so it never makes a good line short. The header's fields are parsed as CSV (a
+    quoted column name may hold the separator, which would make every line look short). A file
+    with a line of unbalanced quotes (a quoted field spanning lines, which the parser joins) is
+    left as it is: its pieces would look short.
     """
     if len(sep) != 1 or not data:
         return data, None
     buf = np.frombuffer(data, dtype=np.uint8)
     nl = np.flatnonzero(buf == 0x0A)
     header_end = int(nl[0]) if len(nl) else len(buf)
-    if b'"' in bytes(buf[:header_end]):
-        return data, None
     line_of_sep = np.searchsorted(nl, np.flatnonzero(buf == ord(sep)))
     fields = np.bincount(line_of_sep, minlength=len(nl) + 1) + 1
+    quotes = np.flatnonzero(buf == 0x22)
+    if len(quotes):
+        if (np.bincount(np.searchsorted(nl, quotes), minlength=len(nl) + 1) % 2).any():
+            return data, None
+        try:
+            header = bytes(buf[:header_end]).decode("utf-8").rstrip("\r")
+        except UnicodeDecodeError:      # drop_undecodable_lines names a garbled header
+            return data, None
+        fields[0] = len(next(csv.reader([header], delimiter=sep)))
     starts = np.concatenate([[0], nl + 1])
     ends = np.concatenate([nl, [len(buf)]])
     content = ends - starts - (buf[np.maximum(ends - 1, 0)] == 0x0D)     # without '\r\n'

@@ -343,6 +343,44 @@ def test_a_csv_row_cut_short_is_dropped_and_counted_not_kept_with_its_missing_ce
     assert "unparseable_row" not in log.meta["diagnostics"]["records_dropped"]
 
 
+def test_a_csv_with_a_quoted_header_still_drops_and_counts_a_row_cut_short(tmp_path):
+    # before: a quote in the header skipped the check, so the short row was kept with NaN cells
+    import csv
+
+    rng = np.random.default_rng(10)
+    n = 60
+    df = helpers_tabular.table(rng, n)
+    df["note"] = ["gps ok, baro ok"] * n       # a quoted separator in a data line adds fields
+    cmap = {"columnmaps": {"m": helpers_tabular.column_map("m")}}
+    lines = df.to_csv(index=False, quoting=csv.QUOTE_NONNUMERIC).encode().split(b"\n")
+    assert lines[0].startswith(b'"t_ms","lat"')
+    p = tmp_path / "quoted.csv"
+    p.write_bytes(b"\n".join(lines))
+    log = registry.read_log(p, config=cmap)
+    assert log.meta["status"] == "ok" and len(log["gps"]) == n
+    assert "unparseable_row" not in log.meta["diagnostics"]["records_dropped"]
+    lines[20] = b",".join(lines[20].split(b",")[:4])
+    p.write_bytes(b"\n".join(lines))
+    log = registry.read_log(p, config=cmap)
+    d = log.meta["diagnostics"]
+    assert log.meta["status"] == "partial" and len(log["gps"]) == n - 1
+    assert d["records_dropped"]["unparseable_row"] == 1
+    assert any(w.startswith(f"1 line(s) with fewer fields than the header ({len(df.columns)}) dropped")
+               and "first line 21 with 4 field(s)" in w for w in d["warnings"]), d["warnings"]
+
+
+def test_the_short_line_check_parses_the_header_and_leaves_a_quoted_field_across_lines_alone():
+    from pipeline.io.tabular import drop_short_lines
+
+    # a column name holding the separator: the header has 2 fields, not 3
+    kept, lost = drop_short_lines(b'"t_ms","alt, m"\n1,2\n3\n5,6\n', ",")
+    assert kept == b'"t_ms","alt, m"\n1,2\n5,6\n' and lost.lines == 1
+    assert "fewer fields than the header (2)" in lost.text and "first line 3 with 1 field(s)" in lost.text
+    # a quoted field over two lines: the parser joins its pieces, so nothing is dropped
+    data = b't_ms,note\n1,"first\nsecond"\n2,x\n'
+    assert drop_short_lines(data, ",") == (data, None)
+
+
 def test_the_many_kinds_of_one_drop_reason_fold_into_one_phrase():
     from pipeline.io.base import grouped_drops, losses_text
 

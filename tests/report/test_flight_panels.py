@@ -211,6 +211,26 @@ def test_flight_mode_bands_cover_each_mode_until_the_next_and_the_last_until_the
     assert plots.mode_bands(go.Figure(), None).layout.shapes == ()
 
 
+def test_every_mode_band_has_a_hover_marker_naming_its_mode_and_times_on_an_axis_of_its_own():
+    import plotly.graph_objects as go
+
+    # before: a shape has no hover text, so a band too short for its name said nothing at all
+    mode = _stream("mode", 4, 1.0, mode=["STABILIZE", "LOITER", "AUTO", "RTL"])
+    mode["t_ns"] = (np.array([0, 0.5, 1.0, 300.0]) * 1e9).astype(np.int64)
+    fig = go.Figure(go.Scatter(x=[0, 330], y=[0, 1]))
+    fig.update_layout(**plots.unit_axes(fig, ["m", "m/s"]))
+    fig = plots.mode_bands(fig, mode, 330.0)
+    marks = fig.data[-1]
+    assert marks.hovertext == ("mode STABILIZE<br>0.0–0.5 s (0.5 s)", "mode LOITER<br>0.5–1.0 s (0.5 s)",
+                               "mode AUTO<br>1.0–300.0 s (299.0 s)", "mode RTL<br>300.0–330.0 s (30.0 s)")
+    np.testing.assert_allclose(marks.x, [0.25, 0.75, 150.5, 315.0])
+    # its own hidden axis over the first, fixed at [0, 1]: the unit axes y and y2 are untouched
+    assert marks.yaxis == "y3" and fig.layout.yaxis3.overlaying == "y" and fig.layout.yaxis3.visible is False
+    assert tuple(fig.layout.yaxis3.range) == (0, 1) and fig.layout.yaxis2.title.text == "m/s"
+    assert list(marks.marker.color) == [plots.label_colour(f"mode {n}") for n in ("STABILIZE", "LOITER", "AUTO", "RTL")]
+    assert len(plots.mode_bands(go.Figure(), None).data) == 0
+
+
 def test_mode_names_switched_within_moments_are_not_printed_over_each_other():
     import plotly.graph_objects as go
 

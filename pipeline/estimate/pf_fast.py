@@ -37,6 +37,13 @@ F64 = NDArray[np.float64]
 BLOCK = 4096
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+# the generator's uint64 constants as globals (numba freezes them) rather than np.uint64(...) calls:
+# each call is one more function for numba to type at every place _normal/_unit are inlined,
+# which made up a good part of the particle kernels' cold compile
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_LO32 = np.uint64(0xFFFFFFFF)
+_U1, _U11, _U27, _U30, _U31, _U32, _U127 = (np.uint64(v) for v in (1, 11, 27, 30, 31, 32, 127))
 
 
 def _ziggurat_tables() -> tuple[F64, F64, F64]:
@@ -64,16 +71,16 @@ _ZR = 3.442619855899
 
 @njit(cache=True, inline="always")
 def _mix(z):
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
+    z = (z ^ (z >> _U30)) * _M1
+    z = (z ^ (z >> _U27)) * _M2
+    return z ^ (z >> _U31)
 
 
 @njit(cache=True, inline="always")
 def _unit(state):
     """Advance a splitmix64 state; (new state, uniform in (0, 1))."""
     state += _GOLDEN
-    return state, ((_mix(state) >> np.uint64(11)) + np.uint64(1)) * (1.0 / 9007199254740993.0)
+    return state, ((_mix(state) >> _U11) + _U1) * (1.0 / 9007199254740993.0)
 
 
 @njit(cache=True)
@@ -95,8 +102,8 @@ def _zig_slow(state, hz, iz, kn, wn, fn):
             return state, x
         state += _GOLDEN
         r = _mix(state)
-        hz = np.int64(r & np.uint64(0xFFFFFFFF)) - 2147483648
-        iz = np.int64((r >> np.uint64(32)) & np.uint64(127))
+        hz = np.int64(r & _LO32) - 2147483648
+        iz = np.int64((r >> _U32) & _U127)
         if abs(hz) < kn[iz]:
             return state, hz * wn[iz]
 
@@ -105,8 +112,8 @@ def _zig_slow(state, hz, iz, kn, wn, fn):
 def _normal(state, kn, wn, fn):
     state += _GOLDEN
     r = _mix(state)
-    hz = np.int64(r & np.uint64(0xFFFFFFFF)) - 2147483648
-    iz = np.int64((r >> np.uint64(32)) & np.uint64(127))
+    hz = np.int64(r & _LO32) - 2147483648
+    iz = np.int64((r >> _U32) & _U127)
     if abs(hz) < kn[iz]:
         return state, hz * wn[iz]
     return _zig_slow(state, hz, iz, kn, wn, fn)
@@ -133,7 +140,7 @@ def _key(seed, k, b):
 
 @njit(cache=True)
 def _uniform(seed, k, b):
-    return (_mix(_key(seed, k, b)) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+    return (_mix(_key(seed, k, b)) >> _U11) * (1.0 / 9007199254740992.0)
 
 
 @njit(cache=True, parallel=True)
@@ -303,17 +310,29 @@ def cv_bootstrap_run(x0: ArrayLike, z: ArrayLike, dt: float, sigma_a: float, sig
 KIND_CV, KIND_CA, KIND_CT = 0, 1, 2
 
 
+#: the shared ω → 0-safe turn coefficients (models.turn_coefficients, scalar form), inlined
+_turn_one = njit(cache=True, inline="always")(turn_coefficients_one)
+
+
 @njit(cache=True, parallel=True)
-def _jm_modes(X, mode, F, kind, init, seed, k, kn, wn, fn):
-    """Draw each particle's mode from its row of ``F = cumsum(Π(Δt))`` (seed 001 (2.21)) and
-    apply the entering mode's ``enter`` (CA: a along v; CT: ω ~ N(0, init))."""
+def _jm_step(X, mode, F, kind, init, sig, sigw, ll, blkmax, zn, ze, dt, inv2s2, seed, k, has_z, kn, wn, fn):
+    """One block ``b`` at a time: draw each particle's mode from its row of ``F = cumsum(Π(Δt))``
+    (seed 001 (2.21)) and apply the entering mode's ``enter`` (CA: a along v; CT: ω ~ N(0, init))
+    from the stream ``(seed, 2k, b)``; then propagate each particle by its mode and weigh it from
+    the stream ``(seed, 2k + 1, b)``. Particles are independent, so doing both per block is the
+    same as the mode draw for all particles first; one ``prange`` kernel rather than two spares
+    numba one parallel lowering in a cold compile."""
     n = mode.shape[0]
     K = F.shape[0]
-    nb = (n + BLOCK - 1) // BLOCK
+    nb = blkmax.shape[0]
+    h = 0.5 * dt * dt
+    d3 = dt * dt * dt / 6.0
+    rdt = np.sqrt(dt)
     for b in prange(nb):
-        state = _key(seed, 2 * k, b)
         lo = b * BLOCK
         hi = min(n, lo + BLOCK)
+        # the mode draw
+        state = _key(seed, 2 * k, b)
         for i in range(lo, hi):
             state, u = _unit(state)
             r = mode[i]
@@ -337,24 +356,8 @@ def _jm_modes(X, mode, F, kind, init, seed, k, kn, wn, fn):
                 elif kind[j] == KIND_CT:
                     state, a = _normal(state, kn, wn, fn)
                     X[4, i] = a * init[j]
-
-
-#: the shared ω → 0-safe turn coefficients (models.turn_coefficients, scalar form), inlined
-_turn_one = njit(cache=True, inline="always")(turn_coefficients_one)
-
-
-@njit(cache=True, parallel=True)
-def _jm_propagate_weigh(X, mode, kind, sig, sigw, ll, blkmax, zn, ze, dt, inv2s2,
-                        seed, k, has_z, kn, wn, fn):
-    n = mode.shape[0]
-    nb = blkmax.shape[0]
-    h = 0.5 * dt * dt
-    d3 = dt * dt * dt / 6.0
-    rdt = np.sqrt(dt)
-    for b in prange(nb):
+        # propagate and weigh
         state = _key(seed, 2 * k + 1, b)
-        lo = b * BLOCK
-        hi = min(n, lo + BLOCK)
         m = -np.inf
         for i in range(lo, hi):
             r = mode[i]
@@ -544,10 +547,9 @@ def jm_run(x0: ArrayLike, mode0: ArrayLike, z: ArrayLike, dt: float, Pi_dt: Arra
     mode_p = np.empty((len(Z), K))
     for k in range(len(Z)):
         has_z = bool(np.all(np.isfinite(Z[k])))
-        _jm_modes(X, mode, F, kind, init, seed, k, _KN, _WN, _FN)
-        _jm_propagate_weigh(X, mode, kind, sig, sigw, ll, blkmax,
-                            Z[k, 0] if has_z else 0.0, Z[k, 1] if has_z else 0.0, dt, inv2s2,
-                            seed, k, has_z, _KN, _WN, _FN)
+        _jm_step(X, mode, F, kind, init, sig, sigw, ll, blkmax,
+                 Z[k, 0] if has_z else 0.0, Z[k, 1] if has_z else 0.0, dt, inv2s2,
+                 seed, k, has_z, _KN, _WN, _FN)
         if not has_z:
             ll.fill(1.0)
             _jm_sums(ll, X, mode, K, blksum, blkmom, blkmode)

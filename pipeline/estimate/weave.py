@@ -544,10 +544,15 @@ def _k_stats(x, w, m, sm, mean, cov, mode_p, submode_p):
         for a in range(n):
             for b in range(a + 1, n):
                 C[b, a] = C[a, b]
-        mean[r] = mu
-        cov[r] = C
-        mode_p[r] = mp
-        submode_p[r] = sp
+        # element copies: a row assignment (mean[r] = mu, cov[r] = C) pulls numba's shape-mismatch
+        # error formatting into the kernel, most of its ~4 s cold compile
+        for a in range(n):
+            mean[r, a] = mu[a]
+            for b in range(n):
+                cov[r, a, b] = C[a, b]
+        for j in range(4):
+            mode_p[r, j] = mp[j]
+            submode_p[r, j] = sp[j]
 
 
 def _fractions(w, m, sm, mode_p, submode_p):

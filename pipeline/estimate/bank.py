@@ -597,8 +597,18 @@ _predict_innov_kernel = lazy_njit(_predict_innov_kernel)
 _update_kernel = lazy_njit(_update_kernel)
 
 
+def _ro(a):
+    """``a`` C-contiguous, as a read-only view (no copy unless ``a`` is not contiguous). The
+    kernels take every array input read-only: numba compiles a separate specialisation for a
+    read-only array (a broadcast view is one), so inputs that are sometimes writable and sometimes
+    not cost a kernel one more cold compile (~0.5 s each)."""
+    v = np.ascontiguousarray(a).view()
+    v.flags.writeable = False
+    return v
+
+
 def _flat(a, n_tail):
-    return np.ascontiguousarray(a.reshape((-1,) + a.shape[a.ndim - n_tail:]))
+    return _ro(a.reshape((-1,) + a.shape[a.ndim - n_tail:]))
 
 
 def components_step(model, comp: Components, dt: float, vo: ArrayLike, z: ArrayLike,
@@ -642,9 +652,9 @@ def components_step(model, comp: Components, dt: float, vo: ArrayLike, z: ArrayL
     s2 = float(sigma_rad) ** 2
     with np.errstate(invalid="ignore", over="ignore"):
         if fast:
-            zf = np.ascontiguousarray(np.broadcast_to(z[:, None], (R_, C)).reshape(-1))
+            zf = _ro(np.broadcast_to(z[:, None], (R_, C)).reshape(-1))
             pc, pht, S, ytil, badp = _predict_innov_kernel(_flat(fx, 1), _flat(F, 2), _flat(cov, 2),
-                                                           np.ascontiguousarray(model.noise(dt)), zf, s2, coords)
+                                                           _ro(model.noise(dt)), zf, s2, coords)
             pm = fx
             pc, pht = pc.reshape(R_, C, n, n), pht.reshape(R_, C, n)
             S, ytil = S.reshape(R_, C), ytil.reshape(R_, C)
@@ -676,8 +686,8 @@ def components_step(model, comp: Components, dt: float, vo: ArrayLike, z: ArrayL
         pm = np.where(div[..., None], model.safe_mean(), pm)
         pc = np.where(div[..., None, None], np.eye(n), pc)
     if fast:
-        m1, c1, badu = _update_kernel(_flat(pm, 1), _flat(pc, 2), _flat(pht, 1), S.reshape(-1),
-                                      ytil.reshape(-1), np.ascontiguousarray(upd.reshape(-1)), s2, coords)
+        m1, c1, badu = _update_kernel(_flat(pm, 1), _flat(pc, 2), _flat(pht, 1), _ro(S.reshape(-1)),
+                                      _ro(ytil.reshape(-1)), _ro(upd.reshape(-1)), s2, coords)
         m1, c1 = m1.reshape(R_, C, n), c1.reshape(R_, C, n, n)
         bad_post = badu.reshape(R_, C) & ~div
     else:
@@ -762,9 +772,9 @@ def combine(mean: F64, cov: F64 | None, logw: F64, angle_idx: tuple[int, ...] = 
     w = np.where(np.isfinite(w), w, 0.0)
     is_angle = np.zeros(n, dtype=np.bool_)
     is_angle[list(angle_idx)] = True
-    m, P = _combine_kernel(np.ascontiguousarray(mean.reshape(-1, C, n), dtype=np.float64),
-                           np.ascontiguousarray(cov.reshape(-1, C, n, n), dtype=np.float64),
-                           np.ascontiguousarray(w.reshape(-1, C)), is_angle)
+    m, P = _combine_kernel(_ro(mean.reshape(-1, C, n).astype(np.float64, copy=False)),
+                           _ro(cov.reshape(-1, C, n, n).astype(np.float64, copy=False)),
+                           _ro(w.reshape(-1, C)), _ro(is_angle))
     return m.reshape(lead + (n,)), P.reshape(lead + (n, n))
 
 

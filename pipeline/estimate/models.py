@@ -743,7 +743,11 @@ def _mpc_euler_kernel(y, vo, dt_sub, n_sub):  # pragma: no cover - compiled by n
             y2 = y2 + dt_sub * d2
             y4 = y4 + dt_sub * d4
         yo[i, 0], yo[i, 1], yo[i, 2], yo[i, 3], yo[i, 4] = y1, y2, y3, y4, y5
-        Phi[i] = P
+        # element by element: a row assignment (Phi[i] = P) pulls numba's shape-mismatch
+        # message into the kernel, seconds of its compile on a fresh checkout
+        for r in range(5):
+            for c in range(5):
+                Phi[i, r, c] = P[r, c]
     return yo, Phi
 
 

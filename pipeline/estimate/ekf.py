@@ -38,6 +38,7 @@ from scipy.linalg.lapack import dpotrf as _dpotrf
 from scipy.linalg.lapack import dpotri as _dpotri
 
 from .base import GaussianState, MeasurementModel, TransitionModel, check_times
+from .models import HAVE_NUMBA, lazy_njit
 
 F64 = NDArray[np.float64]
 
@@ -102,6 +103,19 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64, F64]:
         Li = np.linalg.inv(L)
         ly = np.matmul(Li, y[..., None])[..., 0]
         return _T(Li) @ Li, np.einsum("...i,...i->...", ly, ly), 2.0 * np.log(d).sum(axis=-1)
+    if HAVE_NUMBA and S.ndim >= 3 and S.size >= _KERNEL_FROM * n * n:
+        # many small systems (the Monte Carlo's runs): the same arithmetic, one compiled pass
+        # per matrix instead of ~n³/2 numpy calls over the planes (83 -> ~15 ms of a 1000-run,
+        # 325-step radar EKF)
+        Si, nis, d, bad = _spd_inverse_kernel(np.ascontiguousarray(S.reshape(-1, n, n)),
+                                              np.ascontiguousarray(np.broadcast_to(y, S.shape[:-1]).reshape(-1, n)))
+        if bad:
+            raise np.linalg.LinAlgError("Matrix is not positive definite")
+        # numpy's log, as the planes take it (numba's libm log may differ in the last bit)
+        logdet = np.log(d[:, 0])
+        for i in range(1, n):
+            logdet = logdet + np.log(d[:, i])
+        return Si.reshape(S.shape), nis.reshape(S.shape[:-2]), (2.0 * logdet).reshape(S.shape[:-2])
     # planes are lists of (...)-shaped arrays (views of S and y, new arrays for the rest): no
     # moved-axis copies, and no stores into a planes array (each would be one more copy)
     L: list[list] = [[None] * n for _ in range(n)]
@@ -147,6 +161,62 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64, F64]:
     for i in range(1, n):
         logdet = logdet + np.log(L[i][i])
     return Si, nis, 2.0 * logdet
+
+
+#: from this many stacked systems on, :func:`_spd_inverse` runs :func:`_spd_inverse_kernel`
+_KERNEL_FROM = 64
+
+
+def _spd_inverse_kernel(S, y):  # pragma: no cover - compiled by numba
+    """:func:`_spd_inverse`'s scalar-plane algorithm, matrix by matrix over (N, n, n): the same
+    operations in the same order (Cholesky–Banachiewicz, ``L⁻¹`` by forward substitution,
+    ``S⁻¹ = L⁻ᵀ L⁻¹``, ``|L⁻¹y|²``). Returns ``(Si, nis, diag, bad)``: ``diag`` (N, n) the
+    ``L_ii`` (the caller takes ``2 Σ log L_ii``), ``bad`` True when a matrix is not positive
+    definite (a NaN included)."""
+    N, n = S.shape[0], S.shape[1]
+    Si = np.empty((N, n, n))
+    nis = np.empty(N)
+    diag = np.empty((N, n))
+    L = np.zeros((n, n))
+    Li = np.zeros((n, n))
+    for r in range(N):
+        for i in range(n):
+            for j in range(i + 1):
+                acc = S[r, i, j]
+                for k in range(j):
+                    acc -= L[i, k] * L[j, k]
+                if i == j:
+                    if not acc > 0:
+                        return Si, nis, diag, True
+                    L[i, i] = np.sqrt(acc)
+                    diag[r, i] = L[i, i]
+                else:
+                    L[i, j] = acc / L[j, j]
+        for i in range(n):
+            Li[i, i] = 1.0 / L[i, i]
+            for j in range(i):
+                acc = L[i, j] * Li[j, j]
+                for k in range(j + 1, i):
+                    acc += L[i, k] * Li[k, j]
+                Li[i, j] = acc * -Li[i, i]
+        for i in range(n):
+            for j in range(i + 1):
+                acc = Li[i, i] * Li[i, j]
+                for k in range(i + 1, n):
+                    acc += Li[k, i] * Li[k, j]
+                Si[r, i, j] = acc
+                Si[r, j, i] = acc
+        q = 0.0
+        for i in range(n):
+            ly = Li[i, 0] * y[r, 0]
+            for k in range(1, i + 1):
+                ly += Li[i, k] * y[r, k]
+            q += ly * ly
+        nis[r] = q
+    return Si, nis, diag, False
+
+
+_spd_inverse_kernel = lazy_njit(_spd_inverse_kernel)
 
 
 @dataclass(frozen=True)

@@ -244,3 +244,23 @@ def test_a_non_finite_prior_is_refused(bad):
     (m if bad == "mean" else P)[1, 0] = np.nan
     with pytest.raises(ValueError, match=r"prior mean or covariance is not finite \(run 1"):
         run_filter(ekf, GaussianState(m, P, 0), t, np.repeat(z, 2, axis=1))
+
+
+@pytest.mark.parametrize("n", [1, 2, 4, 5, 8])
+def test_the_compiled_innovation_inverse_equals_the_scalar_planes_bit_for_bit_and_fails_alike(monkeypatch, n):
+    from pipeline.estimate import ekf as ekf_mod
+
+    rng = np.random.default_rng(n)
+    A = rng.normal(size=(20, 25, n, n))
+    S = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(n)
+    y = rng.normal(size=(20, 25, n))
+    compiled = ekf_mod._spd_inverse(S, y)              # 500 systems: the kernel
+    monkeypatch.setattr(ekf_mod, "_KERNEL_FROM", 10**9)
+    planes = ekf_mod._spd_inverse(S, y)
+    for c, p in zip(compiled, planes):
+        assert c.shape == p.shape and np.array_equal(c, p)
+    np.testing.assert_allclose(compiled[0], np.linalg.inv(S), rtol=1e-9, atol=1e-12)
+    monkeypatch.setattr(ekf_mod, "_KERNEL_FROM", 64)
+    S[3, 7] = -np.eye(n)
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        ekf_mod._spd_inverse(S, y)

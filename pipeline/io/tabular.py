@@ -39,7 +39,8 @@ constant over the file, unmapped columns and absent optional ones are listed in
 ``meta['columnmap']`` and the warnings.
 
 Sniffing: Parquet by its ``PAR1`` magic (the map then must come from the config or match a
-shipped one), CSV by a header line whose fields look like column names, followed by a data row.
+shipped one), CSV by a header line whose fields look like column names, followed by a data row
+(both parsed as CSV, so quoted names and cells may hold the delimiter).
 """
 
 from __future__ import annotations

@@ -110,6 +110,21 @@ def test_h_and_jacobian_at_once_equal_h_and_jacobian_on_a_batch(rng, n_x, tau, i
     np.testing.assert_allclose(H1, model.jacobian(x[1, 3]), rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.parametrize("n_x, tau, include", [(9, 0.0, True), (9, 0.05, True), (9, 0.05, False), (6, 0.05, True)])
+def test_on_many_runs_the_compiled_h_and_jacobian_equal_the_planes_bit_for_bit(rng, monkeypatch, n_x, tau, include):
+    from pipeline.estimate import models
+
+    model = RadarModel(site_ned_m=(-200.0, 150.0, 10.0), tau_rd_s=tau, include_tau_in_h=include)
+    x = np.concatenate([rng.uniform(-800, 800, (300, 3)), rng.normal(0, 20, (300, 3)),
+                        rng.normal(0, 2, (300, n_x - 6))], axis=-1)
+    compiled = model.h_and_jacobian(x)                   # 300 runs: the kernel
+    monkeypatch.setattr(models, "_RADAR_KERNEL_FROM", 10**9)
+    planes = model.h_and_jacobian(x)
+    for c, p in zip(compiled, planes):
+        assert c.shape == p.shape and np.array_equal(c, p)
+    np.testing.assert_allclose(compiled[1], model.jacobian(x), rtol=1e-12, atol=1e-15)
+
+
 def test_fold_mirrors_a_state_below_the_site_plane_and_the_measurement_cannot_tell_them_apart(rng):
     m = RadarModel(site_ned_m=(10.0, -20.0, -5.0), tau_rd_s=0.01, above_site=True)
     x = _states(rng, 6)

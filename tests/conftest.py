@@ -3,7 +3,14 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
+
+# The test session writes its bytecode caches even under PYTHONDONTWRITEBYTECODE=1: without them
+# every xdist worker re-compiles the package and re-rewrites the asserts of ~250 test modules at
+# each start (12.6 s before the first test against 4.1 s, measured), and the numba kernels'
+# caches land in the same __pycache__ folders whatever that variable says.
+sys.dont_write_bytecode = False
 
 import numpy as np
 import pytest

@@ -112,8 +112,8 @@ def white_jerk_q1(dt, q):  # pragma: no cover - compiled (its py_func is tested 
 @numba.njit(cache=True)
 def _inv_spd4(A, out):  # pragma: no cover - compiled
     """``out = A⁻¹`` for a symmetric positive definite 4 × 4 ``A``: Gauss–Jordan with partial
-    pivoting in scalar loops (``np.linalg.inv`` pulls LAPACK into the kernel, which tripled its
-    compile time for the same numbers)."""
+    pivoting in scalar loops (``np.linalg.inv`` would pull numba's LAPACK bindings into the
+    kernel's compile)."""
     M = np.empty((4, 8))
     for i in range(4):
         for j in range(4):
@@ -139,6 +139,18 @@ def _inv_spd4(A, out):  # pragma: no cover - compiled
     for i in range(4):
         for j in range(4):
             out[i, j] = M[i, 4 + j]
+
+
+@numba.njit(cache=True)
+def _mm4(A, B, out, b_transposed):  # pragma: no cover - compiled
+    """``out = A B`` (``A Bᵀ`` with ``b_transposed``) for 4 × 4 ``A``, ``B``, in scalar loops
+    (numba's ``@`` on small matrices costs seconds of compile)."""
+    for i in range(4):
+        for j in range(4):
+            acc = 0.0
+            for m in range(4):
+                acc += A[i, m] * (B[j, m] if b_transposed else B[m, j])
+            out[i, j] = acc
 
 
 @numba.njit(cache=True)
@@ -193,18 +205,11 @@ def _rts_axis(t_s, zp, sp, zv, sv, za, sa, qb, sb0, q, smooth):  # pragma: no co
                 x2[i] = acc
             for i in range(4):
                 x[i] = x2[i]
-            for i in range(4):        # T = F P
-                for j in range(4):
-                    acc = 0.0
-                    for m in range(4):
-                        acc += F[i, m] * P[m, j]
-                    T[i, j] = acc
-            for i in range(4):        # P = T Fᵀ + Q
-                for j in range(4):
-                    acc = 0.0
-                    for m in range(4):
-                        acc += T[i, m] * F[j, m]
-                    P[i, j] = acc + (Q1[i, j] if i < 3 and j < 3 else 0.0)
+            _mm4(F, P, T, False)      # P = F P Fᵀ + Q
+            _mm4(T, F, P, True)
+            for i in range(3):
+                for j in range(3):
+                    P[i, j] += Q1[i, j]
             P[3, 3] += qb * dt
         for i in range(4):              # element copies: numba compiles a row assignment
             xp[k, i] = x[i]             # of a 3-D array (Pp[k] = P) in seconds
@@ -247,18 +252,8 @@ def _rts_axis(t_s, zp, sp, zv, sv, za, sa, qb, sb0, q, smooth):  # pragma: no co
         F[0, 2] = 0.5 * dt * dt
         F[1, 2] = dt
         _inv_spd4(Pp[k + 1], Pinv)      # Pp[k + 1] is a view: reading it is cheap to compile
-        for i in range(4):              # T = P_k|k Fᵀ
-            for j in range(4):
-                acc = 0.0
-                for m in range(4):
-                    acc += Pf[k, i, m] * F[j, m]
-                T[i, j] = acc
-        for i in range(4):              # C = T P⁻¹_k+1|k
-            for j in range(4):
-                acc = 0.0
-                for m in range(4):
-                    acc += T[i, m] * Pinv[m, j]
-                C[i, j] = acc
+        _mm4(Pf[k], F, T, True)         # C = P_k|k Fᵀ P⁻¹_k+1|k
+        _mm4(T, Pinv, C, False)
         for i in range(4):
             d[i] = xs[k + 1, i] - xp[k + 1, i]
         for i in range(4):
@@ -267,6 +262,7 @@ def _rts_axis(t_s, zp, sp, zv, sv, za, sa, qb, sb0, q, smooth):  # pragma: no co
                 acc += C[i, j] * d[j]
             xs[k, i] = xf[k, i] + acc
     return xs
+
 
 def smooth_track(t_fix_ns: NDArray[np.int64], pos: NDArray, vel: NDArray, sigma_pos: NDArray,
                  t_out_ns: NDArray[np.int64], cfg: GpsSmoother, *, max_gap_ns: float,

@@ -916,20 +916,20 @@ def mode_bands(fig: go.Figure, mode: pd.DataFrame | None, t_end_s: float | None 
     # each other; the segments timeline's bars carry every name as hover text
     named = spaced_labels(t, end - t, float(end[-1] - t[0]), names, align="left")
     shown = end > t
-    for t0, t1, name, say in zip(t[shown], end[shown], names[shown], named[shown]):
+    t0s, t1s, ns = t[shown], end[shown], names[shown]
+    colours = [label_colour(f"mode {n}") for n in ns]
+    for t0, t1, name, colour, say in zip(t0s, t1s, ns, colours, named[shown]):
         note = dict(annotation_text=name, annotation_position="top left", annotation_font_size=9) if say else {}
-        fig.add_vrect(x0=t0, x1=t1, fillcolor=label_colour(f"mode {name}"), opacity=0.08, line_width=0,
-                      layer="below", **note)
-    if shown.any():
+        fig.add_vrect(x0=t0, x1=t1, fillcolor=colour, opacity=0.08, line_width=0, layer="below", **note)
+    if len(t0s):
         # a shape has no hover text, and the bands too short for their name were nameless:
         # one marker at the top edge of each band names its mode and times on hover. It sits
         # on an axis of its own, fixed at [0, 1] and hidden, so the panel's y range and its
         # unit axes (y, y2, y3) stay as they were
         axis = _free_yaxis(fig)
-        t0s, t1s, ns = t[shown], end[shown], names[shown]
         fig.add_trace(go.Scatter(
             x=0.5 * (t0s + t1s), y=np.ones(len(t0s)), yaxis=f"y{axis}", mode="markers",
-            marker=dict(symbol="triangle-down", size=7, color=[label_colour(f"mode {n}") for n in ns]),
+            marker=dict(symbol="triangle-down", size=7, color=colours),
             cliponaxis=False, showlegend=False, name="flight mode", hoverinfo="text",
             hovertext=[f"mode {n}<br>{a:.1f}–{b:.1f} s ({b - a:.1f} s)" for n, a, b in zip(ns, t0s, t1s)]))
         fig.update_layout({f"yaxis{axis}": dict(overlaying="y", range=[0, 1], visible=False, fixedrange=True)})

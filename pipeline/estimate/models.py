@@ -491,16 +491,16 @@ MPC_STATE: tuple[str, ...] = ("beta_dot_rps", "rdot_over_r_ps", "beta_rad", "inv
 HAVE_NUMBA = importlib.util.find_spec("numba") is not None
 
 
-def lazy_njit(fn):
-    """``numba.njit(cache=True)(fn)``, compiled (or loaded from the cache) on the first call:
-    importing numba costs ~1 s, and most users of this module never call a kernel."""
+def lazy_njit(fn, **options):
+    """``numba.njit(cache=True, **options)(fn)``, compiled (or loaded from the cache) on the
+    first call: importing numba costs ~1 s, and most users of this module never call a kernel."""
     compiled = []
 
     @functools.wraps(fn)
     def call(*args):
         if not compiled:
             from numba import njit
-            compiled.append(njit(cache=True)(fn))
+            compiled.append(njit(cache=True, **options)(fn))
         return compiled[0](*args)
 
     call.py_func = fn

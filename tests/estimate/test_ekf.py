@@ -38,9 +38,12 @@ def _linear_case(rng, n_steps):
 
 
 @pytest.mark.parametrize("joseph, tol", [(True, 1e-12), (False, 1e-9)])
-def test_with_a_linear_measurement_the_ekf_equals_filterpys_kalman_filter(rng, joseph, tol):
+@pytest.mark.parametrize("noise", ["correlated", "diagonal"])  # diagonal: the compiled Joseph update
+def test_with_a_linear_measurement_the_ekf_equals_filterpys_kalman_filter(rng, joseph, tol, noise):
     n_steps = 300
     q, H, R, _, z = _linear_case(rng, n_steps)
+    if noise == "diagonal":
+        R = np.diag(np.diagonal(R))
     kf = kalman.KalmanFilter(dim_x=9, dim_z=4)
     kf.x, kf.P = X0.copy(), initial_cov()
     kf.F, kf.Q, kf.H, kf.R = ca_transition(DT), white_jerk_q(DT, q), H, R
@@ -264,3 +267,84 @@ def test_the_compiled_innovation_inverse_equals_the_scalar_planes_bit_for_bit_an
     S[3, 7] = -np.eye(n)
     with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
         ekf_mod._spd_inverse(S, y)
+
+
+def _joseph_case(rng, n_runs, n_x, n_z, zero_cols=()):
+    """Random SPD covariances, states and a measurement Jacobian with the given zero columns."""
+    A = rng.normal(size=(n_runs, n_x, n_x))
+    P = A @ np.swapaxes(A, -1, -2) + 0.5 * np.eye(n_x)
+    x = rng.normal(size=(n_runs, n_x)) * 10.0
+    H = rng.normal(size=(n_runs, n_z, n_x))
+    H[..., list(zero_cols)] = 0.0
+    return x, P, H, rng.normal(size=(n_runs, n_z)), rng.uniform(0.1, 2.0, n_z)
+
+
+@pytest.mark.parametrize("n_x, n_z, zero_cols", [(9, 4, (6, 7, 8)), (5, 2, ()), (5, 1, (3, 4)), (9, 3, (0, 8))])
+def test_the_compiled_joseph_update_equals_the_numpy_algebra(monkeypatch, n_x, n_z, zero_cols):
+    from pipeline.estimate import ekf as ekf_mod
+
+    rng = np.random.default_rng(n_x * 10 + n_z)
+    x, P, H, y, r = _joseph_case(rng, 150, n_x, n_z, zero_cols)  # two full blocks of 64 and a tail
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), LinearMeasurement(np.eye(n_z, n_x), np.diag(r)))
+
+    class Meas:  # a per-run Jacobian, as the radar's
+        R = np.diag(r)
+
+        @staticmethod
+        def h(xx):
+            return np.zeros(xx.shape[:-1] + (n_z,))
+
+        @staticmethod
+        def jacobian(xx):
+            return H
+
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), Meas())
+    z = y.copy()
+    z[[3, 70, 149]] = np.nan  # three runs unmeasured
+    pred = GaussianState(x, P, 0)
+    fast, st_fast = ekf.update_stats(pred, z)
+    monkeypatch.setattr(ekf_mod, "_JOSEPH_KERNEL", False)
+    slow, st_slow = ekf.update_stats(pred, z)
+    assert _rel(fast.mean, slow.mean) < 1e-13 and _rel(fast.cov, slow.cov) < 1e-12
+    np.testing.assert_allclose(st_fast.nis, st_slow.nis, rtol=1e-11, atol=1e-14)
+    np.testing.assert_allclose(st_fast.logdet, st_slow.logdet, rtol=1e-12, atol=1e-14)
+    np.testing.assert_array_equal(st_fast.dof, st_slow.dof)
+    # an unmeasured run is left exactly as it was
+    np.testing.assert_array_equal(fast.cov[[3, 70, 149]], P[[3, 70, 149]])
+    np.testing.assert_array_equal(fast.mean[[3, 70, 149]], x[[3, 70, 149]])
+    assert st_fast.nis[70] == st_fast.logdet[70] == st_fast.dof[70] == 0
+
+
+def test_a_runs_compiled_update_does_not_depend_on_the_runs_beside_it(rng):
+    x, P, H, y, r = _joseph_case(rng, 100, 9, 4, (6, 7, 8))
+    H[40, :, 5] = 0.0  # run 40 leaves a column the rest of its block uses
+
+    class Meas:
+        R = np.diag(r)
+
+        @staticmethod
+        def h(xx):
+            return np.zeros(xx.shape[:-1] + (4,))
+
+        @staticmethod
+        def jacobian(xx):
+            return H if xx.ndim == 2 else H[40]
+
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), Meas())
+    batch, st = ekf.update_stats(GaussianState(x, P, 0), y)
+    alone, st1 = ekf.update_stats(GaussianState(x[40], P[40], 0), y[40])
+    np.testing.assert_array_equal(batch.mean[40], alone.mean)
+    np.testing.assert_array_equal(batch.cov[40], alone.cov)
+    assert st.nis[40] == st1.nis and st.logdet[40] == st1.logdet
+
+
+def test_the_compiled_update_refuses_a_degenerate_run_and_fills_a_strided_out_array(rng):
+    x, P, H, y, r = _joseph_case(rng, 70, 9, 4, (6, 7, 8))
+    meas = LinearMeasurement(H[0], np.diag(r))
+    ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), meas)
+    out = np.empty((9, 9, 70)).transpose(2, 0, 1)  # not C-contiguous
+    post = ekf.update_stats(GaussianState(x, P, 0), y, out=out)[0]
+    assert np.shares_memory(post.cov, out) and np.array_equal(out, ekf.update(GaussianState(x, P, 0), y).cov)
+    P[66] = np.nan
+    with pytest.raises(ValueError, match="not positive definite"):
+        ekf.update(GaussianState(x, P, 5), y)

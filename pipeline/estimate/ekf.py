@@ -667,8 +667,8 @@ class ExtendedKalmanFilter:
         direct = out is not None and out.flags.c_contiguous
         cov = out if direct else np.empty(b + (n_x, n_x))
         mean, nis, diag = np.empty((N, n_x)), np.empty(N), np.empty((N, n_z))
-        bad = _joseph_update_kernel(xf, Pf, Hf, yf, np.ascontiguousarray(r, dtype=np.float64),
-                                    mean, cov.reshape(N, n_x, n_x), nis, diag)
+        bad = -1 if N == 0 else _joseph_update_kernel(xf, Pf, Hf, yf, np.ascontiguousarray(r, dtype=np.float64),
+                                                      mean, cov.reshape(N, n_x, n_x), nis, diag)
         if bad >= 0:
             raise ValueError(f"update at t_ns={t_ns}: the innovation covariance H P Hᵀ + R is not "
                              "positive definite (a non-finite or degenerate state/covariance)")

@@ -338,7 +338,7 @@ def test_a_runs_compiled_update_does_not_depend_on_the_runs_beside_it(rng):
     assert st.nis[40] == st1.nis and st.logdet[40] == st1.logdet
 
 
-def test_the_compiled_update_refuses_a_degenerate_run_and_fills_a_strided_out_array(rng):
+def test_the_compiled_update_refuses_a_degenerate_run_fills_a_strided_out_array_and_takes_no_runs(rng):
     x, P, H, y, r = _joseph_case(rng, 70, 9, 4, (6, 7, 8))
     meas = LinearMeasurement(H[0], np.diag(r))
     ekf = ExtendedKalmanFilter(ConstantAcceleration(1.0), meas)
@@ -348,3 +348,5 @@ def test_the_compiled_update_refuses_a_degenerate_run_and_fills_a_strided_out_ar
     P[66] = np.nan
     with pytest.raises(ValueError, match="not positive definite"):
         ekf.update(GaussianState(x, P, 5), y)
+    empty, st = ekf.update_stats(GaussianState(x[:0], P[:0], 0), y[:0])  # no runs: nothing to do
+    assert empty.cov.shape == (0, 9, 9) and st.nis.shape == st.logdet.shape == (0,)

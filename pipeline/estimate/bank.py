@@ -73,7 +73,7 @@ from numpy.typing import ArrayLike, NDArray
 from .base import GaussianState, LinearTransition
 from .ekf import ExtendedKalmanFilter
 from .models import (ANGLE_STATES, CPPV_STATE, CV_CPPV_STATE, HAVE_NUMBA, MPC_STATE, BearingMeasurement,
-                     lazy_njit,
+                     kernel_input, lazy_njit,
                      cppv_predict, cppv_process_noise, cppv_to_mpc, cv_cppv_jacobian,
                      cv_cppv_transition, cv_process_noise, mpc_to_cppv, mpc_to_cppv_jacobian,
                      mpc_transition, numerical_jacobian, wrap_angle)
@@ -597,14 +597,7 @@ _predict_innov_kernel = lazy_njit(_predict_innov_kernel)
 _update_kernel = lazy_njit(_update_kernel)
 
 
-def _ro(a):
-    """``a`` C-contiguous, as a read-only view (no copy unless ``a`` is not contiguous). The
-    kernels take every array input read-only: numba compiles a separate specialisation for a
-    read-only array (a broadcast view is one), so inputs that are sometimes writable and sometimes
-    not cost a kernel one more cold compile (~0.5 s each)."""
-    v = np.ascontiguousarray(a).view()
-    v.flags.writeable = False
-    return v
+_ro = kernel_input  # every kernel input C-contiguous and read-only: one specialisation
 
 
 def _flat(a, n_tail):

@@ -838,7 +838,7 @@ def mpc_transition(y: ArrayLike, vo: ArrayLike, dt: float, *, substep_s: float =
     vo = np.broadcast_to(np.asarray(vo, dtype=np.float64), shape + (2,))
     n_sub = max(1, int(round(float(dt) / substep_s)))
     h = float(dt) / n_sub
-    yf, vf = np.ascontiguousarray(y.reshape(-1, 5)), np.ascontiguousarray(vo.reshape(-1, 2))
+    yf, vf = kernel_input(y.reshape(-1, 5)), kernel_input(vo.reshape(-1, 2))
     if engine == "numba" and HAVE_NUMBA:
         yo, Phi = _mpc_euler_kernel(yf, vf, h, n_sub)
     elif engine in ("numba", "numpy"):

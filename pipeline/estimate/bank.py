@@ -597,11 +597,8 @@ _predict_innov_kernel = lazy_njit(_predict_innov_kernel)
 _update_kernel = lazy_njit(_update_kernel)
 
 
-_ro = kernel_input  # every kernel input C-contiguous and read-only: one specialisation
-
-
 def _flat(a, n_tail):
-    return _ro(a.reshape((-1,) + a.shape[a.ndim - n_tail:]))
+    return kernel_input(a.reshape((-1,) + a.shape[a.ndim - n_tail:]))
 
 
 def components_step(model, comp: Components, dt: float, vo: ArrayLike, z: ArrayLike,
@@ -645,9 +642,9 @@ def components_step(model, comp: Components, dt: float, vo: ArrayLike, z: ArrayL
     s2 = float(sigma_rad) ** 2
     with np.errstate(invalid="ignore", over="ignore"):
         if fast:
-            zf = _ro(np.broadcast_to(z[:, None], (R_, C)).reshape(-1))
+            zf = kernel_input(np.broadcast_to(z[:, None], (R_, C)).reshape(-1))
             pc, pht, S, ytil, badp = _predict_innov_kernel(_flat(fx, 1), _flat(F, 2), _flat(cov, 2),
-                                                           _ro(model.noise(dt)), zf, s2, coords)
+                                                           kernel_input(model.noise(dt)), zf, s2, coords)
             pm = fx
             pc, pht = pc.reshape(R_, C, n, n), pht.reshape(R_, C, n)
             S, ytil = S.reshape(R_, C), ytil.reshape(R_, C)
@@ -679,8 +676,8 @@ def components_step(model, comp: Components, dt: float, vo: ArrayLike, z: ArrayL
         pm = np.where(div[..., None], model.safe_mean(), pm)
         pc = np.where(div[..., None, None], np.eye(n), pc)
     if fast:
-        m1, c1, badu = _update_kernel(_flat(pm, 1), _flat(pc, 2), _flat(pht, 1), _ro(S.reshape(-1)),
-                                      _ro(ytil.reshape(-1)), _ro(upd.reshape(-1)), s2, coords)
+        m1, c1, badu = _update_kernel(_flat(pm, 1), _flat(pc, 2), _flat(pht, 1), kernel_input(S.reshape(-1)),
+                                      kernel_input(ytil.reshape(-1)), kernel_input(upd.reshape(-1)), s2, coords)
         m1, c1 = m1.reshape(R_, C, n), c1.reshape(R_, C, n, n)
         bad_post = badu.reshape(R_, C) & ~div
     else:
@@ -765,9 +762,9 @@ def combine(mean: F64, cov: F64 | None, logw: F64, angle_idx: tuple[int, ...] = 
     w = np.where(np.isfinite(w), w, 0.0)
     is_angle = np.zeros(n, dtype=np.bool_)
     is_angle[list(angle_idx)] = True
-    m, P = _combine_kernel(_ro(mean.reshape(-1, C, n).astype(np.float64, copy=False)),
-                           _ro(cov.reshape(-1, C, n, n).astype(np.float64, copy=False)),
-                           _ro(w.reshape(-1, C)), _ro(is_angle))
+    m, P = _combine_kernel(kernel_input(mean.reshape(-1, C, n).astype(np.float64, copy=False)),
+                           kernel_input(cov.reshape(-1, C, n, n).astype(np.float64, copy=False)),
+                           kernel_input(w.reshape(-1, C)), kernel_input(is_angle))
     return m.reshape(lead + (n,)), P.reshape(lead + (n, n))
 
 

@@ -107,18 +107,15 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64, F64]:
         ly = np.matmul(Li, y[..., None])[..., 0]
         return _T(Li) @ Li, np.einsum("...i,...i->...", ly, ly), 2.0 * np.log(d).sum(axis=-1)
     if HAVE_NUMBA and S.ndim >= 3 and S.size >= _KERNEL_FROM * n * n:
-        # many small systems (the Monte Carlo's runs): the same arithmetic, one compiled pass
-        # per matrix instead of ~n³/2 numpy calls over the planes (a 1000-run, 325-step radar
-        # EKF: 0.512 -> 0.493 s CPU, median of 6)
+        # many small systems (stacked or correlated measurements, the standard form over many
+        # runs): the same arithmetic, one compiled pass per matrix instead of ~n³/2 numpy calls
+        # over the planes (measured when the 1000-run, 325-step radar EKF still came here,
+        # before _joseph_update_kernel: 0.512 -> 0.493 s CPU, median of 6)
         Si, nis, d, bad = _spd_inverse_kernel(kernel_input(S.reshape(-1, n, n)),
                                               kernel_input(np.broadcast_to(y, S.shape[:-1]).reshape(-1, n)))
         if bad:
             raise np.linalg.LinAlgError("Matrix is not positive definite")
-        # numpy's log, as the planes take it (numba's libm log may differ in the last bit)
-        logdet = np.log(d[:, 0])
-        for i in range(1, n):
-            logdet = logdet + np.log(d[:, i])
-        return Si.reshape(S.shape), nis.reshape(S.shape[:-2]), (2.0 * logdet).reshape(S.shape[:-2])
+        return Si.reshape(S.shape), nis.reshape(S.shape[:-2]), _logdet(d).reshape(S.shape[:-2])
     # planes are lists of (...)-shaped arrays (views of S and y, new arrays for the rest): no
     # moved-axis copies, and no stores into a planes array (each would be one more copy)
     L: list[list] = [[None] * n for _ in range(n)]
@@ -168,6 +165,16 @@ def _spd_inverse(S: F64, y: F64) -> tuple[F64, F64, F64]:
 
 #: from this many stacked systems on, :func:`_spd_inverse` runs :func:`_spd_inverse_kernel`
 _KERNEL_FROM = 64
+
+
+def _logdet(diag: F64) -> F64:
+    """``log|S| = 2 Σ_i log L_ii`` from a kernel's Cholesky diagonals ``diag`` (N, n): numpy's
+    log, summed in the order the scalar planes of :func:`_spd_inverse` take (numba's libm log
+    may differ in the last bit)."""
+    logdet = np.log(diag[:, 0])
+    for i in range(1, diag.shape[1]):
+        logdet = logdet + np.log(diag[:, i])
+    return 2.0 * logdet
 
 
 def _spd_inverse_kernel(S, y):  # pragma: no cover - compiled by numba
@@ -583,19 +590,16 @@ class ExtendedKalmanFilter:
         else:
             y = np.where(valid[..., None], d, 0.0).reshape(b + (M * n_z,))
             H = np.broadcast_to(np.where(valid[..., None, None], Hj, 0.0), b + (M, n_z, n_x)).reshape(b + (M * n_z, n_x))
+        dof = np.full(b, M * n_z, dtype=np.int64) if valid is None else valid.sum(axis=-1) * n_z
         if (_JOSEPH_KERNEL and self.joseph and M == 1 and R.ndim == 2
                 and not np.any(R - np.diag(np.diagonal(R)))):
             # the common case (one measurement a run, diagonal noise: the radar Monte Carlo,
-            # the IMM's bearings) in one compiled pass; the same algebra. A missing run gets
-            # H = 0, y = 0: zero gain, its state unchanged, exactly as below
+            # the IMM's bearings) in one compiled pass; the same algebra. A missing run has
+            # H = 0, y = 0 (above): zero gain, its state unchanged, exactly as below
+            mean, cov, nis, logdet = self._joseph_compiled(x, P, H, y, np.diagonal(R), out, pred.t_ns)
             if not full:
                 v = valid[..., 0]
-                y = np.where(v[..., None], d[..., 0, :], 0.0)
-                H = np.where(v[..., None, None], Hj[..., 0, :, :], 0.0)
-            mean, cov, nis, logdet = self._joseph_compiled(x, P, H, y, np.diagonal(R), out, pred.t_ns)
-            dof = np.full(b, n_z, dtype=np.int64)
-            if not full:
-                nis, logdet, dof = np.where(v, nis, 0.0), np.where(v, logdet, 0.0), np.where(v, dof, 0)
+                nis, logdet = np.where(v, nis, 0.0), np.where(v, logdet, 0.0)
                 # the kernel mirrors one triangle; an unmeasured run keeps P⁻ as it was
                 np.copyto(cov, P, where=~v[..., None, None])
             fold = getattr(self.measurement, "fold", None)
@@ -648,7 +652,6 @@ class ExtendedKalmanFilter:
         fold = getattr(self.measurement, "fold", None)
         if fold is not None:
             mean, cov = fold(mean, cov)
-        dof = np.full(b, M * n_z, dtype=np.int64) if valid is None else valid.sum(axis=-1) * n_z
         return GaussianState(mean, cov, pred.t_ns), UpdateStats(nis, dof, logdet)
 
 
@@ -676,11 +679,7 @@ class ExtendedKalmanFilter:
         if out is not None and not direct:
             np.copyto(out, cov)
             cov = out
-        # numpy's log, as the numpy path takes it
-        logdet = np.log(diag[:, 0])
-        for i in range(1, n_z):
-            logdet = logdet + np.log(diag[:, i])
-        return mean.reshape(b + (n_x,)), cov, nis.reshape(b), (2.0 * logdet).reshape(b)
+        return mean.reshape(b + (n_x,)), cov, nis.reshape(b), _logdet(diag).reshape(b)
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,8 @@ import json
 import os
 from pathlib import Path
 
+from ..io.stage import one_line
+
 #: exception types whose message is already the whole story (no class name printed)
 _OWN_ERRORS = ("ConfigError", "ModelError", "IngestError", "StudyError", "TrajectoryError", "BearingReplayError",
                "EkfHmmError", "ColumnMapError", "SchemaError")
@@ -40,12 +42,12 @@ def add_config_option(p: argparse.ArgumentParser, what: str = "dataset config") 
 def describe(exc: BaseException) -> str:
     """``exc`` as one line: its message (whitespace collapsed), prefixed by the exception type
     unless it is one of the project's own errors."""
-    msg = " ".join(str(exc).split()) or "(no message)"
+    msg = one_line(exc) or "(no message)"
     name = type(exc).__name__
     if name in _OWN_ERRORS:
         return msg
     if isinstance(exc, KeyError):
-        return f"missing column or key: {' '.join(str(exc.args[0] if exc.args else '').split())}"
+        return f"missing column or key: {one_line(exc.args[0] if exc.args else '')}"
     if isinstance(exc, OSError) and exc.filename is not None:
         return f"{exc.strerror or name}: {exc.filename}"
     return f"{name}: {msg}"

@@ -532,7 +532,7 @@ def _estimate_flight(inputs, paths: Mapping[str, str], config: Mapping, meta_pat
     try:
         log = read_flightlog(meta_path.parent, streams=["radar", "truth", "attitude"])
     except (ValueError, OSError) as exc:     # a damaged or swapped stream file, named
-        return _fail(paths, base, f"cannot read the ingested streams: {' '.join(str(exc).split())}")
+        return _fail(paths, base, f"cannot read the ingested streams: {one_line(exc)}")
     # --- the radar and its model
     notes: list[str] = []
     n_other = 0

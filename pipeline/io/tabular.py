@@ -63,6 +63,7 @@ import yaml
 from . import schema
 from .base import FlightLog, IngestError, LogReader, Progress
 from .registry import register
+from .stage import one_line
 
 #: unit -> (dimension, scale to the dimension's base unit, offset to base). Base units are SI
 #: (m, m/s, m/s^2, rad, rad/s, Pa, degC, T, s, 1).
@@ -556,7 +557,7 @@ def _read_table(path: Path) -> tuple[pd.DataFrame, str, LostLines | None]:
     except pd.errors.EmptyDataError:
         raise IngestError(path, "empty CSV (no header line)") from None
     except pd.errors.ParserError as exc:
-        raise IngestError(path, f"malformed CSV: {' '.join(str(exc).split())}") from None
+        raise IngestError(path, f"malformed CSV: {one_line(exc)}") from None
     except UnicodeDecodeError as exc:
         raise IngestError(path, f"CSV is not UTF-8 text: {exc.reason} at byte {exc.start}") from None
     return df, "csv", lost

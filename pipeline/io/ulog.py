@@ -121,6 +121,7 @@ from .lazy import pandas as pd  # imported on first use (see lazy.py)
 from . import schema
 from .base import FlightLog, IngestError, LogReader, Progress
 from .registry import register
+from .stage import one_line
 
 MAGIC = b"ULog\x01\x12\x35"
 
@@ -182,7 +183,7 @@ class ULogReader(LogReader):
             progress(1, 2)
         diag = schema.new_diagnostics()
         if pyulog_out.strip():
-            diag["warnings"].append(f"pyulog: {' '.join(pyulog_out.split())[:500]}")
+            diag["warnings"].append(f"pyulog: {one_line(pyulog_out)[:500]}")
         topics: dict[str, list] = {}
         for d in ulog.data_list:
             topics.setdefault(d.name, []).append(d)

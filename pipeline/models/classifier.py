@@ -54,6 +54,7 @@ from numpy.typing import NDArray
 from .. import __version__
 from ..io.atomic import atomic_output
 from ..io.parquet import write_json
+from ..io.stage import one_line
 from .base import ModelError, ModelsConfig
 from .features import (GMR_FEATURE_SETS, MinMaxNormaliser, decimation_factor, get_feature_set,
                        heading_rotation, observations, raw_features, run_sequences)
@@ -580,7 +581,7 @@ class ManeuverModelSet:
             raise ModelError(f"{d}: unreadable model files: {type(exc).__name__}: {exc}") from None
         except (KeyError, ValueError, TypeError, IndexError, AttributeError) as exc:
             raise ModelError(f"{d}: params.npz and meta.json do not fit together "
-                             f"({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+                             f"({type(exc).__name__}: {one_line(exc)})") from None
 
     @classmethod
     def _from_files(cls, meta: dict, z) -> "ManeuverModelSet":

@@ -79,7 +79,7 @@ def run_preprocess(inputs, outputs, config: Mapping | None = None, *,
     try:
         log = read_flightlog(meta_path.parent)
     except (ValueError, OSError) as exc:     # a damaged or swapped stream file, named
-        return _placeholder(paths, fid, f"cannot read the ingested streams: {' '.join(str(exc).split())}")
+        return _placeholder(paths, fid, f"cannot read the ingested streams: {one_line(exc)}")
     missing = log.meta.get("missing_streams") or []
     if missing:
         # ingest writes every stream, empty ones too: a missing file is damage, read as empty

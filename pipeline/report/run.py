@@ -13,7 +13,7 @@ from html import escape
 from pathlib import Path
 from typing import Mapping
 
-from ..io.stage import declared, declared_list
+from ..io.stage import declared, declared_list, one_line
 from .compare import build_compare_page
 from .flight import build_flight_report, write_plotly_js
 from .index import build_index
@@ -57,7 +57,7 @@ def run_flight_report(inputs, outputs, config: Mapping | None = None, *, index: 
                             estimates={Path(p).parent.name: p for p in declared_list(inputs, "estimates")},
                             vehicle=vehicle)
     except Exception as exc:  # one flight's unreadable table must not cost the index its page
-        reason = f"{type(exc).__name__}: {' '.join(str(exc).split())}"[:500]
+        reason = f"{type(exc).__name__}: {one_line(exc)}"[:500]
         print(f"uavpipe report: {ingest_dir.name}: page not built: {reason}", file=sys.stderr)
         failure_page(page, ingest_dir.name, reason, relative_href(index, page))
 

@@ -121,7 +121,8 @@ def _dtw_distance_kernel(x, yT, r, wd, wv, wh, sq):
     cur = np.full(W + 2, inf)
     cost = np.empty(W)
     # row 0: only horizontal steps
-    _row_cost(x, yT, 0, lo[0], hi[0], sq, cost)
+    # np.int64(0): a bare 0 types as Literal[int](0), a second compile of _row_cost
+    _row_cost(x, yT, np.int64(0), lo[0], hi[0], sq, cost)
     g = cost[0]
     prev[1] = g
     for k in range(1, hi[0] - lo[0] + 1):
@@ -171,7 +172,8 @@ def _dtw_path_kernel(x, yT, r, wd, wv, wh, sq, hfirst):
     prev = np.full(W + 2, inf)
     cur = np.full(W + 2, inf)
     cost = np.empty(W)
-    _row_cost(x, yT, 0, lo[0], hi[0], sq, cost)
+    # np.int64(0): a bare 0 types as Literal[int](0), a second compile of _row_cost
+    _row_cost(x, yT, np.int64(0), lo[0], hi[0], sq, cost)
     g = cost[0]
     prev[1] = g
     steps[0, 0] = 0

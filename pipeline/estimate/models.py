@@ -674,8 +674,8 @@ def cppv_predict(x: ArrayLike, dt: float, u: ArrayLike | None = None) -> tuple[F
         return cppv_transition(x, dt, u), cppv_jacobian(x, dt)
     shape = x.shape[:-1]
     U = _ownship_step(u, shape)
-    fx, F = _cppv_predict_kernel(np.ascontiguousarray(x.reshape(-1, 5)), float(dt),
-                                 np.ascontiguousarray(U.reshape(-1, 2)), TURN_SERIES_BELOW)
+    fx, F = _cppv_predict_kernel(kernel_input(x.reshape(-1, 5)), float(dt), kernel_input(U.reshape(-1, 2)),
+                                 TURN_SERIES_BELOW)
     return fx.reshape(shape + (5,)), F.reshape(shape + (5, 5))
 
 def cppv_process_noise(dt: float, sigma_v2: float, sigma_omega_dot2: float, *,

@@ -44,6 +44,10 @@ def test_the_tiny_study_writes_every_trend_as_a_result_line_with_numbers(tiny):
     for nm in ("straight", "pi_turn"):
         never = int((~by[f"{nm}_gps_detector"]["ever_flagged"].astype(bool)).sum())
         assert f[f"pf_hmpf_{nm}_never_flagged_seeds"] == f"{never}/3", nm
+    # the π turn's detector bound under the ideal likelihood: a number per maxima and kill count
+    for lab in ("", "_final"):
+        b1, b2 = (float(f[f"pf_hmpf_pi_turn_bound_max_af{lab}_kill{k}"]) for k in (1, 2))
+        assert 0.0 < b1 < 1.0 and 0.0 < b2 < 1.0, lab
     assert float(f["pf_hmpf_radar_weave_pos_rmse_m"]) == pytest.approx(by["weave_radar"]["pos_rmse_m"].mean(), abs=5e-3)
     assert float(f["pf_hmpf_radar_weave_vel_rmse_mps"]) == pytest.approx(by["weave_radar"]["vel_rmse_mps"].mean(),
                                                                          abs=5e-4)
@@ -184,6 +188,51 @@ def test_with_pi_m_4_2_an_ideal_likelihood_caps_the_straight_fraction_near_0_95_
         spf.straight_fraction_bound(c.with_(theta_max_rad=0.2), 1.0, kill_after=1, rng=np.random.default_rng(0))
 
 
+def test_the_ideal_likelihood_on_a_left_turn_matches_the_curve_survival_closed_form():
+    # a left turn from the first step, every particle not turning left removed at once: the
+    # survivors are L (stays at Π_m[L, L] = 0.66; L -> S dies) and weave CL (stays at
+    # 0.97 * (1 - p1) while θ < θ_max), so W's share grows by r = 0.97 * 0.95 / 0.66 a step from
+    # F1 = P(CL) / (P(L) + P(CL)) after the uniform start (CL kept at 0.95, SR -> CL at p1)
+    from pipeline.estimate.weave import HmpfConfig
+    c = HmpfConfig.from_config({}).with_(enter_submode="keep", counters="leaf", theta_max_rad=100.0)
+    pi = np.asarray(c.pi_m)
+    f = spf.oracle_mode_fractions(c, np.full(6, -0.1), 1.4, kill_after=1, n=200_000, rng=np.random.default_rng(3))
+    p_l = pi[:, 1].sum() / 4
+    p_cl = pi[:, 3].sum() / 4 * (0.25 * (1 - c.p1) + 0.25 * c.p1)
+    a = p_cl / (p_l + p_cl)
+    r = pi[3, 3] * (1 - c.p1) / pi[1, 1]
+    j = np.arange(6)
+    F = a * r**j / (a * r**j + 1 - a)
+    assert np.all(f[:, 0] == 0) and np.all(f[:, 2] == 0)
+    # Monte Carlo error: 1.1e-3 a step, growing under resampling (worst of five seeds 4.2e-3);
+    # dropping the submode's 0.95 from r moves the sixth step by 0.03
+    np.testing.assert_allclose(f[:, 3], F, atol=0.008)
+    np.testing.assert_allclose(f[:, 1], 1 - F, atol=0.008)
+    with pytest.raises(ValueError, match="kill_after"):
+        spf.oracle_mode_fractions(c, np.zeros(3), 1.0, kill_after=0, rng=np.random.default_rng(0))
+
+
+def test_with_the_final_maxima_no_likelihood_keeps_the_pi_turn_unflagged():
+    # digest 003 §7 (δ_max = 500 m, θ_max = π): the mode chains alone flag a π turn at
+    # 0.1 rad/s even when every particle moving unlike the track dies at its first weighting;
+    # at the study's weave-scaled maxima only that ideal (a 7 cm difference seen by 1 m GPS)
+    # stays below τ, and the straight track and the weave sit far on either side
+    from pipeline.estimate.weave import HmpfConfig
+    st = {**spf.DEFAULTS}
+    d, t = spf.weave_truth_max(st)
+    final = HmpfConfig.from_config({})
+    sim = final.with_(delta_max_m=1.2 * d, theta_max_rad=1.2 * t)
+    trk = spf.tracks(st)
+
+    def bound(c, name, k):
+        return spf.detector_bound(c, trk[name], st["speed_mps"], kill_after=k, n=10_000, rng=np.random.default_rng(k))
+
+    assert (final.delta_max_m, final.theta_max_rad) == (500.0, np.pi)
+    assert bound(final, "pi_turn", 1) > final.tau + 0.1
+    assert bound(sim, "pi_turn", 1) < final.tau < bound(sim, "pi_turn", 2) - 0.05
+    assert bound(sim, "straight", 1) < final.tau / 2 and bound(sim, "weave", 2) > 2 * final.tau
+
+
 # -- seed-003 trends missed on faithful code: strict xfails holding issue 17's targets ---------------
 # The study's scenarios at the study's particle counts (small size: 2,000 particles, the detector
 # checks at 10,000), so each xfail turns into a pass the day the study meets its target; at 200
@@ -240,7 +289,9 @@ def test_issue17_the_radar_weave_velocity_rms_is_at_most_0_4_mps():
     "0.97*0.95 per step against a left curve's 0.66 (Pi_m (4.2)), so W peaks in and after a long turn (the "
     "thesis's own §4.2.3 reading; it never ran the detector on this track); measured 7/20 at 2,000 particles "
     "with the printed AF(k) (6/20 with the average restarted after the start-up), 6/20 at 10,000 (the study's "
-    "detector runs), 5/20 at 20,000 (before)"))
+    "detector runs), 5/20 at 20,000 (before). An ideal likelihood (every particle moving unlike the track dies "
+    "at its first weighting) gives a largest AF of 0.484 with the issue's 500 m / pi maxima, above tau = 0.269, "
+    "and 0.240 with the study's (0.428 at the second weighting; pf_hmpf_pi_turn_bound_*)"))
 def test_issue17_pi_turn_tracks_are_never_flagged_in_19_of_20_seeds():
     _, out = _hmpf_scenario("pi_turn", "gps", SMALL["detector_particles"])
     never = int((~out.weave_detected.any(axis=1)).sum())

@@ -302,16 +302,44 @@ def straight_fraction_bound(cfg: HmpfConfig, speed_mps: float, *, kill_after: in
     return out[startup:].mean(axis=0)
 
 
+def ideal_detector(cfg: HmpfConfig, track: ShipTrack, speed_mps: float, *, kill_after: int, n: int = 100_000,
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Mode fractions and the detector average AF(k) (digest 003 §9, :func:`detector`) on
+    ``track`` under the ideal likelihood of :func:`oracle_mode_fractions` (every particle moving
+    unlike the track dies at its ``kill_after``-th weighting).
+
+    Returns
+    -------
+    fractions : ndarray (K + 1, 4)
+        S, L, R, W per step of the track, step 0 the uniform start (thesis §2.4).
+    af : ndarray (K + 1,)
+        AF over steps 1..k as the filter computes it (NaN at step 0).
+    """
+    F = oracle_mode_fractions(cfg, track.state[1:, 4], speed_mps, kill_after=kill_after, n=n, rng=rng)
+    af = np.full(F.shape[0] + 1, np.nan)
+    af[1:] = detector(F[None, :, 3], cfg.detector_window, cfg.tau, cfg.startup_steps)[0][0]
+    return np.vstack([np.full((1, 4), 0.25), F]), af
+
+
 def detector_bound(cfg: HmpfConfig, track: ShipTrack, speed_mps: float, *, kill_after: int, n: int = 100_000,
                    rng: np.random.Generator) -> float:
-    """The largest detector average AF(k) after the start-up (digest 003 §9, :func:`detector`)
-    on ``track`` under the ideal likelihood of :func:`oracle_mode_fractions`: the weave fraction
-    the mode and submode chains alone produce when every wrongly moving particle dies at its
-    ``kill_after``-th weighting. At or above ``cfg.tau``, no likelihood keeps the track unflagged
-    with these chains (``kill_after = 1``)."""
-    F = oracle_mode_fractions(cfg, track.state[1:, 4], speed_mps, kill_after=kill_after, n=n, rng=rng)[:, 3]
-    af, _ = detector(F[None, :], cfg.detector_window, cfg.tau, cfg.startup_steps)
-    return float(np.nanmax(af[0, cfg.startup_steps:]))
+    """The largest AF(k) after the start-up under the ideal likelihood (:func:`ideal_detector`):
+    the weave fraction the mode and submode chains alone produce. At or above ``cfg.tau`` with
+    ``kill_after = 1``, no likelihood keeps the track unflagged with these chains."""
+    _, af = ideal_detector(cfg, track, speed_mps, kill_after=kill_after, n=n, rng=rng)
+    return float(np.nanmax(af[cfg.startup_steps + 1:]))
+
+
+def ideal_timeline(name: str, tr: ShipTrack, fractions: np.ndarray, af: np.ndarray, cfg: HmpfConfig) -> pd.DataFrame:
+    """:func:`ideal_detector`'s run as rows of the timeline table (errors NaN: no estimate)."""
+    flag = np.zeros(tr.n_steps, dtype=bool)
+    flag[cfg.startup_steps + 1:] = af[cfg.startup_steps + 1:] >= cfg.tau
+    d = {"scenario": name, "step": np.arange(tr.n_steps), "truth_n_m": tr.state[:, 0], "truth_e_m": tr.state[:, 1],
+         "in_weave": tr.weave, **{f"mode_p_{m}": fractions[:, j] for j, m in enumerate(MODES)},
+         "af": af, "af_seed0": af, "flagged_share": flag.astype(float), "flag_seed0": flag}
+    for c in ("pos_n_m", "pos_e_m", "vel_n_mps", "vel_e_mps"):
+        d[f"rmse_{c}"] = np.nan
+    return pd.DataFrame(d)
 
 
 # -- report ---------------------------------------------------------------------------------------
@@ -419,9 +447,10 @@ def figures(tl: pd.DataFrame, runs: pd.DataFrame) -> list:
     fig.update_layout(xaxis_title="step k", yaxis_title="RMS error over seeds [m, m/s]")
     figs.append(("errors", layout(fig, "Weave (radar, near the site): RMS errors in N, E, v_N, v_E")))
     fig = go.Figure()
-    for sc in ("weave_gps", "straight_gps", "pi_turn_gps"):
+    for sc in ("weave_gps", "straight_gps", "pi_turn_gps", "pi_turn_ideal_likelihood", "pi_turn_ideal_likelihood_final"):
         g = tl[tl["scenario"] == sc]
-        fig.add_trace(go.Scatter(x=g["step"], y=np.where(g["step"] >= 25, g["af"], np.nan), mode="lines", name=sc))
+        fig.add_trace(go.Scatter(x=g["step"], y=np.where(g["step"] >= 25, g["af"], np.nan), mode="lines", name=sc,
+                                 line=dict(dash="dot") if "ideal" in sc else None))
     fig.add_hline(y=0.269, line_dash="dash", annotation_text="τ = 0.269")
     fig.add_vrect(x0=0, x1=25, fillcolor="grey", opacity=0.15, line_width=0)
     fig.update_layout(xaxis_title="step k", yaxis_title="AF(k), mean over seeds (start-up blanked)")
@@ -540,6 +569,16 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
         end = rot.state[-1, 0:2]
         target = np.sign(end) * q if np.all(np.abs(end) > 0) else np.array([q, q])
         quad_rows.append(run(f"quadrant_{i + 1}", rot.moved_to_end_at(target), "radar", sim, noise_key="quadrant"))
+    # what the chains allow on the π turn: the detector under the ideal likelihood, at the
+    # study's maxima and at the §4.3 final ones (500 m, π); first weightings in the timeline
+    pi_bounds: dict[tuple[str, int], float] = {}
+    for lab, c in (("", sim), ("_final", base)):
+        for k in (1, 2):
+            frac, af = ideal_detector(c, trk["pi_turn"], float(st["speed_mps"]), kill_after=k,
+                                      n=int(st["bound_particles"]), rng=set_rng(seed, f"pf/pi_bound{lab}/{k}"))
+            pi_bounds[lab, k] = float(np.nanmax(af[c.startup_steps + 1:]))
+            if k == 1:
+                tls.append(ideal_timeline(f"pi_turn_ideal_likelihood{lab}", trk["pi_turn"], frac, af, c))
     runs_df = pd.concat(runs, ignore_index=True)
     tl = pd.concat(tls, ignore_index=True)
     write_table(runs_df, paths["hmpf_runs"], name="pf_hmpf_runs", extra={"seed": seed, "size": size})
@@ -625,18 +664,13 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     res.add("pf_hmpf_straight_flagged_at_startup_end_seeds", f"{at_start}/{int(s_det['ever_flagged'].sum())}",
             "Straight GPS track: flagged seeds whose first flag is the first step after the 25 start-up steps, "
             "over all flagged seeds.")
-    # what the chains allow on the π turn: the detector's largest AF under the ideal likelihood
-    # (detector_bound), at the study's maxima and at the §4.3 final ones (500 m, π)
-    pi_bounds = {}
-    for lab, c in (("", sim), ("_final", base)):
-        for k in (1, 2):
-            v = pi_bounds[lab, k] = detector_bound(c, trk["pi_turn"], float(st["speed_mps"]), kill_after=k,
-                                                   n=int(st["bound_particles"]), rng=set_rng(seed, f"pf/pi_bound{lab}/{k}"))
-            which = "the study's δ_max/θ_max" if not lab else "the §4.3 final δ_max = 500 m, θ_max = π"
-            res.add(f"pf_hmpf_pi_turn_bound_max_af{lab}_kill{k}", f"{v:.3f}",
-                    f"Oracle: largest AF(k) after start-up on the π-turn track ({which}) when every particle moving "
-                    f"unlike the track dies at its {'first' if k == 1 else 'second'} weighting (the mode and submode "
-                    f"chains alone): at or above τ = {base.tau}, the track is flagged whatever the likelihood.")
+    # what the chains allow on the π turn (ideal_detector, computed above)
+    for (lab, k), v in pi_bounds.items():
+        which = "the study's δ_max/θ_max" if not lab else "the §4.3 final δ_max = 500 m, θ_max = π"
+        res.add(f"pf_hmpf_pi_turn_bound_max_af{lab}_kill{k}", f"{v:.3f}",
+                f"Oracle: largest AF(k) after start-up on the π-turn track ({which}) when every particle moving "
+                f"unlike the track dies at its {'first' if k == 1 else 'second'} weighting (the mode and submode "
+                f"chains alone): at or above τ = {base.tau}, the track is flagged whatever the likelihood.")
     for nm in ("straight", "pi_turn"):
         n_never = counts[""][nm]
         checks.append((f"{nm.replace('_', '-')} never flagged (GPS, {nd} particles)", f"{n_never}/{R_} seeds",

@@ -72,6 +72,13 @@ def test_the_tables_hold_every_scenario_and_seed(tiny):
             "range_10000", "quadrant_4"} <= scen
     assert runs.groupby("scenario").size().eq(3).all()
     np.testing.assert_allclose(tl[[f"mode_p_{m}" for m in "SLRW"]].sum(axis=1), 1.0)
+    # the π turn under the ideal likelihood, beside the filter's runs: its AF peak is the RESULT line
+    f = tiny.figures
+    for lab in ("", "_final"):
+        g = tl[tl["scenario"] == f"pi_turn_ideal_likelihood{lab}"]
+        assert len(g) == len(tl[tl["scenario"] == "pi_turn_gps"]) and g["rmse_pos_n_m"].isna().all()
+        assert f"{g['af'][g['step'] > 25].max():.3f}" == f[f"pf_hmpf_pi_turn_bound_max_af{lab}_kill1"], lab
+        assert g["flag_seed0"].any() == (float(f[f"pf_hmpf_pi_turn_bound_max_af{lab}_kill1"]) >= 0.269), lab
     d_true, t_true = spf.weave_truth_max({**spf.DEFAULTS, **spf.SIZES["tiny"]})
     w = runs[runs["scenario"] == "weave_gps_0.8x"]
     assert np.allclose(w["delta_max_m"], 0.8 * d_true)

@@ -66,6 +66,7 @@ DEFAULTS: dict[str, Any] = {
     "quadrant_end_m": 1000.0,    # the four rotated copies end at (±d, ±d)
     "straight_steps_total": 200,
     "bound_particles": 20000,    # Monte Carlo of the ideal-likelihood straight-fraction bound
+    "geo": {},                   # overrides of the seed-001 run plan at this size (pf_geolocation.GEO_SIZES)
 }
 #: per-size settings
 SIZES: dict[str, dict[str, Any]] = {
@@ -758,7 +759,8 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
             "GPS weave with the §4.3 final δ_max = 500 m, θ_max = π (the config defaults): weave fraction during the weave.")
     res.add("pf_hmpf_trends_met", f"{sum(c[3] for c in checks)}/{len(checks)}", "Issue-17 seed-003 trend checks met.")
     # -- seed 001: camera geo-location (pipeline.studies.pf_geolocation) ------------------------
-    geo_tables, geo_rows = geolocation_study({"geolocation": ((estimate or {}).get("pf") or {}).get("geolocation")},
+    geo_tables, geo_rows = geolocation_study({"geolocation": ((estimate or {}).get("pf") or {}).get("geolocation"),
+                                              "geo_sizes": {size: dict(st["geo"] or {})}},
                                              seed=seed, size=size, progress=progress)
     for t in GEO_TABLES:
         write_table(geo_tables[t], paths[t], name=f"pf_{t}", extra={"seed": seed, "size": size})

@@ -66,7 +66,8 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
     ----------
     settings : mapping
         ``geolocation``: the ``estimate.pf.geolocation`` config section (defaults when absent);
-        optional ``geo_sizes``: ``{size: {...}}`` overriding :data:`GEO_SIZES`.
+        optional ``geo_sizes``: ``{size: {...}}`` overriding :data:`GEO_SIZES` (its keys, and
+        ``observer_particles``: the observer sweep's particle count, default the filter's).
     seed : int
         Run ``r`` of a scenario draws from ``default_rng([seed, crc32(scenario), r])``, split
         into independent target / observer / pixel-noise / filter streams: every point of the
@@ -89,7 +90,13 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
     say = progress or (lambda msg: None)
     if size not in GEO_SIZES:
         raise ValueError(f"geolocation study: unknown size {size!r}; expected one of {', '.join(GEO_SIZES)}")
-    run = {**GEO_SIZES[size], **dict((settings.get("geo_sizes") or {}).get(size) or {})}
+    over = dict((settings.get("geo_sizes") or {}).get(size) or {})
+    bad = sorted(set(over) - set(GEO_SIZES[size]) - {"observer_particles"})
+    if bad:
+        raise ValueError(f"geolocation study: unknown run-plan key(s) {bad}; known: "
+                         f"{sorted({*GEO_SIZES[size], 'observer_particles'})}")
+    run = {**GEO_SIZES[size], **over}
+    n_obs_particles = run.get("observer_particles")
     cfg = _cfg(settings)
     summary, series, timing = [], [], []
 
@@ -99,7 +106,8 @@ def geolocation_study(settings: Mapping, *, seed: int, size: str,
              ("mobile", "mobile", run["runs"], run["mobile_s"], 3, None, "")]
     cases += [(f"particles_{n}", "mobile", run["particle_runs"], run["sweep_s"], 3, int(n), f"N{n}")
               for n in run["particles"]]
-    cases += [(f"observers_{o}", "mobile", run["observer_runs"], run["sweep_s"], int(o), None, f"O{o}")
+    cases += [(f"observers_{o}", "mobile", run["observer_runs"], run["sweep_s"], int(o),
+               None if n_obs_particles is None else int(n_obs_particles), f"O{o}")
               for o in run["observers"]]
     workers = max(1, int(run.get("workers", 1)))
     if workers > 1:

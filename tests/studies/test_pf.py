@@ -17,7 +17,8 @@ NAME = "pf"
 
 @pytest.fixture(scope="module")
 def tiny(ran, tmp_path_factory):
-    return ran(NAME, tmp_path_factory.mktemp("pf"), {"size": "tiny"})
+    # studies.pf.geo reaches the seed-001 part: the observer sweep at its own particle count
+    return ran(NAME, tmp_path_factory.mktemp("pf"), {"size": "tiny", "pf": {"geo": {"observer_particles": 40}}})
 
 
 def test_the_study_is_registered_with_its_tables():
@@ -130,6 +131,8 @@ def test_the_seed_001_part_writes_its_checks_and_the_config_values_fixed_before_
     assert float(f["geo_sigma_px"]) == pytest.approx(800 * np.tan(0.3), abs=0.01)
     summ, cfg = tiny.table("geo_summary"), tiny.table("geo_config")
     assert {"base", "maneuvering", "mobile", "particles_10", "observers_2"} <= set(summ["case"])
+    obs = summ["case"].str.startswith("observers_")
+    assert (summ.loc[obs, "n_particles"] == 40).all() and (summ.loc[summ["case"] == "base", "n_particles"] == 50).all()
     assert {"focal_px", "sigma_px"} <= set(cfg["key"])
 
 

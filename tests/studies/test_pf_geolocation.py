@@ -107,3 +107,21 @@ def test_the_geolocation_study_spread_over_worker_processes_gives_the_same_table
         pd.testing.assert_frame_equal(one[t], two[t], check_exact=True, obj=t)
     assert [(n, v) for n, v, _ in r1 if "step_us" not in n] == [(n, v) for n, v, _ in r2 if "step_us" not in n]
     assert one["geo_summary"]["n_runs"].tolist() == [2, 2, 2, 2, 1]
+
+
+def test_the_observer_sweep_takes_its_own_particle_count_and_run_count_and_a_bad_plan_key_is_named():
+    # studies.pf.geo: e.g. more runs per observer count, or the sweep at another particle count;
+    # the runs are the same scenes (run r of every point replays the same target)
+    plan = {"particles": [], "observers": [2], "base_s": 1.0, "maneuvering_s": 1.0, "mobile_s": 1.0,
+            "sweep_s": 1.5, "observer_runs": 2}
+    a, _ = geolocation_study({"geo_sizes": {"tiny": plan}}, seed=4, size="tiny")
+    b, _ = geolocation_study({"geo_sizes": {"tiny": {**plan, "observer_particles": 30}}}, seed=4, size="tiny")
+    sa, sb = (t["geo_summary"].set_index("case") for t in (a, b))
+    assert sa.loc["observers_2", "n_particles"] == 50 and sb.loc["observers_2", "n_particles"] == 30
+    assert sa.loc["observers_2", "n_runs"] == sb.loc["observers_2", "n_runs"] == 2
+    assert sa.loc["observers_2", "eps_m"] != sb.loc["observers_2", "eps_m"]
+    # the setups are untouched by the sweep's count
+    pd.testing.assert_frame_equal(sa.drop(index="observers_2"), sb.drop(index="observers_2"))
+    assert json.loads(b["geo_config"].set_index("key").loc["runs", "value"])["observer_particles"] == 30
+    with pytest.raises(ValueError, match=r"unknown run-plan key\(s\) \['observer_runz'\]"):
+        geolocation_study({"geo_sizes": {"tiny": {"observer_runz": 3}}}, seed=4, size="tiny")

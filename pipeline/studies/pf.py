@@ -13,7 +13,10 @@ unless a scenario says otherwise; the §4.3 final values (500 m, π; the config 
 real logs) are run once as well, and the weave once more on both sensors with the NCV noise
 rule §4.2.2 reports for the thesis's chapter-3 filter (:func:`ncv_third_noise`; a diagnostic of
 the velocity target, ``*_ncv_third``). Every trend of issue 17 is a ``RESULT`` line with its numbers
-and a 0/1 ``…_met`` line; nothing is tuned to meet a target.
+and a 0/1 ``…_met`` line; nothing is tuned to meet a target. What the mode chains allow at all is
+measured apart from the filter: :func:`oracle_mode_fractions` runs Π_m and the submode rule alone
+under an ideal likelihood on a track's turn rates, which bounds the straight fraction
+(:func:`straight_fraction_bound`) and the detector on the π turn (:func:`detector_bound`).
 
 **Seed 001 part** (camera geo-location, digest 001 §10–§13): :func:`.pf_geolocation.geolocation_study`
 runs the §6.1–§6.5 scenarios with the values fixed in ``estimate.pf.geolocation`` and writes the

@@ -545,6 +545,8 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     # same tracks and noise realisations as the 2,000-particle runs (noise_key = the track)
     s_det = run("straight_gps_detector", trk["straight"], "gps", det)
     p_det = run("pi_turn_gps_detector", trk["pi_turn"], "gps", det)
+    # the π turn with the §4.3 final maxima (500 m, π; what issue 17 names), same noise
+    p_det_fin = run("pi_turn_gps_detector_final", trk["pi_turn"], "gps", base.with_(n_particles=nd))
     w_det = run("weave_gps_detector", trk["weave"], "gps", det)
     progress("radar: near the site, range sweep, quadrants")
     w_rad = run("weave_radar", trk["weave"], "radar", sim)
@@ -668,6 +670,9 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     res.add("pf_hmpf_straight_flagged_at_startup_end_seeds", f"{at_start}/{int(s_det['ever_flagged'].sum())}",
             "Straight GPS track: flagged seeds whose first flag is the first step after the 25 start-up steps, "
             "over all flagged seeds.")
+    res.add("pf_hmpf_pi_turn_never_flagged_seeds_final", f"{int((~p_det_fin['ever_flagged']).sum())}/{R_}",
+            f"Pi turn GPS track at {nd} particles with the §4.3 final δ_max = 500 m, θ_max = π: seeds never flagged "
+            "after start-up (same noise as pf_hmpf_pi_turn_never_flagged_seeds).")
     # what the chains allow on the π turn (ideal_detector, computed above)
     for (lab, k), v in pi_bounds.items():
         which = "the study's δ_max/θ_max" if not lab else "the §4.3 final δ_max = 500 m, θ_max = π"

@@ -45,6 +45,9 @@ def test_the_tiny_study_writes_every_trend_as_a_result_line_with_numbers(tiny):
     for nm in ("straight", "pi_turn"):
         never = int((~by[f"{nm}_gps_detector"]["ever_flagged"].astype(bool)).sum())
         assert f[f"pf_hmpf_{nm}_never_flagged_seeds"] == f"{never}/3", nm
+    fin = by["pi_turn_gps_detector_final"]
+    assert np.allclose(fin["delta_max_m"], 500.0) and np.allclose(fin["theta_max_rad"], np.pi)
+    assert f["pf_hmpf_pi_turn_never_flagged_seeds_final"] == f"{int((~fin['ever_flagged'].astype(bool)).sum())}/3"
     # the π turn's detector bound under the ideal likelihood: a number per maxima and kill count
     for lab in ("", "_final"):
         b1, b2 = (float(f[f"pf_hmpf_pi_turn_bound_max_af{lab}_kill{k}"]) for k in (1, 2))

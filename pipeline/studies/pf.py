@@ -307,7 +307,7 @@ def straight_fraction_bound(cfg: HmpfConfig, speed_mps: float, *, kill_after: in
 
 
 def ideal_detector(cfg: HmpfConfig, track: ShipTrack, speed_mps: float, *, kill_after: int, n: int = 100_000,
-                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mode fractions and the detector average AF(k) (digest 003 §9, :func:`detector`) on
     ``track`` under the ideal likelihood of :func:`oracle_mode_fractions` (every particle moving
     unlike the track dies at its ``kill_after``-th weighting).
@@ -317,27 +317,29 @@ def ideal_detector(cfg: HmpfConfig, track: ShipTrack, speed_mps: float, *, kill_
     fractions : ndarray (K + 1, 4)
         S, L, R, W per step of the track, step 0 the uniform start (thesis §2.4).
     af : ndarray (K + 1,)
-        AF over steps 1..k as the filter computes it (NaN at step 0).
+        AF over steps 1..k as the filter computes it (NaN at step 0 and during the start-up).
+    declared : ndarray of bool (K + 1,)
+        The detector's flag (False at step 0).
     """
     F = oracle_mode_fractions(cfg, track.state[1:, 4], speed_mps, kill_after=kill_after, n=n, rng=rng)
     af = np.full(F.shape[0] + 1, np.nan)
-    af[1:] = detector(F[None, :, 3], cfg.detector_window, cfg.tau, cfg.startup_steps)[0][0]
-    return np.vstack([np.full((1, 4), 0.25), F]), af
+    declared = np.zeros(F.shape[0] + 1, dtype=bool)
+    # as hmpf_filter applies it: over steps 1..K, the initial cloud left out
+    af[1:], declared[1:] = (a[0] for a in detector(F[None, :, 3], cfg.detector_window, cfg.tau, cfg.startup_steps))
+    return np.vstack([np.full((1, 4), 0.25), F]), af, declared
 
 
 def detector_bound(cfg: HmpfConfig, track: ShipTrack, speed_mps: float, *, kill_after: int, n: int = 100_000,
                    rng: np.random.Generator) -> float:
     """The largest AF(k) after the start-up under the ideal likelihood (:func:`ideal_detector`):
     the weave fraction the mode and submode chains alone produce. At or above ``cfg.tau`` with
-    ``kill_after = 1``, no likelihood keeps the track unflagged with these chains."""
-    _, af = ideal_detector(cfg, track, speed_mps, kill_after=kill_after, n=n, rng=rng)
-    return float(np.nanmax(af[cfg.startup_steps + 1:]))
+    ``kill_after = 1``, no likelihood keeps the track unflagged with these chains (AF is NaN
+    during the start-up, so the maximum is over the steps after it)."""
+    return float(np.nanmax(ideal_detector(cfg, track, speed_mps, kill_after=kill_after, n=n, rng=rng)[1]))
 
 
-def ideal_timeline(name: str, tr: ShipTrack, fractions: np.ndarray, af: np.ndarray, cfg: HmpfConfig) -> pd.DataFrame:
+def ideal_timeline(name: str, tr: ShipTrack, fractions: np.ndarray, af: np.ndarray, flag: np.ndarray) -> pd.DataFrame:
     """:func:`ideal_detector`'s run as rows of the timeline table (errors NaN: no estimate)."""
-    flag = np.zeros(tr.n_steps, dtype=bool)
-    flag[cfg.startup_steps + 1:] = af[cfg.startup_steps + 1:] >= cfg.tau
     d = {"scenario": name, "step": np.arange(tr.n_steps), "truth_n_m": tr.state[:, 0], "truth_e_m": tr.state[:, 1],
          "in_weave": tr.weave, **{f"mode_p_{m}": fractions[:, j] for j, m in enumerate(MODES)},
          "af": af, "af_seed0": af, "flagged_share": flag.astype(float), "flag_seed0": flag}
@@ -580,11 +582,11 @@ def run_pf(inputs: Mapping | None, outputs: Mapping, config: Mapping | None, *, 
     pi_bounds: dict[tuple[str, int], float] = {}
     for lab, c in (("", sim), ("_final", base)):
         for k in (1, 2):
-            frac, af = ideal_detector(c, trk["pi_turn"], float(st["speed_mps"]), kill_after=k,
-                                      n=int(st["bound_particles"]), rng=set_rng(seed, f"pf/pi_bound{lab}/{k}"))
-            pi_bounds[lab, k] = float(np.nanmax(af[c.startup_steps + 1:]))
+            frac, af, flag = ideal_detector(c, trk["pi_turn"], float(st["speed_mps"]), kill_after=k,
+                                            n=int(st["bound_particles"]), rng=set_rng(seed, f"pf/pi_bound{lab}/{k}"))
+            pi_bounds[lab, k] = float(np.nanmax(af))   # detector_bound: AF is NaN during the start-up
             if k == 1:
-                tls.append(ideal_timeline(f"pi_turn_ideal_likelihood{lab}", trk["pi_turn"], frac, af, c))
+                tls.append(ideal_timeline(f"pi_turn_ideal_likelihood{lab}", trk["pi_turn"], frac, af, flag))
     runs_df = pd.concat(runs, ignore_index=True)
     tl = pd.concat(tls, ignore_index=True)
     write_table(runs_df, paths["hmpf_runs"], name="pf_hmpf_runs", extra={"seed": seed, "size": size})
